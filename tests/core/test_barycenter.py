@@ -1,0 +1,240 @@
+import sys
+
+import numpy as np
+import pytest
+
+from tests.core.helpers import blobs, dense_barycenter, finite_difference
+from wbcgrade.core import (
+    BarycenterSolver,
+    DenseGeometry,
+    GridGeometry,
+    barycenter,
+    barycenter_gradient,
+    get_loss,
+)
+
+barycenter_module = sys.modules["wbcgrade.core.barycenter"]
+
+GRIDS = [(20,), (9, 8), (6, 5, 4)]
+LOSSES = ["quadratic", "l1", "kl", "wasserstein"]
+
+
+@pytest.mark.parametrize("shape", GRIDS)
+def test_forward_matches_dense_reference(shape, rng):
+    geom = GridGeometry(shape, gamma=0.03)
+    H = rng.random((3, *shape)) ** 2
+    w = rng.dirichlet(np.ones(3))
+    P = barycenter(H, w, geom, n_iter=25)
+    ref = dense_barycenter(H, w, geom.cost_matrix(), geom.gamma, 25).reshape(shape)
+    assert np.abs(P - ref).max() <= 1e-10 * ref.max()
+
+
+def test_forward_on_dense_geometry_matches_reference(rng):
+    pts = rng.random((30, 3))
+    cost = ((pts[:, None] - pts[None]) ** 2).sum(-1)
+    geom = DenseGeometry(cost, gamma=0.05)
+    H = rng.random((4, 30))
+    w = rng.dirichlet(np.ones(4))
+    ref = dense_barycenter(H, w, cost, 0.05, 30)
+    np.testing.assert_allclose(barycenter(H, w, geom, n_iter=30), ref, rtol=1e-10)
+
+
+def test_converged_barycenter_matches_pot_log_domain(rng):
+    ot = pytest.importorskip("ot")
+    geom = GridGeometry(40, gamma=0.004)
+    H = blobs((40,), 3, rng, width=0.08)
+    w = np.array([0.2, 0.5, 0.3])
+    P = barycenter(H, w, geom, n_iter=3000)
+    M = geom.cost_matrix()
+    ref = ot.bregman.barycenter(
+        H.T, M, reg=geom.gamma, weights=w, method="sinkhorn_log", numItermax=5000, stopThr=1e-14
+    )
+    np.testing.assert_allclose(P / P.sum(), ref / ref.sum(), atol=1e-7 * ref.max())
+
+
+def test_barycenter_of_translated_gaussians_is_displacement_interpolation():
+    n = 100
+    x = np.linspace(0, 1, n)
+    geom = GridGeometry.with_width(n, 1.5)
+    sigma = 0.04
+    H = np.stack([np.exp(-((x - c) ** 2) / (2 * sigma**2)) for c in (0.25, 0.75)])
+    H[H < 1e-12] = 0.0  # binned data has no 1e-77 tails
+    for t in (0.3, 0.5):
+        solver = BarycenterSolver(H, geom, 200)
+        P = solver.barycenter([1 - t, t])
+        assert solver.last_backend == "scaling-float64"
+        P = P / P.sum()
+        mean = (P * x).sum()
+        expected = (1 - t) * 0.25 + t * 0.75
+        assert abs(mean - expected) < 0.01  # within 1% of the domain width
+        # One bump in between, not a mixture of the two inputs.
+        std = np.sqrt((P * (x - mean) ** 2).sum())
+        assert std < 2 * sigma
+        # A mixture would keep ~(1 - t) * 68% of its mass within sigma of the first bump.
+        assert P[np.abs(x - 0.25) < sigma].sum() < 0.05
+        assert P[np.abs(x - 0.75) < sigma].sum() < 0.05
+
+
+def _fd_check(H, geom, q, loss, n_iter=15, rng=None):
+    solver = BarycenterSolver(H, geom, n_iter)
+    w = np.random.default_rng(7).dirichlet(np.ones(len(H)))
+    value, grad, P = solver.value_and_grad(w, q, loss)
+    fd = finite_difference(lambda ww: solver.value_and_grad(ww, q, loss)[0], w)
+    assert np.all(np.isfinite(grad))
+    assert np.abs(grad - fd).max() <= 1e-5 * np.abs(fd).max(), (grad, fd)
+    return solver
+
+
+@pytest.mark.parametrize("loss", LOSSES)
+@pytest.mark.parametrize("shape", GRIDS)
+def test_gradient_matches_finite_differences_on_grids(shape, loss, rng):
+    geom = GridGeometry(shape, gamma=0.02)
+    H = rng.random((3, *shape)) ** 3
+    q = rng.random(shape) + 0.05
+    q /= q.sum()
+    _fd_check(H, geom, q, loss)
+
+
+@pytest.mark.parametrize("loss", LOSSES)
+def test_gradient_matches_finite_differences_on_dense_geometry(loss, rng):
+    pts = rng.normal(size=(25, 3))
+    pts /= np.linalg.norm(pts, axis=1, keepdims=True)  # points on a sphere
+    cost = np.arccos(np.clip(pts @ pts.T, -1, 1)) ** 2  # squared geodesic distance
+    geom = DenseGeometry(cost, gamma=0.3)
+    H = rng.random((4, 25))
+    q = rng.random(25) + 0.05
+    _fd_check(H, geom, q / q.sum(), loss)
+
+
+@pytest.mark.parametrize("loss", ["quadratic", "kl", "wasserstein"])
+def test_log_domain_agrees_with_scaling_domain(loss, rng):
+    geom = GridGeometry((7, 6, 5), gamma=0.02)
+    H = rng.random((4, 7, 6, 5)) ** 4
+    H[H < 0.2] = 0.0  # sparse, like real colour histograms
+    q = rng.random((7, 6, 5)) + 0.1
+    w = rng.dirichlet(np.ones(4))
+    solver = BarycenterSolver(H, geom, 15)
+    v1, g1, P1 = solver.value_and_grad(w, q, loss)
+    assert solver.last_backend == "scaling-float64"
+    backend = barycenter_module._LogBackend(solver.H, w, geom)
+    v2, g2, P2 = solver._gradient(backend, w, q, get_loss(loss))
+    assert abs(v1 - v2) <= 1e-10 * abs(v1)
+    np.testing.assert_allclose(P2, P1, rtol=1e-10, atol=1e-14 * P1.max())
+    assert np.abs(g2 - g1).max() <= 1e-9 * np.abs(g1).max()
+
+
+def test_far_apart_sparse_histograms_switch_to_log_domain_without_nan():
+    n = 64
+    geom = GridGeometry.with_width(n, 0.7)
+    x = np.arange(n)
+    H = np.stack([np.exp(-((x - 6) ** 2) / 4.0), np.exp(-((x - 58) ** 2) / 4.0)])
+    H[H < 1e-12] = 0.0
+    solver = BarycenterSolver(H, geom, 40)
+    P = solver.barycenter([0.5, 0.5])
+    assert solver.last_backend == "log"
+    assert np.all(np.isfinite(P)) and P.sum() > 0.99
+    assert abs((P * x).sum() / P.sum() - 32) < 0.5
+    q = np.full(n, 1.0 / n)
+    value, grad, _ = solver.value_and_grad([0.3, 0.7], q)
+    assert np.all(np.isfinite(grad))
+    d = np.array([1.0, -1.0])
+    w = np.array([0.3, 0.7])
+    eps = 1e-6
+    fd = (solver.value_and_grad(w + eps * d, q)[0] - solver.value_and_grad(w - eps * d, q)[0]) / (
+        2 * eps
+    )
+    assert abs(grad @ d - fd) <= 1e-5 * np.abs(grad).max()
+
+
+def test_checkpointing_gives_the_same_gradient_with_any_memory_budget(rng):
+    geom = GridGeometry((8, 8), gamma=0.03)
+    H = rng.random((3, 8, 8))
+    q = rng.random((8, 8))
+    w = np.array([0.5, 0.2, 0.3])
+    full = barycenter_gradient(H, w, geom, q, n_iter=23, checkpoint_bytes=10**9)
+    for budget in (1, 2 * H.nbytes, 5 * H.nbytes):
+        value, grad, P = barycenter_gradient(H, w, geom, q, n_iter=23, checkpoint_bytes=budget)
+        assert value == full[0]
+        np.testing.assert_array_equal(grad, full[1])
+
+
+def test_float32_agrees_with_float64(rng):
+    H = blobs((16, 16), 3, rng, width=0.15, floor=1e-3)
+    w = np.array([0.3, 0.3, 0.4])
+    q = H.mean(axis=0)
+    geom64 = GridGeometry((16, 16), gamma=0.01)
+    geom32 = GridGeometry((16, 16), gamma=0.01, dtype=np.float32)
+    solver32 = BarycenterSolver(H, geom32, 30)
+    P32 = solver32.barycenter(w)
+    assert solver32.last_backend == "scaling-float32"
+    P64 = barycenter(H, w, geom64, n_iter=30)
+    assert np.abs(P32 - P64).max() <= 1e-4 * P64.max()
+    v32, g32, _ = solver32.value_and_grad(w, q)
+    v64, g64, _ = barycenter_gradient(H, w, geom64, q, n_iter=30)
+    assert abs(v32 - v64) <= 1e-4 * abs(v64)
+    assert np.abs(g32 - g64).max() <= 1e-4 * np.abs(g64).max()
+
+
+def test_float32_falls_back_to_float64_when_out_of_range(rng):
+    geom32 = GridGeometry.with_width((40, 40), 1.0, dtype=np.float32)
+    H = blobs((40, 40), 2, rng, width=0.05)
+    solver = BarycenterSolver(H, geom32, 20)
+    P = solver.barycenter([0.5, 0.5])
+    assert solver.last_backend != "scaling-float32"
+    assert np.all(np.isfinite(P))
+
+
+def test_batch_axes_are_independent_problems_sharing_weights(rng):
+    geom = GridGeometry(12, gamma=0.02)
+    H = rng.random((3, 4, 12))
+    q = rng.random((4, 12))
+    w = np.array([0.1, 0.6, 0.3])
+    value, grad, P = barycenter_gradient(H, w, geom, q, loss="kl", n_iter=10)
+    parts = [barycenter_gradient(H[:, i], w, geom, q[i], loss="kl", n_iter=10) for i in range(4)]
+    np.testing.assert_allclose(P, np.stack([p[2] for p in parts]), rtol=1e-12)
+    assert value == pytest.approx(sum(p[0] for p in parts), rel=1e-12)
+    np.testing.assert_allclose(grad, sum(p[1] for p in parts), rtol=1e-10)
+
+
+def test_zero_weights_are_allowed(rng):
+    geom = GridGeometry((6, 6), gamma=0.05)
+    H = rng.random((3, 6, 6))
+    P = barycenter(H, [0.0, 1.0, 0.0], geom, n_iter=50)
+    target = H[1] / H[1].sum()
+    # All weight on one input: b stays 1, so P is that input seen through the kernel.
+    expected = geom.apply(target / geom.apply(np.ones((6, 6))))
+    np.testing.assert_allclose(P, expected, rtol=1e-12)
+    value, grad, _ = barycenter_gradient(H, [0.0, 1.0, 0.0], geom, target, n_iter=20)
+    assert np.all(np.isfinite(grad))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(histograms=np.ones((2, 5, 5))), "shape"),
+        (dict(histograms=-np.ones((2, 6, 6))), "negative"),
+        (dict(histograms=np.full((2, 6, 6), np.nan)), "NaN"),
+        (dict(histograms=np.zeros((2, 6, 6))), "empty"),
+        (dict(weights=[0.5, 0.6]), "simplex"),
+        (dict(weights=[1.2, -0.2]), "simplex"),
+        (dict(weights=[1.0]), "shape"),
+        (dict(weights=[np.nan, 1.0]), "NaN"),
+        (dict(target=np.ones((5, 6))), "target"),
+        (dict(target=np.full((6, 6), np.inf)), "NaN"),
+        (dict(loss="hinge"), "unknown loss"),
+        (dict(loss="kl", target=np.zeros((6, 6))), "positive"),
+        (dict(n_iter=0), "n_iter"),
+    ],
+)
+def test_bad_input_raises_value_error(kwargs, message):
+    args = dict(
+        histograms=np.ones((2, 6, 6)),
+        weights=[0.5, 0.5],
+        geometry=GridGeometry((6, 6), gamma=0.05),
+        target=np.ones((6, 6)),
+        loss="quadratic",
+        n_iter=5,
+    )
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        barycenter_gradient(**args)

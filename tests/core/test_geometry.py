@@ -1,0 +1,91 @@
+import numpy as np
+import pytest
+
+from wbcgrade.core import DenseGeometry, GridGeometry
+
+
+@pytest.mark.parametrize("shape", [(11,), (6, 7), (4, 5, 6)])
+def test_grid_kernel_matches_dense_kernel(shape, rng):
+    geom = GridGeometry(shape, gamma=0.05)
+    K = np.exp(-geom.cost_matrix() / geom.gamma)
+    x = rng.random((3, *shape))
+    expected = (x.reshape(3, -1) @ K.T).reshape(x.shape)
+    np.testing.assert_allclose(geom.apply(x), expected, rtol=1e-12, atol=1e-15)
+
+
+def test_grid_points_are_linspace_in_c_order():
+    geom = GridGeometry((3, 2), gamma=0.1)
+    np.testing.assert_allclose(
+        geom.points, [[0, 0], [0, 1], [0.5, 0], [0.5, 1], [1, 0], [1, 1]]
+    )
+
+
+@pytest.mark.parametrize("shape", [(9,), (5, 6), (4, 3, 5)])
+def test_log_apply_is_exact_including_zeros(shape, rng):
+    geom = GridGeometry(shape, gamma=0.02)
+    x = rng.random((2, *shape))
+    x[x < 0.3] = 0.0
+    K = np.exp(-geom.cost_matrix() / geom.gamma)
+    expected = np.log((x.reshape(2, -1) @ K.T).reshape(x.shape))
+    with np.errstate(divide="ignore"):
+        got = geom.log_apply(np.log(x))
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+
+
+def test_log_apply_survives_ranges_that_underflow_in_linear_domain():
+    geom = GridGeometry(200, gamma=1e-4)  # exp(-1/gamma) underflows across the domain
+    f = np.full(200, -np.inf)
+    f[0] = 0.0
+    out = geom.log_apply(f)
+    assert np.all(np.isfinite(out))
+    np.testing.assert_allclose(out, -(geom.axes[0] ** 2) / geom.gamma, rtol=1e-12)
+
+
+def test_denormal_kernel_entries_are_zeroed():
+    for dtype in (np.float32, np.float64):
+        geom = GridGeometry(128, gamma=2 * (1.5 / 127) ** 2, dtype=dtype)
+        k = geom.kernels[0]
+        assert k.dtype == dtype
+        nonzero = k[k != 0]
+        assert nonzero.min() >= np.finfo(dtype).tiny
+        assert np.count_nonzero(k) < k.size  # far entries were truncated
+
+
+def test_with_width_sets_gamma():
+    geom = GridGeometry.with_width((33, 33), 2.0)
+    assert geom.gamma == pytest.approx(2 * (2.0 / 32) ** 2)
+    assert geom.width == pytest.approx(2.0)
+
+
+def test_dense_geometry_matches_grid(rng):
+    grid = GridGeometry((5, 4), gamma=0.07)
+    dense = DenseGeometry(grid.cost_matrix(), gamma=0.07, points=grid.points)
+    x = rng.random((2, 20))
+    np.testing.assert_allclose(dense.apply(x), grid.apply(x.reshape(2, 5, 4)).reshape(2, 20))
+    np.testing.assert_allclose(
+        dense.log_apply(np.log(x)), grid.log_apply(np.log(x.reshape(2, 5, 4))).reshape(2, 20)
+    )
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: GridGeometry((8, 8), gamma=0.0), "gamma"),
+        (lambda: GridGeometry((8, 8), gamma=-1.0), "gamma"),
+        (lambda: GridGeometry((8, 8), gamma=float("nan")), "gamma"),
+        (lambda: GridGeometry((8, 1), gamma=0.1), "at least 2"),
+        (lambda: DenseGeometry(np.ones((3, 4)), gamma=0.1), "square"),
+        (lambda: DenseGeometry([[0, 1], [2, 0]], gamma=0.1), "symmetric"),
+        (lambda: DenseGeometry([[0, -1], [-1, 0]], gamma=0.1), "non-negative"),
+        (lambda: DenseGeometry([[0, np.nan], [np.nan, 0]], gamma=0.1), "NaN"),
+    ],
+)
+def test_bad_geometry_raises_value_error(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_apply_rejects_wrong_shape():
+    geom = GridGeometry((4, 4), gamma=0.1)
+    with pytest.raises(ValueError, match="shape"):
+        geom.apply(np.ones((4, 5)))

@@ -1,0 +1,30 @@
+"""The mathematical core: arrays in, arrays and small result objects out.
+
+No files, no printing, no colours: geometry, barycenter (+ gradient),
+losses, Sinkhorn and barycentric coordinates.
+"""
+
+from wbcgrade.core.barycenter import BarycenterSolver, barycenter, barycenter_gradient
+from wbcgrade.core.coordinates import CoordinatesResult, barycentric_coordinates, softmax
+from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry
+from wbcgrade.core.losses import LOSSES, Loss, get_loss, register_loss
+from wbcgrade.core.sinkhorn import SinkhornResult, barycentric_projection, sinkhorn
+
+__all__ = [
+    "Geometry",
+    "GridGeometry",
+    "DenseGeometry",
+    "barycenter",
+    "barycenter_gradient",
+    "BarycenterSolver",
+    "barycentric_coordinates",
+    "CoordinatesResult",
+    "softmax",
+    "Loss",
+    "LOSSES",
+    "get_loss",
+    "register_loss",
+    "sinkhorn",
+    "SinkhornResult",
+    "barycentric_projection",
+]

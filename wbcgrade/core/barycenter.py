@@ -1,0 +1,499 @@
+r"""Entropic Wasserstein barycenters after L iterations, and their gradient in the weights.
+
+Forward (Benamou et al. 2015), inputs ``p_1..p_S``, weights on the simplex,
+``b_s = 1`` to start; for ``l = 1..L``::
+
+    phi_s = K (p_s / K b_s)          for every s
+    P     = prod_s phi_s ** w_s
+    b_s   = P / phi_s
+
+Reverse (Bonneel, Peyré, Cuturi 2016, Algorithm 1), for
+``E(w) = Loss(P_L(w), q)``: with ``g = dLoss/dP * P`` and ``r_s = 0``, for
+``l = L..1``::
+
+    grad_s += <log phi_s(l), g>
+    r_s     = -b_s(l-1) * K( a_s(l) / K b_s(l-1) * K( (w_s g - r_s) / phi_s(l) ) )
+    g       = sum_s r_s
+
+where ``a_s(l) = p_s / K b_s(l-1)``. Written this way (``a / Kb`` rather than
+``p / (Kb)^2``) no intermediate squares the dynamic range of the scalings.
+
+Two interchangeable backends run these recursions:
+
+- the scaling domain (fast: plain kernel products), used first;
+- the log domain (exact for any range, slower), used automatically when the
+  scaling domain cannot represent the computation (a scaling that under- or
+  overflows, a kernel product that vanishes where mass sits). Float32
+  geometries fall back to float64 first.
+
+Memory: the reverse pass needs the scalings ``b_s`` entering each iteration.
+Instead of storing all L of them (``S * N * L`` numbers), it keeps as many as a
+memory budget allows and recomputes the others from checkpoints (recursive
+bisection), so peak memory stays bounded at any L.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from wbcgrade.core.geometry import Geometry
+from wbcgrade.core.losses import Loss, get_loss
+
+__all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver"]
+
+log = logging.getLogger(__name__)
+
+#: Bytes of stored scalings the reverse pass may keep (the rest is recomputed).
+DEFAULT_CHECKPOINT_BYTES = 1_000_000_000
+
+#: Mass the scaling domain may drop where a kernel product underflows to 0,
+#: relative to the barycenter's largest bin, before the log domain takes over.
+_UNDERFLOW_TOLERANCE = 1e-12
+
+
+class _Unsafe(Exception):
+    """The scaling domain cannot represent this computation (internal signal)."""
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _validate_histograms(histograms: ArrayLike, geometry: Geometry) -> NDArray:
+    """Histograms as float64 ``(S, *batch, *shape)``, each normalised to sum 1."""
+    H = np.array(histograms, dtype=np.float64)
+    if H.ndim < 1 + geometry.ndim or tuple(H.shape[H.ndim - geometry.ndim :]) != geometry.shape:
+        raise ValueError(
+            f"histograms must have shape (S, ..., *{geometry.shape}), got {H.shape}"
+        )
+    if H.shape[0] < 1:
+        raise ValueError("at least one histogram is needed")
+    if not np.all(np.isfinite(H)):
+        raise ValueError("histograms contain NaN or inf")
+    if np.any(H < 0):
+        raise ValueError("histograms contain negative entries")
+    axes = tuple(range(H.ndim - geometry.ndim, H.ndim))
+    mass = H.sum(axis=axes, keepdims=True)
+    if np.any(mass <= 0):
+        raise ValueError("a histogram is empty (all zeros): it cannot be normalised")
+    H /= mass
+    return H
+
+
+def _validate_weights(weights: ArrayLike, n_histograms: int) -> NDArray:
+    """Weights as float64 ``(S,)``, checked to lie on the simplex."""
+    w = np.array(weights, dtype=np.float64)
+    if w.shape != (n_histograms,):
+        raise ValueError(f"weights must have shape ({n_histograms},), got {w.shape}")
+    if not np.all(np.isfinite(w)):
+        raise ValueError("weights contain NaN or inf")
+    if np.any(w < -1e-12) or abs(w.sum() - 1.0) > 1e-6:
+        raise ValueError(
+            f"weights must lie on the simplex (non-negative, summing to 1); got sum {w.sum():.6g}"
+        )
+    # Not renormalised: the energy is differentiable in every direction, and
+    # finite differences of it stay within the tolerance above.
+    return np.clip(w, 0.0, None)
+
+
+def _validate_target(
+    target: ArrayLike, shape: tuple[int, ...], loss: Loss, geometry: Geometry
+) -> NDArray:
+    q = np.array(target, dtype=np.float64)
+    if q.shape != shape:
+        raise ValueError(f"target must have shape {shape}, got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("target contains NaN or inf")
+    if np.any(q < 0):
+        raise ValueError("target contains negative entries")
+    if loss.needs_positive_target and np.any(q <= 0):
+        raise ValueError(
+            f"the {loss.name} loss needs a target that is positive everywhere "
+            "(add a small floor to it)"
+        )
+    axes = tuple(range(q.ndim - geometry.ndim, q.ndim))
+    if np.any(q.sum(axis=axes) <= 0):
+        raise ValueError("the target is empty (all zeros)")
+    return q
+
+
+def _check_n_iter(n_iter: int) -> int:
+    if int(n_iter) != n_iter or n_iter < 1:
+        raise ValueError(f"n_iter must be a positive integer, got {n_iter!r}")
+    return int(n_iter)
+
+
+# --------------------------------------------------------------------------- backends
+
+
+@dataclass
+class _Iterate:
+    """What one forward iteration computes, kept for its reverse step."""
+
+    Kb: NDArray  # K b(l-1)            (scaling) or log K b (log domain)
+    a: NDArray  # p / K b(l-1)        (scaling) or log a
+    phi: NDArray  # K a               (scaling) or log phi
+    log_phi: NDArray  # log phi
+    P: NDArray  # barycenter P(l), float64, (*batch, *shape)
+
+
+def _weighted_sum(weights: NDArray, stack: NDArray) -> NDArray:
+    """sum_s w_s stack_s, skipping zero weights (so 0 * -inf never appears)."""
+    nonzero = np.flatnonzero(weights)
+    if len(nonzero) == len(weights):
+        return np.tensordot(weights, stack, axes=1)
+    return np.tensordot(weights[nonzero], stack[nonzero], axes=1)
+
+
+class _ScalingBackend:
+    """Plain kernel products; raises ``_Unsafe`` when the numbers leave its range."""
+
+    def __init__(self, H: NDArray, weights: NDArray, geometry: Geometry):
+        self.geometry = geometry
+        self.dtype = geometry.dtype
+        self.H = H.astype(self.dtype, copy=False)
+        self.weights = weights
+        self.n_positive = np.count_nonzero(self.H)
+        if self.n_positive != np.count_nonzero(H):
+            raise _Unsafe("histogram entries underflow in this precision")
+        if self.dtype == np.float32:
+            self.low, self.high = 1e-30, 1e30
+        else:
+            self.low, self.high = 0.0, np.inf
+
+    def initial(self) -> NDArray:
+        return np.ones_like(self.H)
+
+    def step(self, b: NDArray) -> tuple[NDArray, _Iterate]:
+        geom = self.geometry
+        Kb = geom.apply(b)
+        a = np.zeros_like(Kb)
+        np.divide(self.H, Kb, out=a, where=Kb > 0)
+        total = a.sum()
+        if not np.isfinite(total) or np.count_nonzero(a) != self.n_positive:
+            raise _Unsafe("K b vanishes or overflows where a histogram has mass")
+        if self.low > 0 and a.max() > self.high:
+            raise _Unsafe("scalings leave the float32 range")
+        phi = geom.apply(a)
+        with np.errstate(divide="ignore"):
+            log_phi = np.log(phi, dtype=np.float64)
+        log_P = _weighted_sum(self.weights, log_phi)
+        if self.low > 0:
+            if phi.min() < self.low or phi.max() > self.high:
+                raise _Unsafe("scalings leave the float32 range")
+        elif np.count_nonzero(phi) != phi.size:
+            self._check_dropped_mass(log_phi, log_P)
+        P = np.exp(log_P)
+        b_next = np.zeros_like(phi)
+        np.divide(P.astype(self.dtype, copy=False), phi, out=b_next, where=phi > 0)
+        if not np.isfinite(b_next.sum()):
+            raise _Unsafe("scalings overflow")
+        return b_next, _Iterate(Kb, a, phi, log_phi, P)
+
+    def _check_dropped_mass(self, log_phi: NDArray, log_P: NDArray) -> None:
+        """Where a kernel product underflowed, P is bounded above; the bound must be negligible."""
+        tiny = np.log(np.finfo(np.float64).tiny)
+        vanished = ~np.isfinite(log_phi)
+        bound = _weighted_sum(self.weights, np.where(vanished, tiny, log_phi))
+        where = vanished.any(axis=0)
+        finite = log_P[np.isfinite(log_P)]
+        if finite.size == 0:
+            raise _Unsafe("the barycenter vanishes everywhere")
+        if bound[where].max() > finite.max() + np.log(_UNDERFLOW_TOLERANCE):
+            raise _Unsafe("a kernel product underflows where the barycenter has mass")
+
+    def reverse(self, it: _Iterate, b_prev: NDArray, u: NDArray) -> NDArray:
+        """Adjoint of log b(l-1) given ``u``, the adjoint of log phi(l)."""
+        geom = self.geometry
+        u = u.astype(self.dtype, copy=False)
+        x = np.zeros_like(it.phi)
+        np.divide(u, it.phi, out=x, where=it.phi > 0)
+        y = geom.apply(x)
+        y *= it.a  # a = 0 wherever K b = 0, so the division below may skip those bins
+        np.divide(y, it.Kb, out=y, where=it.Kb > 0)
+        v = geom.apply(y)
+        v *= b_prev
+        r = -v.astype(np.float64, copy=False)
+        if not np.isfinite(r.sum()):
+            raise _Unsafe("the reverse pass overflows")
+        return r
+
+
+class _LogBackend:
+    """Log-domain recursions: exact whatever the range of the scalings (slower)."""
+
+    def __init__(self, H: NDArray, weights: NDArray, geometry: Geometry):
+        self.geometry = geometry
+        with np.errstate(divide="ignore"):
+            self.log_H = np.log(H)
+        self.weights = weights
+
+    def initial(self) -> NDArray:
+        return np.zeros_like(self.log_H)
+
+    def step(self, log_b: NDArray) -> tuple[NDArray, _Iterate]:
+        geom = self.geometry
+        log_Kb = geom.log_apply(log_b)
+        log_a = self.log_H - log_Kb
+        log_phi = geom.log_apply(log_a)
+        log_P = _weighted_sum(self.weights, log_phi)
+        if not np.all(np.isfinite(log_P)):
+            raise FloatingPointError("log-domain barycenter is not finite")
+        return log_P - log_phi, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P))
+
+    def reverse(self, it: _Iterate, log_b_prev: NDArray, u: NDArray) -> NDArray:
+        """Same adjoint as the scaling backend, with each sign part carried in logs."""
+        geom = self.geometry
+        r = np.zeros_like(u)
+        with np.errstate(divide="ignore"):
+            for sign in (1.0, -1.0):
+                part = np.log(np.clip(sign * u, 0.0, None)) - it.phi
+                part = geom.log_apply(part) + it.a - it.Kb
+                part = geom.log_apply(part) + log_b_prev
+                r -= sign * np.exp(part)
+        return r
+
+
+# --------------------------------------------------------------------------- solver
+
+
+class BarycenterSolver:
+    """Forward and reverse passes of the barycenter for fixed histograms.
+
+    Parameters
+    ----------
+    histograms : array_like, shape (S, *batch, *geometry.shape)
+        Non-negative; each is normalised to sum 1. Leading ``batch`` axes hold
+        independent problems that share one weight vector (e.g. one histogram
+        per incoming direction of a BRDF).
+    geometry : Geometry
+    n_iter : int
+        Number L of unrolled iterations.
+    checkpoint_bytes : int
+        Memory the reverse pass may spend on stored scalings.
+    """
+
+    def __init__(
+        self,
+        histograms: ArrayLike,
+        geometry: Geometry,
+        n_iter: int = 60,
+        checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
+    ):
+        self.geometry = geometry
+        self.H = _validate_histograms(histograms, geometry)
+        self.n_iter = _check_n_iter(n_iter)
+        self.checkpoint_bytes = int(checkpoint_bytes)
+        self.batch_shape = self.H.shape[1:]
+        #: Backend used by the last call: "scaling-float32", "scaling-float64" or "log".
+        self.last_backend = ""
+
+    @property
+    def n_histograms(self) -> int:
+        return self.H.shape[0]
+
+    def _backends(self, weights: NDArray):
+        geoms = [self.geometry]
+        if self.geometry.dtype != np.float64:
+            geoms.append(self.geometry.with_dtype(np.float64))
+        for geom in geoms:
+            yield f"scaling-{geom.dtype.name}", lambda g=geom: _ScalingBackend(self.H, weights, g)
+        yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
+
+    def _run(self, weights: NDArray, task):
+        """Run ``task(backend)`` on the first backend that can represent it."""
+        for name, make in self._backends(weights):
+            try:
+                result = task(make())
+            except _Unsafe as why:
+                log.info("barycenter: %s backend unsafe (%s); switching", name, why)
+                continue
+            self.last_backend = name
+            return result
+        raise AssertionError("the log backend never reports _Unsafe")
+
+    def barycenter(self, weights: ArrayLike) -> NDArray:
+        """P_L(weights), shape (*batch, *shape), float64."""
+        w = _validate_weights(weights, self.n_histograms)
+
+        def forward(backend):
+            b = backend.initial()
+            for _ in range(self.n_iter):
+                b, it = backend.step(b)
+            return it.P
+
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            return self._run(w, forward)
+
+    def value_and_grad(
+        self, weights: ArrayLike, target: ArrayLike, loss: str | Loss = "quadratic"
+    ) -> tuple[float, NDArray, NDArray]:
+        """Loss(P_L(weights), target), its gradient in the weights (S,), and P_L."""
+        w = _validate_weights(weights, self.n_histograms)
+        loss = get_loss(loss)
+        q = _validate_target(target, self.batch_shape, loss, self.geometry)
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            return self._run(w, lambda backend: self._gradient(backend, w, q, loss))
+
+    # ------------------------------------------------------------------ reverse pass
+
+    def _slots(self, state: NDArray) -> int:
+        """How many stored scalings the memory budget allows."""
+        return max(1, self.checkpoint_bytes // max(1, state.nbytes))
+
+    def _gradient(self, backend, w: NDArray, q: NDArray, loss: Loss):
+        L = self.n_iter
+        b0 = backend.initial()
+        slots = self._slots(b0)
+
+        # Forward pass: P_L and the checkpoints the recursion will ask for first
+        # (the right spine of the bisection tree).
+        spine, lo, hi, s = [], 0, L, slots
+        while hi - lo > 1 and 0 < s < hi - lo - 1:
+            lo += (hi - lo) // 2
+            spine.append(lo)
+            s -= 1
+        saved = {}
+        b = b0
+        for l in range(L):
+            if l in spine:
+                saved[l] = b
+            b, it = backend.step(b)
+        del b
+        P = it.P
+        value, dloss = loss.value_and_grad(P, q, self.geometry)
+        g_final = np.where(P > 0, dloss * P, 0.0)
+        if not np.all(np.isfinite(g_final)) or not np.isfinite(value):
+            raise FloatingPointError(f"the {loss.name} loss is not finite at this barycenter")
+
+        state = {"grad": np.zeros(self.n_histograms), "r": None}
+        w_shape = (-1,) + (1,) * (self.H.ndim - 1)
+        w_col = w.reshape(w_shape)
+
+        def reverse_step(l: int, b_prev: NDArray) -> None:
+            _, it = backend.step(b_prev)
+            if l == L - 1:
+                g = g_final
+                u = w_col * g
+            else:
+                r = state["r"]
+                g = r.sum(axis=0)
+                u = w_col * g - r
+            log_phi = it.log_phi
+            if not np.all(np.isfinite(log_phi)):
+                vanished = ~np.isfinite(log_phi)
+                if np.any(vanished & (g != 0)):
+                    raise _Unsafe("phi vanishes where the gradient needs log phi")
+                log_phi = np.where(vanished, 0.0, log_phi)
+            contrib = np.tensordot(log_phi, g, axes=g.ndim)
+            state["grad"] += contrib
+            state["r"] = None if l == 0 else backend.reverse(it, b_prev, u)
+
+        def advance(b_from: NDArray, start: int, stop: int) -> NDArray:
+            if stop in saved:
+                return saved[stop]
+            for _ in range(start, stop):
+                b_from, _ = backend.step(b_from)
+            return b_from
+
+        def reverse_range(lo: int, hi: int, b_lo: NDArray, slots: int) -> None:
+            n = hi - lo
+            if n == 1:
+                reverse_step(lo, b_lo)
+            elif slots >= n - 1:
+                states = [b_lo]
+                for _ in range(n - 1):
+                    states.append(backend.step(states[-1])[0])
+                for l in range(hi - 1, lo - 1, -1):
+                    reverse_step(l, states.pop())
+            elif slots == 0:
+                for l in range(hi - 1, lo - 1, -1):
+                    reverse_step(l, advance(b_lo, lo, l))
+            else:
+                mid = lo + n // 2
+                b_mid = advance(b_lo, lo, mid)
+                reverse_range(mid, hi, b_mid, slots - 1)
+                saved.pop(mid, None)
+                del b_mid
+                reverse_range(lo, mid, b_lo, slots)
+
+        reverse_range(0, L, b0, slots)
+        grad = state["grad"]
+        if not np.all(np.isfinite(grad)):
+            raise _Unsafe("the gradient is not finite")
+        return float(value), grad, P
+
+
+# --------------------------------------------------------------------------- functions
+
+
+def barycenter(
+    histograms: ArrayLike, weights: ArrayLike, geometry: Geometry, n_iter: int = 60
+) -> NDArray:
+    """Entropic Wasserstein barycenter after ``n_iter`` iterations.
+
+    Solves (approximately, by L unrolled Sinkhorn-like iterations)
+    ``min_P sum_s w_s W_gamma(P, p_s)`` on ``geometry``.
+
+    Parameters
+    ----------
+    histograms : array_like, shape (S, *batch, *geometry.shape)
+        Non-negative histograms; each is normalised to sum 1. Optional
+        ``batch`` axes hold independent problems sharing the weights.
+    weights : array_like, shape (S,)
+        Barycentric weights on the simplex.
+    geometry : Geometry
+    n_iter : int, default 60
+        Number of iterations L (the iteration starts from ``b_s = 1``).
+
+    Returns
+    -------
+    P : ndarray, shape (*batch, *geometry.shape), float64
+
+    References
+    ----------
+    Benamou, Carlier, Cuturi, Nenna, Peyré (2015), Iterative Bregman
+    projections for regularized transportation problems.
+    """
+    return BarycenterSolver(histograms, geometry, n_iter).barycenter(weights)
+
+
+def barycenter_gradient(
+    histograms: ArrayLike,
+    weights: ArrayLike,
+    geometry: Geometry,
+    target: ArrayLike,
+    loss: str | Loss = "quadratic",
+    n_iter: int = 60,
+    checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
+) -> tuple[float, NDArray, NDArray]:
+    """Energy ``E(w) = Loss(P_L(w), target)``, its gradient in ``w``, and ``P_L(w)``.
+
+    The gradient is computed by reverse-mode differentiation of the L unrolled
+    iterations (Bonneel, Peyré, Cuturi 2016, Algorithm 1), at about twice the
+    cost of the forward pass plus recomputation from checkpoints.
+
+    Parameters
+    ----------
+    histograms : array_like, shape (S, *batch, *geometry.shape)
+    weights : array_like, shape (S,)
+    geometry : Geometry
+    target : array_like, shape (*batch, *geometry.shape)
+    loss : {"quadratic", "l1", "kl", "wasserstein"} or Loss
+        Summed over batch axes.
+    n_iter : int, default 60
+    checkpoint_bytes : int
+        Memory budget for stored scalings in the reverse pass.
+
+    Returns
+    -------
+    value : float
+    grad : ndarray, shape (S,)
+        Gradient of E with respect to the weights (unconstrained).
+    P : ndarray, shape (*batch, *geometry.shape)
+    """
+    solver = BarycenterSolver(histograms, geometry, n_iter, checkpoint_bytes)
+    return solver.value_and_grad(weights, target, loss)
