@@ -1,0 +1,52 @@
+"""Command-line interface: ``wbcgrade COMMAND``.
+
+Each command group lives in its own module and is registered below. The CLI
+holds no mathematics: it parses options, calls the library, shows progress and
+turns library errors into one-line messages.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from wbcgrade import __version__
+from wbcgrade.errors import WbcgradeError
+
+
+class _Group(click.Group):
+    """A click group that turns library errors into one-line messages."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.ClickException, click.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo("Interrupted.", err=True)
+            sys.exit(130)
+        except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
+            message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            click.echo(f"Error: {message}", err=True)
+            sys.exit(1)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="wbcgrade")
+def main() -> None:
+    """Colour grading with Wasserstein barycentric coordinates.
+
+    Grade a photo towards the barycenter of a set of style palettes that is
+    closest to its own palette (Bonneel, Peyré, Cuturi, SIGGRAPH 2016).
+    """
+
+
+def _register() -> None:
+    # One line per command module; keep imports here so `wbcgrade --help` lists them.
+    from wbcgrade.cli.demo import demo
+
+    main.add_command(demo)
+
+
+_register()
