@@ -1,0 +1,128 @@
+"""Completion and projection through the core, on small grids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.shape.helpers import ball, voxel_shapes
+from wbcgrade.core import GridGeometry, barycenter, barycenter_gradient
+from wbcgrade.errors import InputError
+from wbcgrade.shape.complete import (
+    KL_REVERSE,
+    VoxelShape,
+    check_memory,
+    complete_shape,
+    completion_surface,
+    default_width,
+    estimate_memory,
+    estimate_missing_fraction,
+    intersection_over_union,
+    iso_level,
+    make_target,
+    project,
+)
+from wbcgrade.shape.volume import density_from_volume
+
+
+def _shape_densities(n: int) -> np.ndarray:
+    balls = [
+        ball(n, 0.25, (0.35, 0.5, 0.5)),
+        ball(n, 0.3, (0.6, 0.45, 0.5)),
+        ball(n, 0.2, (0.5, 0.6, 0.4)),
+    ]
+    return np.stack([density_from_volume(b) for b in balls])
+
+
+@pytest.mark.parametrize("loss", ["kl", KL_REVERSE])
+def test_kl_gradient_matches_finite_differences_on_a_3d_grid(loss):
+    n = 7
+    histograms = _shape_densities(n)
+    geometry = GridGeometry.with_width((n, n, n), 1.0)
+    target = make_target(density_from_volume(ball(n, 0.28, (0.45, 0.5, 0.5))), missing=0.2)
+    weights = np.array([0.5, 0.3, 0.2])
+    _, grad, _ = barycenter_gradient(histograms, weights, geometry, target, loss=loss, n_iter=20)
+    step = 1e-5
+    for i, j in [(0, 1), (1, 2), (0, 2)]:
+        direction = np.zeros(3)
+        direction[i], direction[j] = 1.0, -1.0
+        plus = barycenter_gradient(
+            histograms, weights + step * direction, geometry, target, loss=loss, n_iter=20
+        )[0]
+        minus = barycenter_gradient(
+            histograms, weights - step * direction, geometry, target, loss=loss, n_iter=20
+        )[0]
+        numeric = (plus - minus) / (2 * step)
+        assert grad @ direction == pytest.approx(numeric, rel=1e-4, abs=1e-9)
+
+
+def test_slab_cut_from_a_barycenter_is_completed():
+    n, n_iter = 16, 60
+    database = voxel_shapes(n)  # box, sphere, torus
+    densities = np.stack([density_from_volume(s.occupancy) for s in database])
+    true_weights = np.array([0.5, 0.0, 0.5])
+    geometry = GridGeometry.with_width((n,) * 3, default_width(n))
+    full_density = barycenter(densities, true_weights, geometry, n_iter=n_iter)
+    n_inside = true_weights @ [s.occupancy.sum() for s in database]
+    full = full_density > iso_level(full_density, n_inside)
+    # Cut away the last 30% of the shape along x.
+    xs = np.nonzero(full.any(axis=(1, 2)))[0]
+    cut = xs[-1] + 1 - int(0.3 * (xs[-1] - xs[0] + 1))
+    occupancy = full.astype(float)
+    occupancy[cut:] = 0.0
+    partial = VoxelShape("partial", occupancy, np.eye(4), 0.0)
+
+    completion = complete_shape(partial, database, n_iter=n_iter, max_iter=10)
+    completed = completion.projection.barycenter > completion.level
+    iou_partial = intersection_over_union(occupancy > 0.5, full)
+    iou_completed = intersection_over_union(completed, full)
+    assert iou_completed > iou_partial + 0.05, (iou_partial, iou_completed)
+    assert completion.projection.weights.sum() == pytest.approx(1.0)
+    assert 0.0 < completion.projection.missing <= 0.9  # estimated from the volumes
+
+    euclidean = complete_shape(partial, database, euclidean=True, max_iter=10)
+    mixed = euclidean.projection.barycenter > euclidean.level
+    assert euclidean.projection.weights.min() >= 0
+    assert euclidean.projection.weights.sum() == pytest.approx(1.0)
+    assert iou_completed > intersection_over_union(mixed, full)
+
+    surface = completion_surface(completion)
+    assert surface.is_watertight and surface.volume > 0
+
+
+def test_euclidean_projection_recovers_mixture_weights():
+    histograms = _shape_densities(10)
+    weights = np.array([0.2, 0.5, 0.3])
+    mixture = np.tensordot(weights, histograms, axes=1)
+    for loss in ("kl", "quadratic", "kl_reverse"):
+        result = project(mixture, histograms, loss=loss, euclidean=True)
+        np.testing.assert_allclose(result.weights, weights, atol=2e-3)
+        assert result.method == "euclidean"
+
+
+def test_missing_fraction_and_target():
+    full = ball(12, 0.3)
+    half = full.copy()
+    half[6:] = 0
+    assert estimate_missing_fraction(half, [full, full]) == pytest.approx(0.5, abs=0.1)
+    assert estimate_missing_fraction(full, [half]) == 0.0
+    target = make_target(np.ones((4, 4, 4)), missing=0.25)
+    assert target.sum() == pytest.approx(0.75)
+    with pytest.raises(InputError):
+        make_target(np.ones((4, 4, 4)), missing=1.0)
+
+
+def test_memory_estimate_refuses_huge_grids():
+    small = estimate_memory((32, 32, 32), 4)
+    assert small < 200 * 2**20
+    assert check_memory((32, 32, 32), 4, available=8 * 2**30) == small
+    with pytest.raises(InputError, match="lower --resolution"):
+        check_memory((512, 512, 512), 6, available=8 * 2**30)
+
+
+def test_projection_refuses_mismatched_or_single_database():
+    histograms = _shape_densities(8)
+    with pytest.raises(InputError, match="at least 2"):
+        project(histograms[0], histograms[:1])
+    with pytest.raises(InputError, match="shape"):
+        project(np.ones((6, 6, 6)), histograms)
