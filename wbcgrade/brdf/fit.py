@@ -1,0 +1,248 @@
+"""Fit a measured BRDF as a Wasserstein barycenter of a BRDF database (paper §5.2).
+
+Model
+-----
+A sampled BRDF ``values[w, x, c]`` (incoming ``w``, outgoing ``x``, channel
+``c``; see ``wbcgrade.brdf.sampled``) is turned into one histogram over the
+outgoing directions per incoming direction and channel,
+``p[w, c, :] = values[w, :, c] / sum_x values[w, x, c]``, keeping the row sums
+as its scale. A database of S BRDFs is the array ``(S, N, 3, N)`` of such
+histograms: the core's barycenter treats ``(N, 3)`` as a batch of independent
+problems that share one weight vector (the paper's eq. 16), so the energy and
+its gradient are sums over incoming directions and channels. The ground cost
+is the squared geodesic distance on the hemisphere (``sampling.hemisphere_geometry``),
+the default loss the entropic Wasserstein distance, as in the paper. The
+fitted BRDF is the barycenter ``P(weights)`` rescaled row by row by the
+measurement's row sums.
+
+Sparse measurements
+-------------------
+With a ``mask`` of kept (incoming, outgoing) pairs, only kept entries enter
+the fit, and no missing value is treated as a zero: each row of both the
+barycenter and the measurement is restricted to its kept entries and
+renormalised over them, and the loss compares those (``masked_loss``; for the
+Wasserstein loss this is optimal transport between the kept outgoing
+directions only). The gradient flows through the restriction and the
+renormalisation to the whole barycenter. Each row's scale is then estimated
+from the kept entries alone, ``sum_kept measured / sum_kept P``, the scale
+that makes the fitted row agree in total with what was measured. Rows with no
+kept entry carry no information: they are left out of the loss and their scale
+is the weighted mean of the database's row sums.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbcgrade.core import Loss, barycenter, barycentric_coordinates, get_loss
+from wbcgrade.core.geometry import Geometry
+from wbcgrade.errors import InputError
+
+DEFAULT_LOSS = "wasserstein"
+DEFAULT_N_ITER = 60
+DEFAULT_MAX_ITER = 30
+
+
+@dataclass(frozen=True)
+class BRDFFit:
+    """A fitted BRDF.
+
+    Attributes
+    ----------
+    weights : ndarray, shape (S,)
+        Barycentric weights on the simplex.
+    values : ndarray, shape (N, N, 3)
+        The fitted BRDF: the barycenter rescaled by the measurement's row sums.
+    histograms : ndarray, shape (N, 3, N)
+        The barycenter ``P(weights)``, each row a histogram over outgoing directions.
+    loss : float
+        Final value of the (possibly masked) loss, summed over rows.
+    n_evaluations : int
+        Energy and gradient evaluations.
+    converged : bool
+        Whether L-BFGS met its tolerance.
+    kept_fraction : float
+        Fraction of (incoming, outgoing) measurements used (1 for a full measurement).
+    time_s : float
+    """
+
+    weights: np.ndarray
+    values: np.ndarray
+    histograms: np.ndarray
+    loss: float
+    n_evaluations: int
+    converged: bool
+    kept_fraction: float
+    time_s: float
+
+
+def brdf_histograms(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Split sampled BRDFs into per-row histograms and row sums.
+
+    Parameters
+    ----------
+    values : ndarray, shape (..., N, N, 3)
+
+    Returns
+    -------
+    histograms : ndarray, shape (..., N, 3, N)
+        ``values[..., w, :, c]`` divided by its sum (zero rows stay zero).
+    row_sums : ndarray, shape (..., N, 3)
+    """
+    rows = np.moveaxis(np.asarray(values, dtype=np.float64), -1, -2)
+    sums = rows.sum(axis=-1)
+    histograms = np.divide(rows, sums[..., None], out=np.zeros_like(rows),
+                           where=sums[..., None] > 0)
+    return histograms, sums
+
+
+def masked_loss(loss: str | Loss, mask: np.ndarray) -> Loss:
+    """A loss that only sees the kept entries of each row.
+
+    ``L_mask(P, q) = L(P_k / |P_k|, q)`` with ``P_k = mask * P`` and ``|P_k|``
+    its sum over each row; ``q`` must already be restricted to the kept entries
+    and normalised. The gradient ``mask * (g - <g, P_k/|P_k|>) / |P_k|`` (with
+    ``g`` the base loss's gradient) is exact for the restriction and the
+    renormalisation.
+
+    Parameters
+    ----------
+    loss : str or Loss
+        The base loss.
+    mask : ndarray of bool, shape (*batch, N)
+        Kept entries; every row must keep at least one.
+    """
+    base = get_loss(loss)
+    mask = np.asarray(mask, dtype=bool)
+    if not mask.any(axis=-1).all():
+        raise InputError("every row of a masked loss must keep at least one entry")
+
+    def value_and_grad(P, q, geometry):
+        kept = np.where(mask, P, 0.0)
+        mass = kept.sum(axis=-1, keepdims=True)
+        normalised = kept / mass
+        value, grad = base.value_and_grad(normalised, q, geometry)
+        grad = (grad - (grad * normalised).sum(axis=-1, keepdims=True)) / mass
+        return value, np.where(mask, grad, 0.0)
+
+    return Loss(f"masked-{base.name}", value_and_grad, needs_positive_target=False)
+
+
+def fit_brdf(
+    measured: np.ndarray,
+    database: np.ndarray,
+    geometry: Geometry,
+    mask: np.ndarray | None = None,
+    loss: str = DEFAULT_LOSS,
+    n_iter: int = DEFAULT_N_ITER,
+    max_iter: int = DEFAULT_MAX_ITER,
+    init_weights: np.ndarray | None = None,
+    fit_incoming: np.ndarray | None = None,
+    callback: Callable[[int, np.ndarray, float], None] | None = None,
+) -> BRDFFit:
+    """Barycentric coordinates of a measured BRDF in a database, and the fitted BRDF.
+
+    Parameters
+    ----------
+    measured : ndarray, shape (N, N, 3)
+        The measurement; entries outside ``mask`` are ignored (never read as 0).
+    database : ndarray, shape (S, N, N, 3)
+        BRDFs on the same sampling.
+    geometry : Geometry
+        The hemisphere geometry of the N directions (``sampling.hemisphere_geometry``).
+    mask : ndarray of bool, shape (N, N), optional
+        Kept (incoming, outgoing) measurements (``sampled.decimation_mask``);
+        all by default. See the module docstring for how a mask enters the fit.
+    loss : {"wasserstein", "quadratic", "l1", "kl"}, default "wasserstein"
+    n_iter : int
+        Barycenter iterations L.
+    max_iter : int
+        L-BFGS iterations at most.
+    init_weights : ndarray, shape (S,), optional
+        Starting weights (uniform by default).
+    fit_incoming : ndarray of int, optional
+        Incoming directions whose rows enter the weight fit (all by default;
+        ``sampling.spread_subset`` gives a well-spread subset). The weights are
+        shared by all rows, so a spread subset estimates them at a fraction of
+        the cost; the fitted BRDF is then the barycenter of all rows with those
+        weights, and every row's scale still comes from its own measurements.
+    callback : callable, optional
+        ``callback(n_evaluations, weights, loss)`` after each evaluation.
+
+    Returns
+    -------
+    BRDFFit
+    """
+    start = time.perf_counter()
+    measured = np.asarray(measured, dtype=np.float64)
+    database = np.asarray(database, dtype=np.float64)
+    n = geometry.size
+    if measured.shape != (n, n, 3):
+        raise InputError(f"the measurement has shape {measured.shape}, expected {(n, n, 3)} "
+                         f"for a sampling of {n} directions")
+    if database.ndim != 4 or database.shape[1:] != (n, n, 3) or len(database) < 1:
+        raise InputError(f"the database has shape {database.shape}, expected (S, {n}, {n}, 3)")
+    for name, array in (("measurement", measured), ("database", database)):
+        if not np.isfinite(array).all() or (array < 0).any():
+            raise InputError(f"the {name} holds negative, NaN or infinite values")
+    histograms, database_sums = brdf_histograms(database)  # (S, N, 3, N), (S, N, 3)
+    empty = np.argwhere((database_sums <= 0).any(axis=(1, 2))).ravel()
+    if empty.size:
+        raise InputError(f"database BRDF #{int(empty[0])} has an incoming direction and "
+                         "channel with no reflected energy at all")
+    if mask is None:
+        mask = np.ones((n, n), dtype=bool)
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape != (n, n):
+        raise InputError(f"the mask has shape {mask.shape}, expected {(n, n)}")
+
+    rows = np.moveaxis(measured, -1, -2)  # (N, 3, N)
+    row_mask = np.broadcast_to(mask[:, None, :], rows.shape)
+    kept_sums = np.where(row_mask, rows, 0.0).sum(axis=-1)  # (N, 3)
+    active = kept_sums > 0  # rows the loss can see
+    if fit_incoming is not None:
+        chosen = np.zeros(n, dtype=bool)
+        chosen[np.asarray(fit_incoming, dtype=np.int64)] = True
+        active &= chosen[:, None]
+    if not active.any():
+        raise InputError("the measurement holds no positive value among the kept entries")
+    full = bool(mask.all())
+
+    target = np.where(row_mask, rows, 0.0)[active] / kept_sums[active][:, None]  # (B, N)
+    H = histograms[:, active]  # (S, B, N)
+    base = get_loss(loss)
+    if base.needs_positive_target:  # KL: a tiny floor on the entries the loss sees
+        target = np.where(row_mask[active], target + 1e-4 / n, 0.0)
+        target /= target.sum(axis=-1, keepdims=True)
+    fit_loss = base if full else masked_loss(base, row_mask[active])
+
+    result = barycentric_coordinates(target, H, geometry, loss=fit_loss, n_iter=n_iter,
+                                     max_iter=max_iter, init_weights=init_weights,
+                                     callback=callback)
+    weights = result.weights
+    if active.all():
+        P = result.barycenter.reshape(rows.shape)
+    else:
+        P = barycenter(histograms, weights, geometry, n_iter=n_iter)
+
+    kept_P = np.where(row_mask, P, 0.0).sum(axis=-1)
+    scale = np.divide(kept_sums, kept_P, out=np.zeros_like(kept_sums), where=kept_P > 0)
+    no_entry = ~row_mask.any(axis=-1)
+    if no_entry.any():
+        fallback = np.tensordot(weights, database_sums, axes=1)
+        scale = np.where(no_entry, fallback, scale)
+    values = np.moveaxis(P * scale[..., None], -1, -2)
+    return BRDFFit(
+        weights=weights,
+        values=np.ascontiguousarray(values),
+        histograms=P,
+        loss=float(result.loss),
+        n_evaluations=int(result.n_evaluations),
+        converged=bool(result.converged),
+        kept_fraction=float(mask.mean()),
+        time_s=time.perf_counter() - start,
+    )

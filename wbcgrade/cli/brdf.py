@@ -1,0 +1,194 @@
+"""``wbcgrade brdf``: infer a BRDF from sparse measurements (paper §5.2)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+from tqdm import tqdm
+
+from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
+from wbcgrade.brdf.fit import DEFAULT_LOSS, DEFAULT_MAX_ITER, DEFAULT_N_ITER, fit_brdf
+
+LOSS_CHOICES = ["wasserstein", "quadratic", "l1", "kl"]
+
+
+@click.group("brdf")
+def brdf() -> None:
+    """Reflectance (BRDF) as a Wasserstein barycenter of a BRDF database.
+
+    A measured BRDF is explained by weights on a database of BRDFs; the fitted
+    BRDF is their barycenter. It works from a fraction of the measurements
+    (--keep simulates a sparse acquisition).
+    """
+
+
+@brdf.command("synth")
+@click.option("-o", "--output", "folder", type=click.Path(file_okay=False),
+              help="Folder to write the database into (created if needed).")
+@click.option("--count", default=6, show_default=True, type=click.IntRange(1, 64),
+              help="Number of materials (the first of the built-in catalogue).")
+@click.option("--material", "materials", multiple=True, metavar="NAME",
+              help="Write these materials instead (repeatable; see --list).")
+@click.option("--list", "list_only", is_flag=True, help="List the material names and exit.")
+@click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
+              type=click.IntRange(8, 2000),
+              help="Hemisphere directions of the .npz files written for anisotropic materials.")
+def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only: bool,
+          directions: int) -> None:
+    """Write a database of analytic BRDFs (GGX metals and plastics, Ward, Lambert).
+
+    Isotropic materials are written as MERL .binary files; anisotropic ones
+    (Ward) as sampled .npz files, since the MERL format cannot hold anisotropy.
+    """
+    if list_only:
+        held_out = {m.name for m in analytic.held_out_materials()}
+        for name in analytic.all_material_names():
+            click.echo(f"{name}{'  (held out of --count databases)' if name in held_out else ''}")
+        return
+    if folder is None:
+        raise click.UsageError("Missing option '-o' / '--output'.")
+    chosen = ([analytic.material_by_name(n) for n in materials] if materials
+              else analytic.default_materials(count))
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    dirs = sampling.hemisphere_directions(directions)
+    written = []
+    for index, material in enumerate(tqdm(chosen, desc="synth", unit="BRDF", leave=False)):
+        stem = material.name if materials else f"{index + 1:02d}-{material.name}"
+        if material.isotropic:
+            path = merl.write_merl(out / f"{stem}.binary", merl.tabulate_merl(material.evaluate))
+        else:
+            path = io.write_sampled(out / f"{stem}.npz", analytic.sample_material(material, dirs),
+                                    dirs, name=material.name)
+        written.append(path)
+    for path in written:
+        click.echo(str(path))
+
+
+def _default_output(measured: Path, keep: float | None) -> Path:
+    tag = "" if keep is None else f"-keep{keep * 100:g}"
+    return Path.cwd() / f"{measured.stem}{tag}-fit.binary"
+
+
+def _percent(weights: np.ndarray) -> list[float]:
+    return [round(float(w) * 100.0, 1) for w in weights]
+
+
+@brdf.command("fit")
+@click.argument("measured", type=click.Path(exists=True, dir_okay=False))
+@click.option("--database", required=True, type=click.Path(exists=True, file_okay=False),
+              help="Folder of BRDF files (.binary MERL or .npz sampled).")
+@click.option("--keep", type=click.FloatRange(0.0, 1.0, min_open=True), default=None,
+              help="Keep only this random fraction of the measurements (simulated sparse "
+                   "acquisition).")
+@click.option("--seed", default=0, show_default=True, help="Seed of the decimation.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Fitted BRDF (.binary MERL or .npz) [default: ./<MEASURED>[-keepK]-fit.binary].")
+@click.option("--png", type=click.Path(dir_okay=False), default=None,
+              help="Comparison picture [default: OUTPUT with .png].")
+@click.option("--no-png", is_flag=True, help="Do not render the comparison picture.")
+@click.option("--compare/--no-compare", default=True, show_default=True,
+              help="With --keep, also fit the full measurement for comparison.")
+@click.option("--loss", type=click.Choice(LOSS_CHOICES), default=DEFAULT_LOSS,
+              show_default=True)
+@click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
+              type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
+@click.option("--fit-directions", default=48, show_default=True, type=click.IntRange(0, 2000),
+              help="Incoming directions (well spread) used to fit the weights; 0 = all N.")
+@click.option("--width", default=sampling.DEFAULT_WIDTH, show_default=True,
+              type=click.FloatRange(0.1, 20.0),
+              help="Kernel width in sample spacings (sets gamma).")
+@click.option("--n-iter", default=DEFAULT_N_ITER, show_default=True,
+              type=click.IntRange(1, 10000), help="Barycenter iterations.")
+@click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
+              type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+def fit(measured: str, database: str, keep: float | None, seed: int, output: str | None,
+        png: str | None, no_png: bool, compare: bool, loss: str, directions: int,
+        fit_directions: int, width: float, n_iter: int, max_iter: int, as_json: bool) -> None:
+    """Fit MEASURED (a BRDF file) with weights on the BRDFs of --database.
+
+    Prints the weights and the PSNR of each fit against the full measurement,
+    writes the fitted BRDF (from the decimated measurement when --keep is
+    given) and a picture: spheres rendered with the reference, the full fit
+    and the decimated fit.
+    """
+    measured_path = Path(measured)
+    out = Path(output) if output else _default_output(measured_path, keep)
+    png_path = None if no_png else (Path(png) if png else out.with_suffix(".png"))
+    inputs = {measured_path.resolve(), *(p.resolve() for p in io.database_files(database))}
+    for target in (out, png_path):
+        if target is not None and target.resolve() in inputs:
+            raise click.BadParameter(f"{target} is an input; choose another output",
+                                     param_hint="-o/--png")
+    if out.suffix.lower() not in io.BRDF_SUFFIXES:
+        raise click.BadParameter(f"{out}: use a .binary or .npz suffix", param_hint="-o")
+
+    dirs = sampling.hemisphere_directions(directions)
+    geometry = sampling.hemisphere_geometry(directions, sampling.default_gamma(directions, width))
+    reference = io.load_brdf(measured_path, dirs)
+    names, base = io.load_database(database, dirs, exclude=measured_path)
+    subset = None if fit_directions in (0, directions) else sampling.spread_subset(
+        dirs, fit_directions)
+
+    runs: list[tuple[str, np.ndarray | None]] = []
+    if keep is None or compare:
+        runs.append(("full", None))
+    if keep is not None:
+        runs.append((f"keep {keep * 100:g}%", sampled.decimation_mask(directions, directions,
+                                                                       keep, seed)))
+    results = []
+    for label, mask in runs:
+        with tqdm(desc=f"fit ({label})", unit="eval", leave=False) as bar:
+            def progress(n, weights, value, bar=bar):
+                bar.update(1)
+                bar.set_postfix(loss=f"{value:.4g}")
+
+            result = fit_brdf(reference, base, geometry, mask=mask, loss=loss, n_iter=n_iter,
+                              max_iter=max_iter, fit_incoming=subset, callback=progress)
+        results.append((label, result, sampled.psnr(reference, result.values)))
+
+    label, final, _ = results[-1]
+    io.save_brdf(out, final.values, dirs, name=f"{measured_path.stem} {label} fit")
+    if png_path is not None:
+        renderings = [render.render_sphere(reference, dirs)]
+        captions = [["reference", measured_path.stem[:28]]]
+        for label, result, psnr in results:
+            renderings.append(render.render_sphere(result.values, dirs))
+            captions.append([f"fit, {label}", f"PSNR {psnr:.1f} dB",
+                             "w% " + " ".join(f"{w:.0f}" for w in _percent(result.weights))])
+        render.write_png(png_path, render.comparison_image(renderings, captions))
+
+    if as_json:
+        click.echo(json.dumps({
+            "measured": str(measured_path),
+            "database": names,
+            "directions": directions,
+            "gamma": geometry.gamma,
+            "loss": loss,
+            "fits": [{
+                "label": label,
+                "kept_fraction": result.kept_fraction,
+                "weights": dict(zip(names, (float(w) for w in result.weights), strict=True)),
+                "psnr_db": psnr,
+                "loss": result.loss,
+                "n_evaluations": result.n_evaluations,
+                "converged": result.converged,
+                "time_s": round(result.time_s, 3),
+            } for label, result, psnr in results],
+            "output": str(out),
+            "png": None if png_path is None else str(png_path),
+        }, indent=2))
+        return
+    width_name = max(len(n) for n in [*names, "PSNR vs measurement"])
+    header = f"{'material':<{width_name}}" + "".join(f"{label:>14}" for label, _, _ in results)
+    click.echo(header)
+    for i, name in enumerate(names):
+        click.echo(f"{name:<{width_name}}"
+                   + "".join(f"{r.weights[i] * 100:13.1f}%" for _, r, _ in results))
+    click.echo(f"{'PSNR vs measurement':<{width_name}}"
+               + "".join(f"{p:11.1f} dB" for _, _, p in results))
+    click.echo(f"wrote {out}" + ("" if png_path is None else f" and {png_path}"))
