@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wbcgrade.core._cpu import fast_cpu
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
 
@@ -307,7 +308,8 @@ class BarycenterSolver:
         """Run ``task(backend)`` on the first backend that can represent it."""
         for name, make in self._backends(weights):
             try:
-                result = task(make())
+                with fast_cpu():
+                    result = task(make())
             except _Unsafe as why:
                 log.info("barycenter: %s backend unsafe (%s); switching", name, why)
                 continue

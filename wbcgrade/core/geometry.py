@@ -23,6 +23,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wbcgrade.core._cpu import fast_cpu, parallel_map
+
 __all__ = ["Geometry", "GridGeometry", "DenseGeometry"]
 
 
@@ -75,6 +77,25 @@ def _check_gamma(gamma: float) -> float:
     if not np.isfinite(gamma) or gamma <= 0:
         raise ValueError(f"gamma must be a positive finite number, got {gamma!r}")
     return gamma
+
+
+def _apply_in_parallel(geometry: Geometry, values: NDArray, apply_block) -> NDArray:
+    """Run ``apply_block(block, out)`` over the leading histograms, split across threads."""
+    geometry._check_values(values)
+    x = np.ascontiguousarray(values, dtype=geometry.dtype)
+    lead = int(np.prod(x.shape[: x.ndim - geometry.ndim]))
+    flat = x.reshape(lead, *geometry.shape)
+    out = np.empty_like(flat)
+
+    def work(lo: int, hi: int) -> None:
+        apply_block(flat[lo:hi], out[lo:hi])
+
+    with fast_cpu():
+        if lead >= 2 and geometry.size >= 4096:
+            parallel_map(work, lead)
+        else:
+            work(0, lead)
+    return out.reshape(x.shape)
 
 
 class Geometry(ABC):
@@ -232,18 +253,19 @@ class GridGeometry(Geometry):
         after = int(np.prod(self.shape[axis + 1 :]))
         return before, self.shape[axis], after
 
-    def apply(self, values: NDArray) -> NDArray:
-        self._check_values(values)
-        out = np.ascontiguousarray(values, dtype=self.dtype)
-        full_shape = out.shape
+    def _apply_block(self, block: NDArray, out: NDArray) -> None:
+        """K x for a contiguous block of histograms ``(m, *shape)``, written into ``out``."""
+        last, m = self.ndim - 1, block.shape[0]
         for axis, kernel in enumerate(self.kernels):
-            before, n, after = self._split(out, axis)
-            if after == 1:
-                out = out.reshape(before, n) @ kernel.T
+            before = m * int(np.prod(self.shape[:axis]))
+            n, after = self.shape[axis], int(np.prod(self.shape[axis + 1 :]))
+            if axis == last:  # after == 1: one product with the transposed kernel
+                np.matmul(block.reshape(before, n), kernel.T, out=out.reshape(before, n))
             else:
-                out = np.matmul(kernel, out.reshape(before, n, after))
-            out = out.reshape(full_shape)
-        return out
+                block = np.matmul(kernel, block.reshape(before, n, after))
+
+    def apply(self, values: NDArray) -> NDArray:
+        return _apply_in_parallel(self, values, self._apply_block)
 
     def log_apply(self, log_values: NDArray) -> NDArray:
         self._check_values(log_values)
@@ -314,10 +336,11 @@ class DenseGeometry(Geometry):
     def cost_matrix(self) -> NDArray:
         return self.cost.copy()
 
+    def _apply_block(self, block: NDArray, out: NDArray) -> None:
+        np.matmul(block.reshape(-1, self.size), self.kernel, out=out.reshape(-1, self.size))
+
     def apply(self, values: NDArray) -> NDArray:
-        self._check_values(values)
-        flat = np.ascontiguousarray(values, dtype=self.dtype).reshape(-1, self.size)
-        return (flat @ self.kernel).reshape(values.shape)
+        return _apply_in_parallel(self, values, self._apply_block)
 
     def log_apply(self, log_values: NDArray) -> NDArray:
         self._check_values(log_values)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wbcgrade.core._cpu import fast_cpu
 from wbcgrade.core.geometry import Geometry
 
 __all__ = ["SinkhornResult", "sinkhorn", "barycentric_projection"]
@@ -165,11 +166,12 @@ def sinkhorn(
     if int(max_iter) < 1:
         raise ValueError("max_iter must be at least 1")
     args = (p, q, geometry, float(tol), int(max_iter), init_log_b, max(1, int(check_every)))
-    try:
-        log_a, log_b, n_iter, error = _scaling(*args)
-    except _Unsafe as why:
-        log.info("sinkhorn: scaling domain unsafe (%s); using the log domain", why)
-        log_a, log_b, n_iter, error = _log_domain(*args)
+    with fast_cpu():
+        try:
+            log_a, log_b, n_iter, error = _scaling(*args)
+        except _Unsafe as why:
+            log.info("sinkhorn: scaling domain unsafe (%s); using the log domain", why)
+            log_a, log_b, n_iter, error = _log_domain(*args)
     return SinkhornResult(log_a, log_b, n_iter, error, bool(error <= tol))
 
 

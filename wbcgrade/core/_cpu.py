@@ -1,0 +1,131 @@
+"""CPU settings that make kernel products fast and predictable.
+
+Two facts measured on the target machines (DESIGN.md §4):
+
+- Products whose operands or results are denormal run 10-100 times slower;
+  with the CPU's flush-to-zero / denormals-are-zero flags set they do not.
+  Values below 2.2e-308 carry no usable mass for us, so inside core
+  computations the flags are set (and restored afterwards).
+- OpenBLAS's own threads busy-wait and collapse when the machine is shared
+  or the matrices are small (a 32^3 forward pass took 3x-15x longer). The core
+  therefore runs BLAS single-threaded and spreads independent histograms over
+  its own small thread pool (numpy releases the GIL inside products).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import platform
+import threading
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+
+from threadpoolctl import ThreadpoolController
+
+__all__ = ["fast_cpu", "n_workers", "parallel_map"]
+
+_FLUSH_FLAGS = 0x8040  # MXCSR: flush-to-zero (bit 15) | denormals-are-zero (bit 6)
+
+if platform.machine().lower() in ("x86_64", "amd64"):
+    import numba
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    def _mxcsr_call(builder, name, ptr):
+        fnty = ir.FunctionType(ir.VoidType(), [ir.PointerType(ir.IntType(8))])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, name)
+        builder.call(fn, [builder.bitcast(ptr, ir.PointerType(ir.IntType(8)))])
+
+    @intrinsic
+    def _stmxcsr(typingctx):  # pragma: no cover - compiled
+        def codegen(context, builder, sig, args):
+            ptr = cgutils.alloca_once(builder, ir.IntType(32))
+            _mxcsr_call(builder, "llvm.x86.sse.stmxcsr", ptr)
+            return builder.load(ptr)
+
+        return types.uint32(), codegen
+
+    @intrinsic
+    def _ldmxcsr(typingctx, value):  # pragma: no cover - compiled
+        def codegen(context, builder, sig, args):
+            ptr = cgutils.alloca_once_value(builder, args[0])
+            _mxcsr_call(builder, "llvm.x86.sse.ldmxcsr", ptr)
+            return context.get_dummy_value()
+
+        return types.void(types.uint32), codegen
+
+    @numba.njit(cache=True)
+    def _get_flags() -> int:  # pragma: no cover - compiled
+        return _stmxcsr()
+
+    @numba.njit(cache=True)
+    def _set_flags(value: int) -> None:  # pragma: no cover - compiled
+        _ldmxcsr(value)
+
+else:  # pragma: no cover - other architectures keep their defaults
+
+    def _get_flags() -> int:
+        return 0
+
+    def _set_flags(value: int) -> None:
+        return None
+
+
+_controller: ThreadpoolController | None = None
+_pool: ThreadPoolExecutor | None = None
+_lock = threading.Lock()
+
+
+def n_workers() -> int:
+    """Threads the core uses for independent kernel products."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 16))
+
+
+def _flush_denormals_in_this_thread() -> None:
+    _set_flags(int(_get_flags()) | _FLUSH_FLAGS)
+
+
+def _get_pool() -> ThreadPoolExecutor:
+    global _pool
+    with _lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(
+                n_workers(), "wbcgrade", initializer=_flush_denormals_in_this_thread
+            )
+        return _pool
+
+
+@contextlib.contextmanager
+def fast_cpu() -> Iterator[None]:
+    """Single-threaded BLAS and flushed denormals in this thread, restored on exit."""
+    global _controller
+    if _controller is None:
+        _controller = ThreadpoolController()
+    old = int(_get_flags())
+    with _controller.limit(limits=1, user_api="blas"):
+        _set_flags(old | _FLUSH_FLAGS)
+        try:
+            yield
+        finally:
+            _set_flags(old)
+
+
+def parallel_map(function: Callable[[int, int], None], n_items: int) -> None:
+    """Call ``function(start, stop)`` on contiguous slices of ``range(n_items)`` in parallel."""
+    workers = min(n_workers(), n_items)
+    if workers <= 1:
+        function(0, n_items)
+        return
+    bounds = [round(i * n_items / workers) for i in range(workers + 1)]
+    futures = [
+        _get_pool().submit(function, lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo
+    ]
+    for future in futures:
+        future.result()
