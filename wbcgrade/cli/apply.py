@@ -1,0 +1,128 @@
+"""``wbcgrade apply``: grade a photo towards the closest barycenter of style palettes."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import click
+from tqdm import tqdm
+
+from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.color.lut import DEFAULT_LUT_SIZE
+from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
+from wbcgrade.color.transfer import LOSSES, GradeOptions, parse_weights
+
+_DEFAULTS = GradeOptions()
+
+
+def _warn(message: str) -> None:
+    click.echo(f"Warning: {message}", err=True)
+
+
+def _print_report(report, as_json: bool) -> None:
+    if as_json:
+        click.echo(json.dumps(report.as_dict(), indent=2))
+        return
+    grade = report.grade
+    ranked = grade.ranked()
+    width = max(len("style"), *(len(name) for name, _ in ranked))
+    click.echo(f"{'style':<{width}}  weight")
+    click.echo(f"{'-' * width}  ------")
+    for name, weight in ranked:
+        click.echo(f"{name:<{width}}  {weight:6.3f}")
+    if grade.loss is None:
+        click.echo("loss: - (weights given with --weights)")
+    else:
+        fit = grade.info.get("fit", {})
+        click.echo(f"loss: {grade.loss:.4g} (from {fit.get('initial_loss', float('nan')):.4g} "
+                   f"at uniform weights, {fit.get('evaluations', 0)} evaluations)")
+        if not fit.get("converged", True):
+            _warn("the weight fit stopped before converging (raise --max-iter)")
+    sink = grade.info.get("sinkhorn", {})
+    if sink and not sink.get("converged", True):
+        _warn(f"the transfer Sinkhorn stopped at marginal error {sink['error']:.2g}")
+    stages = ", ".join(f"{k} {v:.2f}s" for k, v in report.timings.items() if k != "total")
+    click.echo(f"time: {stages} (total {report.timings['total']:.1f}s)")
+    click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
+
+
+@click.command("apply")
+@click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
+              help="Folder of style photos (non-images are skipped).")
+@click.option("--preset", default=None, metavar="NAME_OR_FILE",
+              help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz file.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
+@click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
+              help="Bins per axis of the colour map (transfer grid); 128 is the paper's "
+                   "but about 8x slower.")
+@click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
+              help="Bins per axis of the grid the weights are fitted on.")
+@click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
+              help="Fit loss between the barycenter and the photo's histogram.")
+@click.option("--width", type=float, default=_DEFAULTS.width, show_default=True,
+              help="Fit kernel width in bins of the fit grid (gamma = 2 (width/(fit_bins-1))^2).")
+@click.option("--gamma", type=float, default=None,
+              help="Fit entropic regularisation gamma (overrides --width).")
+@click.option("--transfer-width", type=float, default=_DEFAULTS.transfer_width,
+              show_default=True,
+              help="Kernel width in bins of the transfer grid; smaller keeps colours crisper.")
+@click.option("--iterations", "n_iter", type=int, default=_DEFAULTS.n_iter, show_default=True,
+              help="Barycenter iterations.")
+@click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
+              help="L-BFGS iterations of the fit at most.")
+@click.option("--weights", "weights_text", default=None, metavar="A,B,C",
+              help="Use these style weights (in style order) and skip the fit.")
+@click.option("--strength", type=float, default=1.0, show_default=True,
+              help="Blend: x -> (1-t) x + t T(x).")
+@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Also write the grade as a 3-D LUT (.cube).")
+@click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
+              help="Nodes per axis of the LUT.")
+@click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
+              help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or ~/.cache/wbcgrade].")
+def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, transfer_width,
+          n_iter, max_iter, weights_text, strength, lut, lut_size, overwrite, as_json,
+          no_cache, cache_dir):
+    """Grade PHOTO towards the barycenter of style palettes closest to its own.
+
+    The style palettes come from a folder of photos (--style DIR) or a preset
+    (--preset NAME_OR_FILE). The photo keeps its format, bit depth, EXIF and
+    ICC profile. Float (EXR) photos are graded in the sRGB-encoded domain;
+    values above 1 keep their intensity and get the grade of their hue.
+    """
+    opts = GradeOptions(bins=bins, fit_bins=fit_bins, loss=loss, width=width, gamma=gamma,
+                        transfer_width=transfer_width, n_iter=n_iter, max_iter=max_iter,
+                        strength=strength,
+                        weights=parse_weights(weights_text) if weights_text else None)
+    opts.validate()
+    check_outputs(photo, output, lut, lut_size, overwrite)
+    cache = HistogramCache(cache_dir, enabled=not no_cache)
+    start = time.perf_counter()
+    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
+        def progress(done, total, name):
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name)
+            bar.refresh()
+
+        styles = load_styles(style_dir, preset, bins, cache=cache, warn=_warn, progress=progress)
+    timings = {"styles": time.perf_counter() - start}
+
+    with tqdm(desc="fit", unit="eval", disable=None, leave=False) as bar:
+        def on_fit(n_eval, weights, value):
+            bar.update(1)
+            bar.set_postfix(loss=f"{value:.4g}")
+
+        def on_stage(name):
+            bar.set_description(name)
+
+        report = grade_file(photo, styles, opts, output=output, lut=lut, lut_size=lut_size,
+                            overwrite=overwrite, fit_callback=on_fit, stage=on_stage,
+                            timings=timings)
+    _print_report(report, as_json)

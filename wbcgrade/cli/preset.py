@@ -1,0 +1,75 @@
+"""``wbcgrade preset``: build and list style presets."""
+
+from __future__ import annotations
+
+import json
+
+import click
+from tqdm import tqdm
+
+from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.color.presets import (
+    DEFAULT_PRESET_WIDTH,
+    list_presets,
+    load_preset,
+    load_style_folder,
+    save_preset,
+)
+
+
+@click.group("preset")
+def preset() -> None:
+    """Build and list style presets (databases of style palettes)."""
+
+
+@preset.command("build")
+@click.argument("folder", type=click.Path(path_type=str))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
+              help="Preset file to write (.npz).")
+@click.option("--bins", type=int, default=32, show_default=True,
+              help="Bins per axis of the stored histograms (apply re-bins them as needed).")
+@click.option("--width", type=float, default=DEFAULT_PRESET_WIDTH, show_default=True,
+              help="Kernel width (bins) recorded with the preset.")
+@click.option("--description", default="", help="One line shown by `preset list`.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing preset file.")
+@click.option("--no-cache", is_flag=True, help="Do not use the style histogram cache.")
+def build(folder, output, bins, width, description, overwrite, no_cache):
+    """Build a preset from the photos in FOLDER (non-images are skipped)."""
+    if not 4 <= bins <= 256:
+        raise click.BadParameter("must be between 4 and 256", param_hint="--bins")
+    if output and not output.lower().endswith(".npz"):
+        raise click.BadParameter("preset file name must end in .npz", param_hint="-o")
+    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
+        def progress(done, total, name):
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name)
+            bar.refresh()
+
+        styles = load_style_folder(
+            folder, bins, cache=HistogramCache(enabled=not no_cache),
+            warn=lambda m: click.echo(f"Warning: {m}", err=True), progress=progress)
+    path = save_preset(output, styles, width=width, description=description, overwrite=overwrite)
+    click.echo(f"wrote {path}: {len(styles.names)} styles ({', '.join(styles.names)}), "
+               f"{bins}^3 bins, {path.stat().st_size / 1024:.0f} KiB")
+
+
+@preset.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+def list_(as_json):
+    """List the presets shipped with wbcgrade."""
+    rows = []
+    for name, path in list_presets():
+        styles = load_preset(path)
+        rows.append({"name": name, "styles": styles.names, "bins": styles.bins,
+                     "description": styles.description, "path": str(path)})
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+        return
+    if not rows:
+        click.echo("no presets installed")
+        return
+    width = max(len(r["name"]) for r in rows)
+    for r in rows:
+        click.echo(f"{r['name']:<{width}}  {r['bins']}^3  {', '.join(r['styles'])}"
+                   + (f"  - {r['description']}" if r["description"] else ""))

@@ -1,0 +1,1 @@
+"""Colour grading domain: photos <-> RGB histograms, colour maps, LUTs and presets."""

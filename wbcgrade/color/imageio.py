@@ -1,0 +1,328 @@
+"""Read and write photos with OpenImageIO, keeping what a photographer cares about.
+
+Reading applies the EXIF orientation, detects corrupt or truncated files
+(OpenImageIO returns pixels for a truncated JPEG and only reports the problem
+through ``ImageInput.has_error``), rejects NaN/inf pixels, and keeps the
+metadata (EXIF, ICC profile, ...) for writing. Writing keeps the format, bit
+depth and metadata, goes through a temporary file in the output folder that is
+renamed into place, and never replaces the input.
+
+Pixel domains: integer images (8/16-bit JPEG, PNG, TIFF) are treated as
+display-encoded values in [0, 1]. Float images (EXR, float TIFF) are treated as
+scene-linear and graded in the sRGB-encoded domain (colour-science's sRGB
+encoding); see :func:`encode_for_grading` for what happens above 1.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from wbcgrade.errors import InputError
+
+__all__ = [
+    "Image",
+    "read_image",
+    "write_image",
+    "check_output_path",
+    "encode_for_grading",
+    "decode_from_grading",
+    "orient",
+]
+
+#: Metadata prefixes that are meaningful in any file format.
+_GENERIC_PREFIXES = ("Exif", "GPS", "IPTC", "XMP")
+_INTEGER_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0,
+                "int8": 127.0, "int16": 32767.0, "int32": 2147483647.0}
+
+
+@dataclass
+class Image:
+    """A decoded photo.
+
+    Attributes
+    ----------
+    pixels : (H, W, C) float32
+        Display-oriented pixels. Integer formats are scaled to [0, 1]; float
+        formats keep their (scene-linear) values.
+    spec : oiio.ImageSpec
+        The file's spec (format, bit depth, metadata), as read.
+    path : Path or None
+        Where it came from.
+    alpha_channel : int
+        Index of the alpha channel in ``pixels``, or -1.
+    """
+
+    pixels: np.ndarray
+    spec: oiio.ImageSpec
+    path: Path | None = None
+    alpha_channel: int = -1
+    format_name: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def height(self) -> int:
+        return self.pixels.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.pixels.shape[1]
+
+    @property
+    def is_float(self) -> bool:
+        """True for float pixel formats (EXR, float TIFF): scene-linear values."""
+        return self.spec.format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
+
+    @property
+    def color_channels(self) -> list[int]:
+        """Indices of the colour channels (1 for grey, 3 for RGB)."""
+        chans = [c for c in range(self.pixels.shape[2]) if c != self.alpha_channel]
+        return chans[:3] if len(chans) >= 3 else chans[:1]
+
+    def rgb(self) -> np.ndarray:
+        """(H, W, 3) float32 colour values (grey replicated to three channels)."""
+        chans = self.color_channels
+        if len(chans) == 1:
+            return np.repeat(self.pixels[:, :, chans[0]:chans[0] + 1], 3, axis=2)
+        return self.pixels[:, :, chans]
+
+    def alpha(self) -> np.ndarray | None:
+        """(H, W) float32 alpha, or None."""
+        if self.alpha_channel < 0:
+            return None
+        return self.pixels[:, :, self.alpha_channel]
+
+
+def orient(pixels: np.ndarray, orientation: int) -> np.ndarray:
+    """Apply an EXIF orientation (1..8) to (H, W, C) stored pixels -> display pixels."""
+    ops = {
+        1: lambda a: a,
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1, :],
+        5: lambda a: a.transpose(1, 0, 2),
+        6: lambda a: np.rot90(a, k=-1),
+        7: lambda a: a[::-1, ::-1].transpose(1, 0, 2),
+        8: lambda a: np.rot90(a, k=1),
+    }
+    return ops.get(int(orientation), ops[1])(pixels)
+
+
+def read_image(path: str | os.PathLike) -> Image:
+    """Read a photo.
+
+    Parameters
+    ----------
+    path : path of a JPEG, PNG, TIFF (8/16-bit or float), EXR, ... file.
+
+    Returns
+    -------
+    Image with display-oriented float32 pixels (H, W, C).
+
+    Raises
+    ------
+    InputError
+        Missing file, not an image, corrupt or truncated data, no colour
+        channel, NaN or infinite pixels.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not an image")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        reason = oiio.geterror().strip().splitlines()
+        detail = reason[0] if reason else "unknown format"
+        raise InputError(f"{path}: not a readable image ({detail})")
+    try:
+        spec = inp.spec()
+        if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
+            raise InputError(f"{path}: empty image")
+        if spec.depth > 1:
+            raise InputError(f"{path}: volume images are not supported")
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        if pixels is None or inp.has_error:
+            message = inp.geterror().strip().splitlines()
+            detail = message[0] if message else "read failed"
+            raise InputError(f"{path}: corrupt or truncated image ({detail})")
+        format_name = inp.format_name()
+        spec = oiio.ImageSpec(spec)
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    if not np.isfinite(pixels).all():
+        raise InputError(f"{path}: image holds NaN or infinite pixel values")
+    orientation = spec.get_int_attribute("Orientation", 1)
+    pixels = np.ascontiguousarray(orient(pixels, orientation))
+    alpha = spec.alpha_channel
+    if alpha < 0 and spec.nchannels in (2, 4):
+        alpha = spec.nchannels - 1  # grey+alpha or RGBA without an explicit alpha name
+    return Image(pixels=pixels, spec=spec, path=path, alpha_channel=int(alpha),
+                 format_name=format_name)
+
+
+def encode_for_grading(rgb: np.ndarray, is_float: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """Map pixel values into the [0, 1] encoded cube the histograms live in.
+
+    Integer images are already encoded: values are clipped to [0, 1]. Float
+    (scene-linear) images go through colour-science's sRGB encoding. Values
+    above 1 are handled by exposure: each pixel whose largest channel m exceeds
+    1 is divided by m, graded like the in-range colour of the same hue, and
+    multiplied back by m in :func:`decode_from_grading`, so highlights keep
+    their intensity above 1 and only their colour is graded. Negative values
+    are clipped to 0.
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) float32
+    is_float : whether the values are scene-linear floats.
+
+    Returns
+    -------
+    encoded : (H, W, 3) float32 in [0, 1]
+    scale : (H, W, 1) float32 per-pixel exposure factor (>= 1), or None.
+    """
+    if not is_float:
+        return np.clip(rgb, 0.0, 1.0, dtype=np.float32), None
+    from wbcgrade.color._colour import colour
+
+    linear = np.maximum(rgb, 0.0)
+    scale = np.maximum(linear.max(axis=2, keepdims=True), 1.0).astype(np.float32)
+    encoded = colour.cctf_encoding(linear / scale, function="sRGB")
+    return np.clip(encoded, 0.0, 1.0).astype(np.float32), scale
+
+
+def decode_from_grading(encoded: np.ndarray, scale: np.ndarray | None) -> np.ndarray:
+    """Inverse of :func:`encode_for_grading` ((H, W, 3) float32 -> pixel values)."""
+    if scale is None:
+        return encoded.astype(np.float32, copy=False)
+    from wbcgrade.color._colour import colour
+
+    linear = colour.cctf_decoding(np.clip(encoded, 0.0, 1.0), function="sRGB")
+    return (linear * scale).astype(np.float32)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def check_output_path(out: str | os.PathLike, inputs: list[str | os.PathLike] = (),
+                      overwrite: bool = False) -> Path:
+    """Check early that ``out`` may be written (before any long computation).
+
+    Raises InputError if ``out`` is one of ``inputs`` (never allowed), exists
+    and ``overwrite`` is False, or its folder is missing or not writable.
+    """
+    out = Path(out)
+    for src in inputs:
+        if src is not None and _same_file(Path(src), out):
+            raise InputError(f"{out}: refusing to overwrite the input file")
+    if out.exists() and not overwrite:
+        raise InputError(f"{out}: file exists (use --overwrite to replace it)")
+    if out.is_dir():
+        raise InputError(f"{out}: is a folder")
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(f"{folder}: output folder does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: output folder is not writable")
+    return out
+
+
+def _valid_icc(value) -> bool:
+    """Cheap sanity check of an ICC blob (libpng crashes OpenImageIO on bad ones)."""
+    data = np.asarray(value, dtype=np.uint8).tobytes()
+    return (len(data) >= 128 and data[36:40] == b"acsp"
+            and int.from_bytes(data[0:4], "big") == len(data))
+
+
+def _output_spec(like: Image, height: int, width: int, nchannels: int,
+                 out_format_name: str, alpha_channel: int) -> oiio.ImageSpec:
+    spec = oiio.ImageSpec(width, height, nchannels, like.spec.format)
+    if nchannels == like.spec.nchannels:
+        spec.channelnames = like.spec.channelnames
+    elif nchannels >= 3:
+        names = ["R", "G", "B"] + [f"channel{i}" for i in range(3, nchannels)]
+        if 0 <= alpha_channel < nchannels:
+            names[alpha_channel] = "A"
+        spec.channelnames = tuple(names)
+    spec.alpha_channel = alpha_channel if 0 <= alpha_channel < nchannels else -1
+    same_format = out_format_name == like.format_name
+    for attrib in like.spec.extra_attribs:
+        name = attrib.name
+        if name == "Orientation" or name.startswith("ICCProfile:"):
+            continue
+        if name == "ICCProfile":
+            if _valid_icc(attrib.value):
+                spec.attribute(name, attrib.type, attrib.value)
+            continue
+        prefix = name.split(":", 1)[0] if ":" in name else ""
+        if name.startswith("oiio:") and name != "oiio:ColorSpace":
+            continue
+        if not same_format and prefix not in _GENERIC_PREFIXES and name not in (
+                "Make", "Model", "Software", "Artist", "Copyright", "ImageDescription",
+                "DateTime", "XResolution", "YResolution", "ResolutionUnit"):
+            continue
+        try:
+            spec.attribute(name, attrib.type, attrib.value)
+        except (TypeError, ValueError, RuntimeError):
+            continue  # an attribute the binding cannot copy: drop it, not the photo
+    spec.attribute("Orientation", 1)  # pixels are written display-oriented
+    return spec
+
+
+def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
+                overwrite: bool = False, alpha_channel: int | None = None) -> Path:
+    """Write pixels with the format, bit depth and metadata of ``like``.
+
+    Parameters
+    ----------
+    path : output file; its extension picks the file format.
+    pixels : (H, W, C) float32, same value convention as ``Image.pixels``
+        (integer formats: [0, 1], rounded to the nearest code value).
+    like : the image whose spec (bit depth, EXIF, ICC, ...) is kept.
+    overwrite : replace an existing file (never the input).
+    alpha_channel : index of alpha in ``pixels`` (default: ``like``'s).
+
+    The file is written to a temporary name in the same folder and renamed
+    into place; nothing is left behind on failure.
+    """
+    path = check_output_path(path, [like.path], overwrite)
+    if pixels.ndim != 3:
+        raise InputError("pixels must be (H, W, C)")
+    height, width, nchannels = pixels.shape
+    out = oiio.ImageOutput.create(str(path))
+    if out is None:
+        raise InputError(f"{path}: cannot write this file type ({oiio.geterror().strip()})")
+    alpha = like.alpha_channel if alpha_channel is None else alpha_channel
+    spec = _output_spec(like, height, width, nchannels, out.format_name(), alpha)
+    if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
+        pixels = np.clip(pixels, 0.0, 1.0)
+    data = np.ascontiguousarray(pixels, dtype=np.float32)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        if not out.open(tmp_name, spec):
+            raise OSError(f"{path}: cannot open for writing ({out.geterror().strip()})")
+        ok = out.write_image(data)
+        error = out.geterror().strip()
+        closed = out.close()
+        if not ok or not closed:
+            raise OSError(f"{path}: write failed ({error or 'unknown error'})")
+        os.replace(tmp_name, path)
+    except BaseException:
+        try:
+            os.unlink(tmp_name)
+        except OSError:
+            pass
+        raise
+    return path

@@ -1,0 +1,172 @@
+"""Grade a photo file end to end: read, fit, remap, write the photo and a LUT.
+
+This is the library behind ``wbcgrade apply``; it knows files and colours but
+no command line (progress and messages go through callbacks).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.color.imageio import (
+    Image,
+    check_output_path,
+    decode_from_grading,
+    encode_for_grading,
+    read_image,
+    write_image,
+)
+from wbcgrade.color.lut import color_map_to_lut, write_cube
+from wbcgrade.color.presets import StyleSet, load_preset, load_style_folder, resolve_preset
+from wbcgrade.color.transfer import Grade, GradeOptions, grade_image
+from wbcgrade.errors import InputError
+
+__all__ = ["GradeReport", "default_output_path", "check_outputs", "load_styles", "render",
+           "grade_file"]
+
+
+@dataclass
+class GradeReport:
+    """What ``grade_file`` did, for printing or JSON."""
+
+    photo: Path
+    output: Path
+    lut: Path | None
+    grade: Grade
+    styles_source: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        """JSON-friendly summary."""
+        return {
+            "photo": str(self.photo),
+            "output": str(self.output),
+            "lut": None if self.lut is None else str(self.lut),
+            "styles": self.styles_source,
+            "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
+            "loss": self.grade.loss,
+            "fitted": self.grade.loss is not None,
+            "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
+            **{k: v for k, v in self.grade.info.items()},
+        }
+
+
+def default_output_path(photo: str | os.PathLike) -> Path:
+    """``<stem>_graded<ext>`` beside the photo."""
+    photo = Path(photo)
+    return photo.with_name(f"{photo.stem}_graded{photo.suffix}")
+
+
+def check_outputs(photo: str | os.PathLike, output: str | os.PathLike | None,
+                  lut: str | os.PathLike | None, lut_size: int = 33,
+                  overwrite: bool = False) -> tuple[Path, Path | None]:
+    """Check the photo exists and the outputs may be written; -> (output, lut) paths."""
+    photo = Path(photo)
+    if not photo.exists():
+        raise InputError(f"{photo}: no such file")
+    output = Path(output) if output is not None else default_output_path(photo)
+    check_output_path(output, [photo], overwrite)
+    if lut is not None:
+        lut = Path(lut)
+        if lut.suffix.lower() != ".cube":
+            raise InputError(f"{lut}: LUT file name must end in .cube")
+        check_output_path(lut, [photo, output], overwrite)
+        if not 2 <= lut_size <= 256:
+            raise InputError("--lut-size must be between 2 and 256")
+    return output, lut
+
+
+def load_styles(style_dir: str | os.PathLike | None, preset: str | None, bins: int,
+                cache: HistogramCache | None = None,
+                warn: Callable[[str], None] | None = None,
+                progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
+    """Styles from a folder (histograms at ``bins``, cached) or a preset NAME/FILE."""
+    if (style_dir is None) == (preset is None):
+        raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
+    if preset is not None:
+        return load_preset(resolve_preset(preset))
+    return load_style_folder(style_dir, bins, cache=cache, warn=warn, progress=progress)
+
+
+def render(image: Image, grade: Grade) -> tuple[np.ndarray, int]:
+    """Graded pixels of a whole image at full resolution.
+
+    Colour channels go through the grade (in the encoded domain for float
+    images); alpha and any extra channels pass through untouched. A grey
+    photo becomes RGB (a grade may tint it).
+
+    Returns
+    -------
+    pixels : (H, W, C') float32 in the image's value convention.
+    alpha_channel : index of alpha in ``pixels`` or -1.
+    """
+    encoded, scale = encode_for_grading(image.rgb(), image.is_float)
+    graded = decode_from_grading(grade.apply(encoded), scale)
+    chans = image.color_channels
+    if len(chans) == 3:
+        out = image.pixels.copy()
+        out[:, :, chans] = graded
+        return out, image.alpha_channel
+    others = [c for c in range(image.pixels.shape[2]) if c not in chans]
+    out = np.concatenate([graded, image.pixels[:, :, others]], axis=2)
+    alpha = 3 + others.index(image.alpha_channel) if image.alpha_channel in others else -1
+    return np.ascontiguousarray(out), alpha
+
+
+def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
+               output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
+               lut_size: int = 33, overwrite: bool = False,
+               fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
+               stage: Callable[[str], None] | None = None,
+               timings: dict[str, float] | None = None) -> GradeReport:
+    """Grade ``photo`` towards ``styles`` and write the result (and a LUT).
+
+    The output paths are checked before any computation; files are written
+    atomically and the input is never replaced. ``timings`` may hold stages
+    timed by the caller (e.g. loading styles); they are kept in the report.
+    """
+    photo = Path(photo)
+    opts.validate(len(styles.names))
+    output, lut = check_outputs(photo, output, lut, lut_size, overwrite)
+    timings = dict(timings or {})
+    say = stage or (lambda name: None)
+
+    say("read")
+    start = time.perf_counter()
+    image = read_image(photo)
+    timings["read"] = time.perf_counter() - start
+
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    grade = grade_image(encoded, styles, opts, image.alpha(), fit_callback, say)
+    timings.update(grade.timings)
+
+    say("remap")
+    start = time.perf_counter()
+    pixels, alpha_channel = render(image, grade)
+    timings["remap"] = time.perf_counter() - start
+
+    say("write")
+    start = time.perf_counter()
+    write_image(output, pixels, image, overwrite=overwrite, alpha_channel=alpha_channel)
+    timings["write"] = time.perf_counter() - start
+
+    if lut is not None:
+        say("lut")
+        start = time.perf_counter()
+        table = color_map_to_lut(grade.color_map, lut_size, grade.strength)
+        ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
+        write_cube(lut, table, title=f"wbcgrade {photo.stem}",
+                   comments=[f"wbcgrade grade of {photo.name}: {ranked}",
+                             "input: encoded RGB in [0, 1] (sRGB-encoded for float images)"],
+                   overwrite=overwrite)
+        timings["lut"] = time.perf_counter() - start
+    timings["total"] = sum(v for k, v in timings.items() if k != "total")
+    return GradeReport(photo=photo, output=output, lut=lut, grade=grade,
+                       styles_source=styles.source, timings=timings)

@@ -1,0 +1,284 @@
+"""Style databases: a set of named style histograms, from a folder or a preset file.
+
+Preset file format (version 1): a NumPy ``.npz`` archive read with
+``allow_pickle=False`` holding
+
+- ``header``: uint8 bytes of a UTF-8 JSON object ``{"format": "wbcgrade-preset",
+  "version": 1, "bins": n, "names": [...], "width": w, "gamma": g,
+  "description": "...", "space": "sRGB-encoded RGB"}``;
+- ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
+  concatenated, with flat C-order indices into the (n, n, n) grid;
+- ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``.
+
+Everything is checked on load and a broken or foreign file gives one clear
+error. Shipped presets live in ``wbcgrade/color/presets_data/`` so that they
+are installed with the package.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import tempfile
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.histogram import (
+    DEFAULT_MAX_PIXELS,
+    HistogramCache,
+    from_sparse,
+    image_histogram,
+    resample_histogram,
+    to_sparse,
+)
+from wbcgrade.color.imageio import encode_for_grading, read_image
+from wbcgrade.errors import InputError
+
+__all__ = [
+    "StyleSet",
+    "load_style_folder",
+    "save_preset",
+    "load_preset",
+    "resolve_preset",
+    "list_presets",
+    "shipped_presets_dir",
+    "PRESET_FORMAT",
+    "PRESET_VERSION",
+]
+
+log = logging.getLogger(__name__)
+
+PRESET_FORMAT = "wbcgrade-preset"
+PRESET_VERSION = 1
+#: Width (in bins) of the Gibbs kernel recorded in presets when none is given.
+DEFAULT_PRESET_WIDTH = 1.5
+_IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp",
+                   ".tga", ".dpx", ".jp2", ".heic", ".avif", ".ppm", ".pgm", ".pnm"}
+
+
+@dataclass
+class StyleSet:
+    """Named style histograms on one grid.
+
+    Attributes
+    ----------
+    names : S style names (file stems).
+    histograms : (S, n, n, n) float64, each summing to 1.
+    source : folder or preset file they came from.
+    width : kernel width (bins) recorded with a preset, or None.
+    """
+
+    names: list[str]
+    histograms: np.ndarray
+    source: str = ""
+    width: float | None = None
+    description: str = ""
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def bins(self) -> int:
+        return int(self.histograms.shape[1])
+
+    def at_bins(self, bins: int) -> np.ndarray:
+        """(S, bins, bins, bins) histograms re-binned to another grid."""
+        if bins == self.bins:
+            return self.histograms
+        return np.stack([resample_histogram(h, bins) for h in self.histograms])
+
+
+def _photo_histogram(path: Path, bins: int, max_pixels: int) -> np.ndarray:
+    image = read_image(path)
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    return image_histogram(encoded, bins, image.alpha(), max_pixels)
+
+
+def load_style_folder(folder: str | os.PathLike, bins: int,
+                      cache: HistogramCache | None = None,
+                      max_pixels: int = DEFAULT_MAX_PIXELS,
+                      warn: Callable[[str], None] | None = None,
+                      progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
+    """Histograms of every photo in a folder (not recursive), sorted by name.
+
+    Files that are not readable images are skipped with a warning (passed to
+    ``warn``, else logged). Histograms come from ``cache`` when it holds them.
+
+    Raises InputError when the folder is missing or holds no usable photo.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: style folder does not exist")
+    warn = warn or log.warning
+    cache = cache or HistogramCache(enabled=False)
+    files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
+    names, hists = [], []
+    for number, path in enumerate(files):
+        if progress:
+            progress(number, len(files), path.name)
+        hist = cache.get(path, bins, max_pixels)
+        if hist is None:
+            try:
+                hist = _photo_histogram(path, bins, max_pixels)
+            except InputError as exc:
+                if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
+                    warn(f"skipping {exc}")
+                else:
+                    warn(f"skipping {path.name}: not an image")
+                continue
+            cache.put(path, bins, hist, max_pixels)
+        names.append(path.stem)
+        hists.append(hist)
+    if progress:
+        progress(len(files), len(files), "")
+    if not hists:
+        raise InputError(f"{folder}: no readable photos in the style folder")
+    if len(set(names)) != len(names):
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"{folder}: several style photos share the name {dupes[0]!r}")
+    return StyleSet(names=names, histograms=np.stack(hists), source=str(folder))
+
+
+def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
+                description: str = "", overwrite: bool = False,
+                threshold: float = 1e-7) -> Path:
+    """Write a style set as a preset file (atomically; see the module docstring).
+
+    ``threshold`` drops bins holding less than that fraction of a style's mass
+    (they are far below the fitting floor) to keep files small.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise InputError(f"{path}: preset file name must end in .npz")
+    if path.exists() and not overwrite:
+        raise InputError(f"{path}: file exists (use --overwrite to replace it)")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: output folder is missing or not writable")
+    bins = styles.bins
+    gamma = 2.0 * (width / (bins - 1)) ** 2
+    indices, values, offsets = [], [], [0]
+    for hist in styles.histograms:
+        index, vals = to_sparse(hist, threshold)
+        indices.append(index)
+        values.append(vals)
+        offsets.append(offsets[-1] + len(index))
+    header = {"format": PRESET_FORMAT, "version": PRESET_VERSION, "bins": bins,
+              "names": list(styles.names), "width": float(width), "gamma": gamma,
+              "description": description, "space": "sRGB-encoded RGB"}
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz.tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            np.savez_compressed(
+                handle,
+                header=np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8),
+                index=np.concatenate(indices), values=np.concatenate(values),
+                offsets=np.asarray(offsets, dtype=np.int64))
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def _bad(path: Path, why: str) -> InputError:
+    return InputError(f"{path}: not a valid wbcgrade preset ({why})")
+
+
+def load_preset(path: str | os.PathLike) -> StyleSet:
+    """Read and validate a preset file -> StyleSet (raises InputError with the reason)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such preset file")
+    try:
+        raw = path.read_bytes()
+        with np.load(io.BytesIO(raw), allow_pickle=False) as data:
+            missing = {"header", "index", "values", "offsets"} - set(data.files)
+            if missing:
+                raise _bad(path, f"missing {', '.join(sorted(missing))}")
+            header_bytes = data["header"]
+            index, values, offsets = data["index"], data["values"], data["offsets"]
+    except InputError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise _bad(path, f"unreadable archive: {detail}") from None
+    try:
+        if header_bytes.dtype != np.uint8:
+            raise ValueError
+        header = json.loads(header_bytes.tobytes().decode("utf-8"))
+        if not isinstance(header, dict):
+            raise ValueError
+    except (ValueError, UnicodeDecodeError):
+        raise _bad(path, "header is not JSON") from None
+    if header.get("format") != PRESET_FORMAT:
+        raise _bad(path, "unknown format tag")
+    if header.get("version") != PRESET_VERSION:
+        raise _bad(path, f"format version {header.get('version')!r}, "
+                         f"this wbcgrade reads version {PRESET_VERSION}")
+    bins, names = header.get("bins"), header.get("names")
+    if not isinstance(bins, int) or not 2 <= bins <= 256:
+        raise _bad(path, "bad bins")
+    if (not isinstance(names, list) or not names
+            or not all(isinstance(n, str) and n for n in names)):
+        raise _bad(path, "bad style names")
+    width = header.get("width")
+    if width is not None and not (isinstance(width, (int, float)) and width > 0):
+        raise _bad(path, "bad kernel width")
+    if (offsets.ndim != 1 or len(offsets) != len(names) + 1 or offsets[0] != 0
+            or np.any(np.diff(offsets) <= 0) or offsets[-1] != len(index)
+            or index.shape != values.shape or index.ndim != 1):
+        raise _bad(path, "inconsistent histogram arrays")
+    if not np.issubdtype(index.dtype, np.integer) or not np.issubdtype(values.dtype, np.floating):
+        raise _bad(path, "wrong array types")
+    if len(index) and (index.min() < 0 or index.max() >= bins ** 3):
+        raise _bad(path, "bin index out of range")
+    if not np.all(np.isfinite(values)) or np.any(values < 0):
+        raise _bad(path, "negative or non-finite histogram values")
+    hists = []
+    for s in range(len(names)):
+        part = slice(int(offsets[s]), int(offsets[s + 1]))
+        if not values[part].sum() > 0:
+            raise _bad(path, f"style {names[s]!r} is empty")
+        hists.append(from_sparse(index[part], values[part], bins))
+    return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
+                    width=None if width is None else float(width),
+                    description=str(header.get("description", "")), meta=header)
+
+
+def shipped_presets_dir() -> Path:
+    """Folder of the presets installed with the package."""
+    return Path(__file__).resolve().parent / "presets_data"
+
+
+def list_presets() -> list[tuple[str, Path]]:
+    """(name, path) of every shipped preset, sorted by name."""
+    folder = shipped_presets_dir()
+    if not folder.is_dir():
+        return []
+    return sorted((p.stem, p) for p in folder.glob("*.npz"))
+
+
+def resolve_preset(name_or_path: str) -> Path:
+    """A preset file from a shipped preset's NAME or a FILE path.
+
+    An existing path wins; otherwise the name is looked up among the shipped
+    presets. Raises InputError listing the available names.
+    """
+    candidate = Path(name_or_path).expanduser()
+    if candidate.is_file():
+        return candidate
+    shipped = dict(list_presets())
+    if name_or_path in shipped:
+        return shipped[name_or_path]
+    if candidate.suffix or os.sep in name_or_path:
+        raise InputError(f"{name_or_path}: no such preset file")
+    names = ", ".join(shipped) or "none installed"
+    raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")
