@@ -16,13 +16,13 @@ encoding); see :func:`encode_for_grading` for what happens above 1.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
+from wbcgrade.color._files import atomic_path
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -308,9 +308,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         pixels = np.clip(pixels, 0.0, 1.0)
     data = np.ascontiguousarray(pixels, dtype=np.float32)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp_name:
         if not out.open(tmp_name, spec):
             raise OSError(f"{path}: cannot open for writing ({out.geterror().strip()})")
         ok = out.write_image(data)
@@ -318,11 +316,4 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
         closed = out.close()
         if not ok or not closed:
             raise OSError(f"{path}: write failed ({error or 'unknown error'})")
-        os.replace(tmp_name, path)
-    except BaseException:
-        try:
-            os.unlink(tmp_name)
-        except OSError:
-            pass
-        raise
     return path

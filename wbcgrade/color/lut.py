@@ -10,11 +10,11 @@ EXR input, sRGB-encoded values of the linear pixels clipped to [0, 1]).
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color._files import atomic_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError
 
@@ -53,17 +53,8 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
     lut = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
                        domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
                        size=table.shape[0], comments=comments or [])
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".cube", dir=folder)
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=".cube") as tmp:
         colour.write_LUT(lut, tmp, decimals=6, method="Resolve Cube")
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return path
 
 

@@ -21,7 +21,6 @@ import io
 import json
 import logging
 import os
-import tempfile
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color._files import atomic_path
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
@@ -170,21 +170,13 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     header = {"format": PRESET_FORMAT, "version": PRESET_VERSION, "bins": bins,
               "names": list(styles.names), "width": float(width), "gamma": gamma,
               "description": description, "space": "sRGB-encoded RGB"}
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".npz.tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as handle:
+    with atomic_path(path, suffix=".npz.tmp") as tmp:
+        with open(tmp, "wb") as handle:
             np.savez_compressed(
                 handle,
                 header=np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8),
                 index=np.concatenate(indices), values=np.concatenate(values),
                 offsets=np.asarray(offsets, dtype=np.int64))
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return path
 
 
