@@ -22,8 +22,8 @@ SAMPLES = Path(__file__).resolve().parents[2] / "samples" / "shapes"
 
 
 def test_voxel_volume_matches_mesh_volume_for_sample_meshes():
-    for name in ("cow", "elk"):
-        mesh, _ = normalize_mesh(read_mesh(SAMPLES / f"{name}.off"))
+    for name in ("cow.off", "bull.ply"):
+        mesh, _ = normalize_mesh(read_mesh(SAMPLES / name))
         n = 32
         occupancy = voxelize(mesh, n)
         voxel_volume = occupancy.sum() / (n - 1) ** 3

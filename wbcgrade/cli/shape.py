@@ -51,6 +51,7 @@ def _print_weights(projection, as_json: bool, extra: dict) -> None:
             "initial_loss": projection.initial_loss,
             "kernel_width_voxels": projection.width,
             "evaluations": projection.n_evaluations,
+            "coarse_evaluations": projection.n_coarse_evaluations,
             "converged": projection.converged,
             "time_s": round(projection.time_s, 3),
             **extra,
@@ -64,7 +65,10 @@ def _print_weights(projection, as_json: bool, extra: dict) -> None:
     click.echo(
         f"{projection.method} projection, {projection.loss_name} loss "
         f"{projection.initial_loss:.4g} -> {projection.loss:.4g} in "
-        f"{projection.n_evaluations} evaluations ({projection.time_s:.1f} s), "
+        f"{projection.n_evaluations} evaluations"
+        + (f" ({projection.n_coarse_evaluations} on a half-size grid)"
+           if projection.n_coarse_evaluations else "")
+        + f", {projection.time_s:.1f} s, "
         f"missing fraction {projection.missing:.3f}"
     )
     for key, value in extra.items():
@@ -78,15 +82,18 @@ _common_options = [
     click.option("--resolution", "-n", type=click.IntRange(min=8), default=64, show_default=True,
                  help="Voxels along the largest axis."),
     click.option("--missing", type=click.FloatRange(0.0, 0.95), default=None,
-                 help="Fraction of the input's volume that is missing (default: estimated)."),
+                 help="Fraction of the input's volume that is missing "
+                 "(complete: estimated when not given; project: 0)."),
     click.option("--euclidean", is_flag=True,
                  help="Fit a linear mixture of the database instead (for comparison)."),
     click.option("--width", type=click.FloatRange(min=0.5), default=None,
-                 help="Kernel standard deviation in voxels (default 1.5 at 64^3, scaled)."),
+                 help="Kernel standard deviation in voxels (default 1 at 64^3, scaled)."),
     click.option("--iterations", type=click.IntRange(min=1), default=60, show_default=True,
                  help="Barycenter iterations L."),
-    click.option("--max-iter", type=click.IntRange(min=1), default=20, show_default=True,
+    click.option("--max-iter", type=click.IntRange(min=1), default=15, show_default=True,
                  help="Optimiser iterations at most."),
+    click.option("--coarse/--no-coarse", default=True, show_default=True,
+                 help="Fit on a half-size grid first (grids of 32 voxels or more)."),
     click.option("--png", "png_path", type=click.Path(dir_okay=False, path_type=Path),
                  default=None, help="Picture of the views (default: beside -o, .png)."),
     click.option("--top", type=click.IntRange(min=0), default=3, show_default=True,
@@ -120,7 +127,8 @@ def shape() -> None:
 @click.option("--smooth", type=click.IntRange(min=0), default=10, show_default=True,
               help="Taubin smoothing passes on the surface.")
 def complete(partial, database, resolution, missing, euclidean, width, iterations, max_iter,
-             png_path, top, as_json, quiet, loss, align, output, volume_path, smooth) -> None:
+             coarse, png_path, top, as_json, quiet, loss, align, output, volume_path,
+             smooth) -> None:
     """Infer the missing geometry of the mesh PARTIAL from a database of meshes.
 
     Writes the completed surface (-o), the barycenter volume (.npy) and a PNG
@@ -162,6 +170,7 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
         completion = complete_shape(
             shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean,
             width=width, n_iter=iterations, max_iter=max_iter, callback=callback,
+            coarse_to_fine=coarse,
         )
     surface = completion_surface(completion, smooth_iterations=smooth)
     write_mesh(surface, output)
@@ -190,7 +199,7 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
 @click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Fitted volume (.npy, .nii, .nii.gz); default VOLUME_projected.npy.")
 def project(volume, database, resolution, missing, euclidean, width, iterations, max_iter,
-            png_path, top, as_json, quiet, loss, output) -> None:
+            coarse, png_path, top, as_json, quiet, loss, output) -> None:
     """Project the volume VOLUME (.npy or NIfTI) onto a database of volumes.
 
     The fitted volume is written scaled to the input's total intensity, at the
@@ -249,6 +258,7 @@ def project(volume, database, resolution, missing, euclidean, width, iterations,
             n_iter=iterations,
             max_iter=max_iter,
             callback=callback,
+            coarse_to_fine=coarse,
         )
     fitted = projection.barycenter / projection.barycenter.sum() * source.sum()
     write_volume(output, fitted)

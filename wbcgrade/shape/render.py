@@ -119,6 +119,7 @@ def contact_sheet(panels: list[Panel], tile: int = 160) -> np.ndarray:
 
     if not panels:
         raise InputError("nothing to render")
+    panels = _crop_to_content(panels)
     label_height = 22
     gap = 4
     n_cols, n_rows = len(panels), len(VIEWS)
@@ -142,6 +143,34 @@ def contact_sheet(panels: list[Panel], tile: int = 160) -> np.ndarray:
             sheet[y0 : y0 + shape[0], xx : xx + shape[1]] = image
     labels = [(gap + c * (tile + gap) + 2, p.label) for c, p in enumerate(panels)]
     return _draw_labels(sheet, labels)
+
+
+def _crop_to_content(panels: list[Panel], pad: int = 2) -> list[Panel]:
+    """Crop every panel to the union of their drawn content, so the views fill the tiles."""
+    shapes = {np.shape(p.volume) for p in panels}
+    if len(shapes) != 1:
+        return panels
+    lo = np.array(next(iter(shapes)))
+    hi = np.zeros(3, dtype=int)
+    for panel in panels:
+        volume = np.asarray(panel.volume)
+        threshold = panel.level if panel.level is not None else 0.02 * float(volume.max())
+        occupied = np.argwhere(volume > threshold)
+        if occupied.size:
+            lo = np.minimum(lo, occupied.min(axis=0))
+            hi = np.maximum(hi, occupied.max(axis=0) + 1)
+    if np.any(hi <= lo):
+        return panels
+    size = np.array(next(iter(shapes)))
+    lo, hi = np.maximum(lo - pad, 0), np.minimum(hi + pad, size)
+    box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
+    return [
+        Panel(
+            np.asarray(p.volume)[box], p.label, p.level, p.color,
+            None if p.highlight is None else np.asarray(p.highlight)[box],
+        )
+        for p in panels
+    ]
 
 
 def _draw_labels(sheet: np.ndarray, labels: list[tuple[int, str]]) -> np.ndarray:
