@@ -1,0 +1,163 @@
+"""`wbcgrade apply` and `wbcgrade preset` end to end through click's runner."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from click.testing import CliRunner
+
+from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
+from wbcgrade.cli import main
+from wbcgrade.color.imageio import read_image
+from wbcgrade.color.lut import read_cube
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture
+def styles(tmp_path, style_dir):
+    folder = tmp_path / "styles"
+    shutil.copytree(style_dir, folder)
+    (folder / "notes.txt").write_text("not a photo")
+    return folder
+
+
+def test_apply_with_style_folder_json_and_lut(tmp_path, styles):
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.png")
+    result = run("apply", photo, "--style", styles, "--lut", tmp_path / "grade.cube",
+                 "--lut-size", 33, "--json", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    assert "skipping notes.txt: not an image" in result.stderr
+    report = json.loads(result.stdout)
+    weights = [w["weight"] for w in report["weights"]]
+    assert [w["style"] for w in report["weights"]][0] in {"aitzgorri", "coffee", "flower",
+                                                           "seeding"}
+    assert weights == sorted(weights, reverse=True) and sum(weights) == pytest.approx(1, abs=1e-5)
+    assert {"fit", "barycenter", "transfer", "remap", "write", "lut"} <= set(report["timings_s"])
+    graded_path = tmp_path / "cat_graded.png"
+    assert report["output"] == str(graded_path)
+    graded = read_image(graded_path).pixels
+    original = read_image(photo).pixels
+    assert graded.shape == original.shape and np.abs(graded - original).mean() > 0.02
+    # The LUT reproduces the graded photo within 1/255 on average.
+    lut = read_cube(tmp_path / "grade.cube")
+    assert lut.size == 33
+    assert np.abs(lut.apply(original.astype(np.float64)) - graded).mean() < 1 / 255
+
+
+def test_apply_table_weights_and_strength(tmp_path, styles, photo):
+    out = tmp_path / "out.jpg"
+    result = run("apply", photo, "--style", styles, "-o", out, "--weights", "1,1,0,0",
+                 "--strength", "0.5", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0].split() == ["style", "weight"]
+    assert lines[2].split()[1] == "0.500" and lines[4].split()[1] == "0.000"
+    assert "loss: -" in result.stdout and "time:" in result.stdout
+    assert read_image(out).pixels.shape == read_image(photo).pixels.shape
+
+
+def test_preset_build_list_and_apply(tmp_path, styles, photo):
+    preset_file = tmp_path / "mine.npz"
+    result = run("preset", "build", styles, "-o", preset_file, "--bins", 16, "--no-cache")
+    assert result.exit_code == 0, result.output
+    assert "4 styles" in result.stdout and "skipping notes.txt" in result.stderr
+    result = run("apply", photo, "--preset", preset_file, "-o", tmp_path / "a.jpg", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    listing = run("preset", "list")
+    assert listing.exit_code == 0 and "warm" in listing.stdout and "landscape" in listing.stdout
+    result = run("apply", photo, "--preset", "warm", "-o", tmp_path / "b.jpg", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    assert {"coffee", "flower", "sunset"} <= set(result.stdout.split())
+
+
+def test_apply_keeps_16bit_rgba_and_orientation(tmp_path, styles, rng):
+    pixels = rng.random((12, 20, 4)).astype(np.float32)
+    photo = write_array(tmp_path / "in.tif", pixels, "uint16", {"Orientation": 8})
+    out = tmp_path / "out.tif"
+    result = run("apply", photo, "--style", styles, "-o", out, *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    back = oiio.ImageInput.open(str(out))
+    spec = back.spec()
+    data = back.read_image(0, 0, 0, 4, "uint16")
+    back.close()
+    assert spec.format == oiio.TypeDesc("uint16") and (spec.width, spec.height) == (12, 20)
+    assert spec.get_int_attribute("Orientation", 0) == 1
+    expected_alpha = np.rot90(np.round(pixels[:, :, 3] * 65535), k=1)
+    np.testing.assert_array_equal(data[:, :, 3], expected_alpha)
+
+
+def test_apply_exr_keeps_values_above_one(tmp_path, styles, rng):
+    linear = (rng.random((10, 12, 3)) * 0.5).astype(np.float32)
+    linear[0, 0] = [4.0, 2.0, 1.0]
+    photo = write_array(tmp_path / "hdr.exr", linear, "half")
+    result = run("apply", photo, "--style", styles, *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    graded = read_image(tmp_path / "hdr_graded.exr")
+    assert graded.spec.format == oiio.TypeDesc("half")
+    assert graded.pixels[0, 0].max() == pytest.approx(4.0, rel=0.01)
+
+
+def _bad_photo(tmp_path, case):
+    if case == "truncated":
+        data = (SAMPLES / "coffee.jpg").read_bytes()
+        (tmp_path / "p.jpg").write_bytes(data[: len(data) // 2])
+        return tmp_path / "p.jpg"
+    if case == "not-image":
+        (tmp_path / "p.jpg").write_text("hello")
+        return tmp_path / "p.jpg"
+    if case == "missing":
+        return tmp_path / "p.jpg"
+    if case == "nan":
+        pixels = np.full((4, 4, 3), 0.5, np.float32)
+        pixels[2, 2, 1] = np.nan
+        return write_array(tmp_path / "p.exr", pixels, "float")
+    return small_copy(SAMPLES / "chelsea.jpg", tmp_path / "p.jpg")
+
+
+@pytest.mark.parametrize("case, extra, message", [
+    ("truncated", [], "corrupt or truncated"),
+    ("not-image", [], "not a readable image"),
+    ("missing", [], "no such file"),
+    ("nan", [], "NaN or infinite"),
+    ("ok", ["--style", "{empty}"], "no readable photos"),
+    ("ok", ["--preset", "{broken}"], "not a valid wbcgrade preset"),
+    ("ok", ["--preset", "{foreign}"], "not a valid wbcgrade preset"),
+    ("ok", ["--preset", "nosuchpreset"], "unknown preset"),
+    ("ok", ["-o", "{photo}"], "refusing to overwrite the input"),
+    ("ok", ["-o", "{photo}", "--overwrite"], "refusing to overwrite the input"),
+    ("ok", ["-o", "{existing}"], "file exists"),
+    ("ok", ["-o", "{nowhere}"], "output folder does not exist"),
+    ("ok", ["--lut", "{existing_cube}"], "file exists"),
+    ("ok", ["--strength", "2"], "--strength must be in [0, 1]"),
+    ("ok", ["--weights", "1,x"], "comma-separated numbers"),
+    ("ok", ["--weights", "1,1"], "2 numbers for 4 styles"),
+])
+def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, message):
+    photo = _bad_photo(tmp_path, case)
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "broken.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    np.savez(tmp_path / "foreign.npz", weights=np.ones(3))
+    (tmp_path / "existing.jpg").write_bytes(b"keep me")
+    (tmp_path / "existing.cube").write_text("keep me")
+    names = {"empty": tmp_path / "empty", "broken": tmp_path / "broken.npz",
+             "foreign": tmp_path / "foreign.npz", "photo": photo,
+             "existing": tmp_path / "existing.jpg", "nowhere": tmp_path / "no" / "out.jpg",
+             "existing_cube": tmp_path / "existing.cube"}
+    extra = [str(a).format(**names) for a in extra]
+    if not any(a in ("--style", "--preset") for a in extra):
+        extra = ["--style", str(styles), *extra]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    result = run("apply", photo, *extra, *FAST_ARGS)
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    errors = [line for line in result.stderr.splitlines() if line.startswith("Error:")]
+    assert len(errors) == 1 and message in errors[0], result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    assert (tmp_path / "existing.jpg").read_bytes() == b"keep me"

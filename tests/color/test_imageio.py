@@ -1,0 +1,153 @@
+"""Photo reading and writing: formats, bit depth, metadata, orientation, bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from tests.color.conftest import SAMPLES, write_array
+from wbcgrade.color.imageio import (
+    decode_from_grading,
+    encode_for_grading,
+    orient,
+    read_image,
+    write_image,
+)
+from wbcgrade.errors import InputError
+
+
+def _icc_profile() -> np.ndarray:
+    """A minimal well-formed ICC header (128 bytes, 'acsp' signature, no tags)."""
+    data = bytearray(132)
+    data[0:4] = (132).to_bytes(4, "big")
+    data[8:12] = bytes([4, 0x40, 0, 0])
+    data[12:16] = b"mntr"
+    data[16:20] = b"RGB "
+    data[20:24] = b"XYZ "
+    data[36:40] = b"acsp"
+    return np.frombuffer(bytes(data), dtype=np.uint8)
+
+
+def _listed(path):
+    return sorted(p.name for p in path.parent.iterdir())
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_orientation_matches_openimageio(orientation, rng):
+    stored = rng.random((3, 5, 3)).astype(np.float32)
+    buf = oiio.ImageBuf(oiio.ImageSpec(5, 3, 3, "float"))
+    buf.set_pixels(oiio.ROI(0, 5, 0, 3, 0, 1, 0, 3), stored)
+    buf.specmod().attribute("Orientation", orientation)
+    expected = oiio.ImageBufAlgo.reorient(buf).get_pixels(oiio.FLOAT)
+    np.testing.assert_array_equal(orient(stored, orientation), expected)
+
+
+def test_jpeg_round_trip_keeps_exif_icc_and_orientation(tmp_path, rng):
+    pixels = np.zeros((20, 30, 3), np.float32)
+    pixels[:, :10, 0] = 1.0  # red band on the left of the stored image
+    icc = _icc_profile()
+    src = write_array(tmp_path / "in.jpg", pixels, "uint8", {
+        "Orientation": 6, "Make": "TestCam", "Exif:DateTimeOriginal": "2020:01:02 03:04:05",
+        "ICCProfile": (oiio.TypeDesc(f"uint8[{len(icc)}]"), icc)})
+    image = read_image(src)
+    assert image.pixels.shape == (30, 20, 3)  # rotated for display
+    assert image.pixels[:10, :, 0].mean() > 0.9  # the left band is now at the top
+    out = write_image(tmp_path / "out.jpg", image.pixels, image)
+    back = read_image(out)
+    assert back.pixels.shape == (30, 20, 3)
+    assert np.abs(back.pixels - image.pixels).mean() < 2 / 255
+    spec = back.spec
+    assert spec.get_int_attribute("Orientation", 0) == 1
+    assert spec.get_string_attribute("Make") == "TestCam"
+    assert spec.get_string_attribute("Exif:DateTimeOriginal") == "2020:01:02 03:04:05"
+    assert np.array_equal(np.asarray(spec.getattribute("ICCProfile"), np.uint8), icc)
+    assert spec.format == oiio.TypeDesc("uint8")
+
+
+@pytest.mark.parametrize("ext", ["png", "tif"])
+def test_16bit_round_trip_is_exact(tmp_path, rng, ext):
+    codes = rng.integers(0, 65536, size=(8, 9, 3))
+    src = write_array(tmp_path / f"in.{ext}", codes / 65535.0, "uint16")
+    image = read_image(src)
+    assert image.spec.format == oiio.TypeDesc("uint16")
+    out = write_image(tmp_path / f"out.{ext}", image.pixels, image)
+    back = oiio.ImageInput.open(str(out))
+    assert back.spec().format == oiio.TypeDesc("uint16")
+    np.testing.assert_array_equal(back.read_image(0, 0, 0, 3, "uint16"), codes)
+    back.close()
+
+
+def test_exr_float_round_trip_and_values_above_one(tmp_path, rng):
+    linear = (rng.random((6, 7, 3)) * 4.0).astype(np.float32)  # HDR values up to 4
+    src = write_array(tmp_path / "in.exr", linear, "half")
+    image = read_image(src)
+    assert image.is_float
+    encoded, scale = encode_for_grading(image.rgb(), image.is_float)
+    assert encoded.min() >= 0 and encoded.max() <= 1
+    np.testing.assert_allclose(decode_from_grading(encoded, scale), image.rgb(), rtol=1e-5,
+                               atol=1e-6)
+    out = write_image(tmp_path / "out.exr", image.pixels, image)
+    back = read_image(out)
+    assert back.spec.format == oiio.TypeDesc("half")
+    np.testing.assert_array_equal(back.pixels, image.pixels)
+
+
+def test_rgba_alpha_and_grey(tmp_path, rng):
+    rgba = rng.random((5, 6, 4)).astype(np.float32)
+    image = read_image(write_array(tmp_path / "rgba.png", rgba, "uint8"))
+    assert image.alpha_channel == 3
+    assert image.rgb().shape == (5, 6, 3)
+    grey = read_image(write_array(tmp_path / "grey.png", rgba[:, :, :1], "uint16"))
+    assert grey.alpha() is None
+    rgb = grey.rgb()
+    assert rgb.shape == (5, 6, 3) and np.all(rgb[..., 0] == rgb[..., 2])
+
+
+def test_truncated_jpeg_is_rejected(tmp_path):
+    data = (SAMPLES / "coffee.jpg").read_bytes()
+    path = tmp_path / "cut.jpg"
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="corrupt or truncated"):
+        read_image(path)
+
+
+def test_not_an_image_and_missing_file(tmp_path):
+    text = tmp_path / "notes.jpg"
+    text.write_text("hello")
+    with pytest.raises(InputError, match="not a readable image"):
+        read_image(text)
+    with pytest.raises(InputError, match="no such file"):
+        read_image(tmp_path / "missing.png")
+
+
+def test_nan_pixels_are_rejected(tmp_path):
+    pixels = np.ones((4, 4, 3), np.float32)
+    pixels[1, 2, 0] = np.nan
+    with pytest.raises(InputError, match="NaN or infinite"):
+        read_image(write_array(tmp_path / "nan.exr", pixels, "float"))
+    pixels[1, 2, 0] = np.inf
+    with pytest.raises(InputError, match="NaN or infinite"):
+        read_image(write_array(tmp_path / "inf.exr", pixels, "float"))
+
+
+def test_write_refuses_input_and_existing_files(tmp_path):
+    src = write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8")
+    image = read_image(src)
+    with pytest.raises(InputError, match="input"):
+        write_image(src, image.pixels, image, overwrite=True)
+    other = write_array(tmp_path / "b.png", np.zeros((4, 4, 3)), "uint8")
+    with pytest.raises(InputError, match="exists"):
+        write_image(other, image.pixels, image)
+    write_image(other, image.pixels + 0.5, image, overwrite=True)
+    assert read_image(other).pixels.mean() == pytest.approx(128 / 255, abs=1e-6)
+    assert _listed(src) == ["a.png", "b.png"]  # no temporary file left
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    image = read_image(write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8"))
+    with pytest.raises(InputError):
+        write_image(tmp_path / "missing" / "out.png", image.pixels, image)
+    with pytest.raises((InputError, OSError)):
+        write_image(tmp_path / "out.png", image.pixels[:, :, :1].squeeze(), image)
+    assert _listed(tmp_path / "a.png") == ["a.png"]

@@ -1,0 +1,113 @@
+"""Preset files: round trip, shipped presets, broken or foreign files."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from wbcgrade.color.presets import (
+    list_presets,
+    load_preset,
+    load_style_folder,
+    resolve_preset,
+    save_preset,
+)
+from wbcgrade.errors import InputError
+
+
+def test_round_trip(tmp_path, style_dir):
+    warnings = []
+    (tmp_path / "styles").mkdir()
+    styles = load_style_folder(style_dir, 12, warn=warnings.append)
+    assert styles.names == ["aitzgorri", "coffee", "flower", "seeding"] and not warnings
+    path = save_preset(tmp_path / "p.npz", styles, description="test")
+    loaded = load_preset(path)
+    assert loaded.names == styles.names and loaded.bins == 12
+    assert loaded.description == "test" and loaded.width == 1.5
+    np.testing.assert_allclose(loaded.histograms, styles.histograms, atol=1e-6)
+    with pytest.raises(InputError, match="exists"):
+        save_preset(path, styles)
+
+
+def test_shipped_presets_load_and_resolve():
+    names = [name for name, _ in list_presets()]
+    assert {"landscape", "warm", "mixed"} <= set(names)
+    for name in names:
+        styles = load_preset(resolve_preset(name))
+        assert styles.histograms.shape[0] == len(styles.names) >= 2
+        assert np.allclose(styles.histograms.sum(axis=(1, 2, 3)), 1.0)
+    with pytest.raises(InputError, match="unknown preset 'nope'.*landscape"):
+        resolve_preset("nope")
+    with pytest.raises(InputError, match="no such preset file"):
+        resolve_preset("missing/file.npz")
+
+
+def _write_npz(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+def _header(**changes):
+    header = {"format": "wbcgrade-preset", "version": 1, "bins": 4, "names": ["a"]}
+    header.update(changes)
+    return np.frombuffer(json.dumps(header).encode(), np.uint8)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("garbage", "unreadable archive"),
+    ("zip", "missing"),
+    ("foreign", "missing"),
+    ("pickled", "unreadable archive"),
+    ("no-json", "header is not JSON"),
+    ("tag", "unknown format tag"),
+    ("version", "format version 99"),
+    ("index", "bin index out of range"),
+    ("negative", "negative or non-finite"),
+    ("offsets", "inconsistent"),
+])
+def test_broken_presets_give_one_clear_error(tmp_path, case, message):
+    path = tmp_path / "bad.npz"
+    good = {"index": np.array([0, 5]), "values": np.array([0.5, 0.5], np.float32),
+            "offsets": np.array([0, 2])}
+    if case == "garbage":
+        path.write_bytes(b"\x00garbage" * 10)
+    elif case == "zip":
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("readme.txt", "hello")
+    elif case == "foreign":
+        _write_npz(path, weights=np.ones(3))
+    elif case == "pickled":
+        np.savez(path, header=np.array([{"evil": 1}], dtype=object), **good)
+    elif case == "no-json":
+        _write_npz(path, header=np.frombuffer(b"\xff\xfe", np.uint8), **good)
+    elif case == "tag":
+        _write_npz(path, header=_header(format="other"), **good)
+    elif case == "version":
+        _write_npz(path, header=_header(version=99), **good)
+    elif case == "index":
+        _write_npz(path, header=_header(), **{**good, "index": np.array([0, 64])})
+    elif case == "negative":
+        _write_npz(path, header=_header(), **{**good, "values": np.array([1.0, -0.5])})
+    elif case == "offsets":
+        _write_npz(path, header=_header(), **{**good, "offsets": np.array([0, 1])})
+    with pytest.raises(InputError, match=message) as info:
+        load_preset(path)
+    assert "\n" not in str(info.value) and "not a valid wbcgrade preset" in str(info.value)
+
+
+def test_style_folder_skips_non_images_and_rejects_empty(tmp_path, style_dir):
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("not a photo")
+    (folder / "broken.jpg").write_bytes(b"\xff\xd8\xff garbage")
+    with pytest.raises(InputError, match="no readable photos"):
+        load_style_folder(folder, 8, warn=lambda m: None)
+    (folder / "coffee.jpg").write_bytes((style_dir / "coffee.jpg").read_bytes())
+    warnings = []
+    styles = load_style_folder(folder, 8, warn=warnings.append)
+    assert styles.names == ["coffee"] and len(warnings) == 2
+    with pytest.raises(InputError, match="does not exist"):
+        load_style_folder(tmp_path / "nowhere", 8)
