@@ -19,7 +19,7 @@ def small_copy(src: Path, dst: Path, width: int = 96) -> Path:
     buf = oiio.ImageBuf(str(src))
     spec = buf.spec()
     height = max(1, round(spec.height * width / spec.width))
-    small = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, 3))
+    small = oiio.ImageBufAlgo.resample(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, 3))
     assert small.write(str(dst)), small.geterror()
     return dst
 
