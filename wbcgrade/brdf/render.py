@@ -77,11 +77,13 @@ def render_sphere(
 
 
 def tone_map(image: np.ndarray, exposure: float) -> np.ndarray:
-    """sRGB-encoded uint8 image from linear radiance times ``exposure`` (clipped to [0, 1])."""
-    import colour
+    """sRGB-encoded uint8 image from linear radiance times ``exposure`` (clipped to [0, 1]).
 
+    Uses the IEC 61966-2-1 sRGB transfer function (as ``colour.cctf_encoding``).
+    """
     linear = np.clip(np.asarray(image, dtype=np.float64) * exposure, 0.0, 1.0)
-    encoded = colour.cctf_encoding(linear, function="sRGB")
+    encoded = np.where(linear <= 0.0031308, 12.92 * linear,
+                       1.055 * np.power(linear, 1.0 / 2.4) - 0.055)
     return np.round(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
@@ -129,8 +131,12 @@ def comparison_image(
     band = 14 * caption_lines + 8
     panels = []
     for image, lines in zip(renderings, captions, strict=True):
-        panel = np.full((image.shape[0] + band, image.shape[1], 3), 24, dtype=np.uint8)
-        panel[: image.shape[0]] = tone_map(image, exposure)
+        height, width = image.shape[:2]
+        y, x = np.mgrid[0:height, 0:width]
+        outside = ((x + 0.5) / width * 2 - 1) ** 2 + ((y + 0.5) / height * 2 - 1) ** 2 >= 1.0
+        panel = np.full((height + band, width, 3), 24, dtype=np.uint8)
+        panel[:height] = tone_map(image, exposure)
+        panel[:height][outside] = 56  # grey backdrop shows the unlit side's silhouette
         panels.append(_caption(panel, lines[:caption_lines]))
     return np.concatenate(panels, axis=1)
 

@@ -96,7 +96,7 @@ def _percent(weights: np.ndarray) -> list[float]:
               show_default=True)
 @click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
-@click.option("--fit-directions", default=48, show_default=True, type=click.IntRange(0, 2000),
+@click.option("--fit-directions", default=32, show_default=True, type=click.IntRange(0, 2000),
               help="Incoming directions (well spread) used to fit the weights; 0 = all N.")
 @click.option("--width", default=sampling.DEFAULT_WIDTH, show_default=True,
               type=click.FloatRange(0.1, 20.0),
