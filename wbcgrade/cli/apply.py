@@ -66,9 +66,10 @@ def _print_report(report, as_json: bool) -> None:
               help="Fit kernel width in bins of the fit grid (gamma = 2 (width/(fit_bins-1))^2).")
 @click.option("--gamma", type=float, default=None,
               help="Fit entropic regularisation gamma (overrides --width).")
-@click.option("--transfer-width", type=float, default=_DEFAULTS.transfer_width,
-              show_default=True,
-              help="Kernel width in bins of the transfer grid; smaller keeps colours crisper.")
+@click.option("--transfer-width", type=float, default=None,
+              help="Kernel width in bins of the transfer grid; smaller keeps colours crisper "
+                   "but converges slower [default: max(1, (bins-1)/31), sigma = 1/31 of the "
+                   "colour cube].")
 @click.option("--iterations", "n_iter", type=int, default=_DEFAULTS.n_iter, show_default=True,
               help="Barycenter iterations.")
 @click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,

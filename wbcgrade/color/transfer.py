@@ -15,10 +15,11 @@ the weights are fitted on a 16^3 grid with a kernel 1.5 bins wide (sigma
 ~0.1 of the cube): ~0.4 s per gradient, ~10 s per fit, where a 128^3 fit takes
 hours (DESIGN.md §4). The colour map is built on a 32^3 grid with a kernel 1
 bin wide (sigma = 1/31 of the cube, gamma ~0.002, ten times smaller than the
-fit's): barycenter ~2 s, Sinkhorn ~1-5 s with epsilon scaling. At 64^3 the
-narrow-kernel Sinkhorn currently needs minutes (``--bins 64`` works, slowly);
-at 128^3 it is impractical until the core gets faster. Entropic blur pulls
-each colour towards the mean of where its mass goes; the narrow transfer
+fit's): barycenter ~1-2 s, Sinkhorn ~1-3 s with epsilon scaling. The
+transfer kernel keeps that sigma on other grids: ``--bins 64`` (2 bins wide)
+takes ~10 s of Sinkhorn and ~30 s of barycenter, and 128^3 is impractical
+until the core gets faster. Entropic blur pulls each colour towards the mean
+of where its mass goes; the narrow transfer
 kernel keeps graded photos far more colourful than a map built with the
 fit's kernel (tested in ``tests/color``).
 """
@@ -55,7 +56,8 @@ class GradeOptions:
     gamma : fit entropic regularisation; overrides ``width`` when given.
     transfer_width : kernel width, in bins of the transfer grid, of the
         transfer barycenter and the Sinkhorn plan (smaller = crisper colours,
-        slower Sinkhorn).
+        slower Sinkhorn). Default: sigma = 1/31 of the colour cube whatever
+        the grid, i.e. ``max(1, (bins - 1) / 31)`` bins (1 bin at 32^3, ~2 at 64^3).
     n_iter : barycenter iterations L.
     max_iter : L-BFGS iterations at most.
     floor : fraction of mass spread uniformly over the bins of every histogram
@@ -72,7 +74,7 @@ class GradeOptions:
     loss: str = "quadratic"
     width: float = 1.5
     gamma: float | None = None
-    transfer_width: float = 1.0
+    transfer_width: float | None = None
     n_iter: int = 60
     max_iter: int = 30
     floor: float = DEFAULT_FLOOR
@@ -91,7 +93,7 @@ class GradeOptions:
         if self.loss not in LOSSES:
             raise InputError(f"--loss must be one of {', '.join(LOSSES)}")
         for name, value in (("--width", self.width), ("--transfer-width", self.transfer_width)):
-            if not (np.isfinite(value) and value > 0):
+            if value is not None and not (np.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be positive")
         if self.gamma is not None and not (np.isfinite(self.gamma) and self.gamma > 0):
             raise InputError("--gamma must be positive")
@@ -103,6 +105,13 @@ class GradeOptions:
             raise InputError("iteration counts must be at least 1")
         if self.weights is not None and n_styles is not None and len(self.weights) != n_styles:
             raise InputError(f"--weights gives {len(self.weights)} numbers for {n_styles} styles")
+
+
+def transfer_width_bins(opts: GradeOptions) -> float:
+    """The transfer kernel width in bins (see ``GradeOptions.transfer_width``)."""
+    if opts.transfer_width is not None:
+        return float(opts.transfer_width)
+    return max(1.0, (opts.bins - 1) / 31.0)
 
 
 def parse_weights(text: str) -> list[float]:
@@ -261,15 +270,16 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     from wbcgrade.core import GridGeometry
 
     style_hists = timed("histograms", styles.at_bins, opts.bins)
-    geometry = GridGeometry.with_width((opts.bins,) * 3, opts.transfer_width)
+    width = transfer_width_bins(opts)
+    geometry = GridGeometry.with_width((opts.bins,) * 3, width)
     floored = np.stack([add_floor(h, opts.floor) for h in style_hists])
     target = timed("barycenter", barycenter, floored, weights, geometry, opts.n_iter)
     color_map, result = timed("transfer", color_transfer_map, photo_hist, target,
-                              opts.transfer_width, opts.sinkhorn_tol, opts.sinkhorn_max_iter,
+                              width, opts.sinkhorn_tol, opts.sinkhorn_max_iter,
                               opts.floor)
     info["sinkhorn"] = {"iterations": int(result.n_iter), "error": float(result.error),
                         "converged": bool(result.converged), "bins": opts.bins,
-                        "gamma": float(geometry.gamma)}
+                        "gamma": float(geometry.gamma), "width_bins": width}
     return Grade(names=list(styles.names), weights=weights, loss=loss, color_map=color_map,
                  strength=opts.strength, timings=timings,
                  info=info, barycenter=target)
