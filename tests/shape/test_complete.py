@@ -126,3 +126,26 @@ def test_projection_refuses_mismatched_or_single_database():
         project(histograms[0], histograms[:1])
     with pytest.raises(InputError, match="shape"):
         project(np.ones((6, 6, 6)), histograms)
+
+
+def test_alignment_picks_the_axes_signs_that_match_the_reference(tmp_path):
+    import trimesh
+
+    from wbcgrade.shape.complete import load_shape
+
+    body = trimesh.creation.box(extents=(1.0, 0.4, 0.25))
+    head = trimesh.creation.icosphere(subdivisions=2, radius=0.15)
+    head.apply_translation((0.7, 0.15, 0.0))
+    shape = trimesh.util.concatenate([body, head])
+    shape.export(tmp_path / "reference.off")
+    turned = shape.copy()
+    turned.apply_transform(trimesh.transformations.random_rotation_matrix(seed=3))
+    turned.apply_scale(3.0)
+    turned.export(tmp_path / "turned.off")
+
+    reference = load_shape(tmp_path / "reference.off", 20, align=True)
+    aligned = load_shape(tmp_path / "turned.off", 20, align=True, reference=reference)
+    unguided = load_shape(tmp_path / "turned.off", 20)
+    iou = intersection_over_union(aligned.occupancy > 0.5, reference.occupancy > 0.5)
+    assert iou > 0.85
+    assert iou > intersection_over_union(unguided.occupancy > 0.5, reference.occupancy > 0.5)

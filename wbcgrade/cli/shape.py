@@ -119,7 +119,9 @@ def shape() -> None:
 @_with_common
 @click.option("--loss", type=_LOSS_CHOICE, default="kl_reverse", show_default=True,
               help="kl_reverse = KL(input|barycenter); kl = the paper's KL(barycenter|input).")
-@click.option("--align", is_flag=True, help="Align every mesh on its principal axes first.")
+@click.option("--align", is_flag=True,
+              help="Align every mesh on its principal axes first, picking the axes' signs "
+                   "that overlap the input most (for databases of unaligned meshes).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Completed mesh (.obj, .ply, .stl, .off); default PARTIAL_completed.obj.")
 @click.option("--volume", "volume_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -164,7 +166,8 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
     shapes = []
     for path in tqdm([partial, *paths], desc="voxelising", unit="mesh", disable=quiet,
                      file=sys.stderr, leave=False):
-        shapes.append(load_shape(path, resolution, align=align))
+        reference = shapes[0] if shapes else None
+        shapes.append(load_shape(path, resolution, align=align, reference=reference))
     bar, callback = _progress(not quiet, max_iter, "fitting")
     with bar:
         completion = complete_shape(

@@ -54,7 +54,7 @@ import scipy.optimize
 from wbcgrade.core import GridGeometry, Loss, barycentric_coordinates, get_loss
 from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES
 from wbcgrade.errors import InputError
-from wbcgrade.shape.mesh import MESH_SUFFIXES, normalize_mesh, read_mesh, voxelize
+from wbcgrade.shape.mesh import MESH_SUFFIXES, normalization_transform, read_mesh, voxelize
 from wbcgrade.shape.volume import DEFAULT_EPS, density_from_volume, volume_suffix
 
 log = logging.getLogger(__name__)
@@ -174,19 +174,56 @@ def load_shape(
     resolution: int = DEFAULT_RESOLUTION,
     align: bool = False,
     supersample: int | None = None,
+    reference: VoxelShape | None = None,
 ) -> VoxelShape:
     """Read, normalise and voxelise one mesh file.
 
-    ``supersample`` defaults to 2 up to 128^3 and 1 above (memory).
+    Parameters
+    ----------
+    path : mesh file.
+    resolution : voxels per axis.
+    align : rotate the principal axes onto x, y, z (see
+        :func:`~wbcgrade.shape.mesh.normalization_transform`).
+    supersample : samples per voxel and axis; default 2 up to 128^3, 1 above.
+    reference : with ``align``, choose among the four proper sign flips of
+        the principal axes the one whose voxelisation overlaps ``reference``
+        most (IoU), which settles the axes' sign ambiguity consistently
+        across a database.
     """
     mesh = read_mesh(path)
-    normalised, transform = normalize_mesh(mesh, align=align)
     if supersample is None:
         supersample = 2 if resolution <= 128 else 1
-    occupancy = voxelize(normalised, resolution, supersample=supersample)
+    transform = normalization_transform(mesh, align=align)
+    candidates = [transform]
+    if align and reference is not None:
+        candidates = [_flip_about_centre(signs) @ transform for signs in _PROPER_FLIPS]
+    best = None
+    for candidate in candidates:
+        normalised = mesh.copy()
+        normalised.apply_transform(candidate)
+        occupancy = voxelize(normalised, resolution, supersample=supersample)
+        score = (
+            intersection_over_union(occupancy > 0.5, reference.occupancy > 0.5)
+            if reference is not None and len(candidates) > 1
+            else 0.0
+        )
+        if best is None or score > best[0]:
+            best = (score, occupancy, candidate, float(normalised.volume))
+    _, occupancy, transform, volume = best
     if occupancy.max() <= 0:
         raise InputError(f"{path}: the mesh is too thin to cover any voxel at {resolution}^3")
-    return VoxelShape(Path(path).stem, occupancy, transform, float(normalised.volume))
+    return VoxelShape(Path(path).stem, occupancy, transform, volume)
+
+
+_PROPER_FLIPS = ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1))
+
+
+def _flip_about_centre(signs) -> np.ndarray:
+    """(4, 4) reflection of the unit frame's axes through its centre (0.5, 0.5, 0.5)."""
+    flip = np.eye(4)
+    flip[:3, :3] = np.diag(np.asarray(signs, dtype=float))
+    flip[:3, 3] = 0.5 - 0.5 * np.asarray(signs, dtype=float)
+    return flip
 
 
 # --------------------------------------------------------------------------- resources
