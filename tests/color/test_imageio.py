@@ -151,3 +151,22 @@ def test_failed_write_leaves_nothing(tmp_path):
     with pytest.raises((InputError, OSError)):
         write_image(tmp_path / "out.png", image.pixels[:, :, :1].squeeze(), image)
     assert _listed(tmp_path / "a.png") == ["a.png"]
+
+
+def test_interrupted_write_removes_the_temporary_file(tmp_path, monkeypatch):
+    image = read_image(write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8"))
+
+    def fail(*args):
+        raise OSError("disk full")
+
+    monkeypatch.setattr("wbcgrade.color._files.os.replace", fail)
+    with pytest.raises(OSError, match="disk full"):
+        write_image(tmp_path / "out.png", image.pixels, image)
+    assert _listed(tmp_path / "a.png") == ["a.png"]
+
+
+def test_unwritable_output_folder(tmp_path, monkeypatch):
+    image = read_image(write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8"))
+    monkeypatch.setattr("wbcgrade.color.imageio.os.access", lambda *args: False)
+    with pytest.raises(InputError, match="not writable"):
+        write_image(tmp_path / "out.png", image.pixels, image)

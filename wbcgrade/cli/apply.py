@@ -102,6 +102,9 @@ def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, 
                         strength=strength,
                         weights=parse_weights(weights_text) if weights_text else None)
     opts.validate()
+    if bins > 64 or fit_bins > 32:
+        _warn(f"--bins {bins} / --fit-bins {fit_bins}: large grids take many minutes "
+              "with the current core (defaults: 32 and 16)")
     check_outputs(photo, output, lut, lut_size, overwrite)
     cache = HistogramCache(cache_dir, enabled=not no_cache)
     start = time.perf_counter()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import click
 from tqdm import tqdm
@@ -15,6 +16,7 @@ from wbcgrade.color.presets import (
     load_style_folder,
     save_preset,
 )
+from wbcgrade.errors import InputError
 
 
 @click.group("preset")
@@ -36,9 +38,11 @@ def preset() -> None:
 def build(folder, output, bins, width, description, overwrite, no_cache):
     """Build a preset from the photos in FOLDER (non-images are skipped)."""
     if not 4 <= bins <= 256:
-        raise click.BadParameter("must be between 4 and 256", param_hint="--bins")
-    if output and not output.lower().endswith(".npz"):
-        raise click.BadParameter("preset file name must end in .npz", param_hint="-o")
+        raise InputError("--bins must be between 4 and 256")
+    if not output.lower().endswith(".npz"):
+        raise InputError(f"{output}: preset file name must end in .npz")
+    if os.path.exists(output) and not overwrite:
+        raise InputError(f"{output}: file exists (use --overwrite to replace it)")
     with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
         def progress(done, total, name):
             bar.total = total
