@@ -56,8 +56,8 @@ def _print_report(report, as_json: bool) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
-              help="Bins per axis of the colour map (transfer grid); 128 is the paper's "
-                   "but about 8x slower.")
+              help="Bins per axis of the colour map (transfer grid). 64 takes ~1 min; "
+                   "the paper's 128 takes far longer with the current core.")
 @click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
               help="Bins per axis of the grid the weights are fitted on.")
 @click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
@@ -75,7 +75,8 @@ def _print_report(report, as_json: bool) -> None:
 @click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
               help="L-BFGS iterations of the fit at most.")
 @click.option("--weights", "weights_text", default=None, metavar="A,B,C",
-              help="Use these style weights (in style order) and skip the fit.")
+              help="Use these style weights and skip the fit (order: sorted file names of "
+                   "--style DIR, or the preset's order shown by `preset list`).")
 @click.option("--strength", type=float, default=1.0, show_default=True,
               help="Blend: x -> (1-t) x + t T(x).")
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
