@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.color.conftest import SAMPLES, small_copy, write_array
 from wbcgrade.color._colour import colour
 from wbcgrade.color.histogram import grid_points, image_histogram
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.imageio import read_image, write_image
+from wbcgrade.color.pipeline import render
 from wbcgrade.color.presets import StyleSet, load_style_folder
-from wbcgrade.color.transfer import GradeOptions, grade_image, parse_weights
+from wbcgrade.color.remap import identity_map
+from wbcgrade.color.transfer import Grade, GradeOptions, grade_image, parse_weights
 from wbcgrade.errors import InputError
 
 
@@ -44,8 +47,6 @@ def sliced_wasserstein_lab(a, wa, b, wb, n_directions=64, seed=0):
 
 @pytest.fixture(scope="module")
 def scene(style_dir, tmp_path_factory):
-    from tests.color.conftest import SAMPLES, small_copy
-
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path_factory.mktemp("p") / "chelsea.jpg")
     return read_image(photo).rgb(), style_dir
 
@@ -108,3 +109,20 @@ def test_given_weights_skip_the_fit(scene, fast_options):
 def test_bad_weights(text):
     with pytest.raises(InputError):
         parse_weights(text)
+
+
+def test_render_grey_and_alpha(tmp_path, rng):
+    warm = identity_map(9) * np.array([1.0, 0.8, 0.6], np.float32)
+    grade = Grade(names=["w"], weights=np.ones(1), loss=None, color_map=warm)
+    grey_alpha = rng.random((5, 6, 2)).astype(np.float32)
+    image = read_image(write_array(tmp_path / "ga.png", grey_alpha, "uint16"))
+    pixels, alpha = render(image, grade)
+    assert pixels.shape == (5, 6, 4) and alpha == 3
+    np.testing.assert_array_equal(pixels[:, :, 3], image.pixels[:, :, 1])  # alpha untouched
+    np.testing.assert_allclose(pixels[:, :, 1], 0.8 * image.pixels[:, :, 0], atol=1e-6)
+    back = read_image(write_image(tmp_path / "out.png", pixels, image, alpha_channel=alpha))
+    assert back.spec.channelnames == ("R", "G", "B", "A") and back.alpha_channel == 3
+    assert back.spec.format == image.spec.format
+    rgba = read_image(write_array(tmp_path / "c.png", rng.random((5, 6, 4)), "uint8"))
+    pixels, alpha = render(rgba, grade)
+    assert alpha == 3 and np.array_equal(pixels[:, :, 3], rgba.pixels[:, :, 3])
