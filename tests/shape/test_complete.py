@@ -149,3 +149,15 @@ def test_alignment_picks_the_axes_signs_that_match_the_reference(tmp_path):
     iou = intersection_over_union(aligned.occupancy > 0.5, reference.occupancy > 0.5)
     assert iou > 0.85
     assert iou > intersection_over_union(unguided.occupancy > 0.5, reference.occupancy > 0.5)
+
+
+def test_coarse_to_fine_schedule_recovers_translation_weights():
+    n = 32
+    left = density_from_volume(ball(n, 0.15, (0.35, 0.5, 0.5)))
+    right = density_from_volume(ball(n, 0.15, (0.65, 0.5, 0.5)))
+    # The barycenter of two translated balls is the ball in between.
+    target = density_from_volume(ball(n, 0.15, (0.35 + 0.7 * 0.3, 0.5, 0.5)))
+    result = project(target, [left, right], n_iter=25, max_iter=4)
+    assert result.n_coarse_evaluations > 0
+    assert result.n_evaluations > result.n_coarse_evaluations
+    assert result.weights[1] == pytest.approx(0.7, abs=0.08)

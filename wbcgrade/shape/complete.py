@@ -436,7 +436,9 @@ def project(
                 GridGeometry.with_width(coarse_target.shape, max(coarse_width, 1.0)),
                 loss=loss_object, n_iter=n_iter, max_iter=max_iter, callback=callback,
             )
-            init_weights, coarse_history = coarse.weights, list(coarse.history)
+            # A small floor lets the fine level revive a weight the coarse one dropped.
+            init_weights = (coarse.weights + 1e-3) / (1.0 + 1e-3 * len(coarse.weights))
+            coarse_history = list(coarse.history)
             fine_iter = max(3, max_iter // 3)
         fine_callback = callback
         if callback is not None and coarse_history:
