@@ -17,8 +17,8 @@ hours (DESIGN.md §4). The colour map is built on a 32^3 grid with a kernel 1
 bin wide (sigma = 1/31 of the cube, gamma ~0.002, ten times smaller than the
 fit's): barycenter ~1-2 s, Sinkhorn ~1-3 s with epsilon scaling. The
 transfer kernel keeps that sigma on other grids: ``--bins 64`` (2 bins wide)
-takes ~10 s of Sinkhorn and ~30 s of barycenter, and 128^3 is impractical
-until the core gets faster. Entropic blur pulls each colour towards the mean
+takes ~6 s of barycenter and ~6 s of Sinkhorn, ``--bins 128`` ~95 s and ~80 s
+(1 GB) for three styles. Entropic blur pulls each colour towards the mean
 of where its mass goes; the narrow transfer
 kernel keeps graded photos far more colourful than a map built with the
 fit's kernel (tested in ``tests/color``).
