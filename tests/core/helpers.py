@@ -18,14 +18,22 @@ def dense_barycenter(histograms, weights, cost, gamma, n_iter):
     return P
 
 
-def blobs(shape, n, rng, width=0.12, floor=0.0):
-    """n histograms, each a Gaussian blob at a random position on a grid of ``shape``."""
+def blobs(shape, n, rng, width=0.12, floor=0.0, components=1):
+    """n histograms on a grid of ``shape``, each a mixture of Gaussian blobs.
+
+    With one component all histograms are translates of one another, and the
+    barycenter only depends on the weighted mean of their centres; use
+    ``components >= 2`` (random widths) when weights must be identifiable.
+    """
     axes = np.meshgrid(*[np.linspace(0, 1, k) for k in shape], indexing="ij")
     out = []
     for _ in range(n):
-        centre = rng.uniform(0.2, 0.8, size=len(shape))
-        d2 = sum((ax - c) ** 2 for ax, c in zip(axes, centre))
-        h = np.exp(-d2 / (2 * width**2)) + floor
+        h = np.full(shape, float(floor))
+        for _ in range(components):
+            centre = rng.uniform(0.2, 0.8, size=len(shape))
+            sd = width if components == 1 else width * rng.uniform(0.6, 1.4)
+            d2 = sum((ax - c) ** 2 for ax, c in zip(axes, centre))
+            h += rng.uniform(0.5, 1.0) * np.exp(-d2 / (2 * sd**2))
         out.append(h / h.sum())
     return np.stack(out)
 

@@ -168,7 +168,7 @@ class _ScalingBackend:
     def initial(self) -> NDArray:
         return np.ones_like(self.H)
 
-    def step(self, b: NDArray) -> tuple[NDArray, _Iterate]:
+    def step(self, b: NDArray, need_next: bool = True) -> tuple[NDArray | None, _Iterate]:
         geom = self.geometry
         Kb = geom.apply(b)
         a = np.zeros_like(Kb)
@@ -188,6 +188,8 @@ class _ScalingBackend:
         elif np.count_nonzero(phi) != phi.size:
             self._check_dropped_mass(log_phi, log_P)
         P = np.exp(log_P)
+        if not need_next:
+            return None, _Iterate(Kb, a, phi, log_phi, P)
         b_next = np.zeros_like(phi)
         np.divide(P.astype(self.dtype, copy=False), phi, out=b_next, where=phi > 0)
         if not np.isfinite(b_next.sum()):
@@ -209,10 +211,12 @@ class _ScalingBackend:
     def reverse(self, it: _Iterate, b_prev: NDArray, u: NDArray) -> NDArray:
         """Adjoint of log b(l-1) given ``u``, the adjoint of log phi(l)."""
         geom = self.geometry
-        u = u.astype(self.dtype, copy=False)
-        x = np.zeros_like(it.phi)
-        np.divide(u, it.phi, out=x, where=it.phi > 0)
+        x = u.astype(self.dtype, copy=True)  # becomes u / phi, in place
+        np.divide(x, it.phi, out=x, where=it.phi > 0)
+        if np.count_nonzero(it.phi) != it.phi.size:
+            x[it.phi <= 0] = 0.0
         y = geom.apply(x)
+        del x
         y *= it.a  # a = 0 wherever K b = 0, so the division below may skip those bins
         np.divide(y, it.Kb, out=y, where=it.Kb > 0)
         v = geom.apply(y)
@@ -235,7 +239,7 @@ class _LogBackend:
     def initial(self) -> NDArray:
         return np.zeros_like(self.log_H)
 
-    def step(self, log_b: NDArray) -> tuple[NDArray, _Iterate]:
+    def step(self, log_b: NDArray, need_next: bool = True) -> tuple[NDArray, _Iterate]:
         geom = self.geometry
         log_Kb = geom.log_apply(log_b)
         log_a = self.log_H - log_Kb
@@ -371,28 +375,32 @@ class BarycenterSolver:
         if not np.all(np.isfinite(g_final)) or not np.isfinite(value):
             raise FloatingPointError(f"the {loss.name} loss is not finite at this barycenter")
 
-        state = {"grad": np.zeros(self.n_histograms), "r": None}
+        state = {"grad": np.zeros(self.n_histograms)}
         w_shape = (-1,) + (1,) * (self.H.ndim - 1)
         w_col = w.reshape(w_shape)
 
         def reverse_step(l: int, b_prev: NDArray) -> None:
-            _, it = backend.step(b_prev)
+            _, it = backend.step(b_prev, need_next=False)
             if l == L - 1:
                 g = g_final
                 u = w_col * g
             else:
-                r = state["r"]
+                r = state.pop("r")
                 g = r.sum(axis=0)
-                u = w_col * g - r
+                u = w_col * g
+                u -= r
+                del r
             log_phi = it.log_phi
             if not np.all(np.isfinite(log_phi)):
                 vanished = ~np.isfinite(log_phi)
                 if np.any(vanished & (g != 0)):
                     raise _Unsafe("phi vanishes where the gradient needs log phi")
                 log_phi = np.where(vanished, 0.0, log_phi)
-            contrib = np.tensordot(log_phi, g, axes=g.ndim)
-            state["grad"] += contrib
-            state["r"] = None if l == 0 else backend.reverse(it, b_prev, u)
+            state["grad"] += np.tensordot(log_phi, g, axes=g.ndim)
+            del log_phi
+            it.log_phi = None
+            if l > 0:
+                state["r"] = backend.reverse(it, b_prev, u)
 
         def advance(b_from: NDArray, start: int, stop: int) -> NDArray:
             if stop in saved:

@@ -80,7 +80,7 @@ def barycentric_coordinates(
     n_iter: int = 60,
     init_weights: ArrayLike | None = None,
     max_iter: int = 30,
-    tol: float = 1e-7,
+    tol: float = 1e-9,
     callback: Callable[[int, NDArray, float], None] | None = None,
     checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
 ) -> CoordinatesResult:
@@ -100,7 +100,7 @@ def barycentric_coordinates(
         Starting weights (default uniform), e.g. from a coarser grid.
     max_iter : int, default 30
         L-BFGS iterations at most (the paper reports ~10 suffice).
-    tol : float, default 1e-7
+    tol : float, default 1e-9
         Relative decrease of the (normalised) energy at which L-BFGS stops.
     callback : callable, optional
         ``callback(n_evaluations, weights, loss)`` after each evaluation.
