@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
-from wbcgrade.brdf.fit import brdf_histograms, fit_brdf, masked_loss
+from wbcgrade.brdf.fit import brdf_histograms, fit_brdf, masked_loss, resolve_loss
 from wbcgrade.cli import main
 from wbcgrade.core import barycenter, barycenter_gradient
 from wbcgrade.errors import InputError
@@ -183,9 +183,10 @@ def test_interpolation_is_exact_on_samples_and_constants(setup):
 # -- the fit ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("loss", ["quadratic", "wasserstein"])
+@pytest.mark.parametrize("loss", ["quadratic", "wasserstein", "sinkhorn-divergence"])
 def test_gradient_check_on_hemisphere(setup, loss):
     directions, geometry, database, subset = setup
+    loss = resolve_loss(loss)
     histograms, _ = brdf_histograms(database[:, subset[:6]])
     target, _ = brdf_histograms(analytic.sample_material(
         analytic.held_out_materials()[0], directions)[subset[:6]])
@@ -226,10 +227,13 @@ def test_known_weights_are_recovered(setup):
     truth = np.array([0.5, 0.0, 0.3, 0.0, 0.2])
     P = barycenter(histograms, truth, geometry, n_iter=30)
     target = np.moveaxis(P * np.tensordot(truth, sums, axes=1)[..., None], -1, -2)
-    result = fit_brdf(target, database, geometry, loss="quadratic", fit_incoming=subset, **FAST)
-    np.testing.assert_allclose(result.weights, truth, atol=0.02)
-    assert sampled.psnr(target, result.values) > 50
-    # The same from 10% of the measurements.
+    # The debiased Wasserstein loss (the plain entropic one is biased: its
+    # minimum is not at P = q, and it misses these weights by up to 0.3).
+    result = fit_brdf(target, database, geometry, loss="sinkhorn-divergence",
+                      fit_incoming=subset, **FAST)
+    np.testing.assert_allclose(result.weights, truth, atol=0.04)
+    assert sampled.psnr(target, result.values) > 45
+    # The quadratic loss from 10% of the measurements.
     mask = sampled.decimation_mask(N, N, 0.1, seed=0)
     sparse = fit_brdf(target, database, geometry, mask=mask, loss="quadratic",
                       fit_incoming=subset, **FAST)

@@ -10,9 +10,13 @@ import numpy as np
 from tqdm import tqdm
 
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
-from wbcgrade.brdf.fit import DEFAULT_LOSS, DEFAULT_MAX_ITER, DEFAULT_N_ITER, fit_brdf
-
-LOSS_CHOICES = ["wasserstein", "quadratic", "l1", "kl"]
+from wbcgrade.brdf.fit import (
+    BRDF_LOSSES,
+    DEFAULT_LOSS,
+    DEFAULT_MAX_ITER,
+    DEFAULT_N_ITER,
+    fit_brdf,
+)
 
 
 @click.group("brdf")
@@ -92,8 +96,10 @@ def _percent(weights: np.ndarray) -> list[float]:
 @click.option("--no-png", is_flag=True, help="Do not render the comparison picture.")
 @click.option("--compare/--no-compare", default=True, show_default=True,
               help="With --keep, also fit the full measurement for comparison.")
-@click.option("--loss", type=click.Choice(LOSS_CHOICES), default=DEFAULT_LOSS,
-              show_default=True)
+@click.option("--loss", type=click.Choice(BRDF_LOSSES), default=DEFAULT_LOSS,
+              show_default=True,
+              help="Fit loss; sinkhorn-divergence is the debiased Wasserstein loss, quadratic "
+                   "the fastest.")
 @click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
 @click.option("--fit-directions", default=32, show_default=True, type=click.IntRange(0, 2000),
