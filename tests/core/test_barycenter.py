@@ -238,3 +238,16 @@ def test_bad_input_raises_value_error(kwargs, message):
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
         barycenter_gradient(**args)
+
+
+def test_hopeless_log_domain_job_stops_with_clear_error(monkeypatch):
+    from wbcgrade.errors import NumericalError
+
+    monkeypatch.setattr(barycenter_module, "MAX_LOG_DOMAIN_WORK", 1e3)
+    n = 64
+    geom = GridGeometry.with_width(n, 0.7)
+    x = np.arange(n)
+    H = np.stack([np.exp(-((x - 6) ** 2) / 4.0), np.exp(-((x - 58) ** 2) / 4.0)])
+    H[H < 1e-12] = 0.0
+    with pytest.raises(NumericalError, match="wider kernel"):
+        barycenter(H, [0.5, 0.5], geom, n_iter=40)

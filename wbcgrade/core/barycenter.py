@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from wbcgrade.core._cpu import fast_cpu
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
+from wbcgrade.errors import NumericalError
 
 __all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver"]
 
@@ -50,6 +51,10 @@ log = logging.getLogger(__name__)
 
 #: Bytes of stored scalings the reverse pass may keep (the rest is recomputed).
 DEFAULT_CHECKPOINT_BYTES = 1_000_000_000
+
+#: Largest log-domain job (kernel entries visited) run without asking: about ten
+#: minutes on a 2-core machine. Larger ones stop with a clear error instead.
+MAX_LOG_DOMAIN_WORK = 3e10
 
 #: Mass the scaling domain may drop where a kernel product underflows to 0,
 #: relative to the barycenter's largest bin, before the log domain takes over.
@@ -308,9 +313,23 @@ class BarycenterSolver:
             yield f"scaling-{geom.dtype.name}", lambda g=geom: _ScalingBackend(self.H, weights, g)
         yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
 
-    def _run(self, weights: NDArray, task):
+    def _log_domain_work(self, passes: float) -> float:
+        """Kernel entries the log domain visits for ``passes`` forward-pass equivalents."""
+        geom = self.geometry
+        histograms = int(np.prod(self.H.shape[: self.H.ndim - geom.ndim]))
+        return passes * 2 * self.n_iter * histograms * geom.log_apply_work
+
+    def _run(self, weights: NDArray, task, passes: float = 1.0):
         """Run ``task(backend)`` on the first backend that can represent it."""
         for name, make in self._backends(weights):
+            if name == "log" and self._log_domain_work(passes) > MAX_LOG_DOMAIN_WORK:
+                minutes = self._log_domain_work(passes) / MAX_LOG_DOMAIN_WORK * 10
+                raise NumericalError(
+                    "the barycenter cannot be computed safely with plain scalings here "
+                    "(the kernel is too narrow for how far apart the histograms are), and the "
+                    f"exact log-domain computation would take about {minutes:.0f} minutes at "
+                    "this size; use a wider kernel (larger gamma) or fewer bins"
+                )
             try:
                 with fast_cpu():
                     result = task(make())
@@ -342,7 +361,7 @@ class BarycenterSolver:
         loss = get_loss(loss)
         q = _validate_target(target, self.batch_shape, loss, self.geometry)
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-            return self._run(w, lambda backend: self._gradient(backend, w, q, loss))
+            return self._run(w, lambda backend: self._gradient(backend, w, q, loss), passes=4.0)
 
     # ------------------------------------------------------------------ reverse pass
 

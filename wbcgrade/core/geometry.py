@@ -127,6 +127,11 @@ class Geometry(ABC):
 
     @property
     @abstractmethod
+    def log_apply_work(self) -> int:
+        """Kernel entries one ``log_apply`` visits per histogram (its cost)."""
+
+    @property
+    @abstractmethod
     def points(self) -> NDArray | None:
         """Bin coordinates, ``(N, d)`` in C order, or None when unknown."""
 
@@ -234,6 +239,10 @@ class GridGeometry(Geometry):
     def __repr__(self) -> str:
         return f"GridGeometry(shape={self.shape}, gamma={self.gamma:.4g}, dtype={self.dtype.name})"
 
+    @property
+    def log_apply_work(self) -> int:
+        return self.size * sum(self.shape)
+
     @cached_property
     def points(self) -> NDArray:
         grids = np.meshgrid(*self.axes, indexing="ij")
@@ -325,6 +334,10 @@ class DenseGeometry(Geometry):
 
     def __repr__(self) -> str:
         return f"DenseGeometry(N={self.size}, gamma={self.gamma:.4g}, dtype={self.dtype.name})"
+
+    @property
+    def log_apply_work(self) -> int:
+        return self.size * self.size
 
     @property
     def points(self) -> NDArray | None:
