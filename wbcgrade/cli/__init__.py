@@ -45,15 +45,19 @@ def main() -> None:
 def _register() -> None:
     # One line per command module; keep imports here so `wbcgrade --help` lists them.
     from wbcgrade.cli.apply import apply
+    from wbcgrade.cli.batch import batch
     from wbcgrade.cli.brdf import brdf
     from wbcgrade.cli.demo import demo
     from wbcgrade.cli.preset import preset
+    from wbcgrade.cli.report import report
     from wbcgrade.cli.shape import shape
 
     main.add_command(apply)
+    main.add_command(batch)
     main.add_command(brdf)
     main.add_command(demo)
     main.add_command(preset)
+    main.add_command(report)
     main.add_command(shape)
 
 

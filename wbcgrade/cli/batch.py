@@ -1,0 +1,152 @@
+"""``wbcgrade batch``: grade every photo of a folder (and the runner ``report`` shares)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from wbcgrade.cli.grading_options import grading_options, take_grading_options
+from wbcgrade.color.batch import BatchContext, BatchPlan, BatchResult, run_batch
+from wbcgrade.color.pipeline import load_styles
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.errors import InputError
+
+
+def _warn(message: str) -> None:
+    click.echo(f"Warning: {message}", err=True)
+
+
+def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
+    """Load the style set with a progress bar over style photos."""
+    if opts.bins > 64 or opts.fit_bins > 32:
+        _warn(f"--bins {opts.bins} / --fit-bins {opts.fit_bins}: large grids take minutes "
+              "per photo (defaults: 32 and 16)")
+    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
+        def progress(done, total, name):
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name)
+            bar.refresh()
+
+        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
+                             cache=style_args["cache"], warn=_warn, progress=progress)
+    opts.validate(len(styles.names))
+    return styles
+
+
+def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
+                      consistent: bool, jobs: int, scheduler: str | None, force: bool,
+                      report_dir: str | None, write_outputs: bool) -> BatchResult:
+    """Run a batch with a tqdm bar over files (and one over the fit stages in-process)."""
+    if jobs < 1:
+        raise InputError("--jobs must be at least 1")
+    context = BatchContext(styles=styles, opts=opts, force=force,
+                           sheet_dir=None if report_dir is None else Path(report_dir),
+                           write_outputs=write_outputs)
+    if report_dir is not None:
+        from wbcgrade.color.report import style_pictures
+
+        Path(report_dir).mkdir(parents=True, exist_ok=True)
+        context.style_pictures = style_pictures(styles)
+    total = len(plan.tasks) + len(plan.done)
+    local = scheduler is None and jobs == 1
+    with tqdm(total=total, desc="photos", unit="photo", disable=None, position=0) as files, \
+            tqdm(desc="fit", unit="eval", disable=None, leave=False, position=1) as fit_bar:
+        failed = []
+
+        def on_result(result):
+            if result.status == "failed":
+                failed.append(result.relative)
+                files.set_postfix(failed=len(failed), refresh=False)
+            files.update(1)
+
+        def on_fit(n_eval, weights, value):
+            fit_bar.update(1)
+            fit_bar.set_postfix(loss=f"{value:.4g}")
+
+        def on_stage(name):
+            if name == "read":
+                fit_bar.reset()
+            fit_bar.set_description(name)
+
+        return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
+                         on_result=on_result,
+                         fit_callback=on_fit if local or consistent else None,
+                         stage=on_stage if local or consistent else None)
+
+
+def print_summary(result: BatchResult, verb: str = "graded") -> None:
+    """One summary line, then the failures and the ignored files."""
+    line = (f"{verb} {result.count('graded')}, skipped {result.count('skipped')}, "
+            f"failed {result.count('failed')} in {result.time_s:.1f} s")
+    if result.ignored:
+        line += f" ({len(result.ignored)} non-image file{'s' * (len(result.ignored) > 1)} ignored)"
+    click.echo(line)
+    for item in result.results:
+        if item.status == "failed":
+            click.echo(f"  failed   {item.relative}: {item.error}")
+    for name in result.ignored:
+        click.echo(f"  ignored  {name} (not an image)")
+    if result.series is not None:
+        ranked = sorted(zip(result.results[0].names if result.results else [],
+                            result.series.weights), key=lambda p: -p[1])
+        click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))
+
+
+@click.command("batch")
+@click.argument("in_dir", type=click.Path(exists=True, file_okay=False, path_type=str))
+@click.option("-o", "--output-dir", "out_dir", required=True,
+              type=click.Path(file_okay=False, path_type=str),
+              help="Folder for the graded copies (the input tree is mirrored).")
+@grading_options
+@click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
+@click.option("--consistent", is_flag=True,
+              help="One grade for the whole series: one fit on the pooled palette of all "
+                   "photos and one colour map for every photo (costs about one fit).")
+@click.option("--force", is_flag=True, help="Redo photos whose output is already complete.")
+@click.option("-j", "--jobs", type=int, default=1, show_default=True,
+              help="Grade photos in N local processes.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Send the photos to a Dask distributed scheduler (e.g. tcp://host:8786); "
+                   "needs `pip install 'wbcgrade[dask]'` and the same paths on the workers.")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
+              default=None, help="Also write the palette weight report into this folder.")
+@click.pass_context
+def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, report_dir,
+          **kwargs):
+    """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
+
+    Each photo gets its own barycentric coordinates, or with --consistent the
+    whole series shares one. Outputs are written atomically; a rerun skips
+    photos whose output is complete (--force redoes them). Files that are
+    not images (by extension) are ignored; unreadable photos are reported and
+    make the exit status 1.
+    """
+    from wbcgrade.color.batch import plan_batch
+
+    opts, style_args = take_grading_options(kwargs)
+    plan = plan_batch(in_dir, out_dir, recursive=recursive, force=force,
+                      exclude=[report_dir] if report_dir else [])
+    if not plan.tasks and not plan.done:
+        raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
+                                                         " (use --recursive for sub-folders)"))
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    styles = load_styles_with_progress(opts, style_args)
+    result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
+                               scheduler=scheduler, force=force, report_dir=report_dir,
+                               write_outputs=True)
+    result.time_s = time.perf_counter() - start
+    if report_dir is not None:
+        from wbcgrade.color.report import write_report
+
+        path = write_report(report_dir, result, styles, opts,
+                            "consistent" if consistent else "per-photo")
+        click.echo(f"report: {path.parent / 'index.html'}")
+    print_summary(result)
+    if result.count("failed"):
+        ctx.exit(1)

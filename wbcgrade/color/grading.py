@@ -1,0 +1,291 @@
+"""Per-photo and series grades with a guarantee: never worse than one style alone.
+
+The colour pipeline (:mod:`wbcgrade.color.transfer`) fits barycentric
+coordinates from uniform weights. The energy is not convex, so a fit can end
+above the loss of a single style image (a vertex of the simplex). This module
+evaluates every vertex with the same core loss on the same histograms; when
+the fit is worse than the best vertex it refits from that vertex and keeps
+whichever of the two is better (the vertex itself if the refit does not beat
+it). It also builds the one grade of a series (``--consistent``): one fit on
+the pooled palette of all photos and one colour map for all of them.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.histogram import add_floor, image_histogram
+from wbcgrade.color.imageio import Image, encode_for_grading, read_image
+from wbcgrade.color.pipeline import render
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.transfer import (
+    Grade,
+    GradeOptions,
+    color_transfer_map,
+    fit_weights,
+    grade_image,
+    transfer_width_bins,
+)
+
+__all__ = ["NONZERO_THRESHOLD", "FitSummary", "PhotoGrade", "fit_geometry", "vertex_losses",
+           "fit_with_vertex_check", "photo_histograms", "pooled_histogram", "series_grade",
+           "grade_photo"]
+
+#: Weights at or above this count as "non-zero" (softmax weights are never exactly 0).
+NONZERO_THRESHOLD = 1e-3
+
+FitCallback = Callable[[int, np.ndarray, float], None]
+
+
+@dataclass
+class FitSummary:
+    """The weights of a grade and how they compare with single styles.
+
+    Attributes
+    ----------
+    weights : (S,) weights on the simplex.
+    loss : loss of the barycenter at ``weights`` (fit grid, same loss as the fit).
+    vertex_losses : (S,) loss of each style alone (weight 1 on it).
+    start : "uniform" (the pipeline's fit was kept), "vertex-refit" (refit from
+        the best vertex won) or "vertex" (the best single style is the answer);
+        "given" when the weights were fixed by the user.
+    info : fit diagnostics (JSON-friendly).
+    time_s : wall time of the fit and the vertex checks.
+    """
+
+    weights: np.ndarray
+    loss: float
+    vertex_losses: np.ndarray
+    start: str = "uniform"
+    info: dict = field(default_factory=dict)
+    time_s: float = 0.0
+
+    @property
+    def best_vertex(self) -> int:
+        return int(np.argmin(self.vertex_losses))
+
+    @property
+    def n_nonzero(self) -> int:
+        return int(np.sum(self.weights >= NONZERO_THRESHOLD))
+
+
+def fit_geometry(opts: GradeOptions):
+    """The core grid geometry the weights are fitted on (as in the pipeline)."""
+    from wbcgrade.core import GridGeometry
+
+    shape = (opts.fit_bins,) * 3
+    if opts.gamma is not None:
+        return GridGeometry(shape, opts.gamma)
+    return GridGeometry.with_width(shape, opts.width)
+
+
+def _fit_problem(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions):
+    target = add_floor(photo_fit, opts.floor)
+    hists = np.stack([add_floor(h, opts.floor) for h in style_fit])
+    return target, hists, fit_geometry(opts)
+
+
+def _loss_at(target, hists, geometry, weights, opts) -> float:
+    from wbcgrade.core import barycenter, get_loss
+
+    keep = np.flatnonzero(weights > 0)
+    P = barycenter(hists[keep], weights[keep] / weights[keep].sum(), geometry, opts.n_iter)
+    value, _ = get_loss(opts.loss).value_and_grad(P, target, geometry)
+    return float(value)
+
+
+def vertex_losses(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions) -> np.ndarray:
+    """Loss of every single style against the photo, with the fit's loss and grid.
+
+    Parameters
+    ----------
+    photo_fit : (m, m, m) photo histogram on the fit grid (m = opts.fit_bins).
+    style_fit : (S, m, m, m) style histograms on the same grid.
+
+    Returns
+    -------
+    (S,) losses of ``P_L(e_s)`` (the barycenter with all weight on style s).
+    """
+    target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
+    return np.array([_loss_at(target, hists, geometry, np.eye(len(hists))[s], opts)
+                     for s in range(len(hists))])
+
+
+def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions,
+                          callback: FitCallback | None = None) -> FitSummary:
+    """Barycentric coordinates that are never worse than the best single style.
+
+    Runs the pipeline's fit (from uniform weights), evaluates every vertex;
+    if the best vertex has a lower loss, refits from it (95 % on that style)
+    and keeps the better of the refit and the vertex. With ``opts.weights``
+    set, only evaluates the losses of those weights and of the vertices.
+
+    Parameters
+    ----------
+    photo_fit : (m, m, m) photo histogram on the fit grid.
+    style_fit : (S, m, m, m) style histograms on the fit grid.
+    """
+    from wbcgrade.core import barycentric_coordinates
+
+    start = time.perf_counter()
+    target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
+    n_styles = len(hists)
+    vertices = vertex_losses(photo_fit, style_fit, opts)
+    best = int(np.argmin(vertices))
+    if opts.weights is not None:
+        weights = np.asarray(opts.weights, dtype=np.float64)
+        weights = weights / weights.sum()
+        loss = _loss_at(target, hists, geometry, weights, opts)
+        return FitSummary(weights, loss, vertices, "given", {},
+                          time.perf_counter() - start)
+    fit = fit_weights(photo_fit, style_fit, opts, callback)
+    info = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
+            "converged": fit.converged, "initial_loss": float(fit.initial_loss),
+            "bins": opts.fit_bins, "gamma": float(geometry.gamma)}
+    weights, loss, how = np.asarray(fit.weights, dtype=np.float64), float(fit.loss), "uniform"
+    if vertices[best] < loss and n_styles > 1:
+        init = np.full(n_styles, 0.05 / (n_styles - 1))
+        init[best] = 0.95
+        refit = barycentric_coordinates(target, hists, geometry, loss=opts.loss,
+                                        n_iter=opts.n_iter, init_weights=init,
+                                        max_iter=opts.max_iter, callback=callback)
+        info["uniform_start_loss"] = loss
+        info["evaluations"] += refit.n_evaluations
+        if refit.loss < vertices[best]:
+            weights, loss, how = np.asarray(refit.weights, dtype=np.float64), float(refit.loss), \
+                "vertex-refit"
+            info["converged"] = refit.converged
+        else:
+            weights, loss, how = np.eye(n_styles)[best], float(vertices[best]), "vertex"
+    info["start"] = how
+    return FitSummary(weights, loss, vertices, how, info, time.perf_counter() - start)
+
+
+def photo_histograms(path: str | os.PathLike, bins: tuple[int, ...],
+                     max_pixels: int) -> dict[int, np.ndarray]:
+    """Histograms of a photo file at several grid sizes -> {bins: (b, b, b)}."""
+    image = read_image(path)
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    return {b: image_histogram(encoded, b, image.alpha(), max_pixels) for b in bins}
+
+
+def pooled_histogram(histograms: list[np.ndarray]) -> np.ndarray:
+    """The palette of a series: the sum of the photos' (normalised) histograms, normalised.
+
+    Every photo counts once whatever its size. (n, n, n) list -> (n, n, n).
+    """
+    if not histograms:
+        raise ValueError("no histograms to pool")
+    total = np.zeros_like(histograms[0], dtype=np.float64)
+    for hist in histograms:
+        total += hist / hist.sum()
+    return total / total.sum()
+
+
+def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
+                 opts: GradeOptions, callback: FitCallback | None = None,
+                 stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+    """One grade for a whole series: one fit on the pooled palette, one colour map.
+
+    Parameters
+    ----------
+    pooled_fit : (m, m, m) pooled histogram on the fit grid (m = opts.fit_bins).
+    pooled : (n, n, n) pooled histogram on the transfer grid (n = opts.bins).
+
+    Costs one fit, one barycenter and one Sinkhorn, whatever the number of photos.
+    """
+    from wbcgrade.core import GridGeometry, barycenter
+
+    opts.validate(len(styles.names))
+    say = stage or (lambda name: None)
+    timings: dict[str, float] = {}
+    say("fit")
+    summary = fit_with_vertex_check(pooled_fit, styles.at_bins(opts.fit_bins), opts, callback)
+    timings["fit"] = summary.time_s
+    say("barycenter")
+    start = time.perf_counter()
+    width = transfer_width_bins(opts)
+    geometry = GridGeometry.with_width((opts.bins,) * 3, width)
+    floored = np.stack([add_floor(h, opts.floor) for h in styles.at_bins(opts.bins)])
+    keep = np.flatnonzero(summary.weights > 0)
+    target = barycenter(floored[keep], summary.weights[keep] / summary.weights[keep].sum(),
+                        geometry, opts.n_iter)
+    timings["barycenter"] = time.perf_counter() - start
+    say("transfer")
+    start = time.perf_counter()
+    color_map, result = color_transfer_map(pooled, target, width, opts.sinkhorn_tol,
+                                           opts.sinkhorn_max_iter, opts.floor)
+    timings["transfer"] = time.perf_counter() - start
+    info = {"fit": summary.info,
+            "sinkhorn": {"iterations": int(result.n_iter), "error": float(result.error),
+                         "converged": bool(result.converged), "bins": opts.bins,
+                         "gamma": float(geometry.gamma), "width_bins": width}}
+    grade = Grade(names=list(styles.names), weights=summary.weights, loss=summary.loss,
+                  color_map=color_map, strength=opts.strength, timings=timings, info=info,
+                  barycenter=target)
+    return grade, summary
+
+
+@dataclass
+class PhotoGrade:
+    """A graded photo in memory.
+
+    Attributes
+    ----------
+    image : the decoded input.
+    pixels : (H, W, C') float32 graded pixels (the image's value convention).
+    alpha_channel : index of alpha in ``pixels`` or -1.
+    grade : the grade applied (weights, colour map, barycenter).
+    fit : weights and single-style comparison (None for a shared series grade
+        whose summary the caller holds).
+    timings : seconds per stage.
+    """
+
+    image: Image
+    pixels: np.ndarray
+    alpha_channel: int
+    grade: Grade
+    fit: FitSummary | None
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
+                shared: Grade | None = None, callback: FitCallback | None = None,
+                stage: Callable[[str], None] | None = None) -> PhotoGrade:
+    """Read and grade one photo (nothing is written).
+
+    With ``shared`` (a series grade), its colour map is applied as is;
+    otherwise the photo gets its own vertex-checked fit and colour map.
+    """
+    say = stage or (lambda name: None)
+    timings: dict[str, float] = {}
+    say("read")
+    start = time.perf_counter()
+    image = read_image(Path(path))
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    timings["read"] = time.perf_counter() - start
+    summary = None
+    if shared is not None:
+        grade = shared
+    else:
+        opts.validate(len(styles.names))
+        say("fit")
+        photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
+        summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
+        timings["fit"] = summary.time_s
+        fixed = replace(opts, weights=[float(w) for w in summary.weights])
+        grade = grade_image(encoded, styles, fixed, image.alpha(), None, stage)
+        grade.loss = summary.loss
+        grade.info["fit"] = summary.info
+        timings.update({k: v for k, v in grade.timings.items() if k != "fit"})
+    say("remap")
+    start = time.perf_counter()
+    pixels, alpha_channel = render(image, grade)
+    timings["remap"] = time.perf_counter() - start
+    return PhotoGrade(image, pixels, alpha_channel, grade, summary, timings)

@@ -1,0 +1,192 @@
+"""The palette weight report: report.json, weights.csv, PNG sheets and index.html.
+
+Folder layout (REPORT_DIR)::
+
+    report.json          styles, options, and one entry per photo (see FileResult.as_dict)
+    weights.csv          one row per photo, one column per style (plus loss columns)
+    sheets/<photo>.png   one sheet per graded photo (see wbcgrade.color.sheet)
+    photos/<photo>.json  the entry of each photo, reused when a rerun skips the photo
+    index.html           self-contained page: the weight table and every sheet
+                         (inline CSS, sheets referenced by relative paths)
+
+All files are written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color._files import atomic_path
+from wbcgrade.color.batch import BatchResult
+from wbcgrade.color.grading import NONZERO_THRESHOLD
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.transfer import GradeOptions
+
+__all__ = ["style_pictures", "write_report", "report_entries"]
+
+
+def _write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
+        handle.write(text)
+
+
+def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
+    """A small display picture per style: the photo itself for a style folder,
+    else (presets hold histograms only) a block of the style's palette swatches.
+
+    Returns {name: (h, w, 3) float32 in [0, 1]}.
+    """
+    from wbcgrade.color.imageio import encode_for_grading, read_image
+    from wbcgrade.color.sheet import histogram_palette, thumbnail
+
+    folder = Path(styles.source) if styles.source else None
+    pictures = {}
+    files = {}
+    if folder is not None and folder.is_dir():
+        files = {p.stem: p for p in sorted(folder.iterdir()) if p.is_file()}
+    for name, hist in zip(styles.names, styles.histograms):
+        picture = None
+        if name in files:
+            try:
+                image = read_image(files[name])
+                encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+                picture = thumbnail(encoded, size, size * 4 // 3)
+            except (ValueError, OSError):
+                picture = None
+        if picture is None:
+            palette = histogram_palette(hist, k=6)
+            picture = np.zeros((size, size * 4 // 3, 3), dtype=np.float32)
+            edges = np.round(np.concatenate([[0], np.cumsum(palette.shares)]) * size).astype(int)
+            for j, colour in enumerate(palette.colors):
+                picture[edges[j]:edges[j + 1]] = colour
+        pictures[name] = picture
+    return pictures
+
+
+def _record_path(report_dir: Path, relative: str) -> Path:
+    return report_dir / "photos" / f"{relative}.json"
+
+
+def report_entries(report_dir: str | os.PathLike, result: BatchResult) -> list[dict]:
+    """One entry per photo; skipped photos reuse the entry a previous run saved."""
+    report_dir = Path(report_dir)
+    entries = []
+    for item in result.results:
+        entry = item.as_dict()
+        if item.status == "skipped":
+            try:
+                previous = json.loads(_record_path(report_dir, item.relative).read_text("utf-8"))
+                if isinstance(previous, dict) and "weights" in previous:
+                    entry = {**previous, "status": "skipped"}
+            except (OSError, ValueError):
+                pass
+        entries.append(entry)
+    return entries
+
+
+def _weights_row(entry: dict, names: list[str]) -> list:
+    weights = {w["style"]: w["weight"] for w in entry.get("weights", [])}
+    best = entry.get("best_single_style") or {}
+    return ([entry["photo"], entry["status"]] + [weights.get(n, "") for n in names]
+            + [entry.get("loss", ""), best.get("style", ""), best.get("loss", ""),
+               entry.get("nonzero_weights", "")])
+
+
+def _csv_text(entries: list[dict], names: list[str]) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(["photo", "status", *names, "loss", "best_single_style",
+                     "best_single_loss", "nonzero_weights"])
+    for entry in entries:
+        writer.writerow(_weights_row(entry, names))
+    return out.getvalue()
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#222;
+background:#fafaf8}
+h1{font-size:20px;margin:0 0 4px}p.meta{color:#666;margin:0 0 16px;font-size:13px}
+table{border-collapse:collapse;font-size:12px;margin-bottom:24px}
+th,td{border:1px solid #ddd;padding:3px 6px;text-align:right}
+th{background:#eee;position:sticky;top:0}td.name{text-align:left}
+td.failed{color:#b00;text-align:left}
+figure{margin:0 0 28px}figure img{max-width:100%;border:1px solid #ddd}
+figcaption{font-size:13px;color:#444;margin-bottom:4px}
+"""
+
+
+def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
+    esc = html.escape
+    rows = []
+    for entry in entries:
+        weights = {w["style"]: w["weight"] for w in entry.get("weights", [])}
+        photo = esc(entry["photo"])
+        if entry.get("sheet"):
+            photo = f'<a href="#{esc(entry["photo"])}">{photo}</a>'
+        if "weights" not in entry:
+            rows.append(f'<tr><td class="name">{photo}</td>'
+                        f'<td class="failed" colspan="{len(names) + 2}">'
+                        f'{esc(entry["status"])}: {esc(entry.get("error", ""))}</td></tr>')
+            continue
+        cells = []
+        for name in names:
+            w = float(weights.get(name, 0.0))
+            shade = f"rgba(51,115,191,{min(1.0, w):.2f})"
+            colour = "#fff" if w > 0.5 else "#222"
+            cells.append(f'<td style="background:{shade};color:{colour}">{w:.3f}</td>')
+        best = entry.get("best_single_style") or {}
+        rows.append(f'<tr><td class="name">{photo}</td>{"".join(cells)}'
+                    f'<td>{entry.get("loss", 0):.4g}</td>'
+                    f'<td>{esc(str(best.get("style", "")))} {best.get("loss", 0):.4g}</td></tr>')
+    head = "".join(f"<th>{esc(n)}</th>" for n in names)
+    figures = "".join(
+        f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
+        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
+        f"</figure>" for e in entries if e.get("sheet"))
+    summary = esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
+    return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+            f"<title>wbcgrade report</title><style>{_CSS}</style></head><body>"
+            f"<h1>wbcgrade palette weight report</h1><p class=\"meta\">{summary}. Weights "
+            f"&ge; {NONZERO_THRESHOLD:g} count as non-zero; loss = fit loss of the barycenter, "
+            f"compared with the best single style.</p>"
+            f'<table><thead><tr><th>photo</th>{head}<th>loss</th><th>best single style</th>'
+            f"</tr></thead><tbody>{''.join(rows)}</tbody></table>{figures}</body></html>\n")
+
+
+def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: StyleSet,
+                 opts: GradeOptions, mode: str = "per-photo") -> Path:
+    """Write report.json, weights.csv, index.html (and per-photo records) into ``report_dir``.
+
+    Sheets are written by the tasks themselves (``BatchContext.sheet_dir``).
+    Returns the path of report.json.
+    """
+    report_dir = Path(report_dir)
+    report_dir.mkdir(parents=True, exist_ok=True)
+    entries = report_entries(report_dir, result)
+    for item, entry in zip(result.results, entries):
+        if item.status == "graded":
+            _write_text(_record_path(report_dir, item.relative), json.dumps(entry, indent=1))
+    names = list(styles.names)
+    meta = {"styles": styles.source, "mode": mode, "photos": len(entries),
+            "graded": result.count("graded"), "skipped": result.count("skipped"),
+            "failed": result.count("failed"), "time_s": round(result.time_s, 2)}
+    options = {k: v for k, v in vars(opts).items()}
+    document = {"format": "wbcgrade-report", "version": 1, **meta,
+                "style_names": names, "nonzero_threshold": NONZERO_THRESHOLD,
+                "options": options, "ignored": result.ignored, "photos": entries}
+    if result.series is not None:
+        document["series_weights"] = dict(zip(names, map(float, result.series.weights)))
+        document["series_loss"] = float(result.series.loss)
+    path = report_dir / "report.json"
+    _write_text(path, json.dumps(document, indent=2, default=float))
+    _write_text(report_dir / "weights.csv", _csv_text(entries, names))
+    _write_text(report_dir / "index.html", _index_html(entries, names, meta))
+    return path

@@ -1,0 +1,221 @@
+"""A PNG sheet per graded photo: what went in, what came out, and why.
+
+Layout (top to bottom): a title line (photo, loss against the best single
+style, number of non-zero weights, time); the input and the graded output
+side by side; thumbnails of the contributing styles, each with its weight as
+a bar; palette swatches of the input, the barycenter and the output.
+
+Composed with numpy and OpenImageIO only (no plotting library): pictures are
+resized with ``ImageBufAlgo.resize``, text is drawn with
+``ImageBufAlgo.render_text`` and the fonts OpenImageIO ships (when no font can
+be found the sheet is written without text). Palettes are the main colours of
+a histogram: its highest peaks (greedy, at least ``min_distance`` apart),
+refined by a few weighted k-means steps over the histogram's bins; each
+swatch is as wide as the share of mass nearest to it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from wbcgrade.color._files import atomic_path
+from wbcgrade.color.histogram import grid_points, resample_histogram
+
+__all__ = ["Palette", "histogram_palette", "thumbnail", "StyleTile", "SheetContent",
+           "compose_sheet", "write_sheet"]
+
+_BACKGROUND = (0.96, 0.96, 0.95)
+_INK = (0.12, 0.12, 0.12)
+_BAR = (0.20, 0.45, 0.75)
+_PAD = 12
+
+
+@dataclass
+class Palette:
+    """Main colours of a histogram: colors (k, 3) encoded RGB, shares (k,) summing to 1."""
+
+    colors: np.ndarray
+    shares: np.ndarray
+
+
+def histogram_palette(hist: np.ndarray, k: int = 8, bins: int = 16,
+                      min_distance: float = 0.15, steps: int = 5) -> Palette:
+    """Main colours of an (n, n, n) colour histogram.
+
+    Parameters
+    ----------
+    hist : (n, n, n) non-negative histogram over the encoded RGB cube.
+    k : at most this many colours.
+    bins : grid the histogram is re-binned to first (keeps this cheap).
+    min_distance : initial peaks are at least this far apart (RGB, [0, 1] units).
+    steps : weighted k-means refinement steps.
+
+    Returns
+    -------
+    Palette sorted by decreasing share.
+    """
+    hist = resample_histogram(np.asarray(hist, dtype=np.float64), bins)
+    mass = hist.ravel() / hist.sum()
+    points = grid_points(bins)
+    live = np.flatnonzero(mass > 1e-6 * mass.max())
+    points, mass = points[live], mass[live]
+    centres: list[np.ndarray] = []
+    for index in np.argsort(-mass, kind="stable"):
+        if len(centres) == k:
+            break
+        if all(np.linalg.norm(points[index] - c) >= min_distance for c in centres):
+            centres.append(points[index])
+    centres_arr = np.array(centres)
+    for _ in range(steps):
+        nearest = np.argmin(((points[:, None, :] - centres_arr[None]) ** 2).sum(-1), axis=1)
+        for j in range(len(centres_arr)):
+            mine = nearest == j
+            if mass[mine].sum() > 0:
+                centres_arr[j] = (points[mine] * mass[mine, None]).sum(0) / mass[mine].sum()
+    nearest = np.argmin(((points[:, None, :] - centres_arr[None]) ** 2).sum(-1), axis=1)
+    shares = np.bincount(nearest, weights=mass, minlength=len(centres_arr))
+    order = np.argsort(-shares, kind="stable")
+    shares = shares[order]
+    return Palette(np.clip(centres_arr[order], 0, 1), shares / shares.sum())
+
+
+def _fit_size(height: int, width: int, max_h: int, max_w: int) -> tuple[int, int]:
+    scale = min(max_h / height, max_w / width)
+    return max(1, round(height * scale)), max(1, round(width * scale))
+
+
+def thumbnail(rgb: np.ndarray, max_h: int, max_w: int) -> np.ndarray:
+    """(H, W, 3) float display pixels -> resized copy fitting in max_h x max_w (filtered)."""
+    height, width = rgb.shape[:2]
+    out_h, out_w = _fit_size(height, width, max_h, max_w)
+    buf = oiio.ImageBuf(np.ascontiguousarray(rgb[:, :, :3], dtype=np.float32))
+    small = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, out_w, 0, out_h, 0, 1, 0, 3))
+    return np.asarray(small.get_pixels(oiio.FLOAT)).reshape(out_h, out_w, 3)
+
+
+def _swatches(palette: Palette, height: int, width: int) -> np.ndarray:
+    strip = np.empty((height, width, 3), dtype=np.float32)
+    edges = np.round(np.concatenate([[0], np.cumsum(palette.shares)]) * width).astype(int)
+    edges[-1] = width
+    for j, colour in enumerate(palette.colors):
+        strip[:, edges[j]:edges[j + 1]] = colour
+    return strip
+
+
+@dataclass
+class StyleTile:
+    """One contributing style: name, weight and a (h, w, 3) display picture."""
+
+    name: str
+    weight: float
+    picture: np.ndarray
+
+
+@dataclass
+class SheetContent:
+    """Everything a sheet shows (pictures are display-encoded (H, W, 3) floats in [0, 1])."""
+
+    title: str
+    subtitle: str
+    before: np.ndarray
+    after: np.ndarray
+    styles: list[StyleTile]
+    palettes: list[tuple[str, Palette]]
+    more_styles: int = 0
+
+
+class _Canvas:
+    def __init__(self, height: int, width: int):
+        self.pixels = np.empty((height, width, 3), dtype=np.float32)
+        self.pixels[:] = _BACKGROUND
+        self.texts: list[tuple[int, int, str, int, tuple]] = []
+
+    def paste(self, picture: np.ndarray, top: int, left: int) -> None:
+        h, w = picture.shape[:2]
+        self.pixels[top:top + h, left:left + w] = np.clip(picture[:, :, :3], 0, 1)
+
+    def fill(self, top: int, left: int, height: int, width: int, colour) -> None:
+        self.pixels[top:top + height, left:left + width] = colour
+
+    def text(self, x: int, baseline: int, text: str, size: int = 14, colour=_INK) -> None:
+        self.texts.append((x, baseline, text, size, colour))
+
+    def render(self) -> np.ndarray:
+        buf = oiio.ImageBuf(np.ascontiguousarray(self.pixels))
+        for x, y, text, size, colour in self.texts:
+            if not oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "", colour):
+                break  # no font available: keep the sheet, drop the labels
+        return np.asarray(buf.get_pixels(oiio.FLOAT)).reshape(self.pixels.shape)
+
+
+def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
+    """Lay out a sheet -> (H, width, 3) float32 display pixels in [0, 1]."""
+    pad = _PAD
+    half = (width - 3 * pad) // 2
+    pic_h = 300
+    before = thumbnail(content.before, pic_h, half)
+    after = thumbnail(content.after, pic_h, half)
+    row_h = max(before.shape[0], after.shape[0])
+    tile_w, tile_h = 104, 78
+    per_row = max(1, (width - pad) // (tile_w + pad))
+    tiles = content.styles
+    tile_rows = max(1, -(-len(tiles) // per_row))
+    tile_block = tile_h + 40
+    swatch_h = 30
+    height = (pad + 44 + row_h + 24 + 22 + tile_rows * tile_block
+              + len(content.palettes) * (swatch_h + 22) + pad)
+    canvas = _Canvas(height, width)
+    canvas.text(pad, pad + 16, content.title, 18)
+    canvas.text(pad, pad + 38, content.subtitle, 13)
+    top = pad + 48
+    canvas.paste(before, top, pad)
+    canvas.paste(after, top, 2 * pad + half)
+    canvas.text(pad, top + row_h + 16, "input", 13)
+    canvas.text(2 * pad + half, top + row_h + 16, "graded", 13)
+    top += row_h + 24
+    label = "styles (weight bars)"
+    if content.more_styles:
+        label += f", {content.more_styles} more below the threshold"
+    canvas.text(pad, top + 14, label, 13)
+    top += 22
+    for number, tile in enumerate(tiles):
+        row, col = divmod(number, per_row)
+        y, x = top + row * tile_block, pad + col * (tile_w + pad)
+        pic = thumbnail(tile.picture, tile_h, tile_w)
+        canvas.paste(pic, y + (tile_h - pic.shape[0]) // 2, x + (tile_w - pic.shape[1]) // 2)
+        canvas.fill(y + tile_h + 3, x, 8, tile_w, (0.85, 0.85, 0.85))
+        canvas.fill(y + tile_h + 3, x, 8, max(1, round(tile_w * min(tile.weight, 1.0))), _BAR)
+        name = tile.name if len(tile.name) <= 11 else tile.name[:10] + "~"
+        canvas.text(x, y + tile_h + 26, f"{name} {tile.weight:.2f}", 11)
+    top += tile_rows * tile_block
+    label_w = 92
+    for name, palette in content.palettes:
+        canvas.text(pad, top + 20, name, 13)
+        canvas.paste(_swatches(palette, swatch_h, width - 2 * pad - label_w), top,
+                     pad + label_w)
+        top += swatch_h + 22
+    return canvas.render()
+
+
+def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960) -> Path:
+    """Compose a sheet and write it as an 8-bit sRGB PNG (atomically)."""
+    path = Path(path)
+    pixels = compose_sheet(content, width)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None or not out.open(tmp, spec):
+            raise OSError(f"{path}: cannot write the sheet ({oiio.geterror().strip()})")
+        ok = out.write_image(np.ascontiguousarray(pixels, dtype=np.float32))
+        error = out.geterror()
+        out.close()
+        if not ok:
+            raise OSError(f"{path}: cannot write the sheet ({error.strip()})")
+    return path
