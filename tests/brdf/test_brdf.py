@@ -308,17 +308,21 @@ def test_cli_synth_and_fit(tmp_path):
     measured = tmp_path / "ref" / "brushed-gold-ward.npz"
     out = tmp_path / "fit.binary"
     result = runner.invoke(main, [
-        "brdf", "fit", str(measured), "--database", str(database), "--keep", "0.2",
+        "brdf", "fit", str(measured), "--database", str(database),
+        "--keep", "0.3", "--keep", "0.15",
         "--directions", "32", "--fit-directions", "6", "--loss", "quadratic",
         "--max-iter", "4", "--n-iter", "20", "-o", str(out), "--json",
     ])
     assert result.exit_code == 0, result.output
     report = json.loads(result.output[result.output.index("{"):])
-    assert [f["label"] for f in report["fits"]] == ["full", "keep 20%"]
+    assert [f["label"] for f in report["fits"]] == ["full", "keep 30%", "keep 15%"]
     for entry in report["fits"]:
         assert sum(entry["weights"].values()) == pytest.approx(1.0)
         assert np.isfinite(entry["psnr_db"])
     assert out.exists() and out.with_suffix(".png").exists()
+    import OpenImageIO as oiio
+
+    assert oiio.ImageBuf(str(out.with_suffix(".png"))).spec().width == 4 * 192
     assert io.load_brdf(out, sampling.hemisphere_directions(32)).shape == (32, 32, 3)
 
 

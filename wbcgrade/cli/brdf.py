@@ -85,9 +85,11 @@ def _percent(weights: np.ndarray) -> list[float]:
 @click.argument("measured", type=click.Path(exists=True, dir_okay=False))
 @click.option("--database", required=True, type=click.Path(exists=True, file_okay=False),
               help="Folder of BRDF files (.binary MERL or .npz sampled).")
-@click.option("--keep", type=click.FloatRange(0.0, 1.0, min_open=True), default=None,
+@click.option("--keep", "keeps", type=click.FloatRange(0.0, 1.0, min_open=True),
+              multiple=True,
               help="Keep only this random fraction of the measurements (simulated sparse "
-                   "acquisition).")
+                   "acquisition); repeat for several fits side by side, e.g. --keep 0.25 "
+                   "--keep 0.1 --keep 0.05 (the paper's Figure 6).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the decimation.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Fitted BRDF (.binary MERL or .npz) [default: ./<MEASURED>[-keepK]-fit.binary].")
@@ -112,17 +114,18 @@ def _percent(weights: np.ndarray) -> list[float]:
 @click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
               type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-def fit(measured: str, database: str, keep: float | None, seed: int, output: str | None,
+def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, output: str | None,
         png: str | None, no_png: bool, compare: bool, loss: str, directions: int,
         fit_directions: int, width: float, n_iter: int, max_iter: int, as_json: bool) -> None:
     """Fit MEASURED (a BRDF file) with weights on the BRDFs of --database.
 
     Prints the weights and the PSNR of each fit against the full measurement,
-    writes the fitted BRDF (from the decimated measurement when --keep is
-    given) and a picture: spheres rendered with the reference, the full fit
-    and the decimated fit.
+    writes the fitted BRDF (from the first --keep's decimated measurement
+    when --keep is given) and a picture: spheres rendered with the reference,
+    the full fit and the decimated fits.
     """
     measured_path = Path(measured)
+    keep = keeps[0] if keeps else None
     out = Path(output) if output else _default_output(measured_path, keep)
     png_path = None if no_png else (Path(png) if png else out.with_suffix(".png"))
     inputs = {measured_path.resolve(), *(p.resolve() for p in io.database_files(database))}
@@ -141,11 +144,11 @@ def fit(measured: str, database: str, keep: float | None, seed: int, output: str
         dirs, fit_directions)
 
     runs: list[tuple[str, np.ndarray | None]] = []
-    if keep is None or compare:
-        runs.append(("full", None))
-    if keep is not None:
-        runs.append((f"keep {keep * 100:g}%", sampled.decimation_mask(directions, directions,
-                                                                       keep, seed)))
+    for fraction in keeps:
+        runs.append((f"keep {fraction * 100:g}%",
+                     sampled.decimation_mask(directions, directions, fraction, seed)))
+    if not keeps or compare:
+        runs.insert(0, ("full", None))
     results = []
     for label, mask in runs:
         with tqdm(desc=f"fit ({label})", unit="eval", leave=False) as bar:
@@ -157,7 +160,7 @@ def fit(measured: str, database: str, keep: float | None, seed: int, output: str
                               max_iter=max_iter, fit_incoming=subset, callback=progress)
         results.append((label, result, sampled.psnr(reference, result.values)))
 
-    label, final, _ = results[-1]
+    label, final, _ = results[1] if keeps and compare else results[0]
     io.save_brdf(out, final.values, dirs, name=f"{measured_path.stem} {label} fit")
     if png_path is not None:
         renderings = [render.render_sphere(reference, dirs)]
