@@ -38,8 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbcgrade.core import Loss, barycenter, barycentric_coordinates, get_loss
-from wbcgrade.core.geometry import Geometry
+from wbcgrade.core import Geometry, Loss, barycenter, barycentric_coordinates, get_loss
 from wbcgrade.errors import InputError
 
 DEFAULT_LOSS = "wasserstein"
