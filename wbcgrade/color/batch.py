@@ -365,6 +365,10 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+#: How long to wait for a Dask scheduler to answer.
+DASK_CONNECT_TIMEOUT = "20s"
+
+
 def _dask_client(address: str):
     try:
         from dask.distributed import Client
@@ -372,7 +376,7 @@ def _dask_client(address: str):
         raise InputError("--scheduler needs Dask: pip install 'wbcgrade[dask]' "
                          "(dask[distributed])") from None
     try:
-        return Client(address, timeout="20s")
+        return Client(address, timeout=DASK_CONNECT_TIMEOUT)
     except (OSError, TimeoutError) as exc:
         raise InputError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
 

@@ -1,0 +1,266 @@
+"""Batch grading, series grades, scale-out and the palette weight report (tiny images)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from click.testing import CliRunner
+
+from wbcgrade.cli import main
+from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
+from wbcgrade.color.grading import fit_with_vertex_check
+from wbcgrade.color.presets import load_style_folder
+from wbcgrade.color.transfer import GradeOptions
+
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
+FAST = ["--bins", "8", "--fit-bins", "6", "--max-iter", "3", "--iterations", "10", "--no-cache"]
+GOOD = ["chelsea.jpg", "astronaut.png", "sub/bridge.jpg"]
+
+
+def small_copy(src: Path, dst: Path, width: int = 64) -> Path:
+    buf = oiio.ImageBuf(str(src))
+    spec = buf.spec()
+    height = max(1, round(spec.height * width / spec.width))
+    small = oiio.ImageBufAlgo.resample(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, 3))
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    assert small.write(str(dst)), small.geterror()
+    return dst
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory) -> tuple[Path, Path]:
+    """(photos, styles): three good photos (one in a sub-folder, one PNG), a truncated
+    JPEG and a text file; three style photos."""
+    root = tmp_path_factory.mktemp("batch")
+    photos, styles = root / "photos", root / "styles"
+    for name in ("aitzgorri", "coffee", "flower"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 48)
+    small_copy(SAMPLES / "chelsea.jpg", photos / "chelsea.jpg")
+    small_copy(SAMPLES / "astronaut.jpg", photos / "astronaut.png")
+    small_copy(SAMPLES / "bridge.jpg", photos / "sub" / "bridge.jpg")
+    (photos / "broken.jpg").write_bytes((photos / "chelsea.jpg").read_bytes()[:300])
+    (photos / "notes.txt").write_text("not a photo")
+    return photos, styles
+
+
+def _batch(photos: Path, styles: Path, out: Path, *extra: str):
+    return CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style", str(styles),
+                                     "-r", *FAST, *extra])
+
+
+def _pixels(path: Path) -> np.ndarray:
+    buf = oiio.ImageBuf(str(path))
+    assert not buf.has_error, buf.geterror()
+    return buf.get_pixels(oiio.FLOAT)
+
+
+@pytest.fixture(scope="module")
+def local_run(folders, tmp_path_factory) -> Path:
+    """One per-photo batch run in this process; its output folder."""
+    photos, styles = folders
+    out = tmp_path_factory.mktemp("local") / "out"
+    result = _batch(photos, styles, out)
+    assert result.exit_code == 1, result.output
+    return out
+
+
+def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
+    photos, styles = folders
+    for name in GOOD:
+        graded, source = local_run / name, photos / name
+        assert graded.is_file()
+        spec_in, spec_out = oiio.ImageInput.open(str(source)), oiio.ImageInput.open(str(graded))
+        assert spec_out.format_name() == spec_in.format_name()
+        assert spec_out.spec().format == spec_in.spec().format
+        assert (spec_out.spec().width, spec_out.spec().height) == (spec_in.spec().width,
+                                                                   spec_in.spec().height)
+        spec_in.close()
+        spec_out.close()
+        assert not np.array_equal(_pixels(graded), _pixels(source))
+    assert not (local_run / "broken.jpg").exists()
+    assert not (local_run / "notes.txt").exists()
+    assert not [p for p in local_run.rglob(".*")]  # no temporary files left
+
+    # A rerun reports the bad file again and skips the finished ones.
+    out = local_run.parent / "rerun"
+    shutil.copytree(local_run, out)
+    before = {name: (out / name).stat().st_mtime_ns for name in GOOD}
+    result = _batch(photos, styles, out)
+    assert result.exit_code == 1
+    assert "graded 0, skipped 3, failed 1" in result.output
+    assert "broken.jpg" in result.output and "notes.txt" in result.output
+    assert before == {name: (out / name).stat().st_mtime_ns for name in GOOD}
+    # A partial/foreign output of another size is redone; --force redoes all.
+    small_copy(SAMPLES / "coffee.jpg", out / "chelsea.jpg", 20)
+    result = _batch(photos, styles, out)
+    assert "graded 1, skipped 2, failed 1" in result.output
+    assert _pixels(out / "chelsea.jpg").shape == _pixels(photos / "chelsea.jpg").shape
+
+
+def test_good_folder_exits_zero(folders, tmp_path):
+    photos, styles = folders
+    clean = tmp_path / "clean"
+    clean.mkdir()
+    shutil.copy(photos / "chelsea.jpg", clean / "chelsea.jpg")
+    result = _batch(clean, styles, tmp_path / "out", "--weights", "1,1,1")
+    assert result.exit_code == 0, result.output
+    assert "graded 1, skipped 0, failed 0" in result.output
+    result = _batch(clean, styles, clean)
+    assert result.exit_code == 1 and "must differ" in result.output
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    buf = oiio.ImageBuf(np.ascontiguousarray(pixels, dtype=np.float32))
+    buf.set_write_format(oiio.UINT8)
+    assert buf.write(str(path)), buf.geterror()
+
+
+def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
+    photos, styles = folders
+    # b.png holds a.png's pixels on its left half: one colour map for the series grades
+    # them identically; a per-photo grade would not (b's palette differs).
+    series = tmp_path / "series"
+    series.mkdir()
+    right = _pixels(photos / "sub" / "bridge.jpg")
+    left = _pixels(photos / "chelsea.jpg")[: right.shape[0]]
+    _write_png(series / "a.png", left)
+    _write_png(series / "b.png", np.concatenate([left, right], axis=1))
+    shutil.copy(photos / "astronaut.png", series / "c.png")
+    report = tmp_path / "report"
+    result = _batch(series, styles, tmp_path / "out", "--consistent", "--report", str(report))
+    assert result.exit_code == 0, result.output
+    entries = json.loads((report / "report.json").read_text())["photos"]
+    assert [e["status"] for e in entries] == ["graded"] * 3
+    weights = [{w["style"]: w["weight"] for w in e["weights"]} for e in entries]
+    assert all(w == weights[0] for w in weights)
+    graded_a = _pixels(tmp_path / "out" / "a.png")
+    graded_b = _pixels(tmp_path / "out" / "b.png")
+    np.testing.assert_array_equal(graded_b[:, : left.shape[1]], graded_a)
+    assert not np.array_equal(graded_a, left)
+
+
+def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    photos, styles = folders
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        result = _batch(photos, styles, tmp_path / "dask", "--scheduler",
+                        cluster.scheduler_address)
+    assert result.exit_code == 1, result.output
+    assert "graded 3, skipped 0, failed 1" in result.output
+    for name in GOOD:
+        np.testing.assert_array_equal(_pixels(tmp_path / "dask" / name),
+                                      _pixels(local_run / name))
+    # Two local processes, library level (two photos keep it short).
+    style_set = load_style_folder(styles, 8)
+    plan = plan_batch(photos, tmp_path / "pool")
+    context = BatchContext(style_set, GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10))
+    outcome = run_batch(plan, context, jobs=2)
+    assert outcome.count("graded") == 2 and outcome.count("failed") == 1
+    for name in ("chelsea.jpg", "astronaut.png"):
+        np.testing.assert_array_equal(_pixels(tmp_path / "pool" / name),
+                                      _pixels(local_run / name))
+
+
+def test_scheduler_errors_are_one_line(folders, tmp_path, monkeypatch):
+    import sys
+
+    import wbcgrade.color.batch as batch
+
+    photos, styles = folders
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(batch, "DASK_CONNECT_TIMEOUT", "1s")
+    result = _batch(photos, styles, tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines()[-1].startswith("Error: cannot reach")
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # as if not installed
+    result = _batch(photos, styles, tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
+    assert result.exit_code == 1
+    assert "pip install 'wbcgrade[dask]'" in result.output.strip().splitlines()[-1]
+
+
+def test_report_files_are_valid(folders, tmp_path):
+    photos, styles = folders
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, ["report", str(photos), "-o", str(out), "--style",
+                                       str(styles), "-r", *FAST])
+    assert result.exit_code == 1, result.output  # the broken photo
+    document = json.loads((out / "report.json").read_text())
+    entries = document["photos"]
+    assert sorted(e["photo"] for e in entries) == sorted(GOOD + ["broken.jpg"])
+    for entry in entries:
+        if entry["status"] != "graded":
+            assert "error" in entry
+            continue
+        weights = [w["weight"] for w in entry["weights"]]
+        assert weights == sorted(weights, reverse=True)
+        assert abs(sum(weights) - 1) < 1e-4
+        assert entry["loss"] <= entry["best_single_style"]["loss"] * (1 + 1e-9)
+        assert entry["nonzero_weights"] == sum(w >= document["nonzero_threshold"]
+                                               for w in weights)
+        sheet = oiio.ImageInput.open(str(out / entry["sheet"]))
+        assert sheet is not None and sheet.spec().width == 960
+        sheet.close()
+    with open(out / "weights.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r["photo"] for r in rows] == [e["photo"] for e in entries]
+    assert set(document["style_names"]) <= set(rows[0])
+    page = (out / "index.html").read_text()
+    links = re.findall(r'(?:src|href)="([^"#][^"]*)"', page)
+    assert len(links) == 3
+    assert all((out / link).is_file() for link in links)
+    assert not list(photos.rglob("*_graded*"))  # report writes no graded photos
+
+
+def test_report_one_photo_with_preset(folders, tmp_path):
+    photos, _ = folders
+    out = tmp_path / "one"
+    result = CliRunner().invoke(main, ["report", str(photos / "chelsea.jpg"), "-o", str(out),
+                                       "--preset", "warm", *FAST])
+    assert result.exit_code == 0, result.output
+    rows = list(csv.reader(open(out / "weights.csv", newline="")))
+    assert len(rows) == 2 and rows[1][0] == "chelsea.jpg"
+
+
+def test_fit_is_never_worse_than_the_best_single_style():
+    rng = np.random.default_rng(0)
+    styles = rng.random((3, 6, 6, 6)) ** 8
+    styles /= styles.sum(axis=(1, 2, 3), keepdims=True)
+    photo = styles[1] * 0.97 + styles[0] * 0.03
+    opts = GradeOptions(fit_bins=6, max_iter=1, n_iter=10)
+    fit = fit_with_vertex_check(photo, styles, opts)
+    assert fit.loss <= fit.vertex_losses.min() * (1 + 1e-12)
+    assert fit.weights.argmax() == 1
+
+
+def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
+    import wbcgrade.color.batch as batch
+
+    photos, styles = folders
+    out = tmp_path / "out"
+    plan = plan_batch(photos, out, recursive=True)
+    real_write = batch.write_image
+    calls = []
+
+    def write_then_interrupt(path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) == 2:  # as if killed while writing: a temporary file is left
+            (Path(path).parent / f".{Path(path).stem}.x1y2z3{Path(path).suffix}").write_text("")
+            raise KeyboardInterrupt
+        return real_write(path, *args, **kwargs)
+
+    monkeypatch.setattr(batch, "write_image", write_then_interrupt)
+    context = BatchContext(load_style_folder(styles, 8),
+                           GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10))
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(plan, context)
+    written = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert written == [Path(calls[0]).relative_to(out).as_posix()]
+    _pixels(calls[0])  # complete and readable
