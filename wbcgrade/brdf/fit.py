@@ -164,7 +164,7 @@ def fit_brdf(
     database: np.ndarray,
     geometry: Geometry,
     mask: np.ndarray | None = None,
-    loss: str = DEFAULT_LOSS,
+    loss: str | Loss = DEFAULT_LOSS,
     n_iter: int = DEFAULT_N_ITER,
     max_iter: int = DEFAULT_MAX_ITER,
     init_weights: np.ndarray | None = None,
