@@ -264,3 +264,17 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
     written = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     assert written == [Path(calls[0]).relative_to(out).as_posix()]
     _pixels(calls[0])  # complete and readable
+
+
+def test_report_hook_for_apply(folders, tmp_path):
+    from wbcgrade.color.pipeline import grade_file
+    from wbcgrade.color.report import report_from_grade
+
+    photos, styles = folders
+    opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10)
+    style_set = load_style_folder(styles, 8)
+    graded = grade_file(photos / "chelsea.jpg", style_set, opts, output=tmp_path / "c.jpg")
+    path = report_from_grade(tmp_path / "report", graded, style_set, opts)
+    entry = json.loads(path.read_text())["photos"][0]
+    assert entry["photo"] == "chelsea.jpg" and len(entry["weights"]) == 3
+    assert (tmp_path / "report" / entry["sheet"]).is_file()

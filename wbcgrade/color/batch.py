@@ -36,6 +36,7 @@ import OpenImageIO as oiio
 from wbcgrade.color.grading import (
     NONZERO_THRESHOLD,
     FitSummary,
+    PhotoGrade,
     grade_photo,
     photo_histograms,
     pooled_histogram,
@@ -238,7 +239,9 @@ class FileResult:
         return entry
 
 
-def _sheet_content(result: FileResult, graded, context: BatchContext):
+def sheet_content(result: FileResult, graded: PhotoGrade,
+                  style_pictures: dict[str, np.ndarray] | None = None):
+    """The SheetContent of a graded photo (pictures, style tiles, palettes, losses)."""
     from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.imageio import encode_for_grading
     from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
@@ -249,7 +252,7 @@ def _sheet_content(result: FileResult, graded, context: BatchContext):
     after, _ = encode_for_grading(graded.pixels[:, :, color], image.is_float)
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
-    pictures = context.style_pictures or {}
+    pictures = style_pictures or {}
     order = sorted(range(len(result.weights)), key=lambda i: -result.weights[i])
     tiles = [StyleTile(result.names[i], result.weights[i],
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
@@ -301,7 +304,8 @@ def run_task(task: BatchTask, context: BatchContext,
             from wbcgrade.color.sheet import write_sheet
 
             sheet = Path("sheets") / f"{task.relative}.png"
-            write_sheet(context.sheet_dir / sheet, _sheet_content(result, graded, context))
+            write_sheet(context.sheet_dir / sheet, sheet_content(result, graded,
+                                                                context.style_pictures))
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
@@ -328,6 +332,7 @@ class BatchResult:
 # ----------------------------------------------------------------------------- executors
 
 _WORKER_CONTEXT: BatchContext | None = None
+_WORKER_INTERRUPTED = False
 
 
 def _init_worker(context: BatchContext, threads: int) -> None:
@@ -345,8 +350,15 @@ def _init_worker(context: BatchContext, threads: int) -> None:
 
 
 def _run_in_worker(task: BatchTask) -> FileResult:
+    global _WORKER_INTERRUPTED
     assert _WORKER_CONTEXT is not None
-    return run_task(task, _WORKER_CONTEXT)
+    if _WORKER_INTERRUPTED:  # Ctrl-C reached this worker: start no queued file
+        raise KeyboardInterrupt
+    try:
+        return run_task(task, _WORKER_CONTEXT)
+    except KeyboardInterrupt:
+        _WORKER_INTERRUPTED = True
+        raise
 
 
 def _histograms_in_worker(task: BatchTask, bins: tuple[int, ...],

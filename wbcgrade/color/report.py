@@ -29,7 +29,7 @@ from wbcgrade.color.grading import NONZERO_THRESHOLD
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.transfer import GradeOptions
 
-__all__ = ["style_pictures", "write_report", "report_entries"]
+__all__ = ["style_pictures", "write_report", "report_entries", "report_from_grade"]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -190,3 +190,54 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     _write_text(report_dir / "weights.csv", _csv_text(entries, names))
     _write_text(report_dir / "index.html", _index_html(entries, names, meta))
     return path
+
+
+def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
+                      opts: GradeOptions) -> Path:
+    """Report of one photo graded by ``wbcgrade apply`` (a hook for ``apply --report``).
+
+    ``graded`` is the :class:`wbcgrade.color.pipeline.GradeReport` that
+    ``grade_file`` returned; the photo and its written output are read back
+    and the single-style losses are evaluated with the fit's loss (cheap:
+    one barycenter per style on the fit grid). ``apply``'s fit is not
+    vertex-checked: if it is worse than the best single style, the entry says
+    so (``fit_start``: "uniform, worse than a single style").
+    """
+    import time
+
+    from wbcgrade.color.batch import FileResult, sheet_content
+    from wbcgrade.color.grading import PhotoGrade, _fit_problem, _loss_at, vertex_losses
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.imageio import encode_for_grading, read_image
+
+    report_dir = Path(report_dir)
+    start = time.perf_counter()
+    image = read_image(graded.photo)
+    output = read_image(graded.output)
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
+    style_fit = styles.at_bins(opts.fit_bins)
+    vertices = vertex_losses(photo_fit, style_fit, opts)
+    grade = graded.grade
+    weights = np.asarray(grade.weights, dtype=np.float64)
+    loss = grade.loss
+    if loss is None:
+        target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
+        loss = _loss_at(target, hists, geometry, weights / weights.sum(), opts)
+    how = "given" if grade.loss is None else "uniform"
+    if grade.loss is not None and loss > vertices.min():
+        how = "uniform, worse than a single style"
+    result = FileResult(graded.photo.name, str(graded.photo), str(graded.output), "graded",
+                        names=list(styles.names), weights=[float(w) for w in weights],
+                        loss=float(loss), vertex_losses=[float(v) for v in vertices],
+                        start=how, timings=dict(graded.timings))
+    photo = PhotoGrade(image, output.pixels, output.alpha_channel, grade, None)
+    from wbcgrade.color.sheet import write_sheet
+
+    sheet = Path("sheets") / f"{result.relative}.png"
+    write_sheet(report_dir / sheet,
+                sheet_content(result, photo, style_pictures(styles)))
+    result.sheet = sheet.as_posix()
+    batch = BatchResult([result], [], time.perf_counter() - start + graded.timings.get("total", 0))
+    return write_report(report_dir, batch, styles, opts, "apply")
+
