@@ -68,15 +68,22 @@ def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
             fit_bar.update(1)
             fit_bar.set_postfix(loss=f"{value:.4g}")
 
+        def on_read(done, total):
+            fit_bar.set_description("palettes")
+            fit_bar.total = total
+            fit_bar.n = done
+            fit_bar.refresh()
+
         def on_stage(name):
-            if name == "read":
+            if name in ("read", "fit"):
                 fit_bar.reset()
             fit_bar.set_description(name)
 
         return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
                          on_result=on_result,
                          fit_callback=on_fit if local or consistent else None,
-                         stage=on_stage if local or consistent else None)
+                         stage=on_stage if local or consistent else None,
+                         on_read=on_read)
 
 
 def print_summary(result: BatchResult, verb: str = "graded") -> None:
@@ -92,8 +99,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
     for name in result.ignored:
         click.echo(f"  ignored  {name} (not an image)")
     if result.series is not None:
-        ranked = sorted(zip(result.results[0].names if result.results else [],
-                            result.series.weights), key=lambda p: -p[1])
+        ranked = sorted(zip(result.style_names, result.series.weights), key=lambda p: -p[1])
         click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))
 
 

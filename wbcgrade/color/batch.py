@@ -324,6 +324,7 @@ class BatchResult:
     ignored: list[str]
     time_s: float
     series: FitSummary | None = None
+    style_names: list[str] = field(default_factory=list)
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
@@ -500,7 +501,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
               jobs: int = 1, scheduler: str | None = None,
               on_result: Progress | None = None,
               fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
-              stage: Callable[[str], None] | None = None) -> BatchResult:
+              stage: Callable[[str], None] | None = None,
+              on_read: Callable[[int, int], None] | None = None) -> BatchResult:
     """Grade the photos of a plan; returns every photo's result (skipped ones included).
 
     Parameters
@@ -512,6 +514,7 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
     scheduler : Dask scheduler address (overrides ``jobs``).
     on_result : called with each FileResult as it finishes (progress bars).
     fit_callback, stage : progress of fits run in this process.
+    on_read : ``on_read(done, total)`` while a series reads its photos' histograms.
     """
     start = time.perf_counter()
     since = time.time_ns() - 1_000_000_000
@@ -529,7 +532,10 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
                 opts = context.opts
                 bins = tuple(sorted({opts.fit_bins, opts.bins}))
                 fit_hists, hists, readable = [], [], []
-                for task, value in executor.histograms(plan.all_photos, bins):
+                photos = plan.all_photos
+                for number, (task, value) in enumerate(executor.histograms(photos, bins)):
+                    if on_read:
+                        on_read(number + 1, len(photos))
                     if isinstance(value, str):
                         failed = FileResult(task.relative, str(task.source),
                                             None if task.output is None else str(task.output),
@@ -558,5 +564,6 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
         _remove_temporaries(plan.tasks, since)
         raise
     results.sort(key=lambda r: r.relative)
-    return BatchResult(results, list(plan.ignored), time.perf_counter() - start, series)
+    return BatchResult(results, list(plan.ignored), time.perf_counter() - start, series,
+                       list(context.styles.names))
 
