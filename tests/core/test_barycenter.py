@@ -16,7 +16,7 @@ from wbcgrade.core import (
 barycenter_module = sys.modules["wbcgrade.core.barycenter"]
 
 GRIDS = [(20,), (9, 8), (6, 5, 4)]
-LOSSES = ["quadratic", "l1", "kl", "wasserstein"]
+LOSSES = ["quadratic", "l1", "kl", "kl_reverse", "wasserstein"]
 
 
 @pytest.mark.parametrize("shape", GRIDS)

@@ -8,6 +8,9 @@ the loss summed over any leading batch axes and its gradient ``dLoss/dP``
 - ``l1`` (total variation): ``|P - q|_1``, gradient ``sign(P - q)``.
 - ``kl`` (generalised Kullback-Leibler): ``sum P log(P / q) - P + q``,
   gradient ``log(P / q)``; needs ``q > 0``.
+- ``kl_reverse``: ``KL(q | P) = sum q log(q / P) - q + P``, gradient
+  ``1 - q / P``; asks P to cover q without charging mass where q is absent
+  (the better choice for completing partial shapes).
 - ``wasserstein`` (entropic): ``W_gamma(P / |P|, q / |q|)``, the Sinkhorn
   dual value between the normalised histograms; gradient
   ``(f - <f, P/|P|>) / |P|`` with ``f = gamma log a`` the dual potential, the
@@ -66,6 +69,14 @@ def _kl(P: NDArray, q: NDArray, geometry: Geometry) -> tuple[float, NDArray]:
     return float(terms.sum()), grad
 
 
+def _kl_reverse(P: NDArray, q: NDArray, geometry: Geometry) -> tuple[float, NDArray]:
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        terms = np.where(q > 0, q * (np.log(q) - np.log(P)), 0.0) - q + P
+        # Enters the reverse pass multiplied by P: (1 - q / P) P = P - q stays finite.
+        grad = np.where(P > 0, 1.0 - q / P, 0.0)
+    return float(terms.sum()), grad
+
+
 def _wasserstein(P: NDArray, q: NDArray, geometry: Geometry) -> tuple[float, NDArray]:
     from wbcgrade.core.sinkhorn import sinkhorn
 
@@ -99,6 +110,7 @@ def register_loss(loss: Loss) -> Loss:
 register_loss(Loss("quadratic", _quadratic))
 register_loss(Loss("l1", _l1))
 register_loss(Loss("kl", _kl, needs_positive_target=True))
+register_loss(Loss("kl_reverse", _kl_reverse))
 register_loss(Loss("wasserstein", _wasserstein))
 
 

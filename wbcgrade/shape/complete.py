@@ -70,16 +70,7 @@ MAX_MISSING = 0.9
 # --------------------------------------------------------------------------- loss
 
 
-def _kl_reverse(P: np.ndarray, q: np.ndarray, geometry) -> tuple[float, np.ndarray]:
-    """Generalised ``KL(q | P) = sum q log(q / P) - q + P`` and its gradient ``1 - q / P``."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        terms = np.where(q > 0, q * (np.log(q) - np.log(P)), 0.0) - q + P
-        grad = np.where(P > 0, 1.0 - q / P, 0.0)
-    # The core multiplies the gradient by P: (1 - q/P) P = P - q stays finite.
-    return float(terms.sum()), grad
-
-
-KL_REVERSE = Loss("kl_reverse", _kl_reverse, needs_positive_target=False)
+KL_REVERSE = get_loss("kl_reverse")
 """KL of the input from the barycenter, ``KL(q | P)`` (the paper's KL reversed).
 
 The paper's ``KL(P | q)`` charges ``P log(P / q)`` where the input is missing
@@ -87,8 +78,7 @@ The paper's ``KL(P | q)`` charges ``P log(P / q)`` where the input is missing
 there: on a barycenter of database shapes with a slab cut away, the true
 weights score worse than shapes that avoid the cut (measured: 2.14 against
 1.51 at 20^3). ``KL(q | P)`` only asks the barycenter to cover the observed
-part; a completion costs at most its (linear) mass. A candidate for the core's
-loss registry.
+part; a completion costs at most its (linear) mass.
 """
 
 LOSS_NAMES = ("kl_reverse", "kl", "quadratic", "l1", "wasserstein")
@@ -97,10 +87,6 @@ LOSS_NAMES = ("kl_reverse", "kl", "quadratic", "l1", "wasserstein")
 
 def resolve_loss(name: str | Loss) -> Loss:
     """The :class:`~wbcgrade.core.Loss` called ``name`` (``kl_reverse`` or a core loss)."""
-    if isinstance(name, Loss):
-        return name
-    if str(name).lower() == KL_REVERSE.name:
-        return KL_REVERSE
     return get_loss(name)
 
 
