@@ -134,8 +134,13 @@ def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     _write_png(series / "b.png", np.concatenate([left, right], axis=1))
     shutil.copy(photos / "astronaut.png", series / "c.png")
     report = tmp_path / "report"
-    result = _batch(series, styles, tmp_path / "out", "--consistent", "--report", str(report))
+    lut = tmp_path / "series.cube"
+    result = _batch(series, styles, tmp_path / "out", "--consistent", "--report", str(report),
+                    "--lut", str(lut), "--lut-size", "9")
     assert result.exit_code == 0, result.output
+    from wbcgrade.color.lut import read_cube
+
+    assert read_cube(lut).size == 9
     entries = json.loads((report / "report.json").read_text())["photos"]
     assert [e["status"] for e in entries] == ["graded"] * 3
     weights = [{w["style"]: w["weight"] for w in e["weights"]} for e in entries]

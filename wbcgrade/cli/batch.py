@@ -10,6 +10,7 @@ from tqdm import tqdm
 
 from wbcgrade.cli.grading_options import grading_options, take_grading_options
 from wbcgrade.color.batch import BatchContext, BatchPlan, BatchResult, run_batch
+from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut, write_cube
 from wbcgrade.color.pipeline import load_styles
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.transfer import GradeOptions
@@ -121,9 +122,13 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
                    "needs `pip install 'wbcgrade[dask]'` and the same paths on the workers.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write the palette weight report into this folder.")
+@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="With --consistent: also write the series grade as a 3-D LUT (.cube).")
+@click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
+              help="Nodes per axis of the LUT.")
 @click.pass_context
 def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, report_dir,
-          **kwargs):
+          lut, lut_size, **kwargs):
     """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
 
     Each photo gets its own barycentric coordinates, or with --consistent the
@@ -135,6 +140,16 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
     from wbcgrade.color.batch import plan_batch
 
     opts, style_args = take_grading_options(kwargs)
+    if lut is not None:
+        if not consistent:
+            raise InputError("--lut needs --consistent (one grade for the series); per-photo "
+                             "LUTs come from `wbcgrade apply --lut`")
+        if not lut.lower().endswith(".cube"):
+            raise InputError(f"{lut}: LUT file name must end in .cube")
+        if Path(lut).exists() and not force:
+            raise InputError(f"{lut}: file exists (use --force to replace it)")
+        if not 2 <= lut_size <= 256:
+            raise InputError("--lut-size must be between 2 and 256")
     plan = plan_batch(in_dir, out_dir, recursive=recursive, force=force,
                       exclude=[report_dir] if report_dir else [])
     if not plan.tasks and not plan.done:
@@ -154,5 +169,17 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
                             "consistent" if consistent else "per-photo")
         click.echo(f"report: {path.parent / 'index.html'}")
     print_summary(result)
+    if lut is not None:
+        grade = result.series_grade
+        if grade is None:
+            click.echo("LUT not written: no photo was graded (use --force to redo the series)")
+        else:
+            ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
+            write_cube(lut, color_map_to_lut(grade.color_map, lut_size, grade.strength),
+                       title=f"wbcgrade series {Path(in_dir).name}",
+                       comments=[f"wbcgrade series grade of {in_dir}: {ranked}",
+                                 "input: encoded RGB in [0, 1] (sRGB-encoded for float images)"],
+                       overwrite=True)
+            click.echo(f"wrote {lut}")
     if result.count("failed"):
         ctx.exit(1)

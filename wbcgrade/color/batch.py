@@ -318,13 +318,15 @@ def run_task(task: BatchTask, context: BatchContext,
 
 @dataclass
 class BatchResult:
-    """Outcome of a batch: one FileResult per photo (graded, skipped, failed) and the time."""
+    """Outcome of a batch: one FileResult per photo (graded, skipped, failed), the time,
+    and for a series its weights (``series``) and grade (``series_grade``, colour map)."""
 
     results: list[FileResult]
     ignored: list[str]
     time_s: float
     series: FitSummary | None = None
     style_names: list[str] = field(default_factory=list)
+    series_grade: Grade | None = None
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
@@ -524,7 +526,7 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
     for result in results:
         if on_result:
             on_result(result)
-    series = None
+    series, shared = None, None
     try:
         with _Executor(context, jobs, scheduler) as executor:
             todo = list(plan.tasks)
@@ -553,9 +555,9 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
                     # Pool in name order so the series grade does not depend on timing.
                     pooled_fit = pooled_histogram([h for _, h in sorted(fit_hists)])
                     pooled = pooled_histogram([h for _, h in sorted(hists)])
-                    grade, series = series_grade(pooled_fit, pooled, context.styles, opts,
-                                                 fit_callback, stage)
-                    executor.set_shared(grade, series)
+                    shared, series = series_grade(pooled_fit, pooled, context.styles, opts,
+                                                  fit_callback, stage)
+                    executor.set_shared(shared, series)
             for _task, result in executor.grade(todo, fit_callback, stage):
                 results.append(result)
                 if on_result:
@@ -565,5 +567,5 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
         raise
     results.sort(key=lambda r: r.relative)
     return BatchResult(results, list(plan.ignored), time.perf_counter() - start, series,
-                       list(context.styles.names))
+                       list(context.styles.names), shared)
 
