@@ -283,3 +283,20 @@ def test_report_hook_for_apply(folders, tmp_path):
     entry = json.loads(path.read_text())["photos"][0]
     assert entry["photo"] == "chelsea.jpg" and len(entry["weights"]) == 3
     assert (tmp_path / "report" / entry["sheet"]).is_file()
+
+
+def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
+    import wbcgrade.color.sheet as sheet
+    from wbcgrade.color.histogram import soft_histogram
+
+    colours = np.array([[0.9, 0.1, 0.1]] * 3 + [[0.1, 0.2, 0.8]])
+    palette = sheet.histogram_palette(soft_histogram(colours, 16), k=4)
+    assert palette.shares[:2] == pytest.approx([0.75, 0.25], abs=0.02)
+    np.testing.assert_allclose(palette.colors[0], [0.9, 0.1, 0.1], atol=0.04)
+    monkeypatch.setattr(sheet, "USE_FONTS", False)
+    picture = np.full((12, 16, 3), 0.5, dtype=np.float32)
+    content = sheet.SheetContent("title", "loss 0.1", picture, picture,
+                                 [sheet.StyleTile("a", 1.0, picture)], [("input", palette)])
+    pixels = sheet.compose_sheet(content, width=400)
+    assert pixels.shape[1] == 400
+    assert np.any(np.all(np.abs(pixels - 0.12) < 1e-6, axis=2))  # ink drawn by the bitmap font
