@@ -50,7 +50,7 @@ __all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver"]
 log = logging.getLogger(__name__)
 
 #: Bytes of stored scalings the reverse pass may keep (the rest is recomputed).
-DEFAULT_CHECKPOINT_BYTES = 1_000_000_000
+DEFAULT_CHECKPOINT_BYTES = 750_000_000
 
 #: Largest log-domain job (kernel entries visited) run without asking: about ten
 #: minutes on a 2-core machine. Larger ones stop with a clear error instead.
@@ -252,7 +252,8 @@ class _LogBackend:
         log_P = _weighted_sum(self.weights, log_phi)
         if not np.all(np.isfinite(log_P)):
             raise FloatingPointError("log-domain barycenter is not finite")
-        return log_P - log_phi, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P))
+        log_b_next = log_P - log_phi if need_next else None
+        return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P))
 
     def reverse(self, it: _Iterate, log_b_prev: NDArray, u: NDArray) -> NDArray:
         """Same adjoint as the scaling backend, with each sign part carried in logs."""
@@ -346,9 +347,10 @@ class BarycenterSolver:
 
         def forward(backend):
             b = backend.initial()
-            for _ in range(self.n_iter):
-                b, it = backend.step(b)
-            return it.P
+            for l in range(self.n_iter):
+                b, it = backend.step(b, need_next=l < self.n_iter - 1)
+                P, it = it.P, None  # drop this iteration's arrays before the next one
+            return P
 
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
             return self._run(w, forward)
@@ -386,9 +388,9 @@ class BarycenterSolver:
         for l in range(L):
             if l in spine:
                 saved[l] = b
-            b, it = backend.step(b)
+            b, it = backend.step(b, need_next=l < L - 1)
+            P, it = it.P, None  # drop this iteration's arrays before the next one
         del b
-        P = it.P
         value, dloss = loss.value_and_grad(P, q, self.geometry)
         g_final = np.where(P > 0, dloss * P, 0.0)
         if not np.all(np.isfinite(g_final)) or not np.isfinite(value):
