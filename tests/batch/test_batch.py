@@ -86,7 +86,8 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
         assert not np.array_equal(_pixels(graded), _pixels(source))
     assert not (local_run / "broken.jpg").exists()
     assert not (local_run / "notes.txt").exists()
-    assert not [p for p in local_run.rglob(".*")]  # no temporary files left
+    hidden = [p.name for p in local_run.rglob(".*")]
+    assert hidden == [".wbcgrade-batch.json"]  # the run's settings; no temporary file left
 
     # A rerun reports the bad file again and skips the finished ones.
     out = local_run.parent / "rerun"
@@ -97,6 +98,9 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     assert "graded 0, skipped 3, failed 1" in result.output
     assert "broken.jpg" in result.output and "notes.txt" in result.output
     assert before == {name: (out / name).stat().st_mtime_ns for name in GOOD}
+    assert "other settings" not in result.output
+    result = _batch(photos, styles, out, "--strength", "0.5")
+    assert "graded 0, skipped 3" in result.output and "other settings (strength)" in result.output
     # A partial/foreign output of another size is redone; --force redoes all.
     small_copy(SAMPLES / "coffee.jpg", out / "chelsea.jpg", 20)
     result = _batch(photos, styles, out)

@@ -137,7 +137,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
     not images (by extension) are ignored; unreadable photos are reported and
     make the exit status 1.
     """
-    from wbcgrade.color.batch import plan_batch
+    from wbcgrade.color.batch import batch_settings, plan_batch, settings_changed, write_settings
 
     opts, style_args = take_grading_options(kwargs)
     if lut is not None:
@@ -158,9 +158,16 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     styles = load_styles_with_progress(opts, style_args)
+    settings = batch_settings(styles, opts, consistent)
+    changed = settings_changed(out_dir, settings)
+    if changed and plan.done:
+        _warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other settings "
+              f"({', '.join(changed[:4])}); they are kept — use --force to redo them")
     result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
                                scheduler=scheduler, force=force, report_dir=report_dir,
                                write_outputs=True)
+    if result.count("graded"):
+        write_settings(out_dir, settings)
     result.time_s = time.perf_counter() - start
     if report_dir is not None:
         from wbcgrade.color.report import write_report

@@ -48,9 +48,13 @@ from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError, WbcgradeError
 
 __all__ = ["BatchTask", "BatchPlan", "BatchContext", "FileResult", "BatchResult",
-           "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete"]
+           "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete",
+           "batch_settings", "settings_changed", "write_settings"]
 
 Progress = Callable[["FileResult"], None]
+
+#: File in the output folder recording the settings of the last batch run there.
+SETTINGS_FILE = ".wbcgrade-batch.json"
 
 
 def image_extensions() -> set[str]:
@@ -163,6 +167,41 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
         else:
             plan.tasks.append(task)
     return plan
+
+
+def batch_settings(styles: StyleSet, opts: GradeOptions, consistent: bool) -> dict:
+    """What determines the outputs of a batch (JSON-friendly)."""
+    options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opts).items()}
+    return {"styles": styles.source, "style_names": list(styles.names), "options": options,
+            "consistent": bool(consistent)}
+
+
+def settings_changed(out_dir: str | os.PathLike, settings: dict) -> list[str]:
+    """Names of the settings that differ from those recorded in ``out_dir`` (none if unrecorded)."""
+    import json
+
+    try:
+        previous = json.loads((Path(out_dir) / SETTINGS_FILE).read_text("utf-8"))
+    except (OSError, ValueError):
+        return []
+    if not isinstance(previous, dict):
+        return []
+    changed = [k for k in ("styles", "style_names", "consistent")
+               if previous.get(k) != settings[k]]
+    old = previous.get("options") if isinstance(previous.get("options"), dict) else {}
+    changed += [k for k, v in settings["options"].items() if old.get(k) != v]
+    return changed
+
+
+def write_settings(out_dir: str | os.PathLike, settings: dict) -> None:
+    """Record the settings of this run in ``out_dir`` (atomically)."""
+    import json
+
+    from wbcgrade.color._files import atomic_path
+
+    path = Path(out_dir) / SETTINGS_FILE
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+        json.dump(settings, handle, indent=1)
 
 
 @dataclass
