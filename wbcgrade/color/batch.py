@@ -36,10 +36,10 @@ import OpenImageIO as oiio
 from wbcgrade.color.grading import (
     NONZERO_THRESHOLD,
     FitSummary,
+    PaletteSum,
     PhotoGrade,
     grade_photo,
     photo_histograms,
-    pooled_histogram,
     series_grade,
 )
 from wbcgrade.color.imageio import write_image
@@ -572,8 +572,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
             if consistent and todo:
                 opts = context.opts
                 bins = tuple(sorted({opts.fit_bins, opts.bins}))
-                fit_hists, hists, readable = [], [], []
-                photos = plan.all_photos
+                fit_pool, pool = PaletteSum(), PaletteSum()
+                photos, pending, unreadable = plan.all_photos, set(todo), set()
                 for number, (task, value) in enumerate(executor.histograms(photos, bins)):
                     if on_read:
                         on_read(number + 1, len(photos))
@@ -581,21 +581,18 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
                         failed = FileResult(task.relative, str(task.source),
                                             None if task.output is None else str(task.output),
                                             "failed", error=value, timings={"total": 0.0})
-                        if task in todo:
-                            todo.remove(task)
+                        if task in pending:
+                            unreadable.add(task)
                             results.append(failed)
                             if on_result:
                                 on_result(failed)
                         continue
-                    readable.append(task.relative)
-                    fit_hists.append((task.relative, value[opts.fit_bins]))
-                    hists.append((task.relative, value[opts.bins]))
+                    fit_pool.add(value[opts.fit_bins])
+                    pool.add(value[opts.bins])
+                todo = [task for task in todo if task not in unreadable]
                 if todo:
-                    # Pool in name order so the series grade does not depend on timing.
-                    pooled_fit = pooled_histogram([h for _, h in sorted(fit_hists)])
-                    pooled = pooled_histogram([h for _, h in sorted(hists)])
-                    shared, series = series_grade(pooled_fit, pooled, context.styles, opts,
-                                                  fit_callback, stage)
+                    shared, series = series_grade(fit_pool.result(), pool.result(),
+                                                  context.styles, opts, fit_callback, stage)
                     executor.set_shared(shared, series)
             for _task, result in executor.grade(todo, fit_callback, stage):
                 results.append(result)

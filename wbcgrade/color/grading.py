@@ -34,8 +34,8 @@ from wbcgrade.color.transfer import (
 )
 
 __all__ = ["NONZERO_THRESHOLD", "FitSummary", "PhotoGrade", "fit_geometry", "vertex_losses",
-           "fit_with_vertex_check", "photo_histograms", "pooled_histogram", "series_grade",
-           "grade_photo"]
+           "fit_with_vertex_check", "photo_histograms", "PaletteSum", "pooled_histogram",
+           "series_grade", "grade_photo"]
 
 #: Weights at or above this count as "non-zero" (softmax weights are never exactly 0).
 NONZERO_THRESHOLD = 1e-3
@@ -175,17 +175,43 @@ def photo_histograms(path: str | os.PathLike, bins: tuple[int, ...],
     return {b: image_histogram(encoded, b, image.alpha(), max_pixels) for b in bins}
 
 
+class PaletteSum:
+    """Running sum of normalised histograms whose result does not depend on their order.
+
+    Each histogram is rounded to fixed point (2^-40 of its mass) and summed in
+    int64, so photos may arrive in any order (process pool, Dask) and the
+    pooled palette, hence the series grade, is bit-for-bit the same.
+    """
+
+    _ONE = float(2 ** 40)
+
+    def __init__(self) -> None:
+        self.total: np.ndarray | None = None
+        self.count = 0
+
+    def add(self, hist: np.ndarray) -> None:
+        """Add an (n, n, n) histogram (normalised here: every photo counts once)."""
+        fixed = np.rint(np.asarray(hist, dtype=np.float64) / hist.sum() * self._ONE)
+        fixed = fixed.astype(np.int64)
+        self.total = fixed if self.total is None else self.total + fixed
+        self.count += 1
+
+    def result(self) -> np.ndarray:
+        """The pooled (n, n, n) histogram, summing to 1."""
+        if self.total is None:
+            raise ValueError("no histograms to pool")
+        return self.total / self.total.sum()
+
+
 def pooled_histogram(histograms: list[np.ndarray]) -> np.ndarray:
     """The palette of a series: the sum of the photos' (normalised) histograms, normalised.
 
     Every photo counts once whatever its size. (n, n, n) list -> (n, n, n).
     """
-    if not histograms:
-        raise ValueError("no histograms to pool")
-    total = np.zeros_like(histograms[0], dtype=np.float64)
+    pool = PaletteSum()
     for hist in histograms:
-        total += hist / hist.sum()
-    return total / total.sum()
+        pool.add(hist)
+    return pool.result()
 
 
 def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
