@@ -13,6 +13,7 @@ from wbcgrade.errors import InputError
 
 
 def _default_report_dir(target: Path) -> Path:
+    target = target.resolve()
     return target.with_name(f"{target.stem if target.is_file() else target.name}_report")
 
 
