@@ -1,8 +1,11 @@
 """Tests of the BRDF domain: sampling, MERL I/O, analytic database, fit, render, CLI.
 
 Small samplings (N = 32..48 directions, a spread subset of incoming rows) keep
-the whole file fast; the quadratic loss is used where a fit must converge
-tightly (the entropic Wasserstein loss is biased: its minimum is not at P = q).
+the whole file fast. Fits that must land on known weights use the quadratic
+loss or the debiased Sinkhorn divergence: the plain entropic Wasserstein loss
+is biased (its minimum is not at P = q). The robustness check uses the
+quadratic loss because masked Wasserstein losses are slow (their Sinkhorn
+solves on sparse histograms need many iterations).
 """
 
 from __future__ import annotations
