@@ -304,3 +304,16 @@ def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
     pixels = sheet.compose_sheet(content, width=400)
     assert pixels.shape[1] == 400
     assert np.any(np.all(np.abs(pixels - 0.12) < 1e-6, axis=2))  # ink drawn by the bitmap font
+
+
+def test_apply_report_option_writes_a_report(folders, tmp_path):
+    photos, styles = folders
+    result = CliRunner().invoke(main, [
+        "apply", str(photos / "chelsea.jpg"), "--style", str(styles), "-o", str(tmp_path / "c.jpg"),
+        "--bins", "8", "--fit-bins", "6", "--max-iter", "3", "--iterations", "10", "--no-cache",
+        "--report", str(tmp_path / "report"),
+    ])
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert [p["photo"] for p in report["photos"]] == ["chelsea.jpg"]
+    assert (tmp_path / "report" / "index.html").is_file()

@@ -88,9 +88,12 @@ def _print_report(report, as_json: bool) -> None:
 @click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
               help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or ~/.cache/wbcgrade].")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
+              default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
+              "index.html) into this folder.")
 def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, transfer_width,
           n_iter, max_iter, weights_text, strength, lut, lut_size, overwrite, as_json,
-          no_cache, cache_dir):
+          no_cache, cache_dir, report_dir):
     """Grade PHOTO towards the barycenter of style palettes closest to its own.
 
     The style palettes come from a folder of photos (--style DIR) or a preset
@@ -131,3 +134,9 @@ def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, 
                             overwrite=overwrite, fit_callback=on_fit, stage=on_stage,
                             timings=timings)
     _print_report(report, as_json)
+    if report_dir is not None:
+        from wbcgrade.color.report import report_from_grade
+
+        written = report_from_grade(report_dir, report, styles, opts)
+        if not as_json:
+            click.echo(f"report: {written}")

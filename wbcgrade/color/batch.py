@@ -381,6 +381,7 @@ def _init_worker(context: BatchContext, threads: int) -> None:
     """Process-pool initializer: keep the context, cap BLAS and numba threads."""
     global _WORKER_CONTEXT
     _WORKER_CONTEXT = context
+    os.environ["WBCGRADE_THREADS"] = str(max(1, threads))  # the core's kernel-product threads
     with contextlib.suppress(ImportError):
         from threadpoolctl import threadpool_limits
 
