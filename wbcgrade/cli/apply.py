@@ -8,6 +8,7 @@ import time
 import click
 from tqdm import tqdm
 
+from wbcgrade.cli._progress import style_progress
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE
 from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
@@ -112,13 +113,7 @@ def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, 
     check_outputs(photo, output, lut, lut_size, overwrite)
     cache = HistogramCache(cache_dir, enabled=not no_cache)
     start = time.perf_counter()
-    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
-        def progress(done, total, name):
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(name)
-            bar.refresh()
-
+    with style_progress() as progress:
         styles = load_styles(style_dir, preset, bins, cache=cache, warn=_warn, progress=progress)
     timings = {"styles": time.perf_counter() - start}
 

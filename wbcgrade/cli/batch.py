@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from wbcgrade.cli._progress import style_progress
 from wbcgrade.cli.grading_options import grading_options, take_grading_options
 from wbcgrade.color.batch import BatchContext, BatchPlan, BatchResult, run_batch
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut, write_cube
@@ -26,13 +27,7 @@ def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
     if opts.bins > 64 or opts.fit_bins > 32:
         _warn(f"--bins {opts.bins} / --fit-bins {opts.fit_bins}: large grids take minutes "
               "per photo (defaults: 32 and 16)")
-    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
-        def progress(done, total, name):
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(name)
-            bar.refresh()
-
+    with style_progress() as progress:
         styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
                              cache=style_args["cache"], warn=_warn, progress=progress)
     opts.validate(len(styles.names))

@@ -6,8 +6,8 @@ import json
 import os
 
 import click
-from tqdm import tqdm
 
+from wbcgrade.cli._progress import style_progress
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.presets import (
     DEFAULT_PRESET_WIDTH,
@@ -43,13 +43,7 @@ def build(folder, output, bins, width, description, overwrite, no_cache):
         raise InputError(f"{output}: preset file name must end in .npz")
     if os.path.exists(output) and not overwrite:
         raise InputError(f"{output}: file exists (use --overwrite to replace it)")
-    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
-        def progress(done, total, name):
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(name)
-            bar.refresh()
-
+    with style_progress() as progress:
         styles = load_style_folder(
             folder, bins, cache=HistogramCache(enabled=not no_cache),
             warn=lambda m: click.echo(f"Warning: {m}", err=True), progress=progress)
