@@ -170,3 +170,34 @@ def test_unwritable_output_folder(tmp_path, monkeypatch):
     monkeypatch.setattr("wbcgrade.color.imageio.os.access", lambda *args: False)
     with pytest.raises(InputError, match="not writable"):
         write_image(tmp_path / "out.png", image.pixels, image)
+
+
+@pytest.mark.parametrize("ext", ["png", "tif", "exr"])
+def test_colour_under_partial_alpha_survives_read_and_write(tmp_path, ext):
+    """Colour is handled unassociated: not darkened by alpha, not lost where alpha is 0."""
+    import OpenImageIO as oiio
+
+    from wbcgrade.color.imageio import read_image, write_image
+
+    alpha = np.array([[1.0, 128 / 255], [0.0, 10 / 255]], np.float32)
+    colour = np.zeros((2, 2, 4), np.float32)
+    colour[..., 0], colour[..., 1], colour[..., 3] = 200 / 255, 100 / 255, alpha
+    stored = colour.copy()
+    spec = oiio.ImageSpec(2, 2, 4, oiio.HALF if ext == "exr" else oiio.UINT8)
+    spec.alpha_channel = 3
+    if ext == "exr":  # EXR stores colour multiplied by alpha
+        stored[..., :3] *= alpha[..., None]
+    else:
+        spec.attribute("oiio:UnassociatedAlpha", 1)
+    src = str(tmp_path / f"in.{ext}")
+    out = oiio.ImageOutput.create(src)
+    assert out.open(src, spec) and out.write_image(stored) and out.close()
+
+    image = read_image(src)
+    visible = alpha > 0
+    np.testing.assert_allclose(image.pixels[..., 0][visible], 200 / 255, atol=1 / 255)
+    np.testing.assert_allclose(image.pixels[..., 3], alpha, atol=1 / 255)
+    write_image(tmp_path / f"out.{ext}", image.pixels, image)
+    again = read_image(tmp_path / f"out.{ext}")
+    np.testing.assert_allclose(again.pixels[..., :2][visible], image.pixels[..., :2][visible],
+                               atol=0.5 / 255)

@@ -135,7 +135,9 @@ def read_image(path: str | os.PathLike) -> Image:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
-    inp = oiio.ImageInput.open(str(path))
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         reason = oiio.geterror().strip().splitlines()
         detail = reason[0] if reason else "unknown format"
@@ -161,10 +163,33 @@ def read_image(path: str | os.PathLike) -> Image:
     orientation = spec.get_int_attribute("Orientation", 1)
     pixels = np.ascontiguousarray(orient(pixels, orientation))
     alpha = spec.alpha_channel
-    if alpha < 0 and spec.nchannels in (2, 4):
+    if alpha < 0 and spec.nchannels in (2, 4) and (
+        format_name == "png" or str(spec.channelnames[-1]).upper() in ("A", "ALPHA")
+    ):
         alpha = spec.nchannels - 1  # grey+alpha or RGBA without an explicit alpha name
+    if alpha >= 0 and not spec.get_int_attribute("oiio:UnassociatedAlpha", 0):
+        _unpremultiply(pixels, int(alpha))  # EXR and associated TIFF store colour * alpha
     return Image(pixels=pixels, spec=spec, path=path, alpha_channel=int(alpha),
                  format_name=format_name)
+
+
+def _colour_channels(nchannels: int, alpha: int) -> list[int]:
+    return [c for c in range(nchannels) if c != alpha]
+
+
+def _unpremultiply(pixels: np.ndarray, alpha: int) -> None:
+    """Colour / alpha where alpha > 0, in place: pixels hold unassociated colour."""
+    a = pixels[:, :, alpha]
+    safe = np.where(a > 0, a, 1.0)
+    for c in _colour_channels(pixels.shape[2], alpha):
+        pixels[:, :, c] /= safe
+
+
+def _premultiply(pixels: np.ndarray, alpha: int) -> np.ndarray:
+    out = pixels.copy()
+    for c in _colour_channels(pixels.shape[2], alpha):
+        out[:, :, c] *= pixels[:, :, alpha]
+    return out
 
 
 def encode_for_grading(rgb: np.ndarray, is_float: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -305,6 +330,12 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
         raise InputError(f"{path}: cannot write this file type ({oiio.geterror().strip()})")
     alpha = like.alpha_channel if alpha_channel is None else alpha_channel
     spec = _output_spec(like, height, width, nchannels, out.format_name(), alpha)
+    if 0 <= alpha < nchannels:
+        # In memory colour is unassociated; EXR stores it multiplied by alpha.
+        if out.format_name() == "openexr":
+            pixels = _premultiply(pixels, alpha)
+        else:
+            spec.attribute("oiio:UnassociatedAlpha", 1)
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         pixels = np.clip(pixels, 0.0, 1.0)
     data = np.ascontiguousarray(pixels, dtype=np.float32)

@@ -251,7 +251,7 @@ class _LogBackend:
         log_phi = geom.log_apply(log_a)
         log_P = _weighted_sum(self.weights, log_phi)
         if not np.all(np.isfinite(log_P)):
-            raise FloatingPointError("log-domain barycenter is not finite")
+            raise NumericalError("the log-domain barycenter is not finite")
         log_b_next = log_P - log_phi if need_next else None
         return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P))
 
@@ -394,7 +394,7 @@ class BarycenterSolver:
         value, dloss = loss.value_and_grad(P, q, self.geometry)
         g_final = np.where(P > 0, dloss * P, 0.0)
         if not np.all(np.isfinite(g_final)) or not np.isfinite(value):
-            raise FloatingPointError(f"the {loss.name} loss is not finite at this barycenter")
+            raise NumericalError(f"the {loss.name} loss is not finite at this barycenter")
 
         state = {"grad": np.zeros(self.n_histograms)}
         w_shape = (-1,) + (1,) * (self.H.ndim - 1)
