@@ -191,7 +191,7 @@ class _ScalingBackend:
             if phi.min() < self.low or phi.max() > self.high:
                 raise _Unsafe("scalings leave the float32 range")
         elif np.count_nonzero(phi) != phi.size:
-            self._check_dropped_mass(log_phi, log_P)
+            self._check_dropped_mass(log_phi, log_P, a)
         P = np.exp(log_P)
         if not need_next:
             return None, _Iterate(Kb, a, phi, log_phi, P)
@@ -201,11 +201,19 @@ class _ScalingBackend:
             raise _Unsafe("scalings overflow")
         return b_next, _Iterate(Kb, a, phi, log_phi, P)
 
-    def _check_dropped_mass(self, log_phi: NDArray, log_P: NDArray) -> None:
-        """Where a kernel product underflowed, P is bounded above; the bound must be negligible."""
-        tiny = np.log(np.finfo(np.float64).tiny)
+    def _check_dropped_mass(self, log_phi: NDArray, log_P: NDArray, a: NDArray) -> None:
+        """Where a kernel product underflowed, P is bounded above; the bound must be negligible.
+
+        A vanished ``phi_j = sum_i K_ji a_i`` only lost terms below the smallest
+        normal number: truncated kernel entries (each < tiny, times ``a_i``) and
+        flushed products (each < tiny), so ``phi_j < tiny * (sum_i a_i + N)``.
+        """
+        geom = self.geometry
+        axes = tuple(range(a.ndim - geom.ndim, a.ndim))
+        mass = a.sum(axis=axes, keepdims=True, dtype=np.float64) + geom.size
+        ceiling = np.log(np.finfo(np.float64).tiny) + np.log(mass)
         vanished = ~np.isfinite(log_phi)
-        bound = _weighted_sum(self.weights, np.where(vanished, tiny, log_phi))
+        bound = _weighted_sum(self.weights, np.where(vanished, ceiling, log_phi))
         where = vanished.any(axis=0)
         finite = log_P[np.isfinite(log_P)]
         if finite.size == 0:
