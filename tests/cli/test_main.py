@@ -26,5 +26,12 @@ def test_demo_recovers_weights():
 
 def test_bad_option_is_one_line_error_without_traceback():
     result = CliRunner().invoke(main, ["demo", "--size", "2"])
-    assert result.exit_code != 0
-    assert "Traceback" not in result.output
+    assert result.exit_code == 2 and isinstance(result.exception, SystemExit)
+    assert "Error" in result.output and "--size" in result.output
+
+
+def test_library_error_becomes_one_line_message(tmp_path):
+    result = CliRunner().invoke(main, ["apply", str(tmp_path / "missing.jpg"), "--preset", "warm"])
+    assert result.exit_code == 1 and isinstance(result.exception, SystemExit)
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error:") and "missing.jpg" in lines[0]

@@ -23,6 +23,7 @@ palette gets one vertex-checked fit and one colour map
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -533,7 +534,8 @@ def _remove_temporaries(tasks: Iterable[BatchTask], since_ns: int) -> None:
     for task in tasks:
         if task.output is None or not task.output.parent.is_dir():
             continue
-        for tmp in task.output.parent.glob(f".{task.output.stem}.*{task.output.suffix}"):
+        for tmp in task.output.parent.glob(
+                f".{glob.escape(task.output.stem)}.*{glob.escape(task.output.suffix)}"):
             with contextlib.suppress(OSError):
                 if tmp.stat().st_mtime_ns >= since_ns:
                     tmp.unlink()

@@ -20,12 +20,11 @@ from wbcgrade.color.imageio import (
     check_output_path,
     decode_from_grading,
     encode_for_grading,
-    read_image,
     write_image,
 )
 from wbcgrade.color.lut import color_map_to_lut, write_cube
 from wbcgrade.color.presets import StyleSet, load_preset, load_style_folder, resolve_preset
-from wbcgrade.color.transfer import Grade, GradeOptions, grade_image
+from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError
 
 __all__ = ["GradeReport", "default_output_path", "check_outputs", "load_styles", "render",
@@ -138,19 +137,14 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     timings = dict(timings or {})
     say = stage or (lambda name: None)
 
-    say("read")
-    start = time.perf_counter()
-    image = read_image(photo)
-    timings["read"] = time.perf_counter() - start
+    # Read, fit (never worse than the best single style), colour map and remap.
+    from wbcgrade.color.grading import grade_photo  # grading builds on this module
 
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
-    grade = grade_image(encoded, styles, opts, image.alpha(), fit_callback, say)
-    timings.update(grade.timings)
-
-    say("remap")
-    start = time.perf_counter()
-    pixels, alpha_channel = render(image, grade)
-    timings["remap"] = time.perf_counter() - start
+    graded = grade_photo(photo, styles, opts, callback=fit_callback, stage=say)
+    image, pixels, alpha_channel, grade = (
+        graded.image, graded.pixels, graded.alpha_channel, graded.grade
+    )
+    timings.update(graded.timings)
 
     say("write")
     start = time.perf_counter()
