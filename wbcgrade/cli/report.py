@@ -51,9 +51,9 @@ def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, **kw
         if target_path.is_file():
             raise InputError(f"{target}: not an image file (by its extension)")
         raise InputError(f"{target}: no photos found")
-    out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     styles = load_styles_with_progress(opts, style_args)
+    out.mkdir(parents=True, exist_ok=True)  # only once the styles are known to load
     result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
                                scheduler=scheduler, force=False, report_dir=str(out),
                                write_outputs=False)
