@@ -384,10 +384,14 @@ class BarycenterSolver:
         b0 = backend.initial()
         slots = self._slots(b0)
 
-        # Forward pass: P_L and the checkpoints the recursion will ask for first
-        # (the right spine of the bisection tree).
+        # When every iteration's arrays fit in the budget (b and four arrays
+        # of the same size each), one forward pass records them all and the
+        # reverse pass recomputes nothing. Otherwise the forward pass keeps
+        # P_L and the checkpoints the recursion asks for first (the right
+        # spine of the bisection tree).
+        record: list[tuple[NDArray, _Iterate]] | None = [] if slots >= 5 * L else None
         spine, lo, hi, s = [], 0, L, slots
-        while hi - lo > 1 and 0 < s < hi - lo - 1:
+        while record is None and hi - lo > 1 and 0 < s < hi - lo - 1:
             lo += (hi - lo) // 2
             spine.append(lo)
             s -= 1
@@ -396,8 +400,11 @@ class BarycenterSolver:
         for l in range(L):
             if l in spine:
                 saved[l] = b
-            b, it = backend.step(b, need_next=l < L - 1)
-            P, it = it.P, None  # drop this iteration's arrays before the next one
+            b_next, it = backend.step(b, need_next=l < L - 1)
+            if record is not None:
+                record.append((b, it))
+            P, it = it.P, None  # drop this iteration's arrays unless recorded
+            b = b_next
         del b
         value, dloss = loss.value_and_grad(P, q, self.geometry)
         g_final = np.where(P > 0, dloss * P, 0.0)
@@ -408,8 +415,9 @@ class BarycenterSolver:
         w_shape = (-1,) + (1,) * (self.H.ndim - 1)
         w_col = w.reshape(w_shape)
 
-        def reverse_step(l: int, b_prev: NDArray) -> None:
-            _, it = backend.step(b_prev, need_next=False)
+        def reverse_step(l: int, b_prev: NDArray, it: _Iterate | None = None) -> None:
+            if it is None:
+                _, it = backend.step(b_prev, need_next=False)
             if l == L - 1:
                 g = g_final
                 u = w_col * g
@@ -459,7 +467,11 @@ class BarycenterSolver:
                 del b_mid
                 reverse_range(lo, mid, b_lo, slots)
 
-        reverse_range(0, L, b0, slots)
+        if record is not None:
+            for l in range(L - 1, -1, -1):
+                reverse_step(l, *record.pop())
+        else:
+            reverse_range(0, L, b0, slots)
         grad = state["grad"]
         if not np.all(np.isfinite(grad)):
             raise _Unsafe("the gradient is not finite")
