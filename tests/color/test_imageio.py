@@ -160,6 +160,7 @@ def test_interrupted_write_removes_the_temporary_file(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr("wbcgrade.color._files.os.replace", fail)
+    monkeypatch.setattr("wbcgrade.color._files.os.link", fail)
     with pytest.raises(OSError, match="disk full"):
         write_image(tmp_path / "out.png", image.pixels, image)
     assert _listed(tmp_path / "a.png") == ["a.png"]
@@ -201,3 +202,21 @@ def test_colour_under_partial_alpha_survives_read_and_write(tmp_path, ext):
     again = read_image(tmp_path / f"out.{ext}")
     np.testing.assert_allclose(again.pixels[..., :2][visible], image.pixels[..., :2][visible],
                                atol=0.5 / 255)
+
+
+def test_output_that_appears_during_a_grade_is_not_replaced(tmp_path):
+    """The existence check happens early; publishing must not clobber a newer file."""
+    from wbcgrade.color._files import atomic_path
+
+    target = tmp_path / "out.txt"
+    with pytest.raises(InputError, match="file exists"):
+        with atomic_path(target, overwrite=False) as tmp:
+            with open(tmp, "w") as handle:
+                handle.write("ours")
+            target.write_text("theirs")  # another process wrote it meanwhile
+    assert target.read_text() == "theirs"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.txt"]  # no temporary left
+    with atomic_path(target, overwrite=True) as tmp:
+        with open(tmp, "w") as handle:
+            handle.write("ours")
+    assert target.read_text() == "ours"

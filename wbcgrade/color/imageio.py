@@ -339,7 +339,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         pixels = np.clip(pixels, 0.0, 1.0)
     data = np.ascontiguousarray(pixels, dtype=np.float32)
-    with atomic_path(path) as tmp_name:
+    with atomic_path(path, overwrite=overwrite) as tmp_name:
         if not out.open(tmp_name, spec):
             raise OSError(f"{path}: cannot open for writing ({out.geterror().strip()})")
         ok = out.write_image(data)

@@ -53,7 +53,7 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
     lut = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
                        domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
                        size=table.shape[0], comments=comments or [])
-    with atomic_path(path, suffix=".cube") as tmp:
+    with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
         colour.write_LUT(lut, tmp, decimals=6, method="Resolve Cube")
     return path
 
