@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.color._files import atomic_path
+from wbcgrade.color.imageio import check_output_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError
 
@@ -45,11 +46,7 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
     path = Path(path)
     if path.suffix.lower() != ".cube":
         raise InputError(f"{path}: LUT file name must end in .cube")
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: file exists (use --overwrite to replace it)")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{folder}: LUT folder is missing or not writable")
+    check_output_path(path, overwrite=overwrite)
     lut = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
                        domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
                        size=table.shape[0], comments=comments or [])

@@ -37,7 +37,7 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import encode_for_grading, read_image
+from wbcgrade.color.imageio import check_output_path, encode_for_grading, read_image
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -154,11 +154,7 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError(f"{path}: preset file name must end in .npz")
-    if path.exists() and not overwrite:
-        raise InputError(f"{path}: file exists (use --overwrite to replace it)")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{folder}: output folder is missing or not writable")
+    check_output_path(path, overwrite=overwrite)
     bins = styles.bins
     gamma = 2.0 * (width / (bins - 1)) ** 2
     indices, values, offsets = [], [], [0]
@@ -170,7 +166,7 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     header = {"format": PRESET_FORMAT, "version": PRESET_VERSION, "bins": bins,
               "names": list(styles.names), "width": float(width), "gamma": gamma,
               "description": description, "space": "sRGB-encoded RGB"}
-    with atomic_path(path, suffix=".npz.tmp") as tmp:
+    with atomic_path(path, suffix=".npz.tmp", overwrite=overwrite) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(
                 handle,
