@@ -127,7 +127,9 @@ def fast_cpu() -> Iterator[None]:
 def parallel_map(function: Callable[[int, int], None], n_items: int) -> None:
     """Call ``function(start, stop)`` on contiguous slices of ``range(n_items)`` in parallel."""
     workers = min(n_workers(), n_items)
-    if workers <= 1:
+    # Inside a pool worker (nested parallelism) the slices run in this thread:
+    # waiting on the same pool from one of its threads could deadlock.
+    if workers <= 1 or threading.current_thread().name.startswith("wbcgrade"):
         function(0, n_items)
         return
     bounds = [round(i * n_items / workers) for i in range(workers + 1)]

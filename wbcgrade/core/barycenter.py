@@ -36,11 +36,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from threading import Lock
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wbcgrade.core._cpu import fast_cpu
+from wbcgrade.core import _kernels
+from wbcgrade.core._cpu import fast_cpu, parallel_map
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
 from wbcgrade.errors import NumericalError
@@ -50,7 +52,7 @@ __all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver"]
 log = logging.getLogger(__name__)
 
 #: Bytes of stored scalings the reverse pass may keep (the rest is recomputed).
-DEFAULT_CHECKPOINT_BYTES = 750_000_000
+DEFAULT_CHECKPOINT_BYTES = 1_500_000_000
 
 #: Largest log-domain job (kernel entries visited) run without asking: about ten
 #: minutes on a 2-core machine. Larger ones stop with a clear error instead.
@@ -144,6 +146,7 @@ class _Iterate:
     phi: NDArray  # K a               (scaling) or log phi
     log_phi: NDArray  # log phi
     P: NDArray  # barycenter P(l), float64, (*batch, *shape)
+    log_P: NDArray | None = None  # log P(l) (log domain only)
 
 
 def _weighted_sum(weights: NDArray, stack: NDArray) -> NDArray:
@@ -155,51 +158,125 @@ def _weighted_sum(weights: NDArray, stack: NDArray) -> NDArray:
 
 
 class _ScalingBackend:
-    """Plain kernel products; raises ``_Unsafe`` when the numbers leave its range."""
+    """Plain kernel products; raises ``_Unsafe`` when the numbers leave its range.
+
+    Histograms are processed as ``items = S * batch`` independent rows of
+    ``N`` bins: kernel products and the fused element-wise passes of one row
+    are independent, so rows are spread over the core's threads; the passes
+    that mix histograms (the weighted log-sum) are split over bins instead.
+    Each recorded iteration keeps ``K b`` and ``phi`` (two stacks) and ``P``.
+    """
+
+    record_arrays = 2
 
     def __init__(self, H: NDArray, weights: NDArray, geometry: Geometry):
         self.geometry = geometry
         self.dtype = geometry.dtype
-        self.H = H.astype(self.dtype, copy=False)
-        self.weights = weights
-        self.n_positive = np.count_nonzero(self.H)
-        if self.n_positive != np.count_nonzero(H):
+        self.H = np.ascontiguousarray(H, dtype=self.dtype)
+        if np.count_nonzero(self.H) != np.count_nonzero(H):
             raise _Unsafe("histogram entries underflow in this precision")
+        self.weights = weights
+        self.shape = H.shape
+        self.S = H.shape[0]
+        self.N = geometry.size
+        self.M = int(np.prod(H.shape[1:]))  # bins of one histogram, batch included
+        self.batch = self.M // self.N
+        self.items = self.S * self.batch
+        self.item_weights = np.repeat(weights, self.batch)
         if self.dtype == np.float32:
-            self.low, self.high = 1e-30, 1e30
+            self.log_low, self.log_high = np.log(1e-30), np.log(1e30)
+            self.high = 1e30
         else:
-            self.low, self.high = 0.0, np.inf
+            self.log_low, self.log_high = -np.inf, np.inf
+            self.high = np.inf
+        self.limit = self.dtype.type(np.inf)
+
+    # ------------------------------------------------------------ helpers
+    def _rows(self, x: NDArray) -> NDArray:
+        return x.reshape(self.items, self.N)
+
+    def _blocks(self, x: NDArray) -> NDArray:
+        return x.reshape(self.items, *self.geometry.shape)
+
+    def _product(self, source: NDArray, target: NDArray, lo: int, hi: int) -> None:
+        self.geometry._apply_block(self._blocks(source)[lo:hi], self._blocks(target)[lo:hi])
+
+    def _over_items(self, work) -> None:
+        if self.items >= 2 and self.N >= 4096:
+            parallel_map(work, self.items)
+        else:
+            work(0, self.items)
+
+    def _over_bins(self, work) -> None:
+        if self.M >= 65536:
+            parallel_map(work, self.M)
+        else:
+            work(0, self.M)
 
     def initial(self) -> NDArray:
         return np.ones_like(self.H)
 
-    def step(self, b: NDArray, need_next: bool = True) -> tuple[NDArray | None, _Iterate]:
-        geom = self.geometry
-        Kb = geom.apply(b)
-        a = np.zeros_like(Kb)
-        np.divide(self.H, Kb, out=a, where=Kb > 0)
-        total = a.sum()
-        if not np.isfinite(total) or np.count_nonzero(a) != self.n_positive:
-            raise _Unsafe("K b vanishes or overflows where a histogram has mass")
-        if self.low > 0 and a.max() > self.high:
-            raise _Unsafe("scalings leave the float32 range")
-        phi = geom.apply(a)
-        with np.errstate(divide="ignore"):
-            log_phi = np.log(phi, dtype=np.float64)
-        log_P = _weighted_sum(self.weights, log_phi)
-        if self.low > 0:
-            if phi.min() < self.low or phi.max() > self.high:
-                raise _Unsafe("scalings leave the float32 range")
-        elif np.count_nonzero(phi) != phi.size:
-            self._check_dropped_mass(log_phi, log_P, a)
-        P = np.exp(log_P)
-        if not need_next:
-            return None, _Iterate(Kb, a, phi, log_phi, P)
-        b_next = np.zeros_like(phi)
-        np.divide(P.astype(self.dtype, copy=False), phi, out=b_next, where=phi > 0)
-        if not np.isfinite(b_next.sum()):
+    def scalings(self, P: NDArray, phi: NDArray) -> NDArray:
+        """``b = P / phi`` (0 where phi vanished), raising _Unsafe on overflow."""
+        b = np.empty_like(phi)
+        P_flat = P.reshape(-1).astype(self.dtype)
+        phi_flat, b_flat = phi.reshape(self.S, self.M), b.reshape(self.S, -1)
+        overflow = np.zeros(1, dtype=np.int64)
+        lock = Lock()
+
+        def work(lo: int, hi: int) -> None:
+            bad = _kernels.divide_rows(P_flat, phi_flat, b_flat, lo, hi, self.limit)
+            with lock:
+                overflow[0] += bad
+
+        self._over_bins(work)
+        if overflow[0]:
             raise _Unsafe("scalings overflow")
-        return b_next, _Iterate(Kb, a, phi, log_phi, P)
+        return b
+
+    # ------------------------------------------------------------ forward
+    def step(self, b: NDArray, need_next: bool = True) -> tuple[NDArray | None, _Iterate]:
+        Kb, a, phi = np.empty_like(self.H), np.empty_like(self.H), np.empty_like(self.H)
+        log_phi = np.empty_like(self.H)
+        lost = np.zeros(self.items, dtype=np.int64)
+        H_rows, Kb_rows, a_rows = self._rows(self.H), self._rows(Kb), self._rows(a)
+
+        def per_item(lo: int, hi: int) -> None:
+            self._product(b, Kb, lo, hi)
+            for j in range(lo, hi):
+                lost[j] = _kernels.ratio(H_rows[j], Kb_rows[j], a_rows[j], self.high)
+            self._product(a, phi, lo, hi)
+            with np.errstate(divide="ignore"):
+                np.log(self._rows(phi)[lo:hi], out=self._rows(log_phi)[lo:hi])
+
+        self._over_items(per_item)
+        if lost.any():
+            raise _Unsafe("K b vanishes or the scalings leave the range where a histogram has mass")
+
+        log_P = np.empty(self.M)
+        lp_rows = log_phi.reshape(self.S, self.M)
+        stats = []
+        lock = Lock()
+
+        def per_bins(lo: int, hi: int) -> None:
+            result = _kernels.weighted_log_sum(lp_rows, self.weights, log_P, lo, hi,
+                                               self.log_low, self.log_high)
+            with lock:
+                stats.append(result)
+
+        self._over_bins(per_bins)
+        vanished = sum(v for v, _ in stats)
+        outside = sum(o for _, o in stats)
+        log_P = log_P.reshape(self.shape[1:])
+        if vanished and self.dtype == np.float32 or outside:
+            raise _Unsafe("scalings leave the float32 range")
+        if vanished:
+            self._check_dropped_mass(log_phi.astype(np.float64), log_P, a)
+        P = np.exp(log_P)
+        it = _Iterate(Kb, a, phi, log_phi, P)
+        if not need_next:
+            return None, it
+        return self.scalings(P, phi), it
 
     def _check_dropped_mass(self, log_phi: NDArray, log_P: NDArray, a: NDArray) -> None:
         """Where a kernel product underflowed, P is bounded above; the bound must be negligible.
@@ -221,23 +298,74 @@ class _ScalingBackend:
         if bound[where].max() > finite.max() + np.log(_UNDERFLOW_TOLERANCE):
             raise _Unsafe("a kernel product underflows where the barycenter has mass")
 
-    def reverse(self, it: _Iterate, b_prev: NDArray, u: NDArray) -> NDArray:
-        """Adjoint of log b(l-1) given ``u``, the adjoint of log phi(l)."""
-        geom = self.geometry
-        x = u.astype(self.dtype, copy=True)  # becomes u / phi, in place
-        np.divide(x, it.phi, out=x, where=it.phi > 0)
-        if np.count_nonzero(it.phi) != it.phi.size:
-            x[it.phi <= 0] = 0.0
-        y = geom.apply(x)
-        del x
-        y *= it.a  # a = 0 wherever K b = 0, so the division below may skip those bins
-        np.divide(y, it.Kb, out=y, where=it.Kb > 0)
-        v = geom.apply(y)
-        v *= b_prev
-        r = -v.astype(np.float64, copy=False)
-        if not np.isfinite(r.sum()):
-            raise _Unsafe("the reverse pass overflows")
-        return r
+    def compact(self, it: _Iterate) -> _Iterate:
+        """What a recorded iteration keeps: K b, phi and P (a and log phi are recomputed)."""
+        return _Iterate(it.Kb, None, it.phi, None, it.P)
+
+    def previous(self, it: _Iterate) -> NDArray:
+        """The scalings b an iteration produced (its successor's input)."""
+        return self.scalings(it.P, it.phi)
+
+    # ------------------------------------------------------------ reverse
+    def sum_histograms(self, r: NDArray) -> NDArray:
+        """``sum_s r_s``, shape (*batch, *shape)."""
+        g = np.empty(self.shape[1:])
+        r_rows, g_flat = r.reshape(self.S, self.M), g.reshape(-1)
+
+        def work(lo: int, hi: int) -> None:
+            np.sum(r_rows[:, lo:hi], axis=0, out=g_flat[lo:hi])
+
+        self._over_bins(work)
+        return g
+
+    def adjoint(
+        self, it: _Iterate, b_prev: NDArray, g: NDArray, r: NDArray | None, need_r: bool
+    ) -> tuple[NDArray, NDArray | None]:
+        """One reverse step: (d/dw of this iteration (S,), next ``r`` or None).
+
+        ``g`` (*batch, *shape) is the adjoint of log P(l) and ``r`` (S, ...) the
+        part of each ``w_s g`` not yet propagated (None at the last iteration).
+        """
+        g_rows = g.reshape(self.batch, self.N)
+        x = np.empty_like(self.H)
+        r_next = np.empty(self.shape) if need_r else None
+        grad = np.zeros(self.items)
+        unsafe = np.zeros(self.items, dtype=np.int64)
+        empty = np.empty(0)
+        rows = self._rows
+        H_rows, Kb_rows, phi_rows, x_rows = rows(self.H), rows(it.Kb), rows(it.phi), rows(x)
+        r_rows = None if r is None else r.reshape(self.items, self.N)
+        b_rows = rows(b_prev)
+        log_phi = it.log_phi
+
+        def per_item(lo: int, hi: int) -> None:
+            if log_phi is None:
+                with np.errstate(divide="ignore"):
+                    logs = np.log(phi_rows[lo:hi])
+            else:
+                logs = rows(log_phi)[lo:hi]
+            for j in range(lo, hi):
+                gj = g_rows[j % self.batch]
+                grad[j], unsafe[j] = _kernels.dot_log(logs[j - lo], gj)
+                if need_r:
+                    rj = empty if r_rows is None else r_rows[j]
+                    _kernels.reverse_in(self.item_weights[j], gj, rj, phi_rows[j], x_rows[j])
+            if not need_r:
+                return
+            y = np.empty((hi - lo, *self.geometry.shape), dtype=self.dtype)
+            self.geometry._apply_block(self._blocks(x)[lo:hi], y)
+            y_rows = y.reshape(hi - lo, self.N)
+            for j in range(lo, hi):
+                _kernels.reverse_mid(y_rows[j - lo], H_rows[j], Kb_rows[j])
+            self.geometry._apply_block(y, self._blocks(x)[lo:hi])  # v = K y, into x
+            out_rows = r_next.reshape(self.items, self.N)
+            for j in range(lo, hi):
+                unsafe[j] += _kernels.reverse_out(x_rows[j], b_rows[j], out_rows[j])
+
+        self._over_items(per_item)
+        if unsafe.any():
+            raise _Unsafe("phi vanishes where the gradient needs log phi, or the reverse overflows")
+        return grad.reshape(self.S, self.batch).sum(axis=1), r_next
 
 
 class _LogBackend:
@@ -261,19 +389,44 @@ class _LogBackend:
         if not np.all(np.isfinite(log_P)):
             raise NumericalError("the log-domain barycenter is not finite")
         log_b_next = log_P - log_phi if need_next else None
-        return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P))
+        return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P), log_P)
 
-    def reverse(self, it: _Iterate, log_b_prev: NDArray, u: NDArray) -> NDArray:
+    record_arrays = 3
+
+    def compact(self, it: _Iterate) -> _Iterate:
+        return it
+
+    def previous(self, it: _Iterate) -> NDArray:
+        return it.log_P - it.phi
+
+    def sum_histograms(self, r: NDArray) -> NDArray:
+        return r.sum(axis=0)
+
+    def adjoint(
+        self, it: _Iterate, log_b_prev: NDArray, g: NDArray, r: NDArray | None, need_r: bool
+    ) -> tuple[NDArray, NDArray | None]:
         """Same adjoint as the scaling backend, with each sign part carried in logs."""
+        log_phi = it.log_phi
+        if not np.all(np.isfinite(log_phi)):
+            vanished = ~np.isfinite(log_phi)
+            if np.any(vanished & (g != 0)):
+                raise NumericalError("phi vanishes where the gradient needs log phi")
+            log_phi = np.where(vanished, 0.0, log_phi)
+        grad = np.tensordot(log_phi, g, axes=g.ndim)
+        if not need_r:
+            return grad, None
+        u = self.weights.reshape((-1,) + (1,) * g.ndim) * g
+        if r is not None:
+            u -= r
         geom = self.geometry
-        r = np.zeros_like(u)
+        r_next = np.zeros_like(u)
         with np.errstate(divide="ignore"):
             for sign in (1.0, -1.0):
                 part = np.log(np.clip(sign * u, 0.0, None)) - it.phi
                 part = geom.log_apply(part) + it.a - it.Kb
                 part = geom.log_apply(part) + log_b_prev
-                r -= sign * np.exp(part)
-        return r
+                r_next -= sign * np.exp(part)
+        return grad, r_next
 
 
 # --------------------------------------------------------------------------- solver
@@ -384,12 +537,12 @@ class BarycenterSolver:
         b0 = backend.initial()
         slots = self._slots(b0)
 
-        # When every iteration's arrays fit in the budget (b and four arrays
-        # of the same size each), one forward pass records them all and the
-        # reverse pass recomputes nothing. Otherwise the forward pass keeps
-        # P_L and the checkpoints the recursion asks for first (the right
-        # spine of the bisection tree).
-        record: list[tuple[NDArray, _Iterate]] | None = [] if slots >= 5 * L else None
+        # When every iteration's arrays fit in the budget, one forward pass
+        # records them all and the reverse pass recomputes nothing (the
+        # scalings entering iteration l are rebuilt from iteration l-1's P and
+        # phi). Otherwise the forward pass keeps P_L and the checkpoints the
+        # recursion asks for first (the right spine of the bisection tree).
+        record: list[_Iterate] | None = [] if slots >= backend.record_arrays * L + 1 else None
         spine, lo, hi, s = [], 0, L, slots
         while record is None and hi - lo > 1 and 0 < s < hi - lo - 1:
             lo += (hi - lo) // 2
@@ -400,9 +553,10 @@ class BarycenterSolver:
         for l in range(L):
             if l in spine:
                 saved[l] = b
-            b_next, it = backend.step(b, need_next=l < L - 1)
+            b_next, it = backend.step(b, need_next=l < L - 1 and record is None)
             if record is not None:
-                record.append((b, it))
+                record.append(backend.compact(it))
+                b_next = backend.previous(it) if l < L - 1 else None
             P, it = it.P, None  # drop this iteration's arrays unless recorded
             b = b_next
         del b
@@ -412,32 +566,20 @@ class BarycenterSolver:
             raise NumericalError(f"the {loss.name} loss is not finite at this barycenter")
 
         state = {"grad": np.zeros(self.n_histograms)}
-        w_shape = (-1,) + (1,) * (self.H.ndim - 1)
-        w_col = w.reshape(w_shape)
 
         def reverse_step(l: int, b_prev: NDArray, it: _Iterate | None = None) -> None:
             if it is None:
                 _, it = backend.step(b_prev, need_next=False)
             if l == L - 1:
-                g = g_final
-                u = w_col * g
+                g, r = g_final, None
             else:
                 r = state.pop("r")
-                g = r.sum(axis=0)
-                u = w_col * g
-                u -= r
-                del r
-            log_phi = it.log_phi
-            if not np.all(np.isfinite(log_phi)):
-                vanished = ~np.isfinite(log_phi)
-                if np.any(vanished & (g != 0)):
-                    raise _Unsafe("phi vanishes where the gradient needs log phi")
-                log_phi = np.where(vanished, 0.0, log_phi)
-            state["grad"] += np.tensordot(log_phi, g, axes=g.ndim)
-            del log_phi
-            it.log_phi = None
+                g = backend.sum_histograms(r)
+            grad, r_next = backend.adjoint(it, b_prev, g, r, need_r=l > 0)
+            del r, it
+            state["grad"] += grad
             if l > 0:
-                state["r"] = backend.reverse(it, b_prev, u)
+                state["r"] = r_next
 
         def advance(b_from: NDArray, start: int, stop: int) -> NDArray:
             if stop in saved:
@@ -469,7 +611,10 @@ class BarycenterSolver:
 
         if record is not None:
             for l in range(L - 1, -1, -1):
-                reverse_step(l, *record.pop())
+                it = record.pop()
+                b_prev = backend.previous(record[-1]) if l > 0 else b0
+                reverse_step(l, b_prev, it)
+                del it, b_prev
         else:
             reverse_range(0, L, b0, slots)
         grad = state["grad"]
