@@ -100,3 +100,18 @@ def test_cube_file_reproduces_the_map(tmp_path, rng):
         write_cube(path, table)
     with pytest.raises(InputError, match=".cube"):
         write_cube(tmp_path / "grade.txt", table)
+
+
+def test_resampling_matches_soft_binning_of_bin_centres_and_upsamples_smoothly(rng):
+    from wbcgrade.color.histogram import grid_points
+
+    hist = soft_histogram(rng.random((3000, 3)), 20)
+    flat = hist.ravel()
+    nonzero = np.flatnonzero(flat)
+    reference = soft_histogram(grid_points(20)[nonzero], 7, flat[nonzero])
+    np.testing.assert_allclose(resample_histogram(hist, 7), reference, atol=1e-15)
+    fine = resample_histogram(hist, 39)
+    assert fine.shape == (39, 39, 39) and fine.min() >= 0 and fine.sum() == pytest.approx(1.0)
+    # No comb: every fine bin between two occupied coarse bins gets mass.
+    assert np.count_nonzero(fine) > 4 * np.count_nonzero(hist)
+    np.testing.assert_allclose(_mean(fine), _mean(hist), atol=2e-3)

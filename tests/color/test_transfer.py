@@ -126,3 +126,24 @@ def test_render_grey_and_alpha(tmp_path, rng):
     rgba = read_image(write_array(tmp_path / "c.png", rng.random((5, 6, 4)), "uint8"))
     pixels, alpha = render(rgba, grade)
     assert alpha == 3 and np.array_equal(pixels[:, :, 3], rgba.pixels[:, :, 3])
+
+
+def test_coarse_to_fine_plan_matches_a_single_grid_solve(rng):
+    from wbcgrade.color.histogram import soft_histogram
+    from wbcgrade.color.transfer import color_transfer_map
+
+    photo = soft_histogram(rng.random((4000, 3)) * 0.6, 40)
+    target = soft_histogram(0.4 + rng.random((4000, 3)) * 0.6, 40)
+    width = 39 / 31 * 1.5
+    multi, result = color_transfer_map(photo, target, width, tol=1e-4, coarsest=10)
+    single, single_result = color_transfer_map(photo, target, width, tol=1e-4, coarsest=40)
+    assert result.converged and single_result.converged
+    # Same plan to the tolerance: the maps agree to well under one 8-bit level.
+    assert np.abs(multi - single).max() < 0.5 / 255
+    # Barycentric projection of a plan: the photo's colours, moved, have the
+    # target's mean colour (exact for a converged plan; floor and clipping aside).
+    points = np.linspace(0, 1, 40)
+    target_mean = [np.tensordot(target.sum(axis=tuple(a for a in range(3) if a != c)), points, 1)
+                   for c in range(3)]
+    moved_mean = np.tensordot(photo, multi, axes=3)
+    np.testing.assert_allclose(moved_mean, target_mean, atol=0.01)

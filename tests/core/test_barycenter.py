@@ -249,3 +249,40 @@ def test_hopeless_log_domain_job_stops_with_clear_error(monkeypatch):
     H[H < 1e-12] = 0.0
     with pytest.raises(NumericalError, match="wider kernel"):
         barycenter(H, [0.5, 0.5], geom, n_iter=40)
+
+
+def test_solve_reaches_the_fixed_point_and_a_warm_start_from_a_coarse_grid_saves_iterations():
+    from wbcgrade.core import refine_grid
+
+    fine, coarse = (24, 24), (12, 12)
+    gamma = 2 * 0.06**2
+    H_fine = blobs(fine, 3, np.random.default_rng(3), floor=1e-3, components=2)
+    H_coarse = blobs(coarse, 3, np.random.default_rng(3), floor=1e-3, components=2)
+    w = np.array([0.5, 0.3, 0.2])
+    solver = BarycenterSolver(H_fine, GridGeometry(fine, gamma), 60)
+    cold = solver.solve(w, tol=1e-12, max_iter=5000)
+    assert cold.converged and cold.change < 1e-12
+    # The fixed point of the iteration: one more iteration changes nothing.
+    again = solver.solve(w, tol=1e-300, max_iter=1, init_log_scalings=cold.log_scalings)
+    assert np.abs(again.barycenter - cold.barycenter).sum() < 1e-9
+    # A long cold run of the plain iteration ends at the same barycenter.
+    long_run = barycenter(H_fine, w, GridGeometry(fine, gamma), 3000)
+    assert np.abs(long_run - cold.barycenter).sum() < 1e-8
+
+    coarse_result = BarycenterSolver(H_coarse, GridGeometry(coarse, gamma), 60).solve(
+        w, tol=1e-8, max_iter=5000)
+    warm = solver.solve(w, tol=1e-8, max_iter=5000,
+                        init_log_scalings=refine_grid(coarse_result.log_scalings, fine))
+    plain = solver.solve(w, tol=1e-8, max_iter=5000)
+    assert warm.converged and plain.converged
+    assert np.abs(warm.barycenter - cold.barycenter).sum() < 1e-5
+    assert warm.n_iter < plain.n_iter
+
+
+def test_solve_rejects_bad_warm_starts():
+    geom = GridGeometry((6, 6), 0.05)
+    solver = BarycenterSolver(blobs((6, 6), 2, np.random.default_rng(0)), geom, 10)
+    with pytest.raises(ValueError):
+        solver.solve([0.5, 0.5], init_log_scalings=np.zeros((2, 5, 6)))
+    with pytest.raises(ValueError):
+        solver.solve([0.5, 0.5], init_log_scalings=np.full((2, 6, 6), np.nan))

@@ -89,3 +89,21 @@ def test_apply_rejects_wrong_shape():
     geom = GridGeometry((4, 4), gamma=0.1)
     with pytest.raises(ValueError, match="shape"):
         geom.apply(np.ones((4, 5)))
+
+
+def test_refine_grid_is_exact_on_multilinear_functions_and_keeps_leading_axes():
+    from wbcgrade.core import refine_grid
+
+    def f(n):
+        x = np.linspace(0, 1, n)
+        return 1 + 2 * x[:, None, None] - x[None, :, None] + 3 * x[None, None, :] * x[:, None, None]
+
+    coarse = np.stack([f(5), 2 * f(5)])
+    fine = refine_grid(coarse, (9, 9, 9))
+    assert fine.shape == (2, 9, 9, 9)
+    assert np.abs(fine - np.stack([f(9), 2 * f(9)])).max() < 1e-12
+    with_inf = coarse.copy()
+    with_inf[0, 0, 0, 0] = -np.inf
+    assert np.all(np.isfinite(refine_grid(with_inf, (9, 9, 9))))
+    with pytest.raises(ValueError):
+        refine_grid(np.zeros((1, 4)), (8, 8))

@@ -24,9 +24,9 @@ def _warn(message: str) -> None:
 
 def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
     """Load the style set with a progress bar over style photos."""
-    if opts.bins > 64 or opts.fit_bins > 32:
-        _warn(f"--bins {opts.bins} / --fit-bins {opts.fit_bins}: large grids take minutes "
-              "per photo (defaults: 32 and 16)")
+    if opts.fit_bins > 32:
+        _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes per photo "
+              "(default 16)")
     with style_progress() as progress:
         styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
                              cache=style_args["cache"], warn=_warn, progress=progress)

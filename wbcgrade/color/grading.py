@@ -27,9 +27,11 @@ from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.transfer import (
     Grade,
     GradeOptions,
+    _fit_geometry,
     color_transfer_map,
     fit_weights,
     grade_image,
+    palette_barycenter,
     transfer_width_bins,
 )
 
@@ -77,12 +79,7 @@ class FitSummary:
 
 def fit_geometry(opts: GradeOptions):
     """The core grid geometry the weights are fitted on (as in the pipeline)."""
-    from wbcgrade.core import GridGeometry
-
-    shape = (opts.fit_bins,) * 3
-    if opts.gamma is not None:
-        return GridGeometry(shape, opts.gamma)
-    return GridGeometry.with_width(shape, opts.width)
+    return _fit_geometry(opts)
 
 
 def _fit_problem(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions):
@@ -226,7 +223,7 @@ def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
 
     Costs one fit, one barycenter and one Sinkhorn, whatever the number of photos.
     """
-    from wbcgrade.core import GridGeometry, barycenter
+    from wbcgrade.core import GridGeometry
 
     opts.validate(len(styles.names))
     say = stage or (lambda name: None)
@@ -238,17 +235,14 @@ def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
     start = time.perf_counter()
     width = transfer_width_bins(opts)
     geometry = GridGeometry.with_width((opts.bins,) * 3, width)
-    floored = np.stack([add_floor(h, opts.floor) for h in styles.at_bins(opts.bins)])
-    keep = np.flatnonzero(summary.weights > 0)
-    target = barycenter(floored[keep], summary.weights[keep] / summary.weights[keep].sum(),
-                        geometry, opts.n_iter)
+    target, palette_info = palette_barycenter(styles.at_bins, summary.weights, opts)
     timings["barycenter"] = time.perf_counter() - start
     say("transfer")
     start = time.perf_counter()
     color_map, result = color_transfer_map(pooled, target, width, opts.sinkhorn_tol,
                                            opts.sinkhorn_max_iter, opts.floor)
     timings["transfer"] = time.perf_counter() - start
-    info = {"fit": summary.info,
+    info = {"fit": summary.info, "palette": palette_info,
             "sinkhorn": {"iterations": int(result.n_iter), "error": float(result.error),
                          "converged": bool(result.converged), "bins": opts.bins,
                          "gamma": float(geometry.gamma), "width_bins": width}}

@@ -112,16 +112,37 @@ def image_histogram(rgb: np.ndarray, bins: int, alpha: np.ndarray | None = None,
 def resample_histogram(hist: np.ndarray, bins: int) -> np.ndarray:
     """Re-bin an (n, n, n) histogram onto a (bins, bins, bins) grid.
 
-    Each source bin's mass is soft-binned at its position; going to a coarser
-    grid this is the adjoint of trilinear interpolation (mass is conserved and
-    the mean colour too).
+    Going to a coarser grid, each source bin's mass is soft-binned at its
+    position: the adjoint of trilinear interpolation (mass is conserved and the
+    mean colour too). Going to a finer grid, the density is interpolated
+    (trilinearly) and renormalised.
     """
     n = hist.shape[0]
     if n == bins:
         return hist
-    flat = hist.ravel()
-    nonzero = np.flatnonzero(flat)
-    return soft_histogram(grid_points(n)[nonzero], bins, flat[nonzero])
+    if bins > n:  # finer grid: interpolate the density (moving masses would leave gaps)
+        from wbcgrade.core import refine_grid
+
+        fine = np.clip(refine_grid(hist, (bins,) * 3), 0.0, None)
+        return fine / fine.sum()
+    # Soft binning of grid points is separable: one (bins, n) matrix per axis.
+    weights = _binning_matrix(n, bins)
+    out = np.asarray(hist, dtype=np.float64)
+    for axis in range(3):
+        out = np.moveaxis(np.tensordot(weights, out, axes=(1, axis)), 0, axis)
+    out = np.clip(out, 0.0, None)
+    return out / out.sum()
+
+
+def _binning_matrix(n: int, bins: int) -> np.ndarray:
+    """(bins, n): how each of n grid points' mass splits over the two nearest of ``bins``."""
+    pos = np.linspace(0.0, 1.0, n) * (bins - 1)
+    base = np.minimum(pos.astype(np.int64), bins - 2)
+    frac = pos - base
+    matrix = np.zeros((bins, n))
+    matrix[base, np.arange(n)] += 1.0 - frac
+    matrix[base + 1, np.arange(n)] += frac
+    return matrix
 
 
 def add_floor(hist: np.ndarray, floor: float = DEFAULT_FLOOR) -> np.ndarray:

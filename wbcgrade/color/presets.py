@@ -80,6 +80,7 @@ class StyleSet:
     width: float | None = None
     description: str = ""
     meta: dict = field(default_factory=dict)
+    _resampled: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def bins(self) -> int:
@@ -89,7 +90,10 @@ class StyleSet:
         """(S, bins, bins, bins) histograms re-binned to another grid."""
         if bins == self.bins:
             return self.histograms
-        return np.stack([resample_histogram(h, bins) for h in self.histograms])
+        if bins not in self._resampled:  # resampled once per grid size
+            self._resampled[bins] = np.stack([resample_histogram(h, bins)
+                                              for h in self.histograms])
+        return self._resampled[bins]
 
 
 def _photo_histogram(path: Path, bins: int, max_pixels: int) -> np.ndarray:

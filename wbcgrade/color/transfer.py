@@ -10,18 +10,20 @@ Pipeline for one photo (DESIGN.md §1 "Colour transfer"):
    ``T(x_i) = (K (b x))_i / (K b)_i`` on every bin: a colour map;
 4. every pixel moved through the map by trilinear interpolation.
 
-Defaults and why (see :class:`GradeOptions`; measured on 2 shared cores):
-the weights are fitted on a 16^3 grid with a kernel 1.5 bins wide (sigma
-~0.1 of the cube): ~0.4 s per gradient, ~10 s per fit, where a 128^3 fit takes
-hours (DESIGN.md §4). The colour map is built on a 32^3 grid with a kernel 1
-bin wide (sigma = 1/31 of the cube, gamma ~0.002, ten times smaller than the
-fit's): barycenter ~1-2 s, Sinkhorn ~1-3 s with epsilon scaling. The
-transfer kernel keeps that sigma on other grids: ``--bins 64`` (2 bins wide)
-takes ~6 s of barycenter and ~6 s of Sinkhorn, ``--bins 128`` ~95 s and ~80 s
-(1 GB) for three styles. Entropic blur pulls each colour towards the mean
-of where its mass goes; the narrow transfer
-kernel keeps graded photos far more colourful than a map built with the
-fit's kernel (tested in ``tests/color``).
+Defaults and why (see :class:`GradeOptions`; measured on 2 shared cores,
+``benchmarks/apply.py``): the photo's histogram, the Sinkhorn plan and the
+colour map live on the paper's 128^3 grid. The weights are fitted on a 16^3
+grid with a kernel whose sigma is fixed in colour units (0.1 of the cube,
+1.5 bins there), in float32: the same energy on 32^3-128^3 grids has the same
+minimiser (the 128^3 energy drops by ~1e-6 relative in a few more L-BFGS
+steps), at a small fraction of the cost. The target palette (barycenter)
+and the plan use a kernel ten times narrower (sigma = 1/31 of the cube:
+about 4 bins at 128^3), which keeps graded photos colourful (entropic blur
+pulls colours towards grey; tested in ``tests/color``). The palette is
+computed on 64^3 (2 bins wide: resolved) and interpolated to 128^3. The
+plan is solved coarse-to-fine (32^3 with epsilon scaling, then 64^3, then
+128^3, each warm-starting the next), so the 128^3 solve needs ~15-40
+iterations instead of ~150.
 """
 
 from __future__ import annotations
@@ -49,8 +51,14 @@ class GradeOptions:
 
     Attributes
     ----------
-    bins : bins per axis of the transfer grid (the colour map's resolution).
-    fit_bins : bins per axis of the grid the weights are fitted on.
+    bins : bins per axis of the transfer grid (the photo's histogram, the
+        Sinkhorn plan and the colour map).
+    fit_bins : bins per axis of the grid the weights are fitted on (the fit
+        kernel's sigma is fixed in colour units, so the same energy on a 128^3
+        grid has the same minimiser to within ~1e-6: ``benchmarks/apply.py --verify``).
+    palette_bins : the target palette (barycenter) is computed on at most this
+        many bins per axis and interpolated onto the transfer grid (its kernel
+        is >= 2 bins wide there, so it is resolved; 128^3 costs 8x more).
     loss : loss between the barycenter and the photo's histogram.
     width : fit kernel width, in bins of the fit grid (gamma = 2 (width/(fit_bins-1))^2).
     gamma : fit entropic regularisation; overrides ``width`` when given.
@@ -69,8 +77,9 @@ class GradeOptions:
     max_pixels : photos larger than this are subsampled for histograms.
     """
 
-    bins: int = 32
+    bins: int = 128
     fit_bins: int = 16
+    palette_bins: int = 64
     loss: str = "quadratic"
     width: float = 1.5
     gamma: float | None = None
@@ -90,6 +99,8 @@ class GradeOptions:
             raise InputError("--bins must be between 4 and 256")
         if not 4 <= self.fit_bins <= 256:
             raise InputError("--fit-bins must be between 4 and 256")
+        if not 4 <= self.palette_bins <= 256:
+            raise InputError("--palette-bins must be between 4 and 256")
         if self.loss not in LOSSES:
             raise InputError(f"--loss must be one of {', '.join(LOSSES)}")
         for name, value in (("--width", self.width), ("--transfer-width", self.transfer_width)):
@@ -165,9 +176,9 @@ def _fit_geometry(opts: GradeOptions):
     from wbcgrade.core import GridGeometry
 
     shape = (opts.fit_bins,) * 3
-    if opts.gamma is not None:
-        return GridGeometry(shape, opts.gamma)
-    return GridGeometry.with_width(shape, opts.width)
+    gamma = opts.gamma if opts.gamma is not None else 2.0 * (opts.width / (opts.fit_bins - 1)) ** 2
+    # float32 products where they are exact enough (the core falls back to float64).
+    return GridGeometry(shape, gamma, np.float32)
 
 
 def fit_weights(photo_hist: np.ndarray, style_hists: np.ndarray, opts: GradeOptions,
@@ -194,7 +205,7 @@ def fit_weights(photo_hist: np.ndarray, style_hists: np.ndarray, opts: GradeOpti
 
 def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: float,
                        tol: float = 1e-3, max_iter: int = 2000, floor: float = DEFAULT_FLOOR,
-                       schedule: Sequence[float] = (4.0, 2.0)):
+                       schedule: Sequence[float] = (4.0, 2.0), coarsest: int = 32):
     """Colour map moving a photo's colours onto a target palette.
 
     Entropic transport (Sinkhorn) between the photo's histogram and the
@@ -202,31 +213,77 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     barycentric projection of the plan ``T(x_i) = (K (b x))_i / (K b)_i``.
 
     A narrow kernel converges slowly from a cold start, so the plan is first
-    solved with kernels ``schedule`` times wider (to a loose tolerance) and
-    each solve warm-starts the next (epsilon scaling: the dual potential
-    ``gamma log b`` carries over).
+    solved on coarser grids (halving down to ``coarsest`` bins, same kernel
+    in colour units) and, on the coarsest, with kernels ``schedule`` times
+    wider (to a loose tolerance); each solve warm-starts the next (epsilon
+    scaling and multigrid: the dual potential ``gamma log b`` carries over).
 
     Returns
     -------
     color_map : (n, n, n, 3) float32 in [0, 1]
     result : wbcgrade.core.SinkhornResult of the final solve
     """
-    from wbcgrade.core import GridGeometry, barycentric_projection, sinkhorn
+    from wbcgrade.color.histogram import resample_histogram
+    from wbcgrade.core import GridGeometry, barycentric_projection, refine_grid, sinkhorn
 
     n = photo_hist.shape[0]
-    p, q = add_floor(photo_hist, floor), add_floor(target_hist, floor)
-    log_b, gamma_prev = None, None
-    for factor in [f for f in schedule if f > 1.0] + [1.0]:
-        geometry = GridGeometry.with_width((n,) * 3, width * factor)
-        init = None if log_b is None else log_b * (gamma_prev / geometry.gamma)
-        last = factor == 1.0
-        result = sinkhorn(p, q, geometry, tol=tol if last else max(tol, 1e-2),
-                          max_iter=max_iter, init_log_b=init)
-        log_b, gamma_prev = result.log_b, geometry.gamma
+    sizes = [n]
+    while sizes[-1] // 2 >= coarsest and sizes[-1] // 2 >= 4:
+        sizes.append(sizes[-1] // 2)
+    sizes.reverse()
+    sigma = width / (n - 1)  # kernel in colour units, the same on every grid
+    log_b, gamma_prev, shape_prev = None, None, None
+    for size in sizes:
+        p = add_floor(resample_histogram(photo_hist, size), floor)
+        q = add_floor(resample_histogram(target_hist, size), floor)
+        factors = [f for f in schedule if f > 1.0] if size == sizes[0] else []
+        for factor in factors + [1.0]:
+            geometry = GridGeometry((size,) * 3, 2.0 * (sigma * factor) ** 2)
+            init = None
+            if log_b is not None:
+                init = log_b * (gamma_prev / geometry.gamma)
+                if shape_prev != geometry.shape:
+                    init = refine_grid(init, geometry.shape)
+            result = sinkhorn(p, q, geometry, tol=tol if factor == 1.0 else max(tol, 1e-2),
+                              max_iter=max_iter, init_log_b=init)
+            log_b, gamma_prev, shape_prev = result.log_b, geometry.gamma, geometry.shape
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):
         raise NumericalError("the colour map is not finite (try a larger --transfer-width)")
     return np.clip(color_map, 0.0, 1.0).astype(np.float32), result
+
+
+def palette_barycenter(style_hists: Callable[[int], np.ndarray], weights: np.ndarray,
+                       opts: GradeOptions) -> tuple[np.ndarray, dict]:
+    """The target palette: the styles' barycenter with ``weights``, on the transfer grid.
+
+    Computed (L = ``opts.n_iter`` iterations, transfer kernel) on
+    ``min(bins, palette_bins)`` bins per axis and, when that is coarser than
+    the transfer grid, interpolated onto it (densities, renormalised).
+
+    Parameters
+    ----------
+    style_hists : callable ``bins -> (S, bins, bins, bins)`` style histograms.
+    weights : (S,) on the simplex.
+
+    Returns
+    -------
+    ((bins, bins, bins) float64 summing to 1, info dict)
+    """
+    from wbcgrade.core import BarycenterSolver, GridGeometry, refine_grid
+
+    n = opts.bins
+    m = min(n, opts.palette_bins)
+    sigma = transfer_width_bins(opts) / (n - 1)
+    geometry = GridGeometry((m,) * 3, 2.0 * sigma ** 2)
+    keep = np.flatnonzero(np.asarray(weights) > 0)
+    floored = np.stack([add_floor(h, opts.floor) for h in style_hists(m)[keep]])
+    solver = BarycenterSolver(floored, geometry, opts.n_iter)
+    target = solver.barycenter(np.asarray(weights)[keep] / np.sum(np.asarray(weights)[keep]))
+    if m != n:
+        target = np.clip(refine_grid(target, (n,) * 3), 0.0, None)
+        target /= target.sum()
+    return target, {"bins": m, "gamma": float(geometry.gamma), "backend": solver.last_backend}
 
 
 def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
@@ -239,7 +296,6 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     ``stage`` the name of each stage as it starts. Returns a :class:`Grade`;
     call ``grade.apply(encoded)`` for the pixels.
     """
-    from wbcgrade.core import barycenter
 
     opts.validate(len(styles.names))
     timings: dict[str, float] = {}
@@ -269,11 +325,10 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
                        "bins": opts.fit_bins, "gamma": float(_fit_geometry(opts).gamma)}
     from wbcgrade.core import GridGeometry
 
-    style_hists = timed("histograms", styles.at_bins, opts.bins)
     width = transfer_width_bins(opts)
     geometry = GridGeometry.with_width((opts.bins,) * 3, width)
-    floored = np.stack([add_floor(h, opts.floor) for h in style_hists])
-    target = timed("barycenter", barycenter, floored, weights, geometry, opts.n_iter)
+    target, info["palette"] = timed("barycenter", palette_barycenter, styles.at_bins, weights,
+                                    opts)
     color_map, result = timed("transfer", color_transfer_map, photo_hist, target,
                               width, opts.sinkhorn_tol, opts.sinkhorn_max_iter,
                               opts.floor)

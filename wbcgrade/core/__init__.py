@@ -4,9 +4,14 @@ No files, no printing, no colours: geometry, barycenter (+ gradient),
 losses, Sinkhorn and barycentric coordinates.
 """
 
-from wbcgrade.core.barycenter import BarycenterSolver, barycenter, barycenter_gradient
+from wbcgrade.core.barycenter import (
+    BarycenterResult,
+    BarycenterSolver,
+    barycenter,
+    barycenter_gradient,
+)
 from wbcgrade.core.coordinates import CoordinatesResult, barycentric_coordinates, softmax
-from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry
+from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry, refine_grid
 from wbcgrade.core.losses import LOSSES, Loss, get_loss, register_loss
 from wbcgrade.core.sinkhorn import SinkhornResult, barycentric_projection, sinkhorn
 
@@ -14,9 +19,11 @@ __all__ = [
     "Geometry",
     "GridGeometry",
     "DenseGeometry",
+    "refine_grid",
     "barycenter",
     "barycenter_gradient",
     "BarycenterSolver",
+    "BarycenterResult",
     "barycentric_coordinates",
     "CoordinatesResult",
     "softmax",

@@ -47,7 +47,7 @@ from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
 from wbcgrade.errors import NumericalError
 
-__all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver"]
+__all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver", "BarycenterResult"]
 
 log = logging.getLogger(__name__)
 
@@ -216,6 +216,18 @@ class _ScalingBackend:
     def initial(self) -> NDArray:
         return np.ones_like(self.H)
 
+    def from_log(self, log_b: NDArray) -> NDArray:
+        """Scalings from their logs (a warm start), raising _Unsafe out of range."""
+        with np.errstate(over="ignore", under="ignore"):
+            b = np.exp(log_b).astype(self.dtype)
+        if not np.all(np.isfinite(b)):
+            raise _Unsafe("the warm start leaves this precision's range")
+        return b
+
+    def to_log(self, b: NDArray) -> NDArray:
+        with np.errstate(divide="ignore"):
+            return np.log(b, dtype=np.float64)
+
     def scalings(self, P: NDArray, phi: NDArray) -> NDArray:
         """``b = P / phi`` (0 where phi vanished), raising _Unsafe on overflow."""
         b = np.empty_like(phi)
@@ -380,6 +392,12 @@ class _LogBackend:
     def initial(self) -> NDArray:
         return np.zeros_like(self.log_H)
 
+    def from_log(self, log_b: NDArray) -> NDArray:
+        return np.array(log_b, dtype=np.float64)
+
+    def to_log(self, log_b: NDArray) -> NDArray:
+        return log_b
+
     def step(self, log_b: NDArray, need_next: bool = True) -> tuple[NDArray, _Iterate]:
         geom = self.geometry
         log_Kb = geom.log_apply(log_b)
@@ -430,6 +448,29 @@ class _LogBackend:
 
 
 # --------------------------------------------------------------------------- solver
+
+
+@dataclass
+class BarycenterResult:
+    """A barycenter iterated to convergence (:meth:`BarycenterSolver.solve`).
+
+    Attributes
+    ----------
+    barycenter : ndarray, shape (*batch, *shape), float64
+    log_scalings : ndarray, shape (S, *batch, *shape)
+        ``log b_s`` after the last iteration (a warm start for a finer grid).
+    n_iter : int
+    change : float
+        Relative L1 change of the barycenter in the last iteration.
+    converged : bool
+    """
+
+    barycenter: NDArray
+    log_scalings: NDArray
+    n_iter: int
+    change: float
+    converged: bool
+
 
 
 class BarycenterSolver:
@@ -515,6 +556,49 @@ class BarycenterSolver:
 
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
             return self._run(w, forward)
+
+    def solve(
+        self,
+        weights: ArrayLike,
+        tol: float = 1e-4,
+        max_iter: int = 1000,
+        init_log_scalings: ArrayLike | None = None,
+    ) -> BarycenterResult:
+        """Iterate to convergence (not a fixed L), optionally from given scalings.
+
+        Stops when the barycenter changes by less than ``tol`` (relative L1)
+        between two iterations, or after ``max_iter`` iterations. Warm starts
+        (``init_log_scalings``, e.g. refined from a coarser grid by
+        :func:`wbcgrade.core.refine_grid`) make this much cheaper than a cold
+        start on fine grids.
+        """
+        w = _validate_weights(weights, self.n_histograms)
+        init = None
+        if init_log_scalings is not None:
+            init = np.array(init_log_scalings, dtype=np.float64)
+            if init.shape != self.H.shape:
+                raise ValueError(f"init_log_scalings must have shape {self.H.shape}")
+            if np.any(np.isnan(init)) or np.any(init == np.inf):
+                raise ValueError("init_log_scalings contain NaN or +inf")
+        if not tol > 0 or int(max_iter) < 1:
+            raise ValueError("tol must be positive and max_iter at least 1")
+
+        def iterate(backend):
+            b = backend.initial() if init is None else backend.from_log(init)
+            P_prev, change, n = None, np.inf, 0
+            while n < int(max_iter):
+                n += 1
+                b, it = backend.step(b)
+                P, it = it.P, None
+                if P_prev is not None:
+                    change = float(np.abs(P - P_prev).sum() / max(P.sum(), 1e-300))
+                    if change < tol:
+                        break
+                P_prev = P
+            return BarycenterResult(P, backend.to_log(b), n, change, change < tol)
+
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            return self._run(w, iterate, passes=max_iter / self.n_iter)
 
     def value_and_grad(
         self, weights: ArrayLike, target: ArrayLike, loss: str | Loss = "quadratic"

@@ -361,3 +361,39 @@ class DenseGeometry(Geometry):
         out = np.empty_like(flat)
         _logsumexp_product(self._log_kernel, flat, out)
         return out.reshape(log_values.shape)
+
+
+def refine_grid(values: ArrayLike, shape: tuple[int, ...]) -> NDArray:
+    """Values on a regular grid, interpolated (multilinearly) on a grid of another size.
+
+    Both grids span the same box with points at ``linspace(0, 1, n)`` on each
+    axis (:class:`GridGeometry`'s convention), so corner points coincide.
+    Used to carry log-scalings from a coarse grid to a finer one as a warm
+    start; ``-inf`` entries (vanished scalings) become the smallest finite value.
+
+    Parameters
+    ----------
+    values : array_like, shape (..., *coarse_shape)
+    shape : tuple of int
+        The new grid's shape (same number of axes as ``coarse_shape``).
+
+    Returns
+    -------
+    ndarray, shape (..., *shape), float64
+    """
+    from scipy.ndimage import zoom
+
+    x = np.array(values, dtype=np.float64)
+    d = len(shape)
+    if x.ndim < d or any(n < 2 for n in x.shape[x.ndim - d :]) or any(n < 2 for n in shape):
+        raise ValueError(f"cannot refine an array of shape {x.shape} to {shape}")
+    finite = np.isfinite(x)
+    if not finite.all():
+        x[~finite] = x[finite].min() if finite.any() else 0.0
+    lead = x.shape[: x.ndim - d]
+    flat = x.reshape(-1, *x.shape[x.ndim - d :])
+    factors = [n / m for n, m in zip(shape, flat.shape[1:])]
+    out = np.stack([zoom(v, factors, order=1, mode="nearest", grid_mode=False) for v in flat])
+    if out.shape[1:] != tuple(shape):
+        raise AssertionError(f"zoom produced {out.shape[1:]}, expected {shape}")
+    return out.reshape(*lead, *shape)
