@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _kernels
 from wbcgrade.core._cpu import fast_cpu, parallel_map
+from wbcgrade.core.geometry import PARALLEL_BINS as _PARALLEL_BINS
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
 from wbcgrade.errors import NumericalError
@@ -202,13 +203,13 @@ class _ScalingBackend:
         self.geometry._apply_block(self._blocks(source)[lo:hi], self._blocks(target)[lo:hi])
 
     def _over_items(self, work) -> None:
-        if self.items >= 2 and self.N >= 4096:
+        if self.items >= 2 and self.N >= _PARALLEL_BINS:
             parallel_map(work, self.items)
         else:
             work(0, self.items)
 
     def _over_bins(self, work) -> None:
-        if self.M >= 65536:
+        if self.M >= _PARALLEL_BINS:
             parallel_map(work, self.M)
         else:
             work(0, self.M)

@@ -79,6 +79,12 @@ def _check_gamma(gamma: float) -> float:
     return gamma
 
 
+#: Histograms smaller than this are computed in one thread: below ~50^3 bins the
+#: threads' overhead costs more than they save (a 32^3 gradient with S = 10:
+#: 0.67 s in one thread, 0.91 s in two).
+PARALLEL_BINS = 1 << 17
+
+
 def _apply_in_parallel(geometry: Geometry, values: NDArray, apply_block) -> NDArray:
     """Run ``apply_block(block, out)`` over the leading histograms, split across threads."""
     geometry._check_values(values)
@@ -91,7 +97,7 @@ def _apply_in_parallel(geometry: Geometry, values: NDArray, apply_block) -> NDAr
         apply_block(flat[lo:hi], out[lo:hi])
 
     with fast_cpu():
-        if lead >= 2 and geometry.size >= 4096:
+        if lead >= 2 and geometry.size >= PARALLEL_BINS:
             parallel_map(work, lead)
         else:
             work(0, lead)
@@ -274,7 +280,35 @@ class GridGeometry(Geometry):
                 block = np.matmul(kernel, block.reshape(before, n, after))
 
     def apply(self, values: NDArray) -> NDArray:
+        self._check_values(values)
+        if values.size == self.size and self.ndim >= 2 and self.size >= PARALLEL_BINS:
+            return self._apply_one(values)
         return _apply_in_parallel(self, values, self._apply_block)
+
+    @cached_property
+    def _trailing(self) -> GridGeometry:
+        """The grid without its first axis (same gamma, hence the same kernels)."""
+        return GridGeometry(self.shape[1:], self.gamma, self.dtype)
+
+    def _apply_one(self, values: NDArray) -> NDArray:
+        """K x for one large histogram, split over threads: rows of the first axis's
+        product, then slices for the other axes."""
+        n = self.shape[0]
+        x = np.ascontiguousarray(values, dtype=self.dtype).reshape(n, -1)
+        first, out = np.empty_like(x), np.empty_like(x)
+        kernel, rest = self.kernels[0], self._trailing
+
+        def first_axis(lo: int, hi: int) -> None:
+            np.matmul(kernel[lo:hi], x, out=first[lo:hi])
+
+        def other_axes(lo: int, hi: int) -> None:
+            block = first[lo:hi].reshape(hi - lo, *rest.shape)
+            rest._apply_block(block, out[lo:hi].reshape(hi - lo, *rest.shape))
+
+        with fast_cpu():
+            parallel_map(first_axis, n)
+            parallel_map(other_axes, n)
+        return out.reshape(values.shape)
 
     def log_apply(self, log_values: NDArray) -> NDArray:
         self._check_values(log_values)

@@ -1,0 +1,282 @@
+"""End-to-end benchmark of ``wbcgrade apply`` at 128³ (issue 5), in one command.
+
+Run ``python benchmarks/apply.py`` (``--help`` for options). It prints one table:
+
+- ``apply``: wall time and peak resident memory of ``wbcgrade apply`` on the
+  16-megapixel sample photo (``seeding_full.jpg`` beside the project, in
+  ``shared/data/photos``) with ten style photos (the other photos there,
+  histograms computed, not cached) at 128³, and the time of each stage;
+- ``--verify``: the same-answer check. From the fast path's weights, a few
+  L-BFGS steps on the plain 128³ energy (same loss, same kernel, L = 60)
+  must lower it by less than 2 %, and the photo graded with the refined
+  weights must differ from the fast one by less than 2/255 on average;
+- ``--torch``: the gradient of the same energy at 64³ computed by our reverse
+  pass and by PyTorch autograd through the unrolled iterations (CPU,
+  ``pip install torch==2.13.0``), each in its own process: time, peak memory,
+  their ratios, and how far the two gradients agree.
+
+Each measured case runs in a fresh subprocess so that its peak memory
+(``ru_maxrss``) is its own. The machine is shared: quote ratios and medians
+from one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_PHOTOS = ROOT.parent / "shared" / "data" / "photos"
+STAGES = ("styles", "read", "fit", "histograms", "barycenter", "transfer", "remap", "write")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def run_measured(command: list[str]) -> tuple[float, float, str]:
+    """Run a command; (wall seconds, peak RSS in MB of that process, stdout)."""
+    start = time.perf_counter()
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        process = subprocess.Popen(command, stdout=out, stderr=err)
+        _, status, usage = os.wait4(process.pid, 0)
+        process.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.perf_counter() - start
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read().decode(), err.read().decode()
+    if process.returncode != 0:
+        raise SystemExit(f"failed ({process.returncode}): {' '.join(command)}\n{stderr[-2000:]}")
+    return wall, usage.ru_maxrss / 1024.0, stdout
+
+
+def style_folder(photos: Path, photo: Path, count: int, folder: Path) -> list[str]:
+    """Link ``count`` style photos (not the input, nor its resized copies) into ``folder``."""
+    candidates = sorted(p for p in photos.glob("*.jpg")
+                        if not p.stem.startswith(photo.stem.split("_")[0]))
+    if len(candidates) < count:
+        raise SystemExit(f"only {len(candidates)} style photos in {photos}, need {count}")
+    for path in candidates[:count]:
+        (folder / path.name).symlink_to(path)
+    return [p.stem for p in candidates[:count]]
+
+
+def wbcgrade(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from wbcgrade.cli import main; main()", *args]
+
+
+def read_8bit(path: Path) -> np.ndarray:
+    from wbcgrade.color.imageio import read_image
+
+    return np.asarray(read_image(path).pixels, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------- workers
+
+
+def energy_problem(photo: Path, styles: Path, bins: int):
+    """(target, style histograms, fit geometry at ``bins``, opts) of the apply pipeline."""
+    from wbcgrade.color.histogram import add_floor, image_histogram
+    from wbcgrade.color.imageio import encode_for_grading, read_image
+    from wbcgrade.color.presets import load_style_folder
+    from wbcgrade.color.transfer import GradeOptions, _fit_geometry
+    from wbcgrade.core import GridGeometry
+
+    opts = GradeOptions()
+    image = read_image(photo)
+    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    target = add_floor(image_histogram(encoded, bins, image.alpha(), opts.max_pixels), opts.floor)
+    style_set = load_style_folder(styles, bins)
+    hists = np.stack([add_floor(h, opts.floor) for h in style_set.histograms])
+    gamma = _fit_geometry(opts).gamma  # the fit's kernel, fixed in colour units
+    return target, hists, GridGeometry((bins,) * 3, gamma, np.float32), opts, style_set.names
+
+
+def worker_verify(photo: Path, styles: Path, weights: list[float], steps: int) -> dict:
+    """E(fast weights) at 128³, then L-BFGS from there; the best energy found.
+
+    The weights are parametrised by a softmax, under which a weight at 0 has
+    no gradient; L-BFGS therefore starts from the fast weights mixed with 2 %
+    of uniform weights, so every style can gain weight, and the fast weights'
+    own energy is evaluated exactly first.
+    """
+    from wbcgrade.core import BarycenterSolver, barycentric_coordinates, get_loss
+
+    target, hists, geometry, opts, _ = energy_problem(photo, styles, 128)
+    start = time.perf_counter()
+    fast = np.asarray(weights) / np.sum(weights)
+    solver = BarycenterSolver(hists, geometry, opts.n_iter)
+    fast_energy, _ = get_loss(opts.loss).value_and_grad(solver.barycenter(fast), target,
+                                                         geometry)
+    init = 0.98 * fast + 0.02 / len(fast)
+    result = barycentric_coordinates(target, hists, geometry, loss=opts.loss,
+                                     n_iter=opts.n_iter, init_weights=init, max_iter=steps)
+    refined = result.weights if result.loss < fast_energy else fast
+    return {"fast_energy": float(fast_energy), "refined_energy": min(result.loss, fast_energy),
+            "evaluations": result.n_evaluations + 1, "weights": [float(w) for w in refined],
+            "seconds": time.perf_counter() - start, "backend": result.backend}
+
+
+def worker_gradient(kind: str, photo: Path, styles: Path, bins: int, dtype: str) -> dict:
+    target, hists, geometry, opts, _ = energy_problem(photo, styles, bins)
+    geometry = geometry.with_dtype(np.dtype(dtype))
+    weights = np.full(len(hists), 1.0 / len(hists))
+    if kind == "ours":
+        from wbcgrade.core import BarycenterSolver
+
+        solver = BarycenterSolver(hists, geometry, opts.n_iter)
+        start = time.perf_counter()
+        value, grad, _ = solver.value_and_grad(weights, target, opts.loss)
+        seconds, backend = time.perf_counter() - start, solver.last_backend
+    else:
+        value, grad, seconds = torch_gradient(hists, weights, target, geometry, opts.n_iter)
+        backend = f"torch autograd, {dtype}"
+    return {"value": float(value), "grad": [float(g) for g in grad], "seconds": seconds,
+            "backend": backend}
+
+
+def torch_gradient(hists, weights, target, geometry, n_iter):
+    """The same energy's gradient by autograd through the L unrolled iterations."""
+    import torch
+
+    torch.set_flush_denormal(True)  # as fast as it can be (DESIGN.md §4)
+    dtype = geometry.dtype
+    K = torch.from_numpy(np.ascontiguousarray(geometry.kernels[0], dtype=dtype))
+    H = torch.from_numpy(hists.astype(dtype))
+    q = torch.from_numpy(target.astype(dtype))
+    w = torch.tensor(weights.astype(dtype), requires_grad=True)
+
+    def apply(x):  # separable Gibbs kernel over the three grid axes, S histograms
+        x = torch.einsum("ij,sjkl->sikl", K, x)
+        x = torch.einsum("jk,sikl->sijl", K, x)
+        return torch.einsum("kl,sijl->sijk", K, x)
+
+    start = time.perf_counter()
+    b = torch.ones_like(H)
+    for _ in range(n_iter):
+        phi = apply(H / apply(b))
+        P = torch.exp(torch.einsum("s,sijk->ijk", w, torch.log(phi)))
+        b = P / phi
+    loss = 0.5 * ((P.double() - q.double()) ** 2).sum()
+    loss.backward()
+    return float(loss), w.grad.double().numpy(), time.perf_counter() - start
+
+
+# --------------------------------------------------------------------------- main
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--photo", type=Path, default=DEFAULT_PHOTOS / "seeding_full.jpg")
+    parser.add_argument("--photos", type=Path, default=DEFAULT_PHOTOS,
+                        help="folder the style photos are taken from")
+    parser.add_argument("--styles", type=int, default=10)
+    parser.add_argument("--repeats", type=int, default=1, help="apply runs (median)")
+    parser.add_argument("--verify", action="store_true", help="run the same-answer check")
+    parser.add_argument("--verify-steps", type=int, default=3, help="L-BFGS iterations at 128³")
+    parser.add_argument("--torch", action="store_true", help="compare with PyTorch autograd")
+    parser.add_argument("--torch-bins", type=int, default=64,
+                        help="grid of the float32 speed comparison")
+    parser.add_argument("--agree-bins", type=int, default=32,
+                        help="grid of the float64 agreement check")
+    parser.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+
+    if args.worker:
+        kind, *rest = args.worker
+        if kind == "verify":
+            photo, styles, weights, steps = rest
+            result = worker_verify(Path(photo), Path(styles), json.loads(weights), int(steps))
+        else:
+            photo, styles, bins, dtype = rest
+            result = worker_gradient(kind, Path(photo), Path(styles), int(bins), dtype)
+        print(json.dumps(result))
+        return
+
+    if not args.photo.is_file():
+        raise SystemExit(f"{args.photo}: no such photo (use --photo)")
+    rows: list[tuple[str, str, str, str]] = []
+    with tempfile.TemporaryDirectory(prefix="wbcgrade-bench-") as tmp:
+        tmp = Path(tmp)
+        styles = tmp / "styles"
+        styles.mkdir()
+        names = style_folder(args.photos, args.photo, args.styles, styles)
+        print(f"photo {args.photo.name}, {len(names)} styles: {', '.join(names)}", flush=True)
+
+        fast = tmp / "fast.jpg"
+        walls, peaks, report = [], [], {}
+        for _ in range(max(1, args.repeats)):
+            fast.unlink(missing_ok=True)
+            wall, peak, out = run_measured(wbcgrade("apply", str(args.photo), "--style",
+                                                    str(styles), "-o", str(fast), "--json",
+                                                    "--no-cache"))
+            walls.append(wall)
+            peaks.append(peak)
+            report = json.loads(out)
+        timings = report["timings_s"]
+        stages = ", ".join(f"{k} {timings[k]:.1f}" for k in STAGES if k in timings)
+        rows.append(("apply, 128³, end to end", f"{statistics.median(walls):.1f} s",
+                     f"{max(peaks):.0f} MB", f"{len(walls)} run(s); target < 60 s, < 3 GB"))
+        rows.append(("  stages (s)", "", "", stages))
+        by_name = {entry["style"]: entry["weight"] for entry in report["weights"]}
+        fast_weights = [by_name[name] for name in names]
+
+        if args.verify:
+            print("verify: L-BFGS on the plain 128³ energy from the fast weights ...", flush=True)
+            wall, peak, out = run_measured([sys.executable, __file__, "--worker", "verify",
+                                            str(args.photo), str(styles),
+                                            json.dumps(fast_weights), str(args.verify_steps)])
+            check = json.loads(out)
+            drop = (check["fast_energy"] - check["refined_energy"]) / check["fast_energy"]
+            refined = tmp / "refined.jpg"
+            weights_text = ",".join(f"{w:.12g}" for w in check["weights"])
+            run_measured(wbcgrade("apply", str(args.photo), "--style", str(styles), "-o",
+                                  str(refined), "--weights", weights_text, "--no-cache"))
+            diff = np.abs(read_8bit(fast) - read_8bit(refined)).mean() * 255.0
+            rows.append(("verify: 128³ energy drop", f"{wall:.0f} s", f"{peak:.0f} MB",
+                         f"{100 * drop:.4f} % after {check['evaluations']} evaluations "
+                         f"({check['backend']}; must be < 2 %)"))
+            rows.append(("verify: image difference", "", "",
+                         f"{diff:.3f}/255 mean (must be < 2/255)"))
+
+        if args.torch:
+            for bins, dtype in ((args.torch_bins, "float32"), (args.agree_bins, "float64")):
+                results = {}
+                for kind in ("ours", "torch"):
+                    print(f"gradient at {bins}³, {dtype}: {kind} ...", flush=True)
+                    _, peak, out = run_measured([sys.executable, __file__, "--worker", kind,
+                                                 str(args.photo), str(styles), str(bins), dtype])
+                    results[kind] = json.loads(out) | {"peak": peak}
+                ours, theirs = results["ours"], results["torch"]
+                g1, g2 = np.array(ours["grad"]), np.array(theirs["grad"])
+                if np.all(np.isfinite(g2)):
+                    agree = f"gradients agree to {np.abs(g1 - g2).max() / np.abs(g1).max():.1e}"
+                else:
+                    agree = "autograd's gradient is NaN/inf (ours is finite)" if np.all(
+                        np.isfinite(g1)) else "both gradients non-finite"
+                for kind, r in (("ours", ours), ("torch", theirs)):
+                    rows.append((f"gradient {bins}³ {dtype}, {kind}", f"{r['seconds']:.1f} s",
+                                 f"{r['peak']:.0f} MB", r["backend"]))
+                rows.append(("  ours / torch", f"{ours['seconds'] / theirs['seconds']:.2f}",
+                             f"{ours['peak'] / theirs['peak']:.2f}", agree))
+
+    widths = [max(len(r[i]) for r in rows + [("case", "time", "peak RSS", "notes")])
+              for i in range(4)]
+    header = ("case", "time", "peak RSS", "notes")
+    print()
+    print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip())
+    print("-" * (sum(widths) + 6))
+    for row in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
+
+
+if __name__ == "__main__":
+    main()
