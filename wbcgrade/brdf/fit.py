@@ -38,12 +38,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbcgrade.brdf.masked import masked_loss
 from wbcgrade.core import Geometry, Loss, barycenter, barycentric_coordinates, get_loss
 from wbcgrade.errors import InputError
 
-DEFAULT_LOSS = "wasserstein"
+DEFAULT_LOSS = "sinkhorn-divergence"
 DEFAULT_N_ITER = 60
 DEFAULT_MAX_ITER = 30
+DEFAULT_TOL = 1e-6
+DEFAULT_FIT_DIRECTIONS = 16
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,8 @@ class BRDFFit:
         The barycenter ``P(weights)``, each row a histogram over outgoing directions.
     loss : float
         Final value of the (possibly masked) loss, summed over rows.
+    initial_loss : float
+        The loss at the starting (by default uniform) weights.
     n_evaluations : int
         Energy and gradient evaluations.
     converged : bool
@@ -73,6 +78,7 @@ class BRDFFit:
     values: np.ndarray
     histograms: np.ndarray
     loss: float
+    initial_loss: float
     n_evaluations: int
     converged: bool
     kept_fraction: float
@@ -99,64 +105,13 @@ def brdf_histograms(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return histograms, sums
 
 
-def _sinkhorn_divergence(P: np.ndarray, q: np.ndarray, geometry: Geometry):
-    wasserstein = get_loss("wasserstein")
-    value_pq, grad_pq = wasserstein.value_and_grad(P, q, geometry)
-    value_pp, grad_pp = wasserstein.value_and_grad(P, P, geometry)
-    # d/dP W(P, P) = 2 * (gradient in the first argument), by symmetry.
-    return value_pq - 0.5 * value_pp, grad_pq - grad_pp
-
-
-SINKHORN_DIVERGENCE = Loss("sinkhorn-divergence", _sinkhorn_divergence)
-"""Debiased entropic Wasserstein loss ``W(P, q) - W(P, P) / 2`` (the constant
-``- W(q, q) / 2`` left out), built from the core's ``wasserstein`` loss.
-
-The entropic ``W_gamma(P, q)`` is not smallest at ``P = q`` (it prefers a
-sharper ``P``), which biases fitted weights; subtracting the self-transport
-term removes that bias (Feydy et al. 2019, "Interpolating between optimal
-transport and MMD using Sinkhorn divergences"). Twice the cost of ``wasserstein``.
-"""
-
-BRDF_LOSSES = ("wasserstein", "sinkhorn-divergence", "quadratic", "l1", "kl")
+BRDF_LOSSES = ("sinkhorn-divergence", "wasserstein", "quadratic", "l1", "kl")
+"""Losses ``fit_brdf`` and ``wbcgrade brdf fit --loss`` accept (the default first)."""
 
 
 def resolve_loss(loss: str | Loss) -> Loss:
-    """A loss by name: the core's losses plus ``"sinkhorn-divergence"``."""
-    if isinstance(loss, str) and loss.lower() == SINKHORN_DIVERGENCE.name:
-        return SINKHORN_DIVERGENCE
+    """A loss by name (a new instance, with its own warm starts) or a Loss passed through."""
     return get_loss(loss)
-
-
-def masked_loss(loss: str | Loss, mask: np.ndarray) -> Loss:
-    """A loss that only sees the kept entries of each row.
-
-    ``L_mask(P, q) = L(P_k / |P_k|, q)`` with ``P_k = mask * P`` and ``|P_k|``
-    its sum over each row; ``q`` must already be restricted to the kept entries
-    and normalised. The gradient ``mask * (g - <g, P_k/|P_k|>) / |P_k|`` (with
-    ``g`` the base loss's gradient) is exact for the restriction and the
-    renormalisation.
-
-    Parameters
-    ----------
-    loss : str or Loss
-        The base loss.
-    mask : ndarray of bool, shape (*batch, N)
-        Kept entries; every row must keep at least one.
-    """
-    base = resolve_loss(loss)
-    mask = np.asarray(mask, dtype=bool)
-    if not mask.any(axis=-1).all():
-        raise InputError("every row of a masked loss must keep at least one entry")
-
-    def value_and_grad(P, q, geometry):
-        kept = np.where(mask, P, 0.0)
-        mass = kept.sum(axis=-1, keepdims=True)
-        normalised = kept / mass
-        value, grad = base.value_and_grad(normalised, q, geometry)
-        grad = (grad - (grad * normalised).sum(axis=-1, keepdims=True)) / mass
-        return value, np.where(mask, grad, 0.0)
-
-    return Loss(f"masked-{base.name}", value_and_grad, needs_positive_target=False)
 
 
 def fit_brdf(
@@ -167,6 +122,7 @@ def fit_brdf(
     loss: str | Loss = DEFAULT_LOSS,
     n_iter: int = DEFAULT_N_ITER,
     max_iter: int = DEFAULT_MAX_ITER,
+    tol: float = DEFAULT_TOL,
     init_weights: np.ndarray | None = None,
     fit_incoming: np.ndarray | None = None,
     callback: Callable[[int, np.ndarray, float], None] | None = None,
@@ -191,6 +147,9 @@ def fit_brdf(
         Barycenter iterations L.
     max_iter : int
         L-BFGS iterations at most.
+    tol : float
+        L-BFGS stops when an iteration lowers the energy (scaled to 1 at the
+        starting weights) by less than this.
     init_weights : ndarray, shape (S,), optional
         Starting weights (uniform by default).
     fit_incoming : ndarray of int, optional
@@ -250,7 +209,7 @@ def fit_brdf(
     fit_loss = base if full else masked_loss(base, row_mask[active])
 
     result = barycentric_coordinates(target, H, geometry, loss=fit_loss, n_iter=n_iter,
-                                     max_iter=max_iter, init_weights=init_weights,
+                                     max_iter=max_iter, tol=tol, init_weights=init_weights,
                                      callback=callback)
     weights = result.weights
     if active.all():
@@ -270,6 +229,7 @@ def fit_brdf(
         values=np.ascontiguousarray(values),
         histograms=P,
         loss=float(result.loss),
+        initial_loss=float(result.initial_loss),
         n_evaluations=int(result.n_evaluations),
         converged=bool(result.converged),
         kept_fraction=float(mask.mean()),

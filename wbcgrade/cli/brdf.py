@@ -12,9 +12,11 @@ from tqdm import tqdm
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
 from wbcgrade.brdf.fit import (
     BRDF_LOSSES,
+    DEFAULT_FIT_DIRECTIONS,
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
+    DEFAULT_TOL,
     fit_brdf,
 )
 
@@ -60,7 +62,8 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
     out.mkdir(parents=True, exist_ok=True)
     dirs = sampling.hemisphere_directions(directions)
     written = []
-    for index, material in enumerate(tqdm(chosen, desc="synth", unit="BRDF", leave=False)):
+    for index, material in enumerate(tqdm(chosen, desc="synth", unit="BRDF", leave=False,
+                                                   disable=None)):
         stem = material.name if materials else f"{index + 1:02d}-{material.name}"
         if material.isotropic:
             path = merl.write_merl(out / f"{stem}.binary", merl.tabulate_merl(material.evaluate))
@@ -75,10 +78,6 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
 def _default_output(measured: Path, keep: float | None) -> Path:
     tag = "" if keep is None else f"-keep{keep * 100:g}"
     return Path.cwd() / f"{measured.stem}{tag}-fit.binary"
-
-
-def _percent(weights: np.ndarray) -> list[float]:
-    return [round(float(w) * 100.0, 1) for w in weights]
 
 
 @brdf.command("fit")
@@ -100,12 +99,14 @@ def _percent(weights: np.ndarray) -> list[float]:
               help="With --keep, also fit the full measurement for comparison.")
 @click.option("--loss", type=click.Choice(BRDF_LOSSES), default=DEFAULT_LOSS,
               show_default=True,
-              help="Fit loss; sinkhorn-divergence is the debiased Wasserstein loss, quadratic "
-                   "the fastest.")
+              help="Fit loss: sinkhorn-divergence is the entropic Wasserstein loss without "
+                   "its entropic bias; wasserstein is the paper's (biased: it favours blurry "
+                   "BRDFs); quadratic is the fastest.")
 @click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
-@click.option("--fit-directions", default=32, show_default=True, type=click.IntRange(0, 2000),
-              help="Incoming directions (well spread) used to fit the weights; 0 = all N.")
+@click.option("--fit-directions", default=DEFAULT_FIT_DIRECTIONS, show_default=True,
+              type=click.IntRange(0, 2000),
+              help="Incoming directions (well spread) whose rows fit the weights; 0 = all N.")
 @click.option("--width", default=sampling.DEFAULT_WIDTH, show_default=True,
               type=click.FloatRange(0.1, 20.0),
               help="Kernel width in sample spacings (sets gamma).")
@@ -113,10 +114,14 @@ def _percent(weights: np.ndarray) -> list[float]:
               type=click.IntRange(1, 10000), help="Barycenter iterations.")
 @click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
               type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")
+@click.option("--tol", default=DEFAULT_TOL, show_default=True, type=click.FloatRange(0, 1),
+              help="Stop when an L-BFGS iteration lowers the energy (1 at uniform weights) by "
+                   "less than this.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, output: str | None,
         png: str | None, no_png: bool, compare: bool, loss: str, directions: int,
-        fit_directions: int, width: float, n_iter: int, max_iter: int, as_json: bool) -> None:
+        fit_directions: int, width: float, n_iter: int, max_iter: int, tol: float,
+        as_json: bool) -> None:
     """Fit MEASURED (a BRDF file) with weights on the BRDFs of --database.
 
     Prints the weights and the PSNR of each fit against the full measurement,
@@ -151,31 +156,38 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
         runs.insert(0, ("full", None))
     results = []
     for label, mask in runs:
-        with tqdm(desc=f"fit ({label})", unit="eval", leave=False) as bar:
+        with tqdm(desc=f"fit ({label})", unit="eval", leave=False, disable=None) as bar:
             def progress(n, weights, value, bar=bar):
                 bar.update(1)
                 bar.set_postfix(loss=f"{value:.4g}")
 
             result = fit_brdf(reference, base, geometry, mask=mask, loss=loss, n_iter=n_iter,
-                              max_iter=max_iter, fit_incoming=subset, callback=progress)
+                              max_iter=max_iter, tol=tol, fit_incoming=subset,
+                              callback=progress)
         results.append((label, result, sampled.psnr(reference, result.values)))
 
     label, final, _ = results[1] if keeps and compare else results[0]
     io.save_brdf(out, final.values, dirs, name=f"{measured_path.stem} {label} fit")
     if png_path is not None:
         renderings = [render.render_sphere(reference, dirs)]
-        captions = [["reference", measured_path.stem[:28]]]
+        captions = [["reference", measured_path.stem[:30], "(all measurements)"]]
         for label, result, psnr in results:
             renderings.append(render.render_sphere(result.values, dirs))
-            captions.append([f"fit, {label}", f"PSNR {psnr:.1f} dB",
-                             "w% " + " ".join(f"{w:.0f}" for w in _percent(result.weights))])
+            captions.append([f"fit, {label}: {psnr:.1f} dB",
+                             *(f"{w * 100:3.0f}% {name}"[:31]
+                               for name, w in _ranked(names, result.weights)[:3])])
         render.write_png(png_path, render.comparison_image(renderings, captions))
 
+    for label, result, _ in results:
+        if not result.converged:
+            click.echo(f"Warning: the {label} fit stopped before converging (raise --max-iter)",
+                       err=True)
     if as_json:
         click.echo(json.dumps({
             "measured": str(measured_path),
             "database": names,
             "directions": directions,
+            "fit_directions": directions if subset is None else len(subset),
             "gamma": geometry.gamma,
             "loss": loss,
             "fits": [{
@@ -184,6 +196,7 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
                 "weights": dict(zip(names, (float(w) for w in result.weights), strict=True)),
                 "psnr_db": psnr,
                 "loss": result.loss,
+                "initial_loss": result.initial_loss,
                 "n_evaluations": result.n_evaluations,
                 "converged": result.converged,
                 "time_s": round(result.time_s, 3),
@@ -192,12 +205,31 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
             "png": None if png_path is None else str(png_path),
         }, indent=2))
         return
-    width_name = max(len(n) for n in [*names, "PSNR vs measurement"])
-    header = f"{'material':<{width_name}}" + "".join(f"{label:>14}" for label, _, _ in results)
-    click.echo(header)
-    for i, name in enumerate(names):
-        click.echo(f"{name:<{width_name}}"
-                   + "".join(f"{r.weights[i] * 100:13.1f}%" for _, r, _ in results))
-    click.echo(f"{'PSNR vs measurement':<{width_name}}"
-               + "".join(f"{p:11.1f} dB" for _, _, p in results))
+    _print_table(names, results, loss)
     click.echo(f"wrote {out}" + ("" if png_path is None else f" and {png_path}"))
+
+
+def _ranked(names: list[str], weights: np.ndarray) -> list[tuple[str, float]]:
+    """(name, weight) pairs, largest weight first."""
+    order = np.argsort(-np.asarray(weights), kind="stable")
+    return [(names[i], float(weights[i])) for i in order]
+
+
+def _print_table(names: list[str], results: list, loss: str) -> None:
+    """Weights (sorted by the first fit's), PSNR, loss, evaluations and time, one column a fit."""
+    order = [names.index(name) for name, _ in _ranked(names, results[0][1].weights)]
+    rows = [("material", [label for label, _, _ in results])]
+    rows += [(names[i], [f"{r.weights[i]:.3f}" for _, r, _ in results]) for i in order]
+    rows += [
+        ("PSNR vs measurement", [f"{p:.2f} dB" for _, _, p in results]),
+        (f"loss ({loss})", [f"{r.loss:.4g}" for _, r, _ in results]),
+        ("  at uniform weights", [f"{r.initial_loss:.4g}" for _, r, _ in results]),
+        ("evaluations", [str(r.n_evaluations) for _, r, _ in results]),
+        ("time", [f"{r.time_s:.1f}s" for _, r, _ in results]),
+    ]
+    first = max(len(name) for name, _ in rows)
+    width = max(10, *(len(cell) for _, cells in rows for cell in cells))
+    for i, (name, cells) in enumerate(rows):
+        click.echo(f"{name:<{first}}" + "".join(f"  {cell:>{width}}" for cell in cells))
+        if i == 0:
+            click.echo("-" * first + f"  {'-' * width}" * len(cells))
