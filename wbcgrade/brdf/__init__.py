@@ -9,5 +9,6 @@
 - :mod:`wbcgrade.brdf.sampled`: sampled BRDFs: interpolation, PSNR, decimation.
 - :mod:`wbcgrade.brdf.io`: BRDF files (``.binary``, ``.npz``) and database folders.
 - :mod:`wbcgrade.brdf.fit`: barycentric coordinates of a (sparse) measurement.
+- :mod:`wbcgrade.brdf.masked`: losses restricted to the kept measurements.
 - :mod:`wbcgrade.brdf.render`: spheres lit by a directional light, as PNG.
 """

@@ -10,24 +10,46 @@ as its scale. A database of S BRDFs is the array ``(S, N, 3, N)`` of such
 histograms: the core's barycenter treats ``(N, 3)`` as a batch of independent
 problems that share one weight vector (the paper's eq. 16), so the energy and
 its gradient are sums over incoming directions and channels. The ground cost
-is the squared geodesic distance on the hemisphere (``sampling.hemisphere_geometry``),
-the default loss the entropic Wasserstein distance, as in the paper. The
-fitted BRDF is the barycenter ``P(weights)`` rescaled row by row by the
-measurement's row sums.
+is the squared geodesic distance on the hemisphere (``sampling.hemisphere_geometry``).
+The fitted BRDF is the barycenter ``P(weights)`` rescaled row by row by the
+measurement's row sums. The weights are shared by all rows, so by default
+they are fitted on the rows of ``DEFAULT_FIT_DIRECTIONS`` (16) well-spread
+incoming directions (48 histograms); the fitted BRDF has every row. On the
+sample references the weights and PSNR match those of a 32-direction fit
+(orange plastic 30.37 vs 30.34 dB, bronze 32.10 vs 32.11 dB) at half the cost.
+
+Loss
+----
+The paper fits with the entropic Wasserstein loss ``W(P, q)`` (``--loss
+wasserstein``). Entropic ``W`` is not smallest at ``P = q``: it is lower for
+a blurrier ``P`` (more entropy), so it pulls the weights towards broad
+materials. On a target that is itself a barycenter of the six sample
+materials with weights 0.5 / 0 / 0.3 / 0 / 0.2 / 0 (N = 288,
+``samples/brdf/recovery.py``) it returns the weights given in the README,
+with the white Lambert material taking a weight the target does not have.
+The default is therefore the *Sinkhorn divergence*
+``S(P, q) = W(P, q) - W(P, P) / 2 - W(q, q) / 2`` (Feydy et al. 2019): the
+same entropic Wasserstein loss with its self-transport bias removed, zero
+at ``P = q``, still a transport loss (it compares lobes by how far their
+mass must move, not bin by bin). It recovers the known weights from all
+and from 10% of the measurements (README), for twice the Sinkhorn solves
+of ``W``; its gradient is checked against finite differences on the
+hemisphere (``tests/brdf``).
 
 Sparse measurements
 -------------------
 With a ``mask`` of kept (incoming, outgoing) pairs, only kept entries enter
 the fit, and no missing value is treated as a zero: each row of both the
 barycenter and the measurement is restricted to its kept entries and
-renormalised over them, and the loss compares those (``masked_loss``; for the
-Wasserstein loss this is optimal transport between the kept outgoing
-directions only). The gradient flows through the restriction and the
-renormalisation to the whole barycenter. Each row's scale is then estimated
-from the kept entries alone, ``sum_kept measured / sum_kept P``, the scale
-that makes the fitted row agree in total with what was measured. Rows with no
-kept entry carry no information: they are left out of the loss and their scale
-is the weighted mean of the database's row sums.
+renormalised over them, and the loss compares those (``masked.masked_loss``;
+for the transport losses this is optimal transport between the kept outgoing
+directions only, solved on those directions alone). The gradient flows
+through the restriction and the renormalisation to the whole barycenter.
+Each row's scale is then estimated from the kept entries alone,
+``sum_kept measured / sum_kept P``, the scale that makes the fitted row agree
+in total with what was measured. Rows with no kept entry carry no
+information: they are left out of the loss and their scale is the weighted
+mean of the database's row sums.
 """
 
 from __future__ import annotations
@@ -140,9 +162,9 @@ def fit_brdf(
     mask : ndarray of bool, shape (N, N), optional
         Kept (incoming, outgoing) measurements (``sampled.decimation_mask``);
         all by default. See the module docstring for how a mask enters the fit.
-    loss : {"wasserstein", "sinkhorn-divergence", "quadratic", "l1", "kl"} or Loss
-        Default "wasserstein" (the paper's choice); "sinkhorn-divergence" is its
-        debiased form and recovers known weights far better.
+    loss : {"sinkhorn-divergence", "wasserstein", "quadratic", "l1", "kl"} or Loss
+        Default "sinkhorn-divergence", the debiased entropic Wasserstein loss
+        (see the module docstring); "wasserstein" is the paper's, biased.
     n_iter : int
         Barycenter iterations L.
     max_iter : int

@@ -173,10 +173,11 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
         captions = [["reference", measured_path.stem[:30], "(all measurements)"]]
         for label, result, psnr in results:
             renderings.append(render.render_sphere(result.values, dirs))
-            captions.append([f"fit, {label}: {psnr:.1f} dB",
-                             *(f"{w * 100:3.0f}% {name}"[:31]
-                               for name, w in _ranked(names, result.weights)[:3])])
-        render.write_png(png_path, render.comparison_image(renderings, captions))
+            shown = [(n, w) for n, w in _ranked(names, result.weights)[:3] if w >= 0.005]
+            captions.append([f"fit, {label}", f"PSNR {psnr:.1f} dB",
+                             *(f"{w * 100:.0f}%  {name}"[:31] for name, w in shown)])
+        render.write_png(png_path, render.comparison_image(renderings, captions,
+                                                           caption_lines=5))
 
     for label, result, _ in results:
         if not result.converged:

@@ -28,6 +28,7 @@ the previous evaluation's potentials.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,6 +46,8 @@ __all__ = [
     "wasserstein_loss",
     "sinkhorn_divergence_loss",
 ]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -181,6 +184,11 @@ class EntropicTransportLoss:
     max_iter : int
         Inner Sinkhorn iterations at most.
     warm_start : bool
+
+    Attributes
+    ----------
+    inner_iterations : int
+        Sinkhorn iterations of the ``W(P, q)`` solves so far (a measure of cost).
     """
 
     def __init__(self, debiased: bool, tol: float, max_iter: int = 100_000,
@@ -221,6 +229,10 @@ class EntropicTransportLoss:
         result = sinkhorn(p_hat, q_hat, geometry, tol=self.tol, max_iter=self.max_iter,
                           init_log_b=init)
         self.inner_iterations += result.n_iter
+        if not result.converged:
+            log.warning("transport loss: Sinkhorn stopped at marginal error %.2g after %d "
+                        "iterations (tol %.2g); the loss gradient is approximate",
+                        result.error, result.n_iter, self.tol)
         self._log_b = np.where(q_hat > 0, result.log_b, 0.0)
         f = geometry.gamma * result.log_a
         value = _dual_term(f, p_hat) + _dual_term(geometry.gamma * result.log_b, q_hat)
