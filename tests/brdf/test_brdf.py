@@ -226,13 +226,14 @@ def test_masked_loss_gradient(setup, loss):
     _finite_difference_check(histograms, kept, geometry, masked_loss(loss, mask))
 
 
-def test_masked_loss_is_the_loss_on_the_kept_entries(setup):
-    """The compact per-row solve equals the transport problem on the full sampling."""
+@pytest.mark.parametrize("keep", [0.2, 0.8])  # per-row kernels / the full kernel with zeros
+def test_masked_loss_is_the_loss_on_the_kept_entries(setup, keep):
+    """The masked loss equals the transport problem on the full sampling."""
     directions, geometry, database, subset = setup
     histograms, _ = brdf_histograms(database[:, subset[:5]])
     P = barycenter(histograms, [0.1, 0.4, 0.2, 0.2, 0.1], geometry, n_iter=30)
     target, _ = brdf_histograms(database[3, subset[:5]])
-    mask = np.broadcast_to(sampled.decimation_mask(N, N, 0.2, seed=1)[subset[:5]][:, None, :],
+    mask = np.broadcast_to(sampled.decimation_mask(N, N, keep, seed=1)[subset[:5]][:, None, :],
                            target.shape)
     kept = np.where(mask, target, 0.0)
     kept /= kept.sum(axis=-1, keepdims=True)

@@ -100,7 +100,8 @@ def masked_loss(loss: str | Loss, mask: NDArray) -> Loss:
     ``L_mask(P, q) = L(P_k / |P_k|, q_k)`` with ``P_k`` the kept entries of each
     row of ``P`` and ``|P_k|`` their sum; ``q`` must already be restricted to
     the kept entries (zero elsewhere) and normalised. The base loss runs on the
-    kept entries only (a :class:`RowSubsetGeometry`). The gradient
+    kept entries only (a :class:`RowSubsetGeometry`; on the full geometry, with
+    zeros, when some row keeps more than half the entries). The gradient
     ``mask * (g - <g, P_k/|P_k|>) / |P_k|``, with ``g`` the base loss's
     gradient, is exact for the restriction and the renormalisation.
 
@@ -121,29 +122,40 @@ def masked_loss(loss: str | Loss, mask: NDArray) -> Loss:
     if not mask.any(axis=-1).all():
         raise InputError("every row of a masked loss must keep at least one entry")
     batch, n = mask.shape[:-1], mask.shape[-1]
-    index, valid = _row_index(mask.reshape(-1, n))
+    flat_mask = mask.reshape(-1, n)
+    index, valid = _row_index(flat_mask)
     rows = np.arange(len(index))[:, None]
-    compact: dict[int, tuple[Geometry, RowSubsetGeometry]] = {}
+    # Past half the directions, per-row kernels cost more than the shared one.
+    dense = index.shape[1] > n // 2
+    if dense:
+        valid = flat_mask
+    cache: dict[str, object] = {}
 
-    def gather(x: NDArray) -> NDArray:
-        return np.where(valid, x.reshape(-1, n)[rows, index], 0.0)
+    def restrict(x: NDArray) -> NDArray:
+        x = x.reshape(-1, n)
+        return np.where(valid, x if dense else x[rows, index], 0.0)
+
+    def on(geometry: Geometry) -> Geometry:
+        if dense:
+            return geometry
+        if cache.get("for") is not geometry:
+            cache["for"] = geometry
+            cache["compact"] = RowSubsetGeometry(geometry.cost_matrix(), geometry.gamma, index)
+        return cache["compact"]
 
     def value_and_grad(P: NDArray, q: NDArray, geometry: Geometry) -> tuple[float, NDArray]:
         if P.shape != mask.shape:
             raise ValueError(f"the masked loss was built for shape {mask.shape}, got {P.shape}")
-        entry = compact.get(id(geometry))
-        if entry is None or entry[0] is not geometry:
-            entry = (geometry, RowSubsetGeometry(geometry.cost_matrix(), geometry.gamma, index))
-            compact.clear()
-            compact[id(geometry)] = entry
-        kept = gather(P)
+        kept = restrict(P)
         mass = kept.sum(axis=-1, keepdims=True)
         normalised = kept / mass
-        value, grad = base.value_and_grad(normalised, gather(q), entry[1])
+        value, grad = base.value_and_grad(normalised, restrict(q), on(geometry))
         grad = np.where(valid, (grad - (grad * normalised).sum(axis=-1, keepdims=True)) / mass,
                         0.0)
-        full = np.zeros((len(index), n))
-        full[np.broadcast_to(rows, index.shape)[valid], index[valid]] = grad[valid]
-        return value, full.reshape(*batch, n)
+        if not dense:
+            full = np.zeros((len(index), n))
+            full[np.broadcast_to(rows, index.shape)[valid], index[valid]] = grad[valid]
+            grad = full
+        return value, grad.reshape(*batch, n)
 
     return Loss(f"masked-{base.name}", value_and_grad, needs_positive_target=False)
