@@ -163,11 +163,14 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
     _check_outputs([output, volume_path, png_path], [partial, *paths])
     check_memory((resolution,) * 3, len(paths), iterations)
 
+    def warn(message: str) -> None:
+        tqdm.write(f"Warning: {message}", file=sys.stderr)
+
     shapes = []
     for path in tqdm([partial, *paths], desc="voxelising", unit="mesh", disable=quiet,
                      file=sys.stderr, leave=False):
         reference = shapes[0] if shapes else None
-        shapes.append(load_shape(path, resolution, align=align, reference=reference))
+        shapes.append(load_shape(path, resolution, align=align, reference=reference, warn=warn))
     bar, callback = _progress(not quiet, max_iter, "fitting")
     with bar:
         completion = complete_shape(

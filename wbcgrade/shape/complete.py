@@ -100,7 +100,8 @@ class VoxelShape:
     name : label (file stem).
     occupancy : (n, n, n) fraction of each voxel inside the shape, in [0, 1].
     transform : (4, 4) similarity transform from the mesh's frame to the unit frame.
-    mesh_volume : volume of the mesh in the unit frame.
+    mesh_volume : volume of the mesh in the unit frame (of its voxelisation for
+        an open or non-manifold mesh).
     """
 
     name: str
@@ -161,8 +162,13 @@ def load_shape(
     align: bool = False,
     supersample: int | None = None,
     reference: VoxelShape | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> VoxelShape:
     """Read, normalise and voxelise one mesh file.
+
+    Open and slightly non-manifold meshes (scans) are accepted: their inside
+    is decided by generalised winding numbers, and ``warn`` (default: the
+    log) is told in one line what was found and repaired.
 
     Parameters
     ----------
@@ -175,8 +181,12 @@ def load_shape(
         the principal axes the one whose voxelisation overlaps ``reference``
         most (IoU), which settles the axes' sign ambiguity consistently
         across a database.
+    warn : called with a one-line message when the mesh needed repairs.
     """
-    mesh = read_mesh(path)
+    mesh = read_mesh(path, repair=True)
+    repairs = mesh.metadata.get("repairs")
+    if repairs:
+        (warn or log.warning)(f"{path}: {repairs}")
     if supersample is None:
         supersample = 2 if resolution <= 128 else 1
     transform = normalization_transform(mesh, align=align)
@@ -194,9 +204,15 @@ def load_shape(
             else 0.0
         )
         if best is None or score > best[0]:
-            best = (score, occupancy, candidate, float(normalised.volume))
+            if repairs and "winding" in repairs:  # no volume of its own: the voxels'
+                volume = float(occupancy.sum()) / (resolution - 1) ** 3
+            else:
+                volume = float(normalised.volume)
+            best = (score, occupancy, candidate, volume)
     _, occupancy, transform, volume = best
     if occupancy.max() <= 0:
+        if repairs and "winding" in repairs:
+            raise InputError(f"{path}: the mesh encloses no volume ({repairs.split(';')[0]})")
         raise InputError(f"{path}: the mesh is too thin to cover any voxel at {resolution}^3")
     return VoxelShape(Path(path).stem, occupancy, transform, volume)
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -30,22 +31,27 @@ MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 """File suffixes read and written as meshes."""
 
 
-def read_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
-    """Read a closed triangle mesh.
+def read_mesh(path: str | os.PathLike, repair: bool = False) -> trimesh.Trimesh:
+    """Read a triangle mesh; closed unless ``repair``.
 
     Parameters
     ----------
     path : file in a format trimesh reads (``.off``, ``.obj``, ``.ply``, ``.stl``).
+    repair : accept open and non-manifold meshes (scans with holes, cut
+        caps): they are kept as they are, :func:`voxelize` decides their
+        inside by generalised winding numbers, and ``mesh.metadata["repairs"]``
+        says in words what was found (None for a clean closed mesh).
 
     Returns
     -------
-    trimesh.Trimesh with consistent outward winding.
+    trimesh.Trimesh with consistent outward winding where the mesh allows it.
 
     Raises
     ------
     InputError
-        The file is missing or unreadable, the mesh is empty, has non-manifold
-        edges (shared by more than two faces) or is not closed.
+        The file is missing or unreadable, the mesh is empty, its coordinates
+        are not finite or too large, or (without ``repair``) it has
+        non-manifold edges (shared by more than two faces) or is not closed.
     """
     path = Path(path)
     if not path.is_file():
@@ -56,16 +62,123 @@ def read_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
             f"use one of {', '.join(MESH_SUFFIXES)}"
         )
     try:
-        loaded = trimesh.load(str(path), force="mesh", process=True)
+        # Degenerate input makes numpy warn from inside trimesh; the checks below speak instead.
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            loaded = trimesh.load(str(path), force="mesh", process=True)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{path}: unreadable mesh ({detail})") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise InputError(f"{path}: the mesh is empty (no triangles)")
+    check_coordinates(loaded, name=str(path))
+    if repair:
+        loaded.metadata["repairs"] = repair_mesh(loaded, name=str(path))
+        return loaded
     check_closed_mesh(loaded, name=str(path))
     if loaded.volume < 0:
         loaded.invert()
     return loaded
+
+
+MAX_COORDINATE = 1e30
+"""Largest vertex coordinate accepted (volumes and moments stay finite in float64)."""
+
+
+def check_coordinates(mesh: trimesh.Trimesh, name: str = "mesh") -> None:
+    """Raise :class:`InputError` unless every vertex coordinate is finite and moderate."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    if not np.all(np.isfinite(vertices)):
+        raise InputError(f"{name}: the mesh has non-finite vertex coordinates (nan or inf)")
+    largest = float(np.abs(vertices).max()) if vertices.size else 0.0
+    if largest > MAX_COORDINATE:
+        raise InputError(
+            f"{name}: vertex coordinates up to {largest:.3g} are too large to voxelise "
+            f"(at most {MAX_COORDINATE:.0e}); rescale the mesh"
+        )
+
+
+def edge_counts(mesh: trimesh.Trimesh) -> tuple[int, int]:
+    """Numbers of boundary edges (one face) and non-manifold edges (three or more faces)."""
+    if len(mesh.faces) == 0:
+        return 0, 0
+    _, counts = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
+    return int(np.count_nonzero(counts == 1)), int(np.count_nonzero(counts > 2))
+
+
+def is_closed_manifold(mesh: trimesh.Trimesh) -> bool:
+    """True when the mesh has faces and every edge is shared by exactly two of them."""
+    return len(mesh.faces) > 0 and edge_counts(mesh) == (0, 0)
+
+
+def _count_holes(mesh: trimesh.Trimesh) -> int:
+    """Connected loops of boundary edges."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges, counts = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
+    boundary = edges[counts == 1]
+    if len(boundary) == 0:
+        return 0
+    nodes, local = np.unique(boundary, return_inverse=True)
+    local = local.reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])),
+                       shape=(len(nodes), len(nodes)))
+    return int(connected_components(graph, directed=False)[0])
+
+
+MAX_DEFECT_FRACTION = 0.25
+"""Boundary plus non-manifold edges, as a fraction of all edges, above which a mesh is refused."""
+
+
+def repair_mesh(mesh: trimesh.Trimesh, name: str = "mesh") -> str | None:
+    """Prepare a possibly open or non-manifold mesh for :func:`voxelize`, in place.
+
+    Holes of one triangle or quad are closed and the winding made consistent
+    where the mesh allows it; larger holes and non-manifold edges are left
+    to the winding-number voxelisation. Returns a sentence saying what was
+    found and repaired, or None when the mesh was a clean closed surface.
+
+    Raises InputError when a closed mesh encloses no volume, or when more
+    than :data:`MAX_DEFECT_FRACTION` of the edges are boundary or
+    non-manifold (a sheet or a few loose triangles, not a surface with holes).
+    """
+    n_faces = len(mesh.faces)
+    n_boundary, n_non_manifold = edge_counts(mesh)
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        if n_boundary and not n_non_manifold:
+            trimesh.repair.fill_holes(mesh)
+        if not mesh.is_winding_consistent:
+            trimesh.repair.fix_winding(mesh)
+        volume = float(mesh.volume)
+    filled = len(mesh.faces) - n_faces
+    n_boundary, n_non_manifold = edge_counts(mesh)
+    if not n_boundary and not n_non_manifold:
+        if not abs(volume) > 1e-12 * max(float(np.prod(mesh.extents)), 1e-300):
+            raise InputError(f"{name}: the mesh encloses no volume")
+        if volume < 0:
+            mesh.invert()
+        return f"closed small holes with {filled} triangle(s)" if filled else None
+    if volume < 0:  # a best guess for an open surface; the inside test ignores the sign
+        mesh.invert()
+    found = []
+    if n_boundary:
+        holes = _count_holes(mesh)
+        found.append(f"{holes} open hole{'s' if holes != 1 else ''} "
+                     f"({n_boundary} boundary edges)")
+    if n_non_manifold:
+        found.append(f"{n_non_manifold} non-manifold edge{'s' if n_non_manifold != 1 else ''} "
+                     "(shared by more than two faces)")
+    n_edges = len(np.unique(mesh.edges_sorted, axis=0))
+    if n_boundary + n_non_manifold > MAX_DEFECT_FRACTION * n_edges:
+        raise InputError(f"{name}: not a surface that encloses a volume "
+                         f"({', '.join(found)} among {n_edges} edges)")
+    if filled:
+        found.append(f"{filled} triangle(s) added to close small holes")
+    return ("not a closed surface: " + ", ".join(found)
+            + "; its inside is taken from generalised winding numbers, "
+            "which close the holes smoothly")
 
 
 def check_closed_mesh(mesh: trimesh.Trimesh, name: str = "mesh") -> None:
@@ -117,10 +230,17 @@ def normalization_transform(
     """
     if not 0.0 <= margin < 0.5:
         raise InputError(f"margin must be in [0, 0.5), got {margin}")
-    centroid = np.asarray(mesh.center_mass if mesh.is_volume else mesh.centroid, float)
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")  # trimesh's mass properties of a flat mesh
+        is_volume = bool(mesh.is_volume)
+    if is_volume:
+        centroid = np.asarray(mesh.center_mass, float)
+        inertia = np.asarray(mesh.moment_inertia, float) if align else None
+    else:  # open or non-manifold: the solid its winding numbers enclose
+        centroid, inertia = _solid_moments(mesh)
     rotation = np.eye(3)
     if align:
-        rotation = _principal_axes(mesh.vertices - centroid, mesh)
+        rotation = _principal_axes(mesh.vertices - centroid, inertia)
     local = (mesh.vertices - centroid) @ rotation.T
     radius = float(np.abs(local).max())
     if not np.isfinite(radius) or radius <= 0.0:
@@ -132,9 +252,40 @@ def normalization_transform(
     return transform
 
 
-def _principal_axes(centred: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+def _solid_moments(mesh: trimesh.Trimesh, resolution: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid (3,) and inertia tensor (3, 3) of the solid a mesh encloses, from voxels.
+
+    For meshes whose own mass properties are undefined (open, non-manifold):
+    the mesh is voxelised by winding numbers on a ``resolution^3`` grid over
+    its bounding box. Falls back to the surface centroid when nothing is inside.
+    """
+    lo, hi = mesh.bounds
+    half = float(np.max(hi - lo)) / 2.0
+    if not np.isfinite(half) or half <= 0.0:
+        raise InputError("the mesh has no extent (all vertices coincide)")
+    scale = 0.45 / half
+    provisional = np.eye(4)
+    provisional[:3, :3] *= scale
+    provisional[:3, 3] = 0.5 - scale * (lo + hi) / 2.0
+    unit = mesh.copy()
+    unit.apply_transform(provisional)
+    occupancy = voxelize(unit, resolution, supersample=1, robust=True)
+    total = occupancy.sum()
+    if total <= 0:
+        return np.asarray(mesh.centroid, float), np.eye(3)
+    x = voxel_centers(resolution)
+    grid = np.stack(np.meshgrid(x, x, x, indexing="ij"), axis=-1).reshape(-1, 3)
+    weights = occupancy.reshape(-1) / total
+    centre_unit = weights @ grid
+    offsets = (grid - centre_unit) / scale
+    covariance = (offsets * weights[:, None]).T @ offsets
+    inertia = np.trace(covariance) * np.eye(3) - covariance
+    return (centre_unit - provisional[:3, 3]) / scale, inertia
+
+
+def _principal_axes(centred: np.ndarray, inertia: np.ndarray) -> np.ndarray:
     """Rotation (3, 3) whose rows are the principal axes, largest spread first."""
-    inertia = np.asarray(mesh.moment_inertia, float)
+    inertia = np.asarray(inertia, float)
     # Principal inertia components: the axis of *smallest* inertia is the one of
     # largest spread, so sort eigenvalues ascending.
     eigenvalues, eigenvectors = np.linalg.eigh(inertia)
@@ -163,8 +314,10 @@ def voxel_centers(resolution: int) -> np.ndarray:
     return np.linspace(0.0, 1.0, resolution)
 
 
-def voxelize(mesh: trimesh.Trimesh, resolution: int, supersample: int = 2) -> np.ndarray:
-    """Fraction of each voxel inside a closed mesh given in the unit frame.
+def voxelize(
+    mesh: trimesh.Trimesh, resolution: int, supersample: int = 2, robust: bool | None = None
+) -> np.ndarray:
+    """Fraction of each voxel inside a mesh given in the unit frame.
 
     Voxel ``(i, j, k)`` is the cube of side ``h = 1 / (n - 1)`` centred at
     ``(i, j, k) * h`` (the core's grid points). Each voxel is sampled at
@@ -173,11 +326,22 @@ def voxelize(mesh: trimesh.Trimesh, resolution: int, supersample: int = 2) -> np
     (scan-line parity, majority vote over the axes, which makes the result
     robust to rays grazing edges).
 
+    Open and non-manifold meshes (``robust``): a ray crossing the surface an
+    odd number of times in all passes through a hole and its votes are not
+    counted; a point keeps the parity answer only where at least two other
+    rays through it agree, and otherwise is inside when its generalised
+    winding number ``|w| >= 1/2`` (:mod:`wbcgrade.shape.winding`). Only those
+    points pay for winding numbers (measured at 64^3: about 0.6k of 2.1M
+    samples for a cow with two holes, 118k for lion.off with 205 boundary
+    edges, 1.2 s).
+
     Parameters
     ----------
-    mesh : closed mesh in the unit frame (see :func:`normalize_mesh`).
+    mesh : mesh in the unit frame (see :func:`normalize_mesh`).
     resolution : n, voxels per axis (>= 2).
     supersample : samples per voxel and axis (1 = voxel centres only).
+    robust : use the winding-number test where parity is ambiguous; default:
+        when the mesh is not a closed manifold (:func:`is_closed_manifold`).
 
     Returns
     -------
@@ -187,18 +351,47 @@ def voxelize(mesh: trimesh.Trimesh, resolution: int, supersample: int = 2) -> np
         raise InputError(f"resolution must be at least 2, got {resolution}")
     if supersample < 1:
         raise InputError(f"supersample must be at least 1, got {supersample}")
+    if robust is None:
+        robust = not is_closed_manifold(mesh)
     n, s = int(resolution), int(supersample)
     h = 1.0 / (n - 1)
     m = n * s
     # Sample coordinates along one axis: s points per voxel, centred in the voxel.
     samples = (np.arange(m) + 0.5) * (h / s) - 0.5 * h
     triangles = np.asarray(mesh.triangles, dtype=np.float64)
-    votes = np.zeros((m, m, m), dtype=np.uint8)
-    for axis in range(3):
-        votes += _parity_along_axis(triangles, samples, axis)
-    inside = votes >= 2
-    del votes
+    if robust:
+        inside = _robust_inside(triangles, samples)
+    else:
+        votes = np.zeros((m, m, m), dtype=np.uint8)
+        for axis in range(3):
+            votes += _parity_along_axis(triangles, samples, axis)
+        inside = votes >= 2
+        del votes
     return inside.reshape(n, s, n, s, n, s).mean(axis=(1, 3, 5))
+
+
+def _robust_inside(triangles: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """Inside mask (m, m, m) of an open or non-manifold surface (see :func:`voxelize`)."""
+    from wbcgrade.shape.winding import winding_numbers
+
+    m = samples.size
+    inside_votes = np.zeros((m, m, m), dtype=np.uint8)
+    reliable = np.zeros((m, m, m), dtype=np.uint8)
+    for axis in range(3):
+        parity = _parity_along_axis(triangles, samples, axis)
+        # The surface lies inside the sample range: the last sample's parity is
+        # the ray's total number of crossings, odd when the ray passes a hole.
+        closed_ray = np.take(parity, [m - 1], axis=axis) == 0
+        reliable += closed_ray
+        inside_votes += parity.astype(bool) & closed_ray
+    agreed = (reliable >= 2) & ((inside_votes == 0) | (inside_votes == reliable))
+    inside = inside_votes > 0
+    del inside_votes, reliable
+    doubtful = np.nonzero(~agreed)
+    if doubtful[0].size:
+        points = np.stack([samples[index] for index in doubtful], axis=1)
+        inside[doubtful] = np.abs(winding_numbers(triangles, points)) >= 0.5
+    return inside
 
 
 def _parity_along_axis(triangles: np.ndarray, samples: np.ndarray, axis: int) -> np.ndarray:
