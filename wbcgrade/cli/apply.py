@@ -9,6 +9,7 @@ import click
 from tqdm import tqdm
 
 from wbcgrade.cli._progress import style_progress
+from wbcgrade.cli.grading_options import max_image_pixels_option
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE
 from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
@@ -85,6 +86,7 @@ def _print_report(report, as_json: bool) -> None:
 @click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
               help="Nodes per axis of the LUT.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
+@max_image_pixels_option
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,

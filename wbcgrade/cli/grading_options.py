@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS, set_max_image_pixels
 from wbcgrade.color.transfer import LOSSES, GradeOptions, parse_weights
 
 _DEFAULTS = GradeOptions()
@@ -43,6 +44,20 @@ _OPTIONS = [
                  help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or "
                       "~/.cache/wbcgrade]."),
 ]
+
+
+def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
+    set_max_image_pixels(value)  # None: back to $WBCGRADE_MAX_IMAGE_PIXELS or the default
+    return value
+
+
+#: ``--max-image-pixels N``: raise (or lower) the decompression-bomb limit of this run.
+max_image_pixels_option = click.option(
+    "--max-image-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
+    callback=_set_max_image_pixels, metavar="N",
+    help=f"Refuse images with more pixels than this, read from the header before "
+         f"decoding [default: $WBCGRADE_MAX_IMAGE_PIXELS or {DEFAULT_MAX_IMAGE_PIXELS:_}].")
+_OPTIONS.append(max_image_pixels_option)
 
 GRADING_KEYS = ("style_dir", "preset", "bins", "fit_bins", "loss", "width", "gamma",
                 "transfer_width", "n_iter", "max_iter", "weights_text", "strength", "no_cache",

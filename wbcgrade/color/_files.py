@@ -1,14 +1,48 @@
-"""Atomic file writing: a temporary file beside the target, renamed into place."""
+"""Safe file writing: temporary files renamed into place, stale temporaries, folder locks.
+
+Every output goes through :func:`atomic_path`: a hidden temporary file
+``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>`` in the target's folder, locked
+(``flock``) by the process writing it and renamed onto the target only once
+it is complete. A process killed mid-write (SIGKILL, power loss) leaves at
+most such a temporary file, never a partial output; the lock dies with the
+process, so :func:`remove_stale_temporaries` (run by the next ``apply`` /
+``batch`` / ``report`` into the same folder) can tell a dead run's temporary
+from one a live run is writing, and removes only the former.
+
+:func:`lock_folder` gives one run exclusive use of an output folder (``batch``).
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import os
+import re
+import stat
 import tempfile
-from collections.abc import Iterator
+import time
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from wbcgrade.errors import InputError
+
+__all__ = ["atomic_path", "check_regular_target", "remove_stale_temporaries", "is_unlocked",
+           "lock_folder", "TEMP_MARK", "LOCK_FILE"]
+
+#: Marks the project's temporary files: ``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``.
+TEMP_MARK = ".wbcgrade-tmp-"
+#: Lock file a run keeps in an output folder it has exclusive use of.
+LOCK_FILE = ".wbcgrade.lock"
+#: A temporary file younger than this is never removed (it may be just created and
+#: not yet locked by its writer).
+MIN_STALE_AGE_S = 10.0
+#: Temporaries of the previous naming (``.<stem>.XXXXXXXX<ext>``, no lock) are removed
+#: only when this old.
+OLD_PATTERN_AGE_S = 60.0
+
+_TEMP_RE = re.compile(r"^\..*" + re.escape(TEMP_MARK) + r"[A-Za-z0-9_]{8}")
+_MKSTEMP_CHARS = "[a-z0-9_]{8}"
 
 
 def _read_umask() -> int:
@@ -26,6 +60,23 @@ def _umask() -> int:
     return _UMASK
 
 
+def check_regular_target(target: str | os.PathLike) -> None:
+    """Raise InputError when ``target`` exists and is not a regular file (a device such
+    as /dev/null, a FIFO, a socket, a folder): replacing it would destroy it."""
+    target = Path(target)
+    try:
+        mode = target.stat().st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise InputError(f"{target}: cannot be checked ({exc.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise InputError(f"{target}: is a folder")
+    if not stat.S_ISREG(mode):
+        raise InputError(f"{target}: exists and is not a regular file (a device, pipe or "
+                         "socket); refusing to replace it")
+
+
 def _publish(tmp: str, target: Path, overwrite: bool) -> None:
     """Move the finished temporary file onto ``target``.
 
@@ -33,6 +84,7 @@ def _publish(tmp: str, target: Path, overwrite: bool) -> None:
     does not exist (a file that appeared during a long grade is never
     replaced); filesystems without hard links fall back to a last check.
     """
+    check_regular_target(target)
     if overwrite:
         os.replace(tmp, target)
         return
@@ -48,22 +100,30 @@ def _publish(tmp: str, target: Path, overwrite: bool) -> None:
     os.unlink(tmp)
 
 
+def _temp_prefix(target: Path) -> str:
+    stem = target.stem[:100]  # keep the temporary name within NAME_MAX
+    return f".{stem}{TEMP_MARK}"
+
+
 @contextlib.contextmanager
 def atomic_path(
     target: str | os.PathLike, suffix: str = "", overwrite: bool = True
 ) -> Iterator[str]:
     """Yield a temporary path in ``target``'s folder; move it onto ``target`` on success.
 
-    The temporary file gets the permissions a new file would get (mkstemp's
-    are 0600) and is removed if the body raises. With ``overwrite=False`` an
-    existing ``target`` is never replaced (InputError instead).
+    The temporary file (``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``) gets the
+    permissions a new file would get (mkstemp's are 0600), is locked by this
+    process until published, and is removed if the body raises. With
+    ``overwrite=False`` an existing ``target`` is never replaced (InputError
+    instead); a ``target`` that is not a regular file is never replaced.
     """
     target = Path(target)
+    check_regular_target(target)
     folder = target.parent if str(target.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=suffix or target.suffix,
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(target), suffix=suffix or target.suffix,
                                dir=folder)
-    os.close(fd)
     try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # tells a cleaner this file is live
         os.chmod(tmp, 0o666 & ~_umask())
         yield tmp
         _publish(tmp, target, overwrite)
@@ -71,3 +131,97 @@ def atomic_path(
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+    finally:
+        os.close(fd)
+
+
+def is_unlocked(path: str | os.PathLike, min_age: float = MIN_STALE_AGE_S) -> bool:
+    """True when ``path`` is older than ``min_age`` and no live process holds its lock."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or time.time() - info.st_mtime < min_age:
+            return False
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                return False  # a live run is writing it
+            raise
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+
+
+def remove_stale_temporaries(folder: str | os.PathLike, targets: Iterable[str] = (),
+                             min_age: float = MIN_STALE_AGE_S) -> list[Path]:
+    """Remove temporary files that a killed run left in ``folder``; -> removed paths.
+
+    Removes ``.<stem>.wbcgrade-tmp-XXXXXXXX...`` files no live process holds
+    locked (and older than ``min_age`` seconds, so a file just being created
+    is safe). Temporaries of the previous naming (``.<stem>.XXXXXXXX<ext>``),
+    which carry no lock, are removed only for the file names in ``targets``
+    and only when older than a minute. Other files are never touched.
+    """
+    folder = Path(folder)
+    old = [re.compile("^" + re.escape(f".{Path(name).stem}.") + _MKSTEMP_CHARS
+                      + re.escape(Path(name).suffix) + r"(\.tmp)?$") for name in set(targets)]
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        if not name.startswith("."):
+            continue
+        if _TEMP_RE.match(name):
+            age = min_age
+        elif any(pattern.match(name) for pattern in old):
+            age = max(min_age, OLD_PATTERN_AGE_S)
+        else:
+            continue
+        path = folder / name
+        if is_unlocked(path, age):
+            with contextlib.suppress(OSError):
+                path.unlink()
+                removed.append(path)
+    return removed
+
+
+@contextlib.contextmanager
+def lock_folder(folder: str | os.PathLike, what: str = "run") -> Iterator[Path]:
+    """Hold an exclusive lock on ``folder`` (a hidden lock file in it) for the body.
+
+    A second run asking for the same folder gets an InputError naming the
+    process that holds it. The lock is released when the body ends or the
+    process dies (SIGKILL included); the lock file itself is left in place.
+    """
+    folder = Path(folder)
+    path = folder / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666 & ~_umask())
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot lock the output folder ({exc.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip()
+            who = f" (pid {holder})" if holder.isdigit() else ""
+            raise InputError(f"{folder}: another wbcgrade {what}{who} is writing into this "
+                             "folder; wait for it to finish or choose another output "
+                             "folder") from None
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield path
+    finally:
+        os.close(fd)

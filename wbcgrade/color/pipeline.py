@@ -6,6 +6,7 @@ no command line (progress and messages go through callbacks).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Callable
@@ -14,13 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color._files import remove_stale_temporaries
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.imageio import (
     Image,
+    check_image_output,
     check_output_path,
     decode_from_grading,
     encode_for_grading,
-    write_image,
+    stage_image,
 )
 from wbcgrade.color.lut import color_map_to_lut, write_cube
 from wbcgrade.color.presets import StyleSet, load_preset, load_style_folder, resolve_preset
@@ -66,16 +69,25 @@ def default_output_path(photo: str | os.PathLike) -> Path:
 def check_outputs(photo: str | os.PathLike, output: str | os.PathLike | None,
                   lut: str | os.PathLike | None, lut_size: int = 33,
                   overwrite: bool = False) -> tuple[Path, Path | None]:
-    """Check the photo exists and the outputs may be written; -> (output, lut) paths."""
+    """Check the photo exists and the outputs may be written; -> (output, lut) paths.
+
+    Checked before any work: the output's file type can be written, its
+    folder exists and is writable, it is not the photo, not an existing file
+    (unless ``overwrite``) and not a device or other non-regular file; the
+    same for the LUT, which must end in ``.cube`` and differ from the output.
+    """
     photo = Path(photo)
     if not photo.exists():
         raise InputError(f"{photo}: no such file")
     output = Path(output) if output is not None else default_output_path(photo)
     check_output_path(output, [photo], overwrite)
+    check_image_output(output)
     if lut is not None:
         lut = Path(lut)
         if lut.suffix.lower() != ".cube":
             raise InputError(f"{lut}: LUT file name must end in .cube")
+        if lut.absolute() == output.absolute():
+            raise InputError(f"{lut}: the LUT and the graded photo must be different files")
         check_output_path(lut, [photo, output], overwrite)
         if not 2 <= lut_size <= 256:
             raise InputError("--lut-size must be between 2 and 256")
@@ -128,12 +140,19 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     """Grade ``photo`` towards ``styles`` and write the result (and a LUT).
 
     The output paths are checked before any computation; files are written
-    atomically and the input is never replaced. ``timings`` may hold stages
-    timed by the caller (e.g. loading styles); they are kept in the report.
+    atomically and the input is never replaced. The photo and the LUT are
+    published together: when the LUT cannot be written, the graded photo is
+    not published either. Temporary files a killed earlier run left in the
+    output folders are removed. ``timings`` may hold stages timed by the
+    caller (e.g. loading styles); they are kept in the report.
     """
     photo = Path(photo)
     opts.validate(len(styles.names))
     output, lut = check_outputs(photo, output, lut, lut_size, overwrite)
+    for target in (output, lut):
+        if target is not None:
+            remove_stale_temporaries(target.parent if str(target.parent) else Path("."),
+                                     [target.name])
     timings = dict(timings or {})
     say = stage or (lambda name: None)
 
@@ -148,19 +167,29 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
 
     say("write")
     start = time.perf_counter()
-    write_image(output, pixels, image, overwrite=overwrite, alpha_channel=alpha_channel)
-    timings["write"] = time.perf_counter() - start
-
-    if lut is not None:
-        say("lut")
-        start = time.perf_counter()
-        table = color_map_to_lut(grade.color_map, lut_size, grade.strength)
-        ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-        write_cube(lut, table, title=f"wbcgrade {photo.stem}",
-                   comments=[f"wbcgrade grade of {photo.name}: {ranked}",
-                             "input: encoded RGB in [0, 1] (sRGB-encoded for float images)"],
-                   overwrite=overwrite)
-        timings["lut"] = time.perf_counter() - start
+    lut_existed = lut is not None and lut.exists()
+    lut_written = False
+    try:
+        with stage_image(output, pixels, image, overwrite=overwrite,
+                         alpha_channel=alpha_channel):
+            timings["write"] = time.perf_counter() - start
+            if lut is not None:  # written while the photo waits, published just before it
+                say("lut")
+                start = time.perf_counter()
+                table = color_map_to_lut(grade.color_map, lut_size, grade.strength)
+                ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
+                write_cube(lut, table, title=f"wbcgrade {photo.stem}",
+                           comments=[f"wbcgrade grade of {photo.name}: {ranked}",
+                                     "input: encoded RGB in [0, 1] (sRGB-encoded for float "
+                                     "images)"],
+                           overwrite=overwrite)
+                lut_written = True
+                timings["lut"] = time.perf_counter() - start
+    except BaseException:
+        if lut_written and not lut_existed:  # the photo failed to publish: take the LUT back
+            with contextlib.suppress(OSError):
+                lut.unlink()
+        raise
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
     return GradeReport(photo=photo, output=output, lut=lut, grade=grade,
                        styles_source=styles.source, timings=timings)
