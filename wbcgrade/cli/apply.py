@@ -13,7 +13,8 @@ from wbcgrade.cli.grading_options import max_image_pixels_option
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE
 from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
-from wbcgrade.color.transfer import LOSSES, GradeOptions, parse_weights
+from wbcgrade.color.transfer import LOSSES, GradeOptions
+from wbcgrade.color.weights import parse_weights
 
 _DEFAULTS = GradeOptions()
 

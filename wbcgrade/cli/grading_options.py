@@ -10,7 +10,8 @@ import click
 
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS, set_max_image_pixels
-from wbcgrade.color.transfer import LOSSES, GradeOptions, parse_weights
+from wbcgrade.color.transfer import LOSSES, GradeOptions
+from wbcgrade.color.weights import parse_weights
 
 _DEFAULTS = GradeOptions()
 

@@ -11,6 +11,7 @@ from wbcgrade.cli._progress import style_progress
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.presets import (
     DEFAULT_PRESET_WIDTH,
+    check_preset_width,
     list_presets,
     load_preset,
     load_style_folder,
@@ -39,6 +40,7 @@ def build(folder, output, bins, width, description, overwrite, no_cache):
     """Build a preset from the photos in FOLDER (non-images are skipped)."""
     if not 4 <= bins <= 256:
         raise InputError("--bins must be between 4 and 256")
+    width = check_preset_width(width)
     if not output.lower().endswith(".npz"):
         raise InputError(f"{output}: preset file name must end in .npz")
     if os.path.exists(output) and not overwrite:

@@ -99,7 +99,10 @@ class StyleSet:
 def _photo_histogram(path: Path, bins: int, max_pixels: int) -> np.ndarray:
     image = read_image(path)
     encoded, _ = encode_for_grading(image.rgb(), image.is_float)
-    return image_histogram(encoded, bins, image.alpha(), max_pixels)
+    try:
+        return image_histogram(encoded, bins, image.alpha(), max_pixels)
+    except InputError as exc:  # e.g. fully transparent: say which photo
+        raise InputError(f"{path}: {exc}") from None
 
 
 def load_style_folder(folder: str | os.PathLike, bins: int,
@@ -147,6 +150,20 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     return StyleSet(names=names, histograms=np.stack(hists), source=str(folder))
 
 
+def check_preset_width(width: float) -> float:
+    """``width`` as a float when it is a usable kernel width (finite, > 0 bins), else InputError.
+
+    Checked before a preset is built, since :func:`load_preset` refuses any other.
+    """
+    try:
+        value = float(width)
+    except (TypeError, ValueError):
+        raise InputError(f"--width must be a number of bins, got {width!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise InputError(f"--width must be a positive, finite number of bins, got {width}")
+    return value
+
+
 def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
                 threshold: float = 1e-7) -> Path:
@@ -158,6 +175,7 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError(f"{path}: preset file name must end in .npz")
+    width = check_preset_width(width)
     check_output_path(path, overwrite=overwrite)
     bins = styles.bins
     gamma = 2.0 * (width / (bins - 1)) ** 2
@@ -191,6 +209,8 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise InputError(f"{path}: no such preset file")
     try:
         raw = path.read_bytes()
+        if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
+            raise _bad(path, "unreadable archive: not a zip (.npz) file")
         with np.load(io.BytesIO(raw), allow_pickle=False) as data:
             missing = {"header", "index", "values", "offsets"} - set(data.files)
             if missing:
@@ -201,6 +221,8 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "allow_pickle" in detail:  # numpy's hint names an option no user has
+            detail = "it holds pickled Python objects, which are never loaded"
         raise _bad(path, f"unreadable archive: {detail}") from None
     try:
         if header_bytes.dtype != np.uint8:

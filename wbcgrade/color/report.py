@@ -100,13 +100,30 @@ def _weights_row(entry: dict, names: list[str]) -> list:
                entry.get("nonzero_weights", "")])
 
 
+_FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value):
+    """A text cell made safe from spreadsheet formula injection (OWASP "CSV Injection").
+
+    Text starting with ``=``, ``+``, ``-``, ``@``, tab or carriage return gets a
+    leading single quote, so spreadsheets show it as text instead of running
+    it; the csv module quotes the cell when needed and doubles inner quotes.
+    Numbers are left as they are (a negative loss stays a number).
+    """
+    if isinstance(value, str) and value.startswith(_FORMULA_STARTS):
+        return "'" + value
+    return value
+
+
 def _csv_text(entries: list[dict], names: list[str]) -> str:
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(["photo", "status", *names, "loss", "best_single_style",
-                     "best_single_loss", "nonzero_weights"])
-    for entry in entries:
-        writer.writerow(_weights_row(entry, names))
+    rows = [["photo", "status", *names, "loss", "best_single_style", "best_single_loss",
+             "nonzero_weights"]]
+    rows += [_weights_row(entry, names) for entry in entries]
+    for row in rows:
+        writer.writerow([csv_cell(cell) for cell in row])
     return out.getvalue()
 
 
