@@ -128,11 +128,21 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
 
     Each photo gets its own barycentric coordinates, or with --consistent the
     whole series shares one. Outputs are written atomically; a rerun skips
-    photos whose output is complete (--force redoes them). Files that are
-    not images (by extension) are ignored; unreadable photos are reported and
-    make the exit status 1.
+    photos whose output is complete (--force redoes them) and removes the
+    temporary files of a killed run. One run at a time may write into OUT_DIR.
+    Files that are not images (by extension) are ignored; unreadable photos
+    and failed writes (e.g. a full disk) are reported and make the exit
+    status 1.
     """
-    from wbcgrade.color.batch import batch_settings, plan_batch, settings_changed, write_settings
+    from wbcgrade.color._files import lock_folder
+    from wbcgrade.color.batch import (
+        batch_settings,
+        plan_batch,
+        recheck_plan,
+        settings_changed,
+        write_settings,
+    )
+    from wbcgrade.color.imageio import check_output_path
 
     opts, style_args = take_grading_options(kwargs)
     if lut is not None:
@@ -143,6 +153,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
             raise InputError(f"{lut}: LUT file name must end in .cube")
         if Path(lut).exists() and not force:
             raise InputError(f"{lut}: file exists (use --force to replace it)")
+        check_output_path(lut, overwrite=True)  # folder, writability, a regular file
         if not 2 <= lut_size <= 256:
             raise InputError("--lut-size must be between 2 and 256")
     plan = plan_batch(in_dir, out_dir, recursive=recursive, force=force,
@@ -150,38 +161,45 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
     if not plan.tasks and not plan.done:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
                                                          " (use --recursive for sub-folders)"))
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    styles = load_styles_with_progress(opts, style_args)
-    settings = batch_settings(styles, opts, consistent)
-    changed = settings_changed(out_dir, settings)
-    if changed and plan.done:
-        _warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other settings "
-              f"({', '.join(changed[:4])}); they are kept — use --force to redo them")
-    result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
-                               scheduler=scheduler, force=force, report_dir=report_dir,
-                               write_outputs=True)
-    if result.count("graded"):
-        write_settings(out_dir, settings)
-    result.time_s = time.perf_counter() - start
-    if report_dir is not None:
-        from wbcgrade.color.report import write_report
+    try:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
+    with lock_folder(out_dir, "batch"):  # one run at a time per output folder
+        plan = recheck_plan(plan, force)  # a run that held the lock may have finished some
+        start = time.perf_counter()
+        styles = load_styles_with_progress(opts, style_args)
+        settings = batch_settings(styles, opts, consistent)
+        changed = settings_changed(out_dir, settings)
+        if changed and plan.done:
+            _warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
+                  f"settings ({', '.join(changed[:4])}); they are kept — use --force to redo "
+                  "them")
+        result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
+                                   scheduler=scheduler, force=force, report_dir=report_dir,
+                                   write_outputs=True)
+        if result.count("graded"):
+            write_settings(out_dir, settings)
+        result.time_s = time.perf_counter() - start
+        if report_dir is not None:
+            from wbcgrade.color.report import write_report
 
-        path = write_report(report_dir, result, styles, opts,
-                            "consistent" if consistent else "per-photo")
-        click.echo(f"report: {path.parent / 'index.html'}")
-    print_summary(result)
-    if lut is not None:
-        grade = result.series_grade
-        if grade is None:
-            click.echo("LUT not written: no photo was graded (use --force to redo the series)")
-        else:
-            ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-            write_cube(lut, color_map_to_lut(grade.color_map, lut_size, grade.strength),
-                       title=f"wbcgrade series {Path(in_dir).name}",
-                       comments=[f"wbcgrade series grade of {in_dir}: {ranked}",
-                                 "input: encoded RGB in [0, 1] (sRGB-encoded for float images)"],
-                       overwrite=True)
-            click.echo(f"wrote {lut}")
+            path = write_report(report_dir, result, styles, opts,
+                                "consistent" if consistent else "per-photo")
+            click.echo(f"report: {path.parent / 'index.html'}")
+        print_summary(result)
+        if lut is not None:
+            grade = result.series_grade
+            if grade is None:
+                click.echo("LUT not written: no photo was graded (use --force to redo the series)")
+            else:
+                ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
+                write_cube(lut, color_map_to_lut(grade.color_map, lut_size, grade.strength),
+                           title=f"wbcgrade series {Path(in_dir).name}",
+                           comments=[f"wbcgrade series grade of {in_dir}: {ranked}",
+                                     "input: encoded RGB in [0, 1] (sRGB-encoded for float "
+                                     "images)"],
+                           overwrite=True)
+                click.echo(f"wrote {lut}")
     if result.count("failed"):
         ctx.exit(1)

@@ -13,6 +13,11 @@ output that exists is complete; it is skipped when it is newer than its photo
 and has the photo's pixel count (``force`` redoes it). Interrupting
 (Ctrl-C) cancels the queued files, lets the running ones clean up their
 temporary files, and removes any temporary file of this run that is left.
+A run first removes the temporary files a killed run left in its output
+folders (only unlocked ones: see :mod:`wbcgrade.color._files`). Local worker
+processes end when their parent dies (``PR_SET_PDEATHSIG`` and a parent-pid
+watch), so a killed batch does not go on writing. Paths sent to a Dask
+cluster are made absolute first (its workers run in another folder).
 
 Series mode (``consistent``): every photo's histogram is read first (also
 those already done, so a resumed series gets the same grade), the pooled
@@ -23,8 +28,11 @@ palette gets one vertex-checked fit and one colour map
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import glob
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -34,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from wbcgrade.color._files import check_regular_target, is_unlocked, remove_stale_temporaries
 from wbcgrade.color.grading import (
     NONZERO_THRESHOLD,
     FitSummary,
@@ -43,14 +52,20 @@ from wbcgrade.color.grading import (
     photo_histograms,
     series_grade,
 )
-from wbcgrade.color.imageio import write_image
+from wbcgrade.color.imageio import (
+    check_image_output,
+    max_image_pixels,
+    set_max_image_pixels,
+    write_image,
+)
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError, WbcgradeError
 
 __all__ = ["BatchTask", "BatchPlan", "BatchContext", "FileResult", "BatchResult",
            "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete",
-           "batch_settings", "settings_changed", "write_settings"]
+           "batch_settings", "settings_changed", "write_settings", "remove_stale_outputs",
+           "recheck_plan"]
 
 Progress = Callable[["FileResult"], None]
 
@@ -170,6 +185,23 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
     return plan
 
 
+def recheck_plan(plan: BatchPlan, force: bool = False) -> BatchPlan:
+    """Move tasks whose output became complete since planning to ``done`` (unless forced).
+
+    Used once a run holds the output folder's lock: a run that finished in
+    between is not redone.
+    """
+    if force:
+        return plan
+    tasks, done = [], list(plan.done)
+    for task in plan.tasks:
+        if task.output is not None and output_is_complete(task.source, task.output):
+            done.append(task)
+        else:
+            tasks.append(task)
+    return BatchPlan(tasks=tasks, done=done, ignored=list(plan.ignored))
+
+
 def batch_settings(styles: StyleSet, opts: GradeOptions, consistent: bool) -> dict:
     """What determines the outputs of a batch (JSON-friendly)."""
     options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opts).items()}
@@ -219,6 +251,8 @@ class BatchContext:
     sheet_dir : write a PNG sheet per photo here (None: no sheets).
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
+    max_image_pixels : decoding limit of every photo (the creating process's limit
+        by default; sent to the workers with the rest).
     """
 
     styles: StyleSet
@@ -229,6 +263,7 @@ class BatchContext:
     sheet_dir: Path | None = None
     style_pictures: dict[str, np.ndarray] | None = None
     write_outputs: bool = True
+    max_image_pixels: int = field(default_factory=max_image_pixels)
 
 
 @dataclass
@@ -321,7 +356,11 @@ def run_task(task: BatchTask, context: BatchContext,
     start = time.perf_counter()
     result = FileResult(task.relative, str(task.source),
                         None if task.output is None else str(task.output), "failed")
+    set_max_image_pixels(context.max_image_pixels)
     try:
+        if context.write_outputs and task.output is not None:  # before any work
+            check_image_output(task.output)
+            check_regular_target(task.output)
         graded = grade_photo(task.source, context.styles, context.opts, context.shared,
                              callback, stage)
         fit = graded.fit if graded.fit is not None else context.shared_fit
@@ -378,10 +417,41 @@ _WORKER_CONTEXT: BatchContext | None = None
 _WORKER_INTERRUPTED = False
 
 
-def _init_worker(context: BatchContext, threads: int) -> None:
-    """Process-pool initializer: keep the context, cap BLAS and numba threads."""
+#: How often a worker checks that its parent process is still alive (seconds).
+PARENT_WATCH_S = 1.0
+
+
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(PARENT_WATCH_S)
+        if os.getppid() != parent:
+            os._exit(1)  # the batch is gone: write nothing more (temporaries are cleaned later)
+
+
+def _die_with_parent(parent: int) -> None:
+    """End this worker as soon as the process ``parent`` dies (even by SIGKILL).
+
+    ``PR_SET_PDEATHSIG`` (Linux) kills it at once; a daemon thread watching
+    the parent pid covers other systems and the case the signal was missed.
+    """
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                     name="wbcgrade-parent-watch").start()
+
+
+def _init_worker(context: BatchContext, threads: int, parent: int | None = None) -> None:
+    """Process-pool initializer: die with the parent, keep the context, cap threads."""
     global _WORKER_CONTEXT
+    if parent is not None:
+        _die_with_parent(parent)
     _WORKER_CONTEXT = context
+    set_max_image_pixels(context.max_image_pixels)
     os.environ["WBCGRADE_THREADS"] = str(max(1, threads))  # the core's kernel-product threads
     with contextlib.suppress(ImportError):
         from threadpoolctl import threadpool_limits
@@ -405,8 +475,10 @@ def _run_in_worker(task: BatchTask) -> FileResult:
         raise
 
 
-def _histograms_in_worker(task: BatchTask, bins: tuple[int, ...],
-                          max_pixels: int) -> dict[int, np.ndarray] | str:
+def _histograms_in_worker(task: BatchTask, bins: tuple[int, ...], max_pixels: int,
+                          max_image: int | None = None) -> dict[int, np.ndarray] | str:
+    if max_image is not None:
+        set_max_image_pixels(max_image)
     try:
         return photo_histograms(task.source, bins, max_pixels)
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
@@ -452,14 +524,15 @@ class _Executor:
     def __enter__(self) -> _Executor:
         if self.scheduler is not None:
             self.client = _dask_client(self.scheduler)
-            self.context_future = self.client.scatter(self.context, broadcast=True)
+            self.context_future = self.client.scatter(_absolute_context(self.context),
+                                                      broadcast=True)
         elif self.jobs > 1:
             import multiprocessing
 
             threads = max(1, _cpu_count() // self.jobs)
             self.pool = ProcessPoolExecutor(
                 self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                initializer=_init_worker, initargs=(self.context, threads))
+                initializer=_init_worker, initargs=(self.context, threads, os.getpid()))
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -478,9 +551,10 @@ class _Executor:
             threads = max(1, _cpu_count() // self.jobs)
             self.pool = ProcessPoolExecutor(
                 self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                initializer=_init_worker, initargs=(self.context, threads))
+                initializer=_init_worker, initargs=(self.context, threads, os.getpid()))
         if self.client is not None:
-            self.context_future = self.client.scatter(self.context, broadcast=True)
+            self.context_future = self.client.scatter(_absolute_context(self.context),
+                                                      broadcast=True)
 
     def grade(self, tasks: Iterable[BatchTask], callback=None,
               stage=None) -> Iterator[tuple[BatchTask, FileResult]]:
@@ -498,7 +572,8 @@ class _Executor:
         tasks = list(tasks)
         max_pixels = self.context.opts.max_pixels
         if self.client is not None:
-            yield from self._dask(tasks, _histograms_in_worker, bins, max_pixels)
+            yield from self._dask(tasks, _histograms_in_worker, bins, max_pixels,
+                                  self.context.max_image_pixels)
         elif self.pool is not None:
             yield from self._pool(tasks, _histograms_in_worker, bins, max_pixels)
         else:
@@ -520,24 +595,72 @@ class _Executor:
     def _dask(self, tasks, function, *args):
         from dask.distributed import as_completed
 
-        futures = {self.client.submit(function, task, *args, pure=False): task
+        # Workers run in another folder (often on another machine): send absolute paths.
+        futures = {self.client.submit(function, _absolute_task(task), *args, pure=False): task
                    for task in tasks}
         try:
             for future in as_completed(list(futures)):
-                yield futures[future], future.result()
+                task, value = futures[future], future.result()
+                if isinstance(value, FileResult):  # report the paths as the user gave them
+                    value.source = str(task.source)
+                    value.output = None if task.output is None else str(task.output)
+                yield task, value
         finally:
             self.client.cancel(list(futures))
 
 
+def _absolute_task(task: BatchTask) -> BatchTask:
+    return dataclasses.replace(task, source=Path(os.path.abspath(task.source)),
+                               output=None if task.output is None
+                               else Path(os.path.abspath(task.output)))
+
+
+def _absolute_context(context: BatchContext) -> BatchContext:
+    if context.sheet_dir is None:
+        return context
+    return dataclasses.replace(context, sheet_dir=Path(os.path.abspath(context.sheet_dir)))
+
+
+def _output_folders(tasks: Iterable[BatchTask]) -> dict[Path, set[str]]:
+    folders: dict[Path, set[str]] = {}
+    for task in tasks:
+        if task.output is not None:
+            folders.setdefault(task.output.parent, set()).add(task.output.name)
+    return folders
+
+
+def remove_stale_outputs(plan: BatchPlan, extra_folders: Iterable[Path] = (),
+                         min_age: float | None = None) -> list[Path]:
+    """Remove the temporary files a killed run left beside this plan's outputs.
+
+    Only the project's own temporaries that no live process holds locked
+    are removed (see :func:`wbcgrade.color._files.remove_stale_temporaries`);
+    -> the removed paths.
+    """
+    folders = _output_folders(plan.tasks + plan.done)
+    for folder in extra_folders:
+        folders.setdefault(Path(folder), set())
+    removed: list[Path] = []
+    for folder, names in folders.items():
+        if folder.is_dir():
+            kwargs = {} if min_age is None else {"min_age": min_age}
+            removed += remove_stale_temporaries(folder, names, **kwargs)
+    return removed
+
+
 def _remove_temporaries(tasks: Iterable[BatchTask], since_ns: int) -> None:
-    """Delete temporary files this run may have left beside the outputs (after an interrupt)."""
+    """Delete temporary files this run left beside the outputs (after an interrupt).
+
+    Hidden ``.<stem>.*<ext>`` files of this run's outputs made since it
+    started go, unless a live writer still holds them locked.
+    """
     for task in tasks:
         if task.output is None or not task.output.parent.is_dir():
             continue
         for tmp in task.output.parent.glob(
                 f".{glob.escape(task.output.stem)}.*{glob.escape(task.output.suffix)}"):
             with contextlib.suppress(OSError):
-                if tmp.stat().st_mtime_ns >= since_ns:
+                if tmp.stat().st_mtime_ns >= since_ns and is_unlocked(tmp, 0.0):
                     tmp.unlink()
 
 
@@ -561,6 +684,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
     on_read : ``on_read(done, total)`` while a series reads its photos' histograms.
     """
     start = time.perf_counter()
+    extra = [] if context.sheet_dir is None else [context.sheet_dir, context.sheet_dir / "sheets"]
+    remove_stale_outputs(plan, extra)
     since = time.time_ns() - 1_000_000_000
     results: list[FileResult] = [
         FileResult(t.relative, str(t.source), str(t.output), "skipped",
