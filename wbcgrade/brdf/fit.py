@@ -62,7 +62,7 @@ import numpy as np
 
 from wbcgrade.brdf.masked import masked_loss
 from wbcgrade.core import Geometry, Loss, barycenter, barycentric_coordinates, get_loss
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, NumericalError
 
 DEFAULT_LOSS = "sinkhorn-divergence"
 DEFAULT_N_ITER = 60
@@ -212,7 +212,11 @@ def fit_brdf(
 
     rows = np.moveaxis(measured, -1, -2)  # (N, 3, N)
     row_mask = np.broadcast_to(mask[:, None, :], rows.shape)
-    kept_sums = np.where(row_mask, rows, 0.0).sum(axis=-1)  # (N, 3)
+    with np.errstate(over="ignore"):  # huge values: refused just below, in one line
+        kept_sums = np.where(row_mask, rows, 0.0).sum(axis=-1)  # (N, 3)
+    if not np.isfinite(kept_sums).all():
+        raise InputError(f"the measurement's values (up to {float(measured.max()):.3g}) are too "
+                         "large to add up in double precision; rescale them")
     active = kept_sums > 0  # rows the loss can see
     if fit_incoming is not None:
         chosen = np.zeros(n, dtype=bool)
@@ -246,6 +250,10 @@ def fit_brdf(
         fallback = np.tensordot(weights, database_sums, axes=1)
         scale = np.where(no_entry, fallback, scale)
     values = np.moveaxis(P * scale[..., None], -1, -2)
+    if not (np.isfinite(weights).all() and np.isfinite(values).all()
+            and np.isfinite(result.loss) and np.isfinite(result.initial_loss)):
+        raise NumericalError("the fit gave NaN or infinite values (weights, fitted BRDF or "
+                             "loss); check the measurement's scale and the loss")
     return BRDFFit(
         weights=weights,
         values=np.ascontiguousarray(values),

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from wbcgrade.brdf.sampling import sample_spacing
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, NumericalError
 
 
 def check_values(values: np.ndarray, n: int | None = None, name: str = "BRDF") -> np.ndarray:
@@ -125,11 +125,16 @@ def psnr(reference: np.ndarray, estimate: np.ndarray) -> float:
     estimate = np.asarray(estimate, dtype=np.float64)
     if reference.shape != estimate.shape:
         raise InputError(f"PSNR of arrays of shapes {reference.shape} and {estimate.shape}")
-    mse = float(np.mean((reference - estimate) ** 2))
-    peak = float(np.max(np.abs(reference)))
+    peak = float(np.max(np.abs(reference))) if reference.size else 0.0
+    if not np.isfinite(peak) or not np.all(np.isfinite(estimate)):
+        raise NumericalError("PSNR of BRDFs holding NaN or infinite values")
+    if peak == 0.0:
+        return float("inf") if not np.any(estimate) else float("-inf")
+    # Relative to the peak, so that huge but finite values do not overflow the squares.
+    mse = float(np.mean((reference / peak - estimate / peak) ** 2))
     if mse == 0.0:
         return float("inf")
-    return 10.0 * np.log10(peak * peak / mse)
+    return float(-10.0 * np.log10(mse))
 
 
 def decimation_mask(n_incoming: int, n_outgoing: int, keep: float, seed: int = 0) -> np.ndarray:
