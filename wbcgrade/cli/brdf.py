@@ -19,6 +19,7 @@ from wbcgrade.brdf.fit import (
     DEFAULT_TOL,
     fit_brdf,
 )
+from wbcgrade.errors import NumericalError
 
 
 @click.group("brdf")
@@ -169,7 +170,10 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
             result = fit_brdf(reference, base, geometry, mask=mask, loss=loss, n_iter=n_iter,
                               max_iter=max_iter, tol=tol, fit_incoming=subset,
                               callback=progress)
-        results.append((label, result, sampled.psnr(reference, result.values)))
+        psnr = sampled.psnr(reference, result.values)
+        if np.isnan(psnr):
+            raise NumericalError(f"the {label} fit of {measured_path} has no defined PSNR")
+        results.append((label, result, psnr))
 
     label, final, _ = results[1] if keeps and compare else results[0]
     io.save_brdf(out, final.values, dirs, name=f"{measured_path.stem} {label} fit")
@@ -189,30 +193,37 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
             click.echo(f"Warning: the {label} fit stopped before converging (raise --max-iter)",
                        err=True)
     if as_json:
+        number = _json_number
         click.echo(json.dumps({
             "measured": str(measured_path),
             "database": names,
             "directions": directions,
             "fit_directions": directions if subset is None else len(subset),
-            "gamma": geometry.gamma,
+            "gamma": number(geometry.gamma),
             "loss": loss,
             "fits": [{
                 "label": label,
                 "kept_fraction": result.kept_fraction,
                 "weights": dict(zip(names, (float(w) for w in result.weights), strict=True)),
-                "psnr_db": psnr,
-                "loss": result.loss,
-                "initial_loss": result.initial_loss,
+                "psnr_db": number(psnr),  # null: an exact fit (infinite PSNR)
+                "loss": number(result.loss),
+                "initial_loss": number(result.initial_loss),
                 "n_evaluations": result.n_evaluations,
                 "converged": result.converged,
                 "time_s": round(result.time_s, 3),
             } for label, result, psnr in results],
             "output": str(out),
             "png": None if png_path is None else str(png_path),
-        }, indent=2))
+        }, indent=2, allow_nan=False))
         return
     _print_table(names, results, loss)
     click.echo(f"wrote {out}" + ("" if png_path is None else f" and {png_path}"))
+
+
+def _json_number(value: float) -> float | None:
+    """``value`` as a float for JSON, None where it is not finite (JSON has no NaN or inf)."""
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def _ranked(names: list[str], weights: np.ndarray) -> list[tuple[str, float]]:
