@@ -6,7 +6,9 @@ into the *unit frame* ``[0, 1]^3`` (the frame of the core's grid points,
 and the completed surface is mapped back with the inverse transform.
 
 Normalisation (:func:`normalization_transform`)
-    centre = the mesh's volume centroid, moved to ``(0.5, 0.5, 0.5)``;
+    centre = the mesh's volume centroid (for an open or non-manifold mesh:
+    of the solid its winding numbers enclose, from a 32^3 voxelisation),
+    moved to ``(0.5, 0.5, 0.5)``;
     scale  = the largest coordinate distance from the centroid is mapped to
     ``0.5 - margin``. Centring on the centroid (not the bounding box) keeps a
     partial scan close to where its complete shape would sit when the missing
@@ -333,7 +335,7 @@ def voxelize(
     winding number ``|w| >= 1/2`` (:mod:`wbcgrade.shape.winding`). Only those
     points pay for winding numbers (measured at 64^3: about 0.6k of 2.1M
     samples for a cow with two holes, 118k for lion.off with 205 boundary
-    edges, 1.2 s).
+    edges, 1.1 s; 0.14 s for the cow).
 
     Parameters
     ----------
