@@ -33,7 +33,28 @@ def _listed(path):
     return sorted(p.name for p in path.parent.iterdir())
 
 
+# Display pixels of the stored image [[0, 1, 2], [3, 4, 5]] per EXIF/TIFF Orientation.
+_EXIF_DISPLAY = {
+    1: [[0, 1, 2], [3, 4, 5]],
+    2: [[2, 1, 0], [5, 4, 3]],  # mirror horizontal
+    3: [[5, 4, 3], [2, 1, 0]],  # rotate 180
+    4: [[3, 4, 5], [0, 1, 2]],  # mirror vertical
+    5: [[0, 3], [1, 4], [2, 5]],  # transpose: row 0 = left side, column 0 = top
+    6: [[3, 0], [4, 1], [5, 2]],  # rotate 90 clockwise
+    7: [[5, 2], [4, 1], [3, 0]],  # transverse: row 0 = right side, column 0 = bottom
+    8: [[2, 5], [1, 4], [0, 3]],  # rotate 90 counter-clockwise
+}
+
+
 @pytest.mark.parametrize("orientation", range(1, 9))
+def test_orientation_follows_exif_specification(orientation):
+    stored = np.arange(6, dtype=np.float32).reshape(2, 3, 1)
+    np.testing.assert_array_equal(orient(stored, orientation)[..., 0],
+                                  _EXIF_DISPLAY[orientation])
+
+
+# OpenImageIO before 3.2 swaps 5 and 7 in reorient() (OIIO issue #4661, fixed by PR #5350).
+@pytest.mark.parametrize("orientation", [1, 2, 3, 4, 6, 8])
 def test_orientation_matches_openimageio(orientation, rng):
     stored = rng.random((3, 5, 3)).astype(np.float32)
     buf = oiio.ImageBuf(oiio.ImageSpec(5, 3, 3, "float"))
