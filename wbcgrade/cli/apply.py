@@ -9,14 +9,9 @@ import click
 from tqdm import tqdm
 
 from wbcgrade.cli._progress import style_progress
-from wbcgrade.cli.grading_options import max_image_pixels_option
-from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.cli.grading_options import grading_options, take_grading_options
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE
 from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
-from wbcgrade.color.transfer import LOSSES, GradeOptions
-from wbcgrade.color.weights import parse_weights
-
-_DEFAULTS = GradeOptions()
 
 
 def _warn(message: str) -> None:
@@ -52,52 +47,19 @@ def _print_report(report, as_json: bool) -> None:
 
 @click.command("apply")
 @click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
-@click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
-              help="Folder of style photos (non-images are skipped).")
-@click.option("--preset", default=None, metavar="NAME_OR_FILE",
-              help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz file.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
-@click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
-              help="Bins per axis of the photo's histogram and the colour map (the paper's "
-                   "128; 64 or 32 are faster and coarser).")
-@click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
-              help="Bins per axis of the grid the weights are fitted on.")
-@click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
-              help="Fit loss between the barycenter and the photo's histogram.")
-@click.option("--width", type=float, default=_DEFAULTS.width, show_default=True,
-              help="Fit kernel width in bins of the fit grid (gamma = 2 (width/(fit_bins-1))^2).")
-@click.option("--gamma", type=float, default=None,
-              help="Fit entropic regularisation gamma (overrides --width).")
-@click.option("--transfer-width", type=float, default=None,
-              help="Kernel width in bins of the transfer grid; smaller keeps colours crisper "
-                   "but converges slower [default: max(1, (bins-1)/31), sigma = 1/31 of the "
-                   "colour cube].")
-@click.option("--iterations", "n_iter", type=int, default=_DEFAULTS.n_iter, show_default=True,
-              help="Barycenter iterations.")
-@click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
-              help="L-BFGS iterations of the fit at most.")
-@click.option("--weights", "weights_text", default=None, metavar="A,B,C",
-              help="Use these style weights and skip the fit (order: sorted file names of "
-                   "--style DIR, or the preset's order shown by `preset list`).")
-@click.option("--strength", type=float, default=1.0, show_default=True,
-              help="Blend: x -> (1-t) x + t T(x).")
+@grading_options
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Also write the grade as a 3-D LUT (.cube).")
 @click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
               help="Nodes per axis of the LUT.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
-@max_image_pixels_option
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
-@click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
-@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
-              help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or ~/.cache/wbcgrade].")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
               "index.html) into this folder.")
-def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, transfer_width,
-          n_iter, max_iter, weights_text, strength, lut, lut_size, overwrite, as_json,
-          no_cache, cache_dir, report_dir):
+def apply(photo, output, lut, lut_size, overwrite, as_json, report_dir, **kwargs):
     """Grade PHOTO towards the barycenter of style palettes closest to its own.
 
     The style palettes come from a folder of photos (--style DIR) or a preset
@@ -105,18 +67,14 @@ def apply(photo, style_dir, preset, output, bins, fit_bins, loss, width, gamma, 
     ICC profile. Float (EXR) photos are graded in the sRGB-encoded domain;
     values above 1 keep their intensity and get the grade of their hue.
     """
-    opts = GradeOptions(bins=bins, fit_bins=fit_bins, loss=loss, width=width, gamma=gamma,
-                        transfer_width=transfer_width, n_iter=n_iter, max_iter=max_iter,
-                        strength=strength,
-                        weights=parse_weights(weights_text) if weights_text else None)
-    opts.validate()
-    if fit_bins > 32:
-        _warn(f"--fit-bins {fit_bins}: fits on large grids take minutes (default 16)")
+    opts, style_args = take_grading_options(kwargs)
+    if opts.fit_bins > 32:
+        _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes (default 16)")
     check_outputs(photo, output, lut, lut_size, overwrite)
-    cache = HistogramCache(cache_dir, enabled=not no_cache)
     start = time.perf_counter()
     with style_progress() as progress:
-        styles = load_styles(style_dir, preset, bins, cache=cache, warn=_warn, progress=progress)
+        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
+                             cache=style_args["cache"], warn=_warn, progress=progress)
     timings = {"styles": time.perf_counter() - start}
 
     with tqdm(desc="fit", unit="eval", disable=None, leave=False) as bar:

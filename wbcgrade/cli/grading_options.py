@@ -1,7 +1,7 @@
 """Click options shared by the commands that grade photos (``batch``, ``report``).
 
-Same names, defaults and help as ``wbcgrade apply``; ``apply`` could use
-:func:`grading_options` too.
+One list of options, names, defaults and help for ``apply``, ``batch`` and
+``report``.
 """
 
 from __future__ import annotations
@@ -40,6 +40,28 @@ _OPTIONS = [
                  help="Use these style weights and skip the fit."),
     click.option("--strength", type=float, default=1.0, show_default=True,
                  help="Blend: x -> (1-t) x + t T(x)."),
+    click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
+                 metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
+                 "(unbalanced transport: palette colours the photo has no use for are left "
+                 "out; smaller = more relaxed, e.g. 0.05) [default: balanced]."),
+    click.option("--map-size", type=int, default=_DEFAULTS.map_size, show_default=True,
+                 help="Nodes per axis of the smooth colour map (the grade is this LUT)."),
+    click.option("--smoothness", type=float, default=_DEFAULTS.smoothness, show_default=True,
+                 help="Curvature penalty of the smooth colour map (0 with --stiffness 0: "
+                      "the raw transport map, the paper's)."),
+    click.option("--stiffness", type=float, default=_DEFAULTS.stiffness, show_default=True,
+                 help="First-difference penalty of the colour map (holds its local gain "
+                      "near 1: less noise amplification, less contrast change)."),
+    click.option("--regrain/--no-regrain", default=_DEFAULTS.regrain, show_default=True,
+                 help="Keep the input's grain and edges (edge-aware local linear model; "
+                      "off: every pixel goes exactly through the LUT)."),
+    click.option("--regrain-radius", type=float, default=_DEFAULTS.regrain_radius,
+                 show_default=True, help="Regrain window radius, fraction of the long side."),
+    click.option("--regrain-eps", type=float, default=_DEFAULTS.regrain_eps,
+                 show_default=True, help="Regrain: input variations below about "
+                 "sqrt(eps) (encoded units) are kept as grain."),
+    click.option("--preserve-luminance", is_flag=True,
+                 help="Change hue and chroma only; keep each colour's lightness (Oklab)."),
     click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms."),
     click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
                  help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or "
@@ -60,9 +82,11 @@ max_image_pixels_option = click.option(
          f"decoding [default: $WBCGRADE_MAX_IMAGE_PIXELS or {DEFAULT_MAX_IMAGE_PIXELS:_}].")
 _OPTIONS.append(max_image_pixels_option)
 
-GRADING_KEYS = ("style_dir", "preset", "bins", "fit_bins", "loss", "width", "gamma",
-                "transfer_width", "n_iter", "max_iter", "weights_text", "strength", "no_cache",
-                "cache_dir")
+#: Options that are GradeOptions fields of the same name.
+_PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "n_iter",
+               "max_iter", "strength", "relaxation", "map_size", "smoothness", "stiffness",
+               "regrain", "regrain_radius", "regrain_eps", "preserve_luminance")
+GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
 
 
 def grading_options(function):
@@ -79,10 +103,7 @@ def take_grading_options(kwargs: dict) -> tuple[GradeOptions, dict]:
     """
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
     text = values["weights_text"]
-    opts = GradeOptions(bins=values["bins"], fit_bins=values["fit_bins"], loss=values["loss"],
-                        width=values["width"], gamma=values["gamma"],
-                        transfer_width=values["transfer_width"], n_iter=values["n_iter"],
-                        max_iter=values["max_iter"], strength=values["strength"],
+    opts = GradeOptions(**{key: values[key] for key in _PLAIN_KEYS},
                         weights=parse_weights(text) if text else None)
     opts.validate()
     cache = HistogramCache(values["cache_dir"], enabled=not values["no_cache"])

@@ -28,11 +28,11 @@ from wbcgrade.color.transfer import (
     Grade,
     GradeOptions,
     _fit_geometry,
-    color_transfer_map,
     fit_weights,
+    grade_color_map,
     grade_image,
     palette_barycenter,
-    transfer_width_bins,
+    regrain_settings,
 )
 
 __all__ = ["NONZERO_THRESHOLD", "FitSummary", "PhotoGrade", "fit_geometry", "vertex_losses",
@@ -151,7 +151,8 @@ def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: Gr
         init[best] = 0.95
         refit = barycentric_coordinates(target, hists, geometry, loss=opts.loss,
                                         n_iter=opts.n_iter, init_weights=init,
-                                        max_iter=opts.max_iter, callback=callback)
+                                        max_iter=opts.max_iter, tol=opts.fit_tol,
+                                        callback=callback)
         info["uniform_start_loss"] = loss
         info["evaluations"] += refit.n_evaluations
         if refit.loss < vertices[best]:
@@ -223,8 +224,6 @@ def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
 
     Costs one fit, one barycenter and one Sinkhorn, whatever the number of photos.
     """
-    from wbcgrade.core import GridGeometry
-
     opts.validate(len(styles.names))
     say = stage or (lambda name: None)
     timings: dict[str, float] = {}
@@ -233,22 +232,16 @@ def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
     timings["fit"] = summary.time_s
     say("barycenter")
     start = time.perf_counter()
-    width = transfer_width_bins(opts)
-    geometry = GridGeometry.with_width((opts.bins,) * 3, width)
     target, palette_info = palette_barycenter(styles.at_bins, summary.weights, opts)
     timings["barycenter"] = time.perf_counter() - start
     say("transfer")
     start = time.perf_counter()
-    color_map, result = color_transfer_map(pooled, target, width, opts.sinkhorn_tol,
-                                           opts.sinkhorn_max_iter, opts.floor)
+    color_map, map_info = grade_color_map(pooled, target, opts)
     timings["transfer"] = time.perf_counter() - start
-    info = {"fit": summary.info, "palette": palette_info,
-            "sinkhorn": {"iterations": int(result.n_iter), "error": float(result.error),
-                         "converged": bool(result.converged), "bins": opts.bins,
-                         "gamma": float(geometry.gamma), "width_bins": width}}
+    info = {"fit": summary.info, "palette": palette_info, **map_info}
     grade = Grade(names=list(styles.names), weights=summary.weights, loss=summary.loss,
                   color_map=color_map, strength=opts.strength, timings=timings, info=info,
-                  barycenter=target)
+                  barycenter=target, regrain=regrain_settings(opts))
     return grade, summary
 
 

@@ -55,6 +55,7 @@ class GradeReport:
             "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
             "loss": self.grade.loss,
             "fitted": self.grade.loss is not None,
+            "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
             **{k: v for k, v in self.grade.info.items()},
         }

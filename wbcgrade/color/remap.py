@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["apply_color_map", "identity_map", "blend_map"]
+__all__ = ["apply_color_map", "identity_map", "blend_map", "keep_lightness"]
 
 
 @numba.njit(parallel=True, cache=True, fastmath=False)
@@ -75,3 +75,32 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
     out = np.empty_like(colors)
     _trilinear(colors, table, np.float32(strength), out)
     return out.reshape(shape)
+
+
+def keep_lightness(color_map: np.ndarray) -> np.ndarray:
+    """A colour map that keeps each input colour's Oklab lightness (``--preserve-luminance``).
+
+    Every node's output takes the hue and chroma (Oklab a, b) of the map and
+    the lightness L of the node's own colour; colours outside the sRGB gamut
+    are clipped. Encoded sRGB in and out (colour-science conversions).
+
+    Parameters
+    ----------
+    color_map : (n, n, n, 3) encoded colours in [0, 1].
+
+    Returns
+    -------
+    (n, n, n, 3) float32 in [0, 1].
+    """
+    from wbcgrade.color._colour import colour
+
+    def to_oklab(encoded):
+        linear = colour.cctf_decoding(np.clip(encoded, 0.0, 1.0), function="sRGB")
+        return colour.XYZ_to_Oklab(colour.RGB_to_XYZ(linear, "sRGB"))
+
+    source = to_oklab(identity_map(color_map.shape[0], np.float64))
+    mapped = to_oklab(np.asarray(color_map, dtype=np.float64))
+    mapped[..., 0] = source[..., 0]
+    linear = colour.XYZ_to_RGB(colour.Oklab_to_XYZ(mapped), "sRGB")
+    encoded = colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB")
+    return np.clip(encoded, 0.0, 1.0).astype(np.float32)

@@ -37,11 +37,19 @@ import numpy as np
 
 from wbcgrade.color.histogram import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS, add_floor, image_histogram
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.regrain import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS, regrain
+from wbcgrade.color.remap import apply_color_map, keep_lightness
+from wbcgrade.color.smooth_map import (
+    DEFAULT_MAP_SIZE,
+    DEFAULT_SMOOTHNESS,
+    DEFAULT_STIFFNESS,
+    fit_smooth_map,
+)
+from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError, NumericalError
 
-__all__ = ["GradeOptions", "Grade", "fit_weights", "color_transfer_map", "grade_image",
-           "parse_weights"]
+__all__ = ["GradeOptions", "Grade", "fit_weights", "color_transfer_map", "grade_color_map",
+           "grade_image", "parse_weights"]
 
 LOSSES = ("quadratic", "l1", "kl", "wasserstein")
 
@@ -76,6 +84,22 @@ class GradeOptions:
     sinkhorn_tol, sinkhorn_max_iter : transfer Sinkhorn stopping rule
         (L1 error on the photo's marginal).
     max_pixels : photos larger than this are subsampled for histograms.
+    fit_tol : the weight fit stops when an L-BFGS step lowers the (normalised)
+        loss by less than this.
+    relaxation : rho > 0 relaxes the palette side of the transfer plan by
+        ``rho KL`` (unbalanced transport; colours of the palette the photo has
+        no use for are left out instead of forced onto it); None: balanced.
+    map_size : nodes per axis of the smooth colour map (the grade is this
+        lattice LUT; ``--lut`` at the same size writes it exactly).
+    smoothness, stiffness : curvature and first-difference penalties of the
+        smooth map fit (:mod:`wbcgrade.color.smooth_map`); both 0: the raw
+        barycentric projection on the transfer grid is the map (the paper's).
+    regrain : keep the input's grain and edges (:mod:`wbcgrade.color.regrain`).
+    regrain_radius : window radius as a fraction of the photo's long side.
+    regrain_eps : below this variance (encoded units squared) input detail
+        is kept as it is.
+    preserve_luminance : keep each colour's Oklab lightness, change only its
+        hue and chroma.
     """
 
     bins: int = 128
@@ -93,6 +117,15 @@ class GradeOptions:
     sinkhorn_tol: float = 1e-3
     sinkhorn_max_iter: int = 2000
     max_pixels: int = DEFAULT_MAX_PIXELS
+    fit_tol: float = 1e-6
+    relaxation: float | None = None
+    map_size: int = DEFAULT_MAP_SIZE
+    smoothness: float = DEFAULT_SMOOTHNESS
+    stiffness: float = DEFAULT_STIFFNESS
+    regrain: bool = True
+    regrain_radius: float = DEFAULT_REGRAIN_RADIUS
+    regrain_eps: float = DEFAULT_REGRAIN_EPS
+    preserve_luminance: bool = False
 
     def validate(self, n_styles: int | None = None) -> None:
         """Raise InputError on an option out of range."""
@@ -115,6 +148,20 @@ class GradeOptions:
             raise InputError("floor must be in [0, 1)")
         if self.n_iter < 1 or self.max_iter < 1:
             raise InputError("iteration counts must be at least 1")
+        if self.relaxation is not None and not (np.isfinite(self.relaxation)
+                                                and self.relaxation > 0):
+            raise InputError("--relax must be a positive number")
+        if not 2 <= self.map_size <= 129:
+            raise InputError("--map-size must be between 2 and 129")
+        for name, value in (("--smoothness", self.smoothness), ("--stiffness", self.stiffness)):
+            if not (np.isfinite(value) and value >= 0):
+                raise InputError(f"{name} must be a non-negative number")
+        for name, value in (("--regrain-radius", self.regrain_radius),
+                            ("--regrain-eps", self.regrain_eps)):
+            if not (np.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be positive")
+        if not (np.isfinite(self.fit_tol) and self.fit_tol > 0):
+            raise InputError("the fit tolerance must be positive")
         if self.weights is not None and n_styles is not None and len(self.weights) != n_styles:
             raise InputError(f"--weights gives {len(self.weights)} numbers for {n_styles} styles")
 
@@ -124,17 +171,6 @@ def transfer_width_bins(opts: GradeOptions) -> float:
     if opts.transfer_width is not None:
         return float(opts.transfer_width)
     return max(1.0, (opts.bins - 1) / 31.0)
-
-
-def parse_weights(text: str) -> list[float]:
-    """'a,b,c' -> weights normalised to sum 1 (InputError when malformed)."""
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise InputError(f"--weights {text!r}: expected comma-separated numbers") from None
-    if not values or any(not np.isfinite(v) or v < 0 for v in values) or sum(values) <= 0:
-        raise InputError(f"--weights {text!r}: need non-negative numbers, not all zero")
-    return [v / sum(values) for v in values]
 
 
 @dataclass
@@ -152,6 +188,7 @@ class Grade:
     timings : seconds per stage.
     info : fit and Sinkhorn diagnostics (JSON-friendly).
     barycenter : (n, n, n) the target palette on the transfer grid.
+    regrain : (radius, eps) of the regrain step applied to images, or None.
     """
 
     names: list[str]
@@ -162,10 +199,18 @@ class Grade:
     timings: dict[str, float] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     barycenter: np.ndarray | None = None
+    regrain: tuple[float, float] | None = None
 
     def apply(self, encoded: np.ndarray) -> np.ndarray:
-        """Grade (..., 3) encoded colours in [0, 1] -> float32 (..., 3)."""
-        return apply_color_map(encoded, self.color_map, self.strength)
+        """Grade encoded colours in [0, 1] -> float32, same shape.
+
+        An (H, W, 3) image also goes through the regrain step when the grade
+        has one; other shapes (lists of colours) get the colour map only.
+        """
+        mapped = apply_color_map(encoded, self.color_map, self.strength)
+        if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
+            mapped = regrain(encoded, mapped, *self.regrain)
+        return mapped
 
     def ranked(self) -> list[tuple[str, float]]:
         """(name, weight) sorted by decreasing weight."""
@@ -201,12 +246,13 @@ def fit_weights(photo_hist: np.ndarray, style_hists: np.ndarray, opts: GradeOpti
     target = add_floor(photo_hist, opts.floor)
     hists = np.stack([add_floor(h, opts.floor) for h in style_hists])
     return barycentric_coordinates(target, hists, geometry, loss=opts.loss, n_iter=opts.n_iter,
-                                   max_iter=opts.max_iter, callback=callback)
+                                   max_iter=opts.max_iter, tol=opts.fit_tol, callback=callback)
 
 
 def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: float,
                        tol: float = 1e-3, max_iter: int = 2000, floor: float = DEFAULT_FLOOR,
-                       schedule: Sequence[float] = (4.0, 2.0), coarsest: int = 32):
+                       schedule: Sequence[float] = (4.0, 2.0), coarsest: int = 32,
+                       relaxation: float | None = None):
     """Colour map moving a photo's colours onto a target palette.
 
     Entropic transport (Sinkhorn) between the photo's histogram and the
@@ -246,7 +292,7 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
                 if shape_prev != geometry.shape:
                     init = refine_grid(init, geometry.shape)
             result = sinkhorn(p, q, geometry, tol=tol if factor == 1.0 else max(tol, 1e-2),
-                              max_iter=max_iter, init_log_b=init)
+                              max_iter=max_iter, init_log_b=init, relaxation=relaxation)
             log_b, gamma_prev, shape_prev = result.log_b, geometry.gamma, geometry.shape
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):
@@ -287,6 +333,55 @@ def palette_barycenter(style_hists: Callable[[int], np.ndarray], weights: np.nda
     return target, {"bins": m, "gamma": float(geometry.gamma), "backend": solver.last_backend}
 
 
+def grade_color_map(photo_hist: np.ndarray, target: np.ndarray,
+                    opts: GradeOptions) -> tuple[np.ndarray, dict]:
+    """The colour map of a grade: transport to the palette, then a smooth lattice fit.
+
+    Sinkhorn between the photo's histogram and the target palette (relaxed on
+    the palette's side when ``opts.relaxation`` is set), the barycentric
+    projection of the plan on the transfer grid, then the smooth map fitted
+    to it, weighted by the photo's colours (``opts.map_size`` nodes a side;
+    the raw projection when ``opts.smoothness`` and ``opts.stiffness`` are 0),
+    and the photo's lightness put back when ``opts.preserve_luminance``.
+
+    Parameters
+    ----------
+    photo_hist, target : (n, n, n) histograms on the transfer grid (n = opts.bins).
+
+    Returns
+    -------
+    color_map : (m, m, m, 3) float32 in [0, 1]
+    info : Sinkhorn and map diagnostics (JSON-friendly)
+    """
+    from wbcgrade.core import GridGeometry
+
+    width = transfer_width_bins(opts)
+    raw, result = color_transfer_map(photo_hist, target, width, opts.sinkhorn_tol,
+                                     opts.sinkhorn_max_iter, opts.floor,
+                                     relaxation=opts.relaxation)
+    info = {"sinkhorn": {"iterations": int(result.n_iter), "error": float(result.error),
+                         "converged": bool(result.converged), "bins": opts.bins,
+                         "gamma": float(GridGeometry.with_width((opts.bins,) * 3, width).gamma),
+                         "width_bins": width, "relaxation": opts.relaxation}}
+    color_map = raw
+    if opts.smoothness > 0 or opts.stiffness > 0:
+        color_map = fit_smooth_map(raw, photo_hist, opts.map_size, opts.smoothness,
+                                   opts.stiffness)
+        info["map"] = {"size": opts.map_size, "smoothness": opts.smoothness,
+                       "stiffness": opts.stiffness}
+    else:
+        info["map"] = {"size": opts.bins, "smoothness": 0.0, "stiffness": 0.0}
+    if opts.preserve_luminance:
+        color_map = keep_lightness(color_map)
+    info["map"]["preserve_luminance"] = opts.preserve_luminance
+    return color_map, info
+
+
+def regrain_settings(opts: GradeOptions) -> tuple[float, float] | None:
+    """(radius, eps) of the regrain step of a grade, or None when it is off."""
+    return (opts.regrain_radius, opts.regrain_eps) if opts.regrain else None
+
+
 def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
                 alpha: np.ndarray | None = None,
                 callback: Callable[[int, np.ndarray, float], None] | None = None,
@@ -324,18 +419,10 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
         info["fit"] = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
                        "converged": fit.converged, "initial_loss": float(fit.initial_loss),
                        "bins": opts.fit_bins, "gamma": float(_fit_geometry(opts).gamma)}
-    from wbcgrade.core import GridGeometry
-
-    width = transfer_width_bins(opts)
-    geometry = GridGeometry.with_width((opts.bins,) * 3, width)
     target, info["palette"] = timed("barycenter", palette_barycenter, styles.at_bins, weights,
                                     opts)
-    color_map, result = timed("transfer", color_transfer_map, photo_hist, target,
-                              width, opts.sinkhorn_tol, opts.sinkhorn_max_iter,
-                              opts.floor)
-    info["sinkhorn"] = {"iterations": int(result.n_iter), "error": float(result.error),
-                        "converged": bool(result.converged), "bins": opts.bins,
-                        "gamma": float(geometry.gamma), "width_bins": width}
+    color_map, map_info = timed("transfer", grade_color_map, photo_hist, target, opts)
+    info.update(map_info)
     return Grade(names=list(styles.names), weights=weights, loss=loss, color_map=color_map,
                  strength=opts.strength, timings=timings,
-                 info=info, barycenter=target)
+                 info=info, barycenter=target, regrain=regrain_settings(opts))

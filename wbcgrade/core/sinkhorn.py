@@ -2,7 +2,11 @@ r"""Two-marginal entropic optimal transport (Sinkhorn) and the barycentric proje
 
 Solves ``min_pi <C, pi> - gamma H(pi)`` subject to ``pi 1 = p``, ``pi^T 1 = q``
 by alternate scalings (Cuturi 2013): the plan is ``pi = diag(a) K diag(b)``
-with ``a = p / K b`` and ``b = q / K a``. Iterations stop when the L1 error on
+with ``a = p / K b`` and ``b = q / K a``. With ``relaxation = rho`` the second
+marginal is only asked to be close to ``q``, ``+ rho KL(pi^T 1 | q)`` in the
+objective (unbalanced transport, Chizat, Peyré, Schmitzer, Vialard 2018):
+``b = (q / K a) ** (rho / (rho + gamma))``, so mass of ``q`` that ``p`` has no
+use for is left out instead of being forced onto ``p``. Iterations stop when the L1 error on
 the first marginal falls below ``tol`` (the second is exact after each
 update). The scaling domain is used first; when scalings under- or overflow
 the solver restarts in the log domain, which is exact for any range.
@@ -73,7 +77,7 @@ def _marginal_error(p_est: NDArray, p: NDArray, geometry: Geometry) -> float:
     return float(np.abs(p_est - p).sum(axis=axes).max())
 
 
-def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every):
+def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         b = np.ones_like(p) if init_log_b is None else np.exp(init_log_b)
         if not np.all(np.isfinite(b)):
@@ -95,6 +99,8 @@ def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every):
             Ka = geometry.apply(a).astype(np.float64, copy=False)
             b = np.zeros_like(q)
             np.divide(q, Ka, out=b, where=Ka > 0)
+            if power != 1.0:
+                np.power(b, power, out=b)
             if not np.isfinite(b.sum()) or np.count_nonzero(b) != n_q:
                 raise _Unsafe("K a vanishes or overflows where q has mass")
         else:
@@ -103,7 +109,7 @@ def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every):
         return np.log(a), np.log(b), it, error
 
 
-def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every):
+def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
     with np.errstate(divide="ignore", invalid="ignore"):
         log_p, log_q = np.log(p), np.log(q)
         log_b = np.zeros_like(q) if init_log_b is None else np.array(init_log_b, dtype=np.float64)
@@ -117,7 +123,7 @@ def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every):
                     it -= 1
                     break
             log_a = log_p - log_Kb
-            log_b = log_q - geometry.log_apply(log_a)
+            log_b = power * (log_q - geometry.log_apply(log_a))
         else:
             error = _marginal_error(np.exp(log_a + geometry.log_apply(log_b)), p, geometry)
         return log_a, log_b, it, error
@@ -131,6 +137,7 @@ def sinkhorn(
     max_iter: int = 1000,
     init_log_b: ArrayLike | None = None,
     check_every: int = 5,
+    relaxation: float | None = None,
 ) -> SinkhornResult:
     """Entropic optimal transport between ``p`` and ``q`` on ``geometry``.
 
@@ -148,6 +155,10 @@ def sinkhorn(
         Warm start for ``log b`` (e.g. from a previous, coarser solve).
     check_every : int, default 5
         Iterations between convergence checks.
+    relaxation : float, optional
+        ``rho > 0``: the second marginal is relaxed by ``rho KL(pi^T 1 | q)``
+        (in the units of the cost; ``rho -> inf`` is balanced transport). The
+        first marginal stays exact, so ``error`` still measures convergence.
 
     Returns
     -------
@@ -165,7 +176,11 @@ def sinkhorn(
         raise ValueError(f"init_log_b must have shape {q.shape}, got {np.shape(init_log_b)}")
     if int(max_iter) < 1:
         raise ValueError("max_iter must be at least 1")
-    args = (p, q, geometry, float(tol), int(max_iter), init_log_b, max(1, int(check_every)))
+    if relaxation is not None and not (np.isfinite(relaxation) and relaxation > 0):
+        raise ValueError("relaxation must be a positive number (or None for balanced transport)")
+    power = 1.0 if relaxation is None else float(relaxation / (relaxation + geometry.gamma))
+    args = (p, q, geometry, float(tol), int(max_iter), init_log_b, max(1, int(check_every)),
+            power)
     with fast_cpu():
         try:
             log_a, log_b, n_iter, error = _scaling(*args)
