@@ -10,7 +10,13 @@ from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.regrain import regrain
-from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness
+from wbcgrade.color.remap import (
+    LUMA_WEIGHTS,
+    apply_color_map,
+    identity_map,
+    keep_lightness,
+    monotone_lightness,
+)
 from wbcgrade.color.smooth_map import fit_smooth_map
 from wbcgrade.color.transfer import GradeOptions, color_transfer_map, grade_image
 
@@ -195,3 +201,21 @@ def test_histogram_of_regrained_output_still_lands_near_the_palette(scene):
     without = grade.apply(rgb)
     h_in, h_with, h_without = (image_histogram(x, 8) for x in (rgb, with_regrain, without))
     assert np.abs(h_with - h_without).sum() < 0.5 * np.abs(h_in - h_without).sum()
+
+
+def test_monotone_lightness_removes_reversals_and_keeps_monotone_maps():
+    x = identity_map(17, np.float64)
+    # a map whose output luma falls when red rises past 0.5 (a lightness reversal)
+    bent = 0.2 + 0.6 * x
+    bent[..., 1] = 0.2 + 0.6 * np.abs(x[..., 0] - 0.5) * 2 * 0.5 + 0.3 * x[..., 1]
+    luma_before = bent @ LUMA_WEIGHTS
+    assert np.diff(luma_before, axis=0).min() < -0.01
+    fixed = monotone_lightness(bent)
+    luma = fixed.astype(np.float64) @ LUMA_WEIGHTS
+    for axis in range(3):
+        assert np.diff(luma, axis=axis).min() > -1e-6
+    # only the lightness moved: channel differences (hue, chroma) are kept
+    np.testing.assert_allclose(np.diff(fixed, axis=-1), np.diff(bent, axis=-1), atol=1e-6)
+    # a map that is already monotone is left alone
+    affine = 0.1 + 0.8 * x
+    np.testing.assert_allclose(monotone_lightness(affine), affine, atol=1e-6)

@@ -37,7 +37,8 @@ _OPTIONS = [
     click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
                  help="L-BFGS iterations of the fit at most."),
     click.option("--weights", "weights_text", default=None, metavar="A,B,C",
-                 help="Use these style weights and skip the fit."),
+                 help="Use these style weights and skip the fit (order: sorted file names of "
+                      "--style DIR, or the preset's order shown by `preset list`)."),
     click.option("--strength", type=float, default=1.0, show_default=True,
                  help="Blend: x -> (1-t) x + t T(x)."),
     click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
@@ -52,6 +53,9 @@ _OPTIONS = [
     click.option("--stiffness", type=float, default=_DEFAULTS.stiffness, show_default=True,
                  help="First-difference penalty of the colour map (holds its local gain "
                       "near 1: less noise amplification, less contrast change)."),
+    click.option("--monotone/--no-monotone", default=_DEFAULTS.monotone, show_default=True,
+                 help="Keep the order of lightness: the map's output luma never decreases "
+                      "when an input channel increases (no reversed steps in flat areas)."),
     click.option("--regrain/--no-regrain", default=_DEFAULTS.regrain, show_default=True,
                  help="Keep the input's grain and edges (edge-aware local linear model; "
                       "off: every pixel goes exactly through the LUT)."),
@@ -85,7 +89,7 @@ _OPTIONS.append(max_image_pixels_option)
 #: Options that are GradeOptions fields of the same name.
 _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "n_iter",
                "max_iter", "strength", "relaxation", "map_size", "smoothness", "stiffness",
-               "regrain", "regrain_radius", "regrain_eps", "preserve_luminance")
+               "monotone", "regrain", "regrain_radius", "regrain_eps", "preserve_luminance")
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
 
 

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["apply_color_map", "identity_map", "blend_map", "keep_lightness"]
+__all__ = ["apply_color_map", "identity_map", "blend_map", "keep_lightness", "monotone_lightness",
+           "LUMA_WEIGHTS"]
 
 
 @numba.njit(parallel=True, cache=True, fastmath=False)
@@ -104,3 +105,39 @@ def keep_lightness(color_map: np.ndarray) -> np.ndarray:
     linear = colour.XYZ_to_RGB(colour.Oklab_to_XYZ(mapped), "sRGB")
     encoded = colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB")
     return np.clip(encoded, 0.0, 1.0).astype(np.float32)
+
+
+#: Luma of encoded RGB (Rec. 601 weights, as JPEG's Y'CbCr).
+LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114])
+
+
+def monotone_lightness(color_map: np.ndarray) -> np.ndarray:
+    """A colour map whose output luma never decreases when an input channel increases.
+
+    Where a transport map is not monotone in lightness, two neighbouring
+    colours of a flat area swap their order of brightness after grading (the
+    8x8 JPEG blocks of a sky turn into a checkerboard of reversed steps). The
+    output luma ``Y(x)`` of the lattice is replaced, along each axis in turn,
+    by the mean of its running maximum from below and its running minimum
+    from above (both non-decreasing, and each pass keeps the earlier axes'
+    order), and every node's colour is moved by the change along grey (the
+    hue and chroma differences between channels are kept), then clipped.
+
+    Parameters
+    ----------
+    color_map : (n, n, n, 3) encoded colours in [0, 1].
+
+    Returns
+    -------
+    (n, n, n, 3) float32 in [0, 1].
+    """
+    table = np.asarray(color_map, dtype=np.float64)
+    luma = table @ LUMA_WEIGHTS
+    target = luma.copy()
+    for axis in range(3):
+        rising = np.maximum.accumulate(target, axis=axis)
+        falling = np.flip(np.minimum.accumulate(np.flip(target, axis=axis), axis=axis),
+                          axis=axis)
+        target = 0.5 * (rising + falling)
+    out = table + (target - luma)[..., None]
+    return np.clip(out, 0.0, 1.0).astype(np.float32)

@@ -6,9 +6,14 @@ Pipeline for one photo (DESIGN.md §1 "Colour transfer"):
 2. barycentric coordinates: the weights whose barycenter best explains the
    photo's histogram (``wbcgrade.core.barycentric_coordinates``);
 3. the barycenter with those weights on the finer *transfer* grid, Sinkhorn
-   between the photo's histogram and it, and the barycentric projection
-   ``T(x_i) = (K (b x))_i / (K b)_i`` on every bin: a colour map;
-4. every pixel moved through the map by trilinear interpolation.
+   between the photo's histogram and it (optionally relaxed on the palette's
+   side), and the barycentric projection ``T(x_i) = (K (b x))_i / (K b)_i``
+   on every bin;
+4. the colour map: a smooth 33^3 lattice LUT fitted to that projection,
+   weighted by the photo's colours (:mod:`wbcgrade.color.smooth_map`), made
+   monotone in lightness;
+5. every pixel moved through the map by trilinear interpolation, then the
+   input's grain and edges given back (:mod:`wbcgrade.color.regrain`).
 
 Defaults and why (see :class:`GradeOptions`; measured on 2 shared cores,
 ``benchmarks/apply.py``): the photo's histogram, the Sinkhorn plan and the
@@ -38,7 +43,7 @@ import numpy as np
 from wbcgrade.color.histogram import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS, add_floor, image_histogram
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.regrain import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS, regrain
-from wbcgrade.color.remap import apply_color_map, keep_lightness
+from wbcgrade.color.remap import apply_color_map, keep_lightness, monotone_lightness
 from wbcgrade.color.smooth_map import (
     DEFAULT_MAP_SIZE,
     DEFAULT_SMOOTHNESS,
@@ -100,6 +105,8 @@ class GradeOptions:
         is kept as it is.
     preserve_luminance : keep each colour's Oklab lightness, change only its
         hue and chroma.
+    monotone : make the map's output luma non-decreasing in each input
+        channel (no lightness reversals between neighbouring colours).
     """
 
     bins: int = 128
@@ -126,6 +133,7 @@ class GradeOptions:
     regrain_radius: float = DEFAULT_REGRAIN_RADIUS
     regrain_eps: float = DEFAULT_REGRAIN_EPS
     preserve_luminance: bool = False
+    monotone: bool = True
 
     def validate(self, n_styles: int | None = None) -> None:
         """Raise InputError on an option out of range."""
@@ -342,7 +350,8 @@ def grade_color_map(photo_hist: np.ndarray, target: np.ndarray,
     projection of the plan on the transfer grid, then the smooth map fitted
     to it, weighted by the photo's colours (``opts.map_size`` nodes a side;
     the raw projection when ``opts.smoothness`` and ``opts.stiffness`` are 0),
-    and the photo's lightness put back when ``opts.preserve_luminance``.
+    made monotone in lightness (``opts.monotone``), and the photo's lightness
+    put back when ``opts.preserve_luminance``.
 
     Parameters
     ----------
@@ -371,9 +380,11 @@ def grade_color_map(photo_hist: np.ndarray, target: np.ndarray,
                        "stiffness": opts.stiffness}
     else:
         info["map"] = {"size": opts.bins, "smoothness": 0.0, "stiffness": 0.0}
+    if opts.monotone and not opts.preserve_luminance:
+        color_map = monotone_lightness(color_map)
     if opts.preserve_luminance:
         color_map = keep_lightness(color_map)
-    info["map"]["preserve_luminance"] = opts.preserve_luminance
+    info["map"].update(monotone=opts.monotone, preserve_luminance=opts.preserve_luminance)
     return color_map, info
 
 
