@@ -238,16 +238,24 @@ def test_bad_input_raises_value_error(kwargs, message):
         barycenter_gradient(**args)
 
 
-def test_hopeless_log_domain_job_stops_with_clear_error(monkeypatch):
+def test_log_domain_job_over_budget_stops_with_clear_error(monkeypatch):
     from wbcgrade.errors import NumericalError
 
-    monkeypatch.setattr(barycenter_module, "MAX_LOG_DOMAIN_WORK", 1e3)
     n = 64
     geom = GridGeometry.with_width(n, 0.7)
     x = np.arange(n)
     H = np.stack([np.exp(-((x - 6) ** 2) / 4.0), np.exp(-((x - 58) ** 2) / 4.0)])
     H[H < 1e-12] = 0.0
-    with pytest.raises(NumericalError, match="wider kernel"):
+    with pytest.raises(NumericalError, match="WBCGRADE_LOG_DOMAIN_BUDGET_S"):
+        barycenter(H, [0.5, 0.5], geom, n_iter=40, log_domain_budget_s=1e-6)
+    monkeypatch.setenv("WBCGRADE_LOG_DOMAIN_BUDGET_S", "1e-6")
+    with pytest.raises(NumericalError, match="budget"):
+        barycenter(H, [0.5, 0.5], geom, n_iter=40)
+    # the argument wins over the environment, and raising the budget runs it
+    P = barycenter(H, [0.5, 0.5], geom, n_iter=40, log_domain_budget_s=float("inf"))
+    assert np.all(np.isfinite(P))
+    monkeypatch.setenv("WBCGRADE_LOG_DOMAIN_BUDGET_S", "soon")
+    with pytest.raises(ValueError, match="not a number"):
         barycenter(H, [0.5, 0.5], geom, n_iter=40)
 
 

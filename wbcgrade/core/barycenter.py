@@ -35,6 +35,7 @@ bisection), so peak memory stays bounded at any L.
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass
 from threading import Lock
 
@@ -42,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _kernels
-from wbcgrade.core._cpu import fast_cpu, parallel_map
+from wbcgrade.core._cpu import fast_cpu, n_workers, parallel_map
 from wbcgrade.core.geometry import PARALLEL_BINS as _PARALLEL_BINS
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
@@ -55,9 +56,39 @@ log = logging.getLogger(__name__)
 #: Bytes of stored scalings the reverse pass may keep (the rest is recomputed).
 DEFAULT_CHECKPOINT_BYTES = 1_500_000_000
 
-#: Largest log-domain job (kernel entries visited) run without asking: about ten
-#: minutes on a 2-core machine. Larger ones stop with a clear error instead.
-MAX_LOG_DOMAIN_WORK = 3e10
+#: Longest log-domain job (estimated seconds) run without asking; larger ones
+#: stop with a clear error instead. Raise it with the ``log_domain_budget_s``
+#: argument or the ``WBCGRADE_LOG_DOMAIN_BUDGET_S`` environment variable
+#: (``inf`` for no limit).
+DEFAULT_LOG_DOMAIN_BUDGET_S = 1800.0
+
+#: Kernel entries per second of a geometry's ``log_apply`` when it does not say
+#: (``_log_apply_rate``, per core): the per-entry log-sum-exp, measured at
+#: ~5e7 entries/s on 2 cores.
+_DIRECT_LOG_RATE = 2.5e7
+
+#: Log-domain products per iteration and histogram, over 2: the forward pass 1,
+#: the gradient ~5.5 (forward, recomputation from checkpoints, the reverse
+#: step's own forward step and the adjoint's products).
+_GRADIENT_PASSES = 5.5
+
+
+def log_domain_budget(value: float | None = None) -> float:
+    """The log domain's time budget in seconds: ``value``, else the environment's, else default."""
+    if value is None:
+        text = os.environ.get("WBCGRADE_LOG_DOMAIN_BUDGET_S", "").strip()
+        if not text:
+            return DEFAULT_LOG_DOMAIN_BUDGET_S
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(
+                f"WBCGRADE_LOG_DOMAIN_BUDGET_S={text!r} is not a number of seconds") from None
+    value = float(value)
+    if not value > 0:  # also rejects NaN
+        raise ValueError(
+            f"the log-domain budget must be a positive number of seconds, got {value!r}")
+    return value
 
 #: Mass the scaling domain may drop where a kernel product underflows to 0,
 #: relative to the barycenter's largest bin, before the log domain takes over.
@@ -488,6 +519,11 @@ class BarycenterSolver:
         Number L of unrolled iterations.
     checkpoint_bytes : int
         Memory the reverse pass may spend on stored scalings.
+    log_domain_budget_s : float, optional
+        Longest estimated run (seconds) of the exact log-domain computation,
+        used when plain scalings cannot represent the problem; longer jobs
+        raise ``NumericalError`` before starting. Default
+        ``$WBCGRADE_LOG_DOMAIN_BUDGET_S``, else 1800 (``inf``: no limit).
     """
 
     def __init__(
@@ -496,11 +532,13 @@ class BarycenterSolver:
         geometry: Geometry,
         n_iter: int = 60,
         checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
+        log_domain_budget_s: float | None = None,
     ):
         self.geometry = geometry
         self.H = _validate_histograms(histograms, geometry)
         self.n_iter = _check_n_iter(n_iter)
         self.checkpoint_bytes = int(checkpoint_bytes)
+        self.log_domain_budget_s = log_domain_budget(log_domain_budget_s)
         self.batch_shape = self.H.shape[1:]
         #: Backend used by the last call: "scaling-float32", "scaling-float64" or "log".
         self.last_backend = ""
@@ -517,22 +555,35 @@ class BarycenterSolver:
             yield f"scaling-{geom.dtype.name}", lambda g=geom: _ScalingBackend(self.H, weights, g)
         yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
 
-    def _log_domain_work(self, passes: float) -> float:
-        """Kernel entries the log domain visits for ``passes`` forward-pass equivalents."""
+    def log_domain_seconds(self, passes: float = 1.0) -> float:
+        """Estimated seconds of the log domain for ``passes`` forward-pass equivalents.
+
+        One forward pass is ``2 L`` kernel products per histogram; a gradient
+        costs about 5.5 passes. The rate is the geometry's ``_log_apply_rate``
+        (kernel entries per second and core; the shifted BLAS product of
+        :class:`GridGeometry`) times the threads, or the per-entry
+        log-sum-exp's ~5e7 entries/s.
+        """
         geom = self.geometry
         histograms = int(np.prod(self.H.shape[: self.H.ndim - geom.ndim]))
-        return passes * 2 * self.n_iter * histograms * geom.log_apply_work
+        work = passes * 2 * self.n_iter * histograms * geom.log_apply_work
+        rate = getattr(geom, "_log_apply_rate", None)
+        if rate is None:
+            return work / (2 * _DIRECT_LOG_RATE)
+        return work / (rate * max(1, min(n_workers(), histograms)))
 
     def _run(self, weights: NDArray, task, passes: float = 1.0):
         """Run ``task(backend)`` on the first backend that can represent it."""
         for name, make in self._backends(weights):
-            if name == "log" and self._log_domain_work(passes) > MAX_LOG_DOMAIN_WORK:
-                minutes = self._log_domain_work(passes) / MAX_LOG_DOMAIN_WORK * 10
+            if name == "log" and self.log_domain_seconds(passes) > self.log_domain_budget_s:
+                minutes = self.log_domain_seconds(passes) / 60
                 raise NumericalError(
                     "the barycenter cannot be computed safely with plain scalings here "
                     "(the kernel is too narrow for how far apart the histograms are), and the "
                     f"exact log-domain computation would take about {minutes:.0f} minutes at "
-                    "this size; use a wider kernel (larger gamma) or fewer bins"
+                    f"this size, over the budget of {self.log_domain_budget_s / 60:.0f} minutes; "
+                    "raise it (log_domain_budget_s=..., or WBCGRADE_LOG_DOMAIN_BUDGET_S in "
+                    "seconds), or use a wider kernel (larger gamma) or fewer bins"
                 )
             try:
                 with fast_cpu():
@@ -609,7 +660,8 @@ class BarycenterSolver:
         loss = get_loss(loss)
         q = _validate_target(target, self.batch_shape, loss, self.geometry)
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-            return self._run(w, lambda backend: self._gradient(backend, w, q, loss), passes=4.0)
+            return self._run(w, lambda backend: self._gradient(backend, w, q, loss),
+                             passes=_GRADIENT_PASSES)
 
     # ------------------------------------------------------------------ reverse pass
 
@@ -712,7 +764,11 @@ class BarycenterSolver:
 
 
 def barycenter(
-    histograms: ArrayLike, weights: ArrayLike, geometry: Geometry, n_iter: int = 60
+    histograms: ArrayLike,
+    weights: ArrayLike,
+    geometry: Geometry,
+    n_iter: int = 60,
+    log_domain_budget_s: float | None = None,
 ) -> NDArray:
     """Entropic Wasserstein barycenter after ``n_iter`` iterations.
 
@@ -729,6 +785,8 @@ def barycenter(
     geometry : Geometry
     n_iter : int, default 60
         Number of iterations L (the iteration starts from ``b_s = 1``).
+    log_domain_budget_s : float, optional
+        Time budget of the exact log-domain fallback (see :class:`BarycenterSolver`).
 
     Returns
     -------
@@ -739,7 +797,9 @@ def barycenter(
     Benamou, Carlier, Cuturi, Nenna, Peyré (2015), Iterative Bregman
     projections for regularized transportation problems.
     """
-    return BarycenterSolver(histograms, geometry, n_iter).barycenter(weights)
+    solver = BarycenterSolver(histograms, geometry, n_iter,
+                              log_domain_budget_s=log_domain_budget_s)
+    return solver.barycenter(weights)
 
 
 def barycenter_gradient(
@@ -750,6 +810,7 @@ def barycenter_gradient(
     loss: str | Loss = "quadratic",
     n_iter: int = 60,
     checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
+    log_domain_budget_s: float | None = None,
 ) -> tuple[float, NDArray, NDArray]:
     """Energy ``E(w) = Loss(P_L(w), target)``, its gradient in ``w``, and ``P_L(w)``.
 
@@ -768,6 +829,13 @@ def barycenter_gradient(
     n_iter : int, default 60
     checkpoint_bytes : int
         Memory budget for stored scalings in the reverse pass.
+    log_domain_budget_s : float, optional
+        Longest estimated run (seconds) of the exact log-domain computation
+        that takes over when plain scalings under- or overflow (sparse, far
+        apart histograms, narrow kernels); longer jobs raise
+        ``NumericalError`` up front. Default ``$WBCGRADE_LOG_DOMAIN_BUDGET_S``,
+        else 1800 (30 minutes); ``float("inf")`` removes the limit. At 128^3,
+        S = 10, L = 60 with a 1.5-bin kernel the estimate is ~16 minutes.
 
     Returns
     -------
@@ -776,5 +844,6 @@ def barycenter_gradient(
         Gradient of E with respect to the weights (unconstrained).
     P : ndarray, shape (*batch, *geometry.shape)
     """
-    solver = BarycenterSolver(histograms, geometry, n_iter, checkpoint_bytes)
+    solver = BarycenterSolver(histograms, geometry, n_iter, checkpoint_bytes,
+                              log_domain_budget_s)
     return solver.value_and_grad(weights, target, loss)
