@@ -116,3 +116,70 @@ def test_one_large_histogram_is_split_over_threads_with_the_same_result(rng):
     geom._apply_block(x[None], reference)
     np.testing.assert_allclose(geom.apply(x), reference[0], rtol=1e-12)
     np.testing.assert_allclose(geom.apply(x[None]), reference, rtol=1e-12)
+
+
+def _steep_log_values(shape, rng, count=3):
+    """Log-values with ranges of thousands of nats along every axis, and zeros (-inf)."""
+    axes = np.meshgrid(*[np.arange(k, dtype=float) for k in shape], indexing="ij")
+    ramp = 150.0 * axes[0] - 30.0 * (axes[-1] - 5) ** 2
+    f = np.stack([ramp, -ramp] + [rng.normal(0, 400, shape) for _ in range(count - 2)])
+    f += rng.normal(0, 20, f.shape)
+    f[rng.random(f.shape) < 0.3] = -np.inf
+    return f
+
+
+@pytest.mark.parametrize("shape, width", [((40,), 0.3), ((200,), 0.4), ((14, 13, 12), 0.5)])
+def test_shifted_log_apply_matches_the_per_entry_log_sum_exp(shape, width, rng):
+    geom = GridGeometry.with_width(shape, width)
+    f = _steep_log_values(shape, rng)
+    got = geom.log_apply(f)
+    expected = geom._log_apply_direct(f)
+    assert np.array_equal(np.isfinite(got), np.isfinite(expected))
+    finite = np.isfinite(expected)
+    scale = np.maximum(1.0, np.abs(expected[finite]))
+    assert np.all(np.abs(got[finite] - expected[finite]) <= 1e-13 * scale)
+    if geom.ndim == 1:
+        assert geom.last_log_repairs > 0  # the per-block second pass ran
+
+
+def test_every_pass_of_the_shifted_product_is_exact(rng):
+    """A line with one huge value at one end: pass 2 (per block) and pass 3 (per entry) run."""
+    import wbcgrade.core.geometry as geometry_module
+
+    geom = GridGeometry.with_width(64, 0.5)
+    f = np.full((2, 64), -np.inf)
+    f[0, 0], f[0, 40:] = 5000.0, 0.0
+    f[1] = rng.normal(0, 300, 64)
+    calls = {"entries": 0}
+    repair = geometry_module._repair_entries
+
+    def counting(*args):
+        calls["entries"] += int(args[4].sum())
+        return repair(*args)
+
+    geometry_module._repair_entries = counting
+    try:
+        got = geom.log_apply(f)
+    finally:
+        geometry_module._repair_entries = repair
+    expected = geom._log_apply_direct(f)
+    np.testing.assert_allclose(got, expected, rtol=1e-13)
+    assert geom.last_log_repairs > 0 and calls["entries"] > 0
+
+
+def test_signed_log_apply_matches_both_parts(rng):
+    shape = (14, 13, 12)
+    geom = GridGeometry.with_width(shape, 0.5)
+    f = _steep_log_values(shape, rng)
+    signs = rng.choice([-1.0, 1.0], f.shape)
+    signs[f == -np.inf] = 0.0
+    log_abs, sign = geom._signed_log_apply(f, signs)
+    pos = geom._log_apply_direct(np.where(signs > 0, f, -np.inf))
+    neg = geom._log_apply_direct(np.where(signs < 0, f, -np.inf))
+    top = np.maximum(pos, neg)
+    live = np.isfinite(top)
+    with np.errstate(invalid="ignore"):
+        got = sign * np.exp(log_abs - top)
+        expected = np.exp(pos - top) - np.exp(neg - top)
+    assert np.abs(got[live] - expected[live]).max() <= 1e-12
+    assert np.all(sign[~live] == 0)

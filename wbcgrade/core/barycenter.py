@@ -455,7 +455,12 @@ class _LogBackend:
     def adjoint(
         self, it: _Iterate, log_b_prev: NDArray, g: NDArray, r: NDArray | None, need_r: bool
     ) -> tuple[NDArray, NDArray | None]:
-        """Same adjoint as the scaling backend, with each sign part carried in logs."""
+        """Same adjoint as the scaling backend, in logs with signs carried beside them.
+
+        Geometries with a signed log-domain product (``_signed_log_apply``:
+        grids) apply it once per kernel product; others carry the positive
+        and negative parts through separately (twice the products).
+        """
         log_phi = it.log_phi
         if not np.all(np.isfinite(log_phi)):
             vanished = ~np.isfinite(log_phi)
@@ -469,6 +474,20 @@ class _LogBackend:
         if r is not None:
             u -= r
         geom = self.geometry
+        signed_apply = getattr(geom, "_signed_log_apply", None)
+        if signed_apply is not None:  # one signed product per kernel application
+            with np.errstate(divide="ignore"):
+                part = np.log(np.abs(u))
+            part -= it.phi
+            part, signs = signed_apply(part, np.sign(u))
+            part += it.a
+            part -= it.Kb
+            part, signs = signed_apply(part, signs)
+            part += log_b_prev
+            np.exp(part, out=part)
+            part *= signs
+            np.negative(part, out=part)
+            return grad, part
         r_next = np.zeros_like(u)
         with np.errstate(divide="ignore"):
             for sign in (1.0, -1.0):

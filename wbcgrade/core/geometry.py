@@ -62,11 +62,13 @@ def _logsumexp_product(log_kernel, values, out):  # pragma: no cover - compiled
 
 
 @numba.njit(nogil=True, cache=True)
-def _repair_entries(log_kernel, values, mask, out):  # pragma: no cover - compiled
-    """``out[p, i, q] = log sum_j exp(log_kernel[i, j] + values[p, j, q])`` where ``mask``.
+def _repair_entries(log_kernel, values, signs, signed, mask, out, out_signs):  # pragma: no cover
+    """``out[p, i, q] = log |sum_j s_j exp(log_kernel[i, j] + values[p, j, q])|`` where ``mask``.
 
-    The per-entry log-sum-exp of :func:`_logsumexp_product`, shifted by each
-    entry's own peak; the last resort of :func:`_shifted_log_product`.
+    ``s_j = signs[p, j, q]`` when ``signed`` (then the sign of the sum goes to
+    ``out_signs``), else 1. The per-entry log-sum-exp of
+    :func:`_logsumexp_product`, shifted by each entry's own peak; the last
+    resort of :func:`_shifted_log_product`.
     """
     n_batch, n_out, n_right = mask.shape
     n_in = values.shape[1]
@@ -80,26 +82,27 @@ def _repair_entries(log_kernel, values, mask, out):  # pragma: no cover - compil
                     v = log_kernel[i, j] + values[p, j, q]
                     if v > peak:
                         peak = v
-                if peak == -np.inf:
-                    out[p, i, q] = -np.inf
-                    continue
                 total = 0.0
-                for j in range(n_in):
-                    v = log_kernel[i, j] + values[p, j, q] - peak
-                    if v > -50.0:  # below e^-50 relative: nothing in float64
-                        total += np.exp(v)
-                out[p, i, q] = peak + np.log(total)
+                if peak > -np.inf:
+                    for j in range(n_in):
+                        v = log_kernel[i, j] + values[p, j, q] - peak
+                        if v > -50.0:  # below e^-50 of the peak: nothing in float64
+                            total += np.exp(v) * (signs[p, j, q] if signed else 1.0)
+                out[p, i, q] = peak + np.log(np.abs(total)) if total != 0.0 else -np.inf
+                if signed:
+                    out_signs[p, i, q] = np.sign(total)
 
 
 @numba.njit(nogil=True, cache=True)
-def _block_pass(values, low, block_shift, block_kernel, block_size, out, still, floor):
+def _block_pass(values, signs, signed, low, block_shift, block_kernel, block_size, out,
+                out_signs, still, floor):  # pragma: no cover - compiled
     """Pass 2 of :func:`_shifted_log_product` on the line blocks where ``low`` is set.
 
     ``block_shift[b, j] = max_{i in block b} log K_ij``, ``block_kernel[b, r, j]
     = exp(log K_{lo+r, j} - block_shift[b, j])`` (0 below ``tiny``). Sets
     ``still`` where the result is below ``floor`` (left for pass 3). Returns
     the number of results recomputed.
-    """  # pragma: no cover - compiled
+    """
     n_batch, n, n_right = values.shape
     n_blocks = block_shift.shape[0]
     acc = np.empty(block_size)
@@ -123,11 +126,16 @@ def _block_pass(values, low, block_shift, block_kernel, block_size, out, still, 
                     v = values[p, j, q] + block_shift[b, j] - m
                     if v > -745.0:
                         e = np.exp(v)
+                        if signed:
+                            e *= signs[p, j, q]
                         for r in range(hi - lo):
                             acc[r] += block_kernel[b, r, j] * e
                 for r in range(hi - lo):
-                    out[p, lo + r, q] = m + np.log(acc[r])
-                    still[p, lo + r, q] = acc[r] < floor
+                    a = np.abs(acc[r])
+                    out[p, lo + r, q] = m + np.log(a)
+                    still[p, lo + r, q] = a < floor
+                    if signed:
+                        out_signs[p, lo + r, q] = np.sign(acc[r])
                 count += hi - lo
     return count
 
@@ -163,8 +171,20 @@ class _AxisKernel:
             self.block_kernel[b, : len(rows)] = k
 
 
-def _shifted_log_product(axis: _AxisKernel, values: NDArray, out: NDArray) -> int:
+_NO_SIGNS = np.ones((1, 1, 1))
+
+
+def _shifted_log_product(
+    axis: _AxisKernel,
+    values: NDArray,
+    out: NDArray,
+    signs: NDArray | None = None,
+    out_signs: NDArray | None = None,
+) -> int:
     """``out = log(K exp(values))`` along axis 1 of ``(before, n, after)`` arrays, exactly.
+
+    With ``signs`` (+1, -1 or 0, same shape), the product of signed values
+    ``signs * exp(values)``: ``out = log |K x|`` and ``out_signs = sign(K x)``.
 
     Pass 1: each line (fixed ``before`` and ``after`` index) is shifted by its
     maximum, so its values become scalings in (0, 1] and one matrix product
@@ -193,32 +213,44 @@ def _shifted_log_product(axis: _AxisKernel, values: NDArray, out: NDArray) -> in
     shift = values.max(axis=1)  # (before, after)
     live = shift > -np.inf
     n_live = int(np.count_nonzero(live))
+    signed = signs is not None
     with np.errstate(divide="ignore"):
         if n_live < 0.5 * live.size:  # sparse: only the lines that hold mass
             out[...] = -np.inf
+            if signed:
+                out_signs[...] = 0.0
             if n_live == 0:
                 return 0
-            out_t = out.transpose(0, 2, 1)
             lines = values.transpose(0, 2, 1)[live]  # (lines, n)
             lines -= shift[live][:, None]
             np.exp(lines, out=lines)
+            if signed:
+                lines *= signs.transpose(0, 2, 1)[live]
             scaled = lines @ axis.kernel.T
             del lines
+            if signed:
+                out_signs.transpose(0, 2, 1)[live] = np.sign(scaled)
+                np.abs(scaled, out=scaled)
             low_lines = scaled < floor
             np.log(scaled, out=scaled)
             scaled += shift[live][:, None]
-            out_t[live] = scaled
+            out.transpose(0, 2, 1)[live] = scaled
             low = np.zeros(values.shape, dtype=bool)
             low.transpose(0, 2, 1)[live] = low_lines
         else:
             shift0 = np.where(live, shift, 0.0)
             scaled_in = values - shift0[:, None, :]
             np.exp(scaled_in, out=scaled_in)
+            if signed:
+                scaled_in *= signs
             if after == 1:
                 scaled = (scaled_in.reshape(before, n) @ axis.kernel.T).reshape(before, n, 1)
             else:
                 scaled = np.matmul(axis.kernel, scaled_in)
             del scaled_in
+            if signed:
+                np.sign(scaled, out=out_signs)
+                np.abs(scaled, out=scaled)
             low = scaled < floor
             low &= live[:, None, :]
             np.log(scaled, out=out)
@@ -227,11 +259,13 @@ def _shifted_log_product(axis: _AxisKernel, values: NDArray, out: NDArray) -> in
         if not low.any():
             return 0
         still = np.zeros_like(low)
-        repaired = _block_pass(values, low, axis.block_shift, axis.block_kernel, _BLOCK,
-                               out, still, floor)
+        sign_arg = signs if signed else _NO_SIGNS
+        out_sign_arg = out_signs if signed else _NO_SIGNS
+        repaired = _block_pass(values, sign_arg, signed, low, axis.block_shift,
+                               axis.block_kernel, _BLOCK, out, out_sign_arg, still, floor)
     still &= low
     if still.any():
-        _repair_entries(axis.log_kernel, values, still, out)
+        _repair_entries(axis.log_kernel, values, sign_arg, signed, still, out, out_sign_arg)
     return repaired
 
 
@@ -503,16 +537,33 @@ class GridGeometry(Geometry):
         faster when few entries need repair). Histograms are spread over the
         core's threads.
         """
+        return self._shifted_log_apply(log_values, None)[0]
+
+    def _signed_log_apply(self, log_abs: NDArray, signs: NDArray) -> tuple[NDArray, NDArray]:
+        """``log |K x|`` and ``sign(K x)`` for ``x = signs * exp(log_abs)``, exactly (float64).
+
+        Used by the reverse pass, whose adjoints change sign: one signed
+        product instead of one for each sign's part.
+        """
+        return self._shifted_log_apply(log_abs, signs)
+
+    def _shifted_log_apply(self, log_values: NDArray, signs: NDArray | None):
         self._check_values(log_values)
         x = np.ascontiguousarray(log_values, dtype=np.float64)
         lead = int(np.prod(x.shape[: x.ndim - self.ndim]))
         flat = x.reshape(lead, *self.shape)
         out = np.empty_like(flat)
+        flat_signs = out_signs = None
+        if signs is not None:
+            flat_signs = np.ascontiguousarray(signs, dtype=np.float64).reshape(flat.shape)
+            out_signs = np.empty_like(flat)
         repairs = np.zeros(lead, dtype=np.int64)
 
         def work(lo: int, hi: int) -> None:
             for k in range(lo, hi):
-                repairs[k] = self._log_apply_one(flat[k], out[k])
+                repairs[k] = self._log_apply_one(
+                    flat[k], out[k], None if signs is None else flat_signs[k],
+                    None if signs is None else out_signs[k])
 
         with fast_cpu():
             if lead >= 2 and self.size >= PARALLEL_BINS:
@@ -520,19 +571,28 @@ class GridGeometry(Geometry):
             else:
                 work(0, lead)
         self.last_log_repairs = int(repairs.sum())
-        return out.reshape(x.shape)
+        if signs is None:
+            return out.reshape(x.shape), None
+        return out.reshape(x.shape), out_signs.reshape(x.shape)
 
-    def _log_apply_one(self, values: NDArray, out: NDArray) -> int:
+    def _log_apply_one(self, values: NDArray, out: NDArray, signs: NDArray | None = None,
+                       out_signs: NDArray | None = None) -> int:
         """``log_apply`` of one histogram ``values`` (``self.shape``) into ``out``."""
-        current, repairs = values, 0
+        current, current_signs, repairs = values, signs, 0
         for axis in range(self.ndim):
             before = int(np.prod(self.shape[:axis]))
             n, after = self.shape[axis], int(np.prod(self.shape[axis + 1 :]))
-            target = out if axis == self.ndim - 1 else np.empty(self.shape)
+            last = axis == self.ndim - 1
+            target = out if last else np.empty(self.shape)
+            target_signs = None
+            if signs is not None:
+                target_signs = out_signs if last else np.empty(self.shape)
+            lines = (before, n, after)
             repairs += _shifted_log_product(
-                self._axis_kernels[axis],
-                current.reshape(before, n, after), target.reshape(before, n, after))
-            current = target
+                self._axis_kernels[axis], current.reshape(lines), target.reshape(lines),
+                None if signs is None else current_signs.reshape(lines),
+                None if signs is None else target_signs.reshape(lines))
+            current, current_signs = target, target_signs
         return repairs
 
     def _log_apply_direct(self, log_values: NDArray) -> NDArray:
