@@ -87,7 +87,9 @@ class GradeOptions:
     strength : t in [0, 1]: x -> (1 - t) x + t T(x).
     weights : fixed style weights (skip the fit).
     sinkhorn_tol, sinkhorn_max_iter : transfer Sinkhorn stopping rule
-        (L1 error on the photo's marginal).
+        (L1 error on the photo's marginal). 3e-3 gives the same smooth colour
+        map as 1e-3 to 0.13/255 on average (0.37/255 at most) on the 16 MP
+        sample, in half the time.
     max_pixels : photos larger than this are subsampled for histograms.
     fit_tol : the weight fit stops when an L-BFGS step lowers the (normalised)
         loss by less than this.
@@ -121,7 +123,7 @@ class GradeOptions:
     floor: float = DEFAULT_FLOOR
     strength: float = 1.0
     weights: Sequence[float] | None = None
-    sinkhorn_tol: float = 1e-3
+    sinkhorn_tol: float = 3e-3
     sinkhorn_max_iter: int = 2000
     max_pixels: int = DEFAULT_MAX_PIXELS
     fit_tol: float = 1e-6
