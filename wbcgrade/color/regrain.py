@@ -104,11 +104,23 @@ def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: flo
                 out[y, x, c] = min(max(value, 0.0), 1.0)
 
 
+@numba.njit(parallel=True, cache=True)
 def _downsample(x: np.ndarray, step: int) -> np.ndarray:
-    h, w = (x.shape[0] // step) * step, (x.shape[1] // step) * step
-    if h == 0 or w == 0:
-        return x
-    return x[:h, :w].reshape(h // step, step, w // step, step, -1).mean(axis=(1, 3))
+    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
+    h, w, c = x.shape[0] // step, x.shape[1] // step, x.shape[2]
+    out = np.zeros((h, w, c), np.float32)
+    scale = 1.0 / (step * step)
+    for i in numba.prange(h):
+        for di in range(step):
+            row = i * step + di
+            for j in range(w):
+                for dj in range(step):
+                    for k in range(c):
+                        out[i, j, k] += x[row, j * step + dj, k]
+        for j in range(w):
+            for k in range(c):
+                out[i, j, k] *= scale
+    return out
 
 
 def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGRAIN_RADIUS,
