@@ -66,7 +66,7 @@ class GradeOptions:
     Attributes
     ----------
     bins : bins per axis of the transfer grid (the photo's histogram, the
-        Sinkhorn plan and the colour map).
+        Sinkhorn plan and the raw barycentric projection).
     fit_bins : bins per axis of the grid the weights are fitted on (the fit
         kernel's sigma is fixed in colour units, so the same energy on a 128^3
         grid has the same minimiser: ``benchmarks/apply.py --verify``).
@@ -192,8 +192,9 @@ class Grade:
     names : S style names.
     weights : (S,) barycentric weights.
     loss : fit loss at the weights (None when the weights were given).
-    color_map : (n, n, n, 3) float32, new encoded colour of each transfer bin
-        (strength not applied).
+    color_map : (m, m, m, 3) float32, new encoded colour of each node of the
+        grade's lattice LUT (m = map_size; the transfer grid for a raw map;
+        strength not applied).
     strength : the blend applied by :meth:`apply`.
     timings : seconds per stage.
     info : fit and Sinkhorn diagnostics (JSON-friendly).
@@ -277,7 +278,7 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
 
     Returns
     -------
-    color_map : (n, n, n, 3) float32 in [0, 1]
+    color_map : (n, n, n, 3) float32 in [0, 1], the raw barycentric projection
     result : wbcgrade.core.SinkhornResult of the final solve
     """
     from wbcgrade.color.histogram import resample_histogram
