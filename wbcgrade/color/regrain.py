@@ -16,8 +16,9 @@ averaged over the windows that hold each pixel. Where the input only varies
 by noise (variance << eps), ``A -> 0`` and the window gets the mean change:
 the grain keeps its input amplitude and no block or speckle is amplified.
 Where the input has real structure, ``A`` reproduces the map's local
-contrast, so edges and the style's contrast survive, without halos (the
-model follows the input's colour edges). Large images are solved on a
+contrast, so edges and the style's contrast survive without halos (the
+model follows the input's colour edges); across edges fainter than about
+sqrt(eps) the change is blended over one window. Large images are solved on a
 subsampled copy and ``A, b`` are interpolated back (the fast guided filter,
 He and Sun 2015), so 16 megapixels cost about one pass over the pixels.
 """
