@@ -21,7 +21,8 @@ _OPTIONS = [
     click.option("--preset", default=None, metavar="NAME_OR_FILE",
                  help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz file."),
     click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
-                 help="Bins per axis of the colour map (transfer grid)."),
+                 help="Bins per axis of the photo's histogram and the transport plan (the "
+                      "paper's 128; 64 or 32 are faster and coarser)."),
     click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
                  help="Bins per axis of the grid the weights are fitted on."),
     click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
