@@ -29,6 +29,8 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from wbcgrade.core._jit import compiled
+
 __all__ = ["regrain", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
 
 #: Window radius as a fraction of the image's long side (5 px at 1024 px).
@@ -76,7 +78,7 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int,
     return A, b
 
 
-@numba.njit(parallel=True, cache=True)
+@compiled(parallel=True, cache=True)
 def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: float,
                      out: np.ndarray) -> None:
     h, w = source.shape[:2]
@@ -105,7 +107,7 @@ def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: flo
                 out[y, x, c] = min(max(value, 0.0), 1.0)
 
 
-@numba.njit(parallel=True, cache=True)
+@compiled(parallel=True, cache=True)
 def _downsample(x: np.ndarray, step: int) -> np.ndarray:
     """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
     h, w, c = x.shape[0] // step, x.shape[1] // step, x.shape[2]

@@ -11,11 +11,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from wbcgrade.core._jit import compiled
+
 __all__ = ["apply_color_map", "identity_map", "blend_map", "keep_lightness", "monotone_lightness",
            "LUMA_WEIGHTS"]
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@compiled(parallel=True, cache=True, fastmath=False)
 def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.ndarray) -> None:
     n = table.shape[0]
     scale = n - 1

@@ -28,11 +28,12 @@ __all__ = ["fast_cpu", "n_workers", "parallel_map"]
 _FLUSH_FLAGS = 0x8040  # MXCSR: flush-to-zero (bit 15) | denormals-are-zero (bit 6)
 
 if platform.machine().lower() in ("x86_64", "amd64"):
-    import numba
     from llvmlite import ir
     from numba import types
     from numba.core import cgutils
     from numba.extending import intrinsic
+
+    from wbcgrade.core._jit import compiled
 
     def _mxcsr_call(builder, name, ptr):
         fnty = ir.FunctionType(ir.VoidType(), [ir.PointerType(ir.IntType(8))])
@@ -57,11 +58,11 @@ if platform.machine().lower() in ("x86_64", "amd64"):
 
         return types.void(types.uint32), codegen
 
-    @numba.njit(cache=True)
+    @compiled(cache=True)
     def _get_flags() -> int:  # pragma: no cover - compiled
         return _stmxcsr()
 
-    @numba.njit(cache=True)
+    @compiled(cache=True)
     def _set_flags(value: int) -> None:  # pragma: no cover - compiled
         _ldmxcsr(value)
 

@@ -11,14 +11,15 @@ work on bins ``lo:hi`` so that threads can share one call's work.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from wbcgrade.core._jit import compiled
 
 _OPTS = {"nogil": True, "cache": True, "error_model": "numpy",
          "fastmath": {"reassoc", "contract", "nsz"}}
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def ratio(h, kb, out, high):  # pragma: no cover - compiled
     """``out = h / kb`` (0 where ``kb`` vanished); returns how many bins lost mass.
 
@@ -36,7 +37,7 @@ def ratio(h, kb, out, high):  # pragma: no cover - compiled
     return bad
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def weighted_log_sum(log_phi, weights, out, lo, hi, log_low, log_high):  # pragma: no cover
     """``out[i] = sum_s w_s log_phi[s, i]`` for i in lo:hi (zero weights skipped).
 
@@ -60,7 +61,7 @@ def weighted_log_sum(log_phi, weights, out, lo, hi, log_low, log_high):  # pragm
     return vanished, outside
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def divide_rows(P, phi, out, lo, hi, limit):  # pragma: no cover - compiled
     """``out[s, i] = P[i] / phi[s, i]`` (0 where phi vanished), i in lo:hi; returns #overflows.
 
@@ -80,7 +81,7 @@ def divide_rows(P, phi, out, lo, hi, limit):  # pragma: no cover - compiled
     return bad
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def reverse_in(weight, g, r, phi, out):  # pragma: no cover - compiled
     """``out = (weight g - r) / phi`` (0 where phi vanished); ``r`` may be empty (= 0)."""
     if r.size > 0:
@@ -95,7 +96,7 @@ def reverse_in(weight, g, r, phi, out):  # pragma: no cover - compiled
             out[i] = v if f > 0.0 else 0.0
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def reverse_mid(y, h, kb):  # pragma: no cover - compiled
     """``y *= a / kb`` with ``a = h / kb`` (never ``h / kb**2``, which leaves the range)."""
     for i in range(y.size):
@@ -104,7 +105,7 @@ def reverse_mid(y, h, kb):  # pragma: no cover - compiled
         y[i] = v if k > 0.0 else 0.0
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def reverse_out(v, b, out):  # pragma: no cover - compiled
     """``out = -(v * b)`` in float64; returns the number of non-finite results."""
     bad = 0
@@ -115,7 +116,7 @@ def reverse_out(v, b, out):  # pragma: no cover - compiled
     return bad
 
 
-@numba.njit(**_OPTS)
+@compiled(**_OPTS)
 def dot_log(log_phi, g):  # pragma: no cover - compiled
     """``sum_i log_phi[i] g[i]`` over bins where g != 0; returns (value, bins with -inf there)."""
     acc = 0.0

@@ -27,11 +27,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core._cpu import fast_cpu, parallel_map
+from wbcgrade.core._jit import compiled
 
 __all__ = ["Geometry", "GridGeometry", "DenseGeometry"]
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@compiled(parallel=True, cache=True, nogil=True)
 def _logsumexp_product(log_kernel, values, out):  # pragma: no cover - compiled
     """out[p, i, q] = log sum_j exp(log_kernel[i, j] + values[p, j, q]), exactly.
 
@@ -64,7 +65,7 @@ def _logsumexp_product(log_kernel, values, out):  # pragma: no cover - compiled
                     out[p, i, q] = peak[q] + np.log(total[q])
 
 
-@numba.njit(nogil=True, cache=True)
+@compiled(nogil=True, cache=True)
 def _repair_entries(log_kernel, values, signs, signed, mask, out, out_signs):  # pragma: no cover
     """``out[p, i, q] = log |sum_j s_j exp(log_kernel[i, j] + values[p, j, q])|`` where ``mask``.
 
@@ -96,7 +97,7 @@ def _repair_entries(log_kernel, values, signs, signed, mask, out, out_signs):  #
                     out_signs[p, i, q] = np.sign(total)
 
 
-@numba.njit(nogil=True, cache=True)
+@compiled(nogil=True, cache=True)
 def _block_pass(values, signs, signed, low, block_shift, block_kernel, block_size, out,
                 out_signs, still, floor):  # pragma: no cover - compiled
     """Pass 2 of :func:`_shifted_log_product` on the line blocks where ``low`` is set.

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from wbcgrade.core._jit import compiled
+
 __all__ = ["WindingTree", "winding_numbers", "winding_numbers_exact"]
 
 LEAF_SIZE = 16
@@ -102,7 +104,7 @@ def build_tree(triangles: np.ndarray, leaf_size: int = LEAF_SIZE) -> WindingTree
                        table[:, 3].copy(), centre, dipole, radius)
 
 
-@numba.njit(cache=True, fastmath=False, inline="always")
+@compiled(cache=True, fastmath=False, inline="always")
 def _solid_angle(tri, t, px, py, pz):
     """Twice the half solid angle: ``Omega / 2`` of triangle ``t`` seen from p."""
     ax = tri[t, 0, 0] - px
@@ -123,7 +125,7 @@ def _solid_angle(tri, t, px, py, pz):
     return np.arctan2(det, den)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@compiled(parallel=True, cache=True, fastmath=False)
 def _exact(tri, points):  # pragma: no cover - compiled
     out = np.empty(points.shape[0])
     for i in numba.prange(points.shape[0]):
@@ -134,7 +136,7 @@ def _exact(tri, points):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@compiled(parallel=True, cache=True, fastmath=False)
 def _tree(tri, start, stop, left, right, centre, dipole, radius, points, beta):
     # pragma: no cover - compiled
     out = np.empty(points.shape[0])
