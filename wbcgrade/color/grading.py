@@ -281,7 +281,7 @@ def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     say("read")
     start = time.perf_counter()
     image = read_image(Path(path))
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    encoded, scale = encode_for_grading(image.rgb(), image.is_float)
     timings["read"] = time.perf_counter() - start
     summary = None
     if shared is not None:
@@ -299,6 +299,6 @@ def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
         timings.update({k: v for k, v in grade.timings.items() if k != "fit"})
     say("remap")
     start = time.perf_counter()
-    pixels, alpha_channel = render(image, grade)
+    pixels, alpha_channel = render(image, grade, (encoded, scale))
     timings["remap"] = time.perf_counter() - start
     return PhotoGrade(image, pixels, alpha_channel, grade, summary, timings)

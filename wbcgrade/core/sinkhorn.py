@@ -20,12 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wbcgrade.core import _kernels
 from wbcgrade.core._cpu import fast_cpu
 from wbcgrade.core.geometry import Geometry
 
 __all__ = ["SinkhornResult", "sinkhorn", "barycentric_projection"]
 
 log = logging.getLogger(__name__)
+
+_FLOAT64_MAX = float(np.finfo(np.float64).max)
 
 
 @dataclass(frozen=True)
@@ -77,35 +80,52 @@ def _marginal_error(p_est: NDArray, p: NDArray, geometry: Geometry) -> float:
     return float(np.abs(p_est - p).sum(axis=axes).max())
 
 
+def _rows(x: NDArray, geometry: Geometry) -> NDArray:
+    """(*batch, *shape) -> (batch, N) view."""
+    return x.reshape(-1, geometry.size)
+
+
+def _l1_error(a: NDArray, Kb: NDArray, p: NDArray, geometry: Geometry) -> float:
+    """Largest L1 error ``|a K b - p|`` over the batch (one fused pass per problem)."""
+    return max(_kernels.l1_residual(ar, kr, pr)
+               for ar, kr, pr in zip(_rows(a, geometry), _rows(Kb, geometry),
+                                     _rows(p, geometry)))
+
+
+def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry) -> bool:
+    """``out = num / den`` (0 where den vanished), fused; False when a bin with mass
+    gets a scaling that is 0, inf or NaN (the scaling domain cannot go on)."""
+    bad = 0
+    for nr, dr, orow in zip(_rows(num, geometry), _rows(den, geometry), _rows(out, geometry)):
+        bad += _kernels.ratio(nr, dr, orow, _FLOAT64_MAX)
+    return bad == 0
+
+
 def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         b = np.ones_like(p) if init_log_b is None else np.exp(init_log_b)
         if not np.all(np.isfinite(b)):
             raise _Unsafe("initial scalings overflow")
-        n_p, n_q = np.count_nonzero(p), np.count_nonzero(q)
         a = np.zeros_like(p)
         error, it = np.inf, 0
         for it in range(1, max_iter + 1):
-            Kb = geometry.apply(b).astype(np.float64, copy=False)
+            Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)
             if it > 1 and (it % check_every == 0 or it == max_iter):
-                error = _marginal_error(a * Kb, p, geometry)
+                error = _l1_error(a, Kb, p, geometry)
                 if error <= tol:
                     it -= 1
                     break
-            a.fill(0.0)
-            np.divide(p, Kb, out=a, where=Kb > 0)
-            if not np.isfinite(a.sum()) or np.count_nonzero(a) != n_p:
+            if not _update(p, Kb, a, geometry):
                 raise _Unsafe("K b vanishes or overflows where p has mass")
-            Ka = geometry.apply(a).astype(np.float64, copy=False)
-            b = np.zeros_like(q)
-            np.divide(q, Ka, out=b, where=Ka > 0)
+            Ka = np.ascontiguousarray(geometry.apply(a), dtype=np.float64)
+            b = np.empty_like(q)
+            if not _update(q, Ka, b, geometry):
+                raise _Unsafe("K a vanishes or overflows where q has mass")
             if power != 1.0:
                 np.power(b, power, out=b)
-            if not np.isfinite(b.sum()) or np.count_nonzero(b) != n_q:
-                raise _Unsafe("K a vanishes or overflows where q has mass")
         else:
-            Kb = geometry.apply(b).astype(np.float64, copy=False)
-            error = _marginal_error(a * Kb, p, geometry)
+            Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)
+            error = _l1_error(a, Kb, p, geometry)
         return np.log(a), np.log(b), it, error
 
 
