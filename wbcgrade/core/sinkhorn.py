@@ -95,6 +95,8 @@ def _l1_error(a: NDArray, Kb: NDArray, p: NDArray, geometry: Geometry) -> float:
 def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry) -> bool:
     """``out = num / den`` (0 where den vanished), fused; False when a bin with mass
     gets a scaling that is 0, inf or NaN (the scaling domain cannot go on)."""
+    if not out.flags.c_contiguous:
+        raise ValueError("out must be C-contiguous")
     bad = 0
     for nr, dr, orow in zip(_rows(num, geometry), _rows(den, geometry), _rows(out, geometry)):
         bad += _kernels.ratio(nr, dr, orow, _FLOAT64_MAX)
@@ -102,11 +104,13 @@ def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry) -> boo
 
 
 def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
+    # C order throughout: the fused passes work on flat views of these arrays.
+    p, q = np.ascontiguousarray(p), np.ascontiguousarray(q)
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        b = np.ones_like(p) if init_log_b is None else np.exp(init_log_b)
+        b = np.ones(q.shape) if init_log_b is None else np.exp(init_log_b)
         if not np.all(np.isfinite(b)):
             raise _Unsafe("initial scalings overflow")
-        a = np.zeros_like(p)
+        a = np.zeros(p.shape)
         error, it = np.inf, 0
         for it in range(1, max_iter + 1):
             Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)

@@ -1,0 +1,87 @@
+"""Sinkhorn: marginals, the two domains agree, memory layouts, batches, relaxation."""
+
+from __future__ import annotations
+
+import importlib
+import logging
+
+import numpy as np
+import pytest
+
+from tests.core.helpers import blobs
+from wbcgrade.core import GridGeometry, sinkhorn
+
+sinkhorn_module = importlib.import_module("wbcgrade.core.sinkhorn")
+
+
+def _plan(result, geometry: GridGeometry) -> np.ndarray:
+    """The dense plan ``diag(a) K diag(b)`` (small grids only)."""
+    K = np.exp(-geometry.cost_matrix() / geometry.gamma)
+    return np.exp(result.log_a).ravel()[:, None] * K * np.exp(result.log_b).ravel()[None, :]
+
+
+@pytest.fixture
+def problem(rng):
+    geometry = GridGeometry((8, 8, 8), 2 * (1.2 / 7) ** 2)
+    p, q = blobs(geometry.shape, 2, rng, width=0.15, floor=1e-4, components=2)
+    return p, q, geometry
+
+
+def test_the_plan_has_both_marginals(problem):
+    p, q, geometry = problem
+    result = sinkhorn(p, q, geometry, tol=1e-9, max_iter=5000)
+    plan = _plan(result, geometry)
+    assert result.converged
+    assert np.abs(plan.sum(axis=1) - p.ravel()).sum() <= 1e-9 * 1.01
+    assert np.abs(plan.sum(axis=0) - q.ravel()).sum() < 1e-7
+
+
+def test_scaling_and_log_domains_give_the_same_plan(problem, monkeypatch):
+    p, q, geometry = problem
+    scaled = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000)
+
+    def unsafe(*args):
+        raise sinkhorn_module._Unsafe("forced")
+
+    monkeypatch.setattr(sinkhorn_module, "_scaling", unsafe)
+    logged = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000)
+    assert scaled.n_iter == logged.n_iter
+    np.testing.assert_allclose(logged.log_a, scaled.log_a, atol=1e-8)
+    np.testing.assert_allclose(logged.log_b, scaled.log_b, atol=1e-8)
+
+
+def test_any_memory_layout_stays_in_the_scaling_domain(problem, caplog):
+    """Fortran-ordered and transposed inputs: same answer, no fallback to the log domain
+    (the fused passes once wrote into a copy of a non-contiguous array and found 0)."""
+    p, q, geometry = problem
+    reference = sinkhorn(p, q, geometry, tol=1e-8, max_iter=5000)
+    with caplog.at_level(logging.INFO, logger="wbcgrade.core.sinkhorn"):
+        for layout in (np.asfortranarray, lambda x: np.ascontiguousarray(x.T).T):
+            result = sinkhorn(layout(p), layout(q), geometry, tol=1e-8, max_iter=5000,
+                              init_log_b=layout(np.zeros(geometry.shape)))
+            assert result.n_iter == reference.n_iter
+            np.testing.assert_allclose(result.log_a, reference.log_a, atol=1e-10)
+    assert "log domain" not in caplog.text
+
+
+def test_a_batch_solves_each_problem(problem, rng):
+    p, q, geometry = problem
+    p2, q2 = blobs(geometry.shape, 2, rng, width=0.2, floor=1e-4)
+    batch = sinkhorn(np.stack([p, p2]), np.stack([q, q2]), geometry, tol=1e-9, max_iter=5000)
+    for i, (pi, qi) in enumerate(((p, q), (p2, q2))):
+        single = sinkhorn(pi, qi, geometry, tol=1e-9, max_iter=5000)
+        np.testing.assert_allclose(batch.log_b[i] - batch.log_b[i].mean(),
+                                   single.log_b - single.log_b.mean(), atol=1e-5)
+
+
+def test_a_large_relaxation_is_balanced_transport_and_a_small_one_is_not(problem):
+    p, q, geometry = problem
+    balanced = _plan(sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000), geometry)
+    loose = _plan(sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000, relaxation=1e6),
+                  geometry)
+    tight = _plan(sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000, relaxation=1e-3),
+                  geometry)
+    assert np.abs(loose - balanced).sum() < 1e-4
+    # The relaxed side no longer matches q; the first marginal still does.
+    assert np.abs(tight.sum(axis=0) - q.ravel()).sum() > 1e-2
+    assert np.abs(tight.sum(axis=1) - p.ravel()).sum() < 1e-9
