@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import publish_bytes
 from wbcgrade.brdf import merl
 from wbcgrade.brdf.sampled import check_values, interpolate
 from wbcgrade.brdf.sampling import same_sampling
@@ -29,16 +30,6 @@ SAMPLED_FORMAT = "wbcgrade-brdf-sampled-1"
 MERL_SUFFIXES = (".binary", ".merl")
 SAMPLED_SUFFIXES = (".npz",)
 BRDF_SUFFIXES = MERL_SUFFIXES + SAMPLED_SUFFIXES
-
-
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        temporary.write_bytes(data)
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
 
 
 def read_sampled(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +68,7 @@ def write_sampled(path: str | os.PathLike, values: np.ndarray, directions: np.nd
     buffer = io.BytesIO()
     np.savez_compressed(buffer, values=values, directions=np.asarray(directions, np.float64),
                         format=np.str_(SAMPLED_FORMAT), name=np.str_(name))
-    _atomic_write_bytes(path, buffer.getvalue())
+    publish_bytes(path, buffer.getvalue())
     return path
 
 

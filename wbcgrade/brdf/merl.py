@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import atomic_path
 from wbcgrade.errors import InputError
 
 MERL_SHAPE = (90, 90, 180)
@@ -109,15 +110,9 @@ def write_merl(path: str | os.PathLike, table: np.ndarray) -> Path:
     if not np.isfinite(table).all():
         raise InputError("refusing to write a MERL file with NaN or infinite values")
     raw = np.ascontiguousarray(table / MERL_SCALES[:, None, None, None], dtype="<f8")
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(temporary, "wb") as handle:
-            handle.write(np.asarray(MERL_SHAPE, dtype="<i4").tobytes())
-            handle.write(raw.tobytes())
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
+    with atomic_path(path) as temporary, open(temporary, "wb") as handle:
+        handle.write(np.asarray(MERL_SHAPE, dtype="<i4").tobytes())
+        handle.write(raw.tobytes())
     return path
 
 

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade import _publish
 from wbcgrade.brdf.sampled import interpolate
-from wbcgrade.errors import WbcgradeError
 
 DEFAULT_LIGHT = (-0.45, 0.55, 0.70)
 """Direction towards the light (world frame, viewer along +z): upper left, in front."""
@@ -142,24 +142,5 @@ def comparison_image(
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> Path:
-    """Write an 8-bit RGB image (H, W, 3) as PNG with OpenImageIO, atomically."""
-    import OpenImageIO as oiio
-
-    path = Path(path)
-    image = np.ascontiguousarray(image, dtype=np.uint8)
-    temporary = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
-    try:
-        output = oiio.ImageOutput.create(str(temporary))
-        if output is None:
-            raise WbcgradeError(f"{path}: cannot create a PNG writer ({oiio.geterror()})")
-        spec = oiio.ImageSpec(image.shape[1], image.shape[0], 3, oiio.UINT8)
-        ok = output.open(str(temporary), spec) and output.write_image(image)
-        error = output.geterror()
-        output.close()
-        if not ok:
-            raise WbcgradeError(f"{path}: cannot write PNG ({error})")
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
-    return path
+    """Write an 8-bit RGB image (H, W, 3) uint8 as PNG, atomically (``wbcgrade._publish``)."""
+    return _publish.write_png(path, np.asarray(image, dtype=np.uint8))

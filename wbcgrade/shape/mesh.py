@@ -20,13 +20,13 @@ Normalisation (:func:`normalization_transform`)
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from wbcgrade._publish import publish_bytes
 from wbcgrade.errors import InputError
 
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -511,21 +511,4 @@ def write_mesh(mesh: trimesh.Trimesh, path: str | os.PathLike) -> None:
             f"use one of {', '.join(MESH_SUFFIXES)}"
         )
     data = trimesh.exchange.export.export_mesh(mesh, file_obj=None, file_type=file_type)
-    atomic_write_bytes(path, data.encode() if isinstance(data, str) else data)
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, then rename it over ``path``."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"{directory}: output folder does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    publish_bytes(path, data.encode() if isinstance(data, str) else data)

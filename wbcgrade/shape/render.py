@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from wbcgrade import _publish
 from wbcgrade.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -188,28 +187,8 @@ def _draw_labels(sheet: np.ndarray, labels: list[tuple[int, str]]) -> np.ndarray
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
-    """Write an (H, W, 3) float image in [0, 1] as an 8-bit PNG, atomically."""
-    import OpenImageIO as oiio
+    """Write an (H, W, 3) float image in [0, 1] as an 8-bit PNG, atomically.
 
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"{directory}: output folder does not exist")
-    pixels = np.ascontiguousarray(np.clip(np.round(image * 255.0), 0, 255).astype(np.uint8))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=directory)
-    os.close(fd)
-    try:
-        output = oiio.ImageOutput.create(tmp)
-        if output is None:
-            raise OSError(f"{path}: cannot create a PNG writer ({oiio.geterror()})")
-        spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
-        ok = output.open(tmp, spec) and output.write_image(pixels)
-        error = output.geterror()
-        output.close()
-        if not ok:
-            raise OSError(f"{path}: could not write the PNG ({error})")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    See :func:`wbcgrade._publish.write_png`.
+    """
+    _publish.write_png(path, np.asarray(image, dtype=np.float64))

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import publish_bytes
 from wbcgrade.errors import InputError
-from wbcgrade.shape.mesh import atomic_write_bytes
 
 VOLUME_SUFFIXES = (".npy", ".nii", ".nii.gz")
 """File suffixes read as volumes."""
@@ -88,7 +88,7 @@ def write_volume(path: str | os.PathLike, volume: np.ndarray) -> None:
     if suffix == ".npy":
         buffer = io.BytesIO()
         np.save(buffer, volume, allow_pickle=False)
-        atomic_write_bytes(path, buffer.getvalue())
+        publish_bytes(path, buffer.getvalue())
     elif suffix in (".nii", ".nii.gz"):
         nibabel = _import_nibabel()
         image = nibabel.Nifti1Image(volume.astype(np.float32), affine=np.eye(4))
@@ -97,7 +97,7 @@ def write_volume(path: str | os.PathLike, volume: np.ndarray) -> None:
             import gzip
 
             data = gzip.compress(data)
-        atomic_write_bytes(path, data)
+        publish_bytes(path, data)
     else:
         raise InputError(f"{path}: unsupported volume format; use .npy, .nii or .nii.gz")
 
