@@ -17,6 +17,7 @@ the same names and locks and removes such leftovers.
 - :func:`publish_bytes`: write a ``bytes`` object atomically.
 - :func:`write_png`: the PNG writer (8-bit, OpenImageIO) of the BRDF and shape code.
 - :func:`check_regular_target`: refuse to replace a device, pipe, socket or folder.
+- :func:`check_output_path`: all the checks an output can get before any work.
 
 With ``overwrite=False`` an existing target is never replaced, even one that
 appears while the file is being written (published by a hard link, which
@@ -30,7 +31,7 @@ import fcntl
 import os
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,7 @@ import numpy as np
 from wbcgrade.errors import InputError
 
 __all__ = ["TEMP_MARK", "atomic_path", "publish_bytes", "write_png", "check_regular_target",
-           "check_folder"]
+           "check_folder", "check_output_path"]
 
 #: Marks the project's temporary files: ``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``.
 TEMP_MARK = ".wbcgrade-tmp-"
@@ -82,6 +83,34 @@ def check_folder(target: str | os.PathLike) -> Path:
     if not folder.is_dir():
         raise InputError(f"{folder}: output folder does not exist")
     return folder
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def check_output_path(target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (),
+                      overwrite: bool = True) -> Path:
+    """Check that ``target`` may be written, before any long computation. -> ``Path(target)``.
+
+    Raises InputError when ``target`` is one of ``inputs`` (never allowed), a
+    folder, exists and is not a regular file, exists and ``overwrite`` is
+    False, or its folder is missing or not writable.
+    """
+    target = Path(target)
+    for source in inputs:
+        if source is not None and _same_file(Path(source), target):
+            raise InputError(f"{target}: refusing to overwrite the input file")
+    check_regular_target(target)
+    if target.exists() and not overwrite:
+        raise InputError(f"{target}: file exists (use --overwrite to replace it)")
+    folder = check_folder(target)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: output folder is not writable")
+    return target
 
 
 def _fsync_path(path: str | os.PathLike, directory: bool = False) -> None:

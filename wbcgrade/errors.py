@@ -15,3 +15,15 @@ class InputError(WbcgradeError, ValueError):
 
 class NumericalError(WbcgradeError, FloatingPointError):
     """A computation could not be carried out safely in the requested precision."""
+
+
+class OptionError(InputError):
+    """A setting (a command-line option) has an unusable value.
+
+    ``option`` names it as the command line spells it (e.g. ``"-o/--png"``);
+    the CLI reports it as a usage error (exit status 2), like click's own.
+    """
+
+    def __init__(self, message: str, option: str) -> None:
+        super().__init__(message)
+        self.option = option

@@ -24,12 +24,12 @@ def brdfs(tmp_path):
 
 @pytest.fixture
 def no_fit(monkeypatch):
-    import wbcgrade.cli.brdf as cli
+    import wbcgrade.brdf.fit as fit_module  # the workflow (wbcgrade.brdf.workflow) calls it
 
     def forbidden(*args, **kwargs):
         raise AssertionError("fitted before checking the outputs")
 
-    monkeypatch.setattr(cli, "fit_brdf", forbidden)
+    monkeypatch.setattr(fit_module, "fit_brdf", forbidden)
 
 
 def _fit(measured, database, *extra):

@@ -60,15 +60,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbcgrade.brdf.defaults import (
+    BRDF_LOSSES,
+    DEFAULT_FIT_DIRECTIONS,
+    DEFAULT_LOSS,
+    DEFAULT_MAX_ITER,
+    DEFAULT_N_ITER,
+    DEFAULT_TOL,
+)
 from wbcgrade.brdf.masked import masked_loss
 from wbcgrade.core import Geometry, Loss, barycenter, barycentric_coordinates, get_loss
 from wbcgrade.errors import InputError, NumericalError
 
-DEFAULT_LOSS = "sinkhorn-divergence"
-DEFAULT_N_ITER = 60
-DEFAULT_MAX_ITER = 30
-DEFAULT_TOL = 1e-6
-DEFAULT_FIT_DIRECTIONS = 16
+__all__ = ["BRDFFit", "brdf_histograms", "resolve_loss", "fit_brdf", "BRDF_LOSSES",
+           "DEFAULT_LOSS", "DEFAULT_N_ITER", "DEFAULT_MAX_ITER", "DEFAULT_TOL",
+           "DEFAULT_FIT_DIRECTIONS"]
 
 
 @dataclass(frozen=True)
@@ -125,10 +131,6 @@ def brdf_histograms(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     histograms = np.divide(rows, sums[..., None], out=np.zeros_like(rows),
                            where=sums[..., None] > 0)
     return histograms, sums
-
-
-BRDF_LOSSES = ("sinkhorn-divergence", "wasserstein", "quadratic", "l1", "kl")
-"""Losses ``fit_brdf`` and ``wbcgrade brdf fit --loss`` accept (the default first)."""
 
 
 def resolve_loss(loss: str | Loss) -> Loss:

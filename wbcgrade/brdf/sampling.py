@@ -29,13 +29,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbcgrade.brdf.defaults import DEFAULT_DIRECTIONS, DEFAULT_WIDTH
 from wbcgrade.errors import InputError
 
-DEFAULT_DIRECTIONS = 288
-"""Number of hemisphere directions used by default (the paper's N)."""
-
-DEFAULT_WIDTH = 1.5
-"""Default kernel width (Gaussian standard deviation) in sample spacings."""
+__all__ = ["DEFAULT_DIRECTIONS", "DEFAULT_WIDTH", "hemisphere_directions", "sample_spacing",
+           "default_gamma", "geodesic_distance", "geodesic_cost", "hemisphere_geometry",
+           "spread_subset", "same_sampling"]
 
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 

@@ -1,25 +1,27 @@
-"""``wbcgrade brdf``: infer a BRDF from sparse measurements (paper §5.2)."""
+"""``wbcgrade brdf``: infer a BRDF from sparse measurements (paper §5.2).
+
+Parsing, progress and printing only; the work is ``wbcgrade.brdf.workflow``.
+Heavy modules (numpy, the core) are imported inside the commands, so that
+``wbcgrade --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import click
-import numpy as np
-from tqdm import tqdm
 
-from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
-from wbcgrade.brdf.fit import (
+from wbcgrade.brdf.defaults import (
     BRDF_LOSSES,
+    DEFAULT_DIRECTIONS,
     DEFAULT_FIT_DIRECTIONS,
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
     DEFAULT_TOL,
-    fit_brdf,
+    DEFAULT_WIDTH,
 )
-from wbcgrade.errors import NumericalError
+from wbcgrade.errors import OptionError
 
 
 @click.group("brdf")
@@ -40,7 +42,7 @@ def brdf() -> None:
 @click.option("--material", "materials", multiple=True, metavar="NAME",
               help="Write these materials instead (repeatable; see --list).")
 @click.option("--list", "list_only", is_flag=True, help="List the material names and exit.")
-@click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
+@click.option("--directions", default=DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000),
               help="Hemisphere directions of the .npz files written for anisotropic materials.")
 def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only: bool,
@@ -50,6 +52,11 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
     Isotropic materials are written as MERL .binary files; anisotropic ones
     (Ward) as sampled .npz files, since the MERL format cannot hold anisotropy.
     """
+    from tqdm import tqdm
+
+    from wbcgrade.brdf import analytic
+    from wbcgrade.brdf.workflow import write_database
+
     if list_only:
         held_out = {m.name for m in analytic.held_out_materials()}
         for name in analytic.all_material_names():
@@ -57,28 +64,15 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
         return
     if folder is None:
         raise click.UsageError("Missing option '-o' / '--output'.")
-    chosen = ([analytic.material_by_name(n) for n in materials] if materials
-              else analytic.default_materials(count))
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
-    dirs = sampling.hemisphere_directions(directions)
-    written = []
-    for index, material in enumerate(tqdm(chosen, desc="synth", unit="BRDF", leave=False,
-                                                   disable=None)):
-        stem = material.name if materials else f"{index + 1:02d}-{material.name}"
-        if material.isotropic:
-            path = merl.write_merl(out / f"{stem}.binary", merl.tabulate_merl(material.evaluate))
-        else:
-            path = io.write_sampled(out / f"{stem}.npz", analytic.sample_material(material, dirs),
-                                    dirs, name=material.name)
-        written.append(path)
+    with tqdm(desc="synth", unit="BRDF", leave=False, disable=None) as bar:
+        def progress(done: int, total: int, name: str) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        written = write_database(folder, materials, count=count, directions=directions,
+                                 progress=progress)
     for path in written:
         click.echo(str(path))
-
-
-def _default_output(measured: Path, keep: float | None) -> Path:
-    tag = "" if keep is None else f"-keep{keep * 100:g}"
-    return Path.cwd() / f"{measured.stem}{tag}-fit.binary"
 
 
 @brdf.command("fit")
@@ -103,12 +97,12 @@ def _default_output(measured: Path, keep: float | None) -> Path:
               help="Fit loss: sinkhorn-divergence is the entropic Wasserstein loss without "
                    "its entropic bias; wasserstein is the paper's (biased: it favours blurry "
                    "BRDFs); quadratic is the fastest.")
-@click.option("--directions", default=sampling.DEFAULT_DIRECTIONS, show_default=True,
+@click.option("--directions", default=DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
 @click.option("--fit-directions", default=DEFAULT_FIT_DIRECTIONS, show_default=True,
               type=click.IntRange(0, 2000),
               help="Incoming directions (well spread) whose rows fit the weights; 0 = all N.")
-@click.option("--width", default=sampling.DEFAULT_WIDTH, show_default=True,
+@click.option("--width", default=DEFAULT_WIDTH, show_default=True,
               type=click.FloatRange(0.1, 20.0),
               help="Kernel width in sample spacings (sets gamma).")
 @click.option("--n-iter", default=DEFAULT_N_ITER, show_default=True,
@@ -130,119 +124,56 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
     when --keep is given) and a picture: spheres rendered with the reference,
     the full fit and the decimated fits.
     """
-    measured_path = Path(measured)
-    keep = keeps[0] if keeps else None
-    out = Path(output) if output else _default_output(measured_path, keep)
-    png_path = None if no_png else (Path(png) if png else out.with_suffix(".png"))
-    inputs = {measured_path.resolve(), *(p.resolve() for p in io.database_files(database))}
-    for target in (out, png_path):
-        if target is not None and target.resolve() in inputs:
-            raise click.BadParameter(f"{target} is an input; choose another output",
-                                     param_hint="-o/--png")
-    if out.suffix.lower() not in io.BRDF_SUFFIXES:
-        raise click.BadParameter(f"{out}: use a .binary or .npz suffix", param_hint="-o")
-    from wbcgrade.color.imageio import check_output_path
+    from tqdm import tqdm
 
-    for target in (out, png_path):  # before any work: folder, writability, a regular file
-        if target is not None:
-            check_output_path(target, overwrite=True)
+    from wbcgrade.brdf.workflow import fit_measurement
 
-    dirs = sampling.hemisphere_directions(directions)
-    geometry = sampling.hemisphere_geometry(directions, sampling.default_gamma(directions, width))
-    reference = io.load_brdf(measured_path, dirs)
-    names, base = io.load_database(database, dirs, exclude=measured_path)
-    subset = None if fit_directions in (0, directions) else sampling.spread_subset(
-        dirs, fit_directions)
+    bars: dict[str, tqdm] = {}
 
-    runs: list[tuple[str, np.ndarray | None]] = []
-    for fraction in keeps:
-        runs.append((f"keep {fraction * 100:g}%",
-                     sampled.decimation_mask(directions, directions, fraction, seed)))
-    if not keeps or compare:
-        runs.insert(0, ("full", None))
-    results = []
-    for label, mask in runs:
-        with tqdm(desc=f"fit ({label})", unit="eval", leave=False, disable=None) as bar:
-            def progress(n, weights, value, bar=bar):
-                bar.update(1)
-                bar.set_postfix(loss=f"{value:.4g}")
+    def progress(label, n, weights, value) -> None:
+        if label not in bars:
+            for bar in bars.values():
+                bar.close()
+            bars[label] = tqdm(desc=f"fit ({label})", unit="eval", leave=False, disable=None)
+        bars[label].update(1)
+        bars[label].set_postfix(loss=f"{value:.4g}")
 
-            result = fit_brdf(reference, base, geometry, mask=mask, loss=loss, n_iter=n_iter,
-                              max_iter=max_iter, tol=tol, fit_incoming=subset,
-                              callback=progress)
-        psnr = sampled.psnr(reference, result.values)
-        if np.isnan(psnr):
-            raise NumericalError(f"the {label} fit of {measured_path} has no defined PSNR")
-        results.append((label, result, psnr))
+    try:
+        result = fit_measurement(
+            measured, database, keeps=keeps, seed=seed, output=output, png=png, no_png=no_png,
+            compare=compare, loss=loss, directions=directions, fit_directions=fit_directions,
+            width=width, n_iter=n_iter, max_iter=max_iter, tol=tol, progress=progress)
+    except OptionError as exc:
+        raise click.BadParameter(str(exc), param_hint=exc.option) from None
+    finally:
+        for bar in bars.values():
+            bar.close()
 
-    label, final, _ = results[1] if keeps and compare else results[0]
-    io.save_brdf(out, final.values, dirs, name=f"{measured_path.stem} {label} fit")
-    if png_path is not None:
-        renderings = [render.render_sphere(reference, dirs)]
-        captions = [["reference", measured_path.stem[:30], "(all measurements)"]]
-        for label, result, psnr in results:
-            renderings.append(render.render_sphere(result.values, dirs))
-            shown = [(n, w) for n, w in _ranked(names, result.weights)[:3] if w >= 0.005]
-            captions.append([f"fit, {label}", f"PSNR {psnr:.1f} dB",
-                             *(f"{w * 100:.0f}%  {name}"[:31] for name, w in shown)])
-        render.write_png(png_path, render.comparison_image(renderings, captions,
-                                                           caption_lines=5))
-
-    for label, result, _ in results:
-        if not result.converged:
-            click.echo(f"Warning: the {label} fit stopped before converging (raise --max-iter)",
-                       err=True)
+    for run in result.runs:
+        if not run.fit.converged:
+            click.echo(f"Warning: the {run.label} fit stopped before converging "
+                       "(raise --max-iter)", err=True)
     if as_json:
-        number = _json_number
-        click.echo(json.dumps({
-            "measured": str(measured_path),
-            "database": names,
-            "directions": directions,
-            "fit_directions": directions if subset is None else len(subset),
-            "gamma": number(geometry.gamma),
-            "loss": loss,
-            "fits": [{
-                "label": label,
-                "kept_fraction": result.kept_fraction,
-                "weights": dict(zip(names, (float(w) for w in result.weights), strict=True)),
-                "psnr_db": number(psnr),  # null: an exact fit (infinite PSNR)
-                "loss": number(result.loss),
-                "initial_loss": number(result.initial_loss),
-                "n_evaluations": result.n_evaluations,
-                "converged": result.converged,
-                "time_s": round(result.time_s, 3),
-            } for label, result, psnr in results],
-            "output": str(out),
-            "png": None if png_path is None else str(png_path),
-        }, indent=2, allow_nan=False))
+        click.echo(json.dumps(result.as_dict(), indent=2, allow_nan=False))
         return
-    _print_table(names, results, loss)
-    click.echo(f"wrote {out}" + ("" if png_path is None else f" and {png_path}"))
+    _print_table(result)
+    click.echo(f"wrote {result.output}" + ("" if result.png is None else f" and {result.png}"))
 
 
-def _json_number(value: float) -> float | None:
-    """``value`` as a float for JSON, None where it is not finite (JSON has no NaN or inf)."""
-    value = float(value)
-    return value if np.isfinite(value) else None
-
-
-def _ranked(names: list[str], weights: np.ndarray) -> list[tuple[str, float]]:
-    """(name, weight) pairs, largest weight first."""
-    order = np.argsort(-np.asarray(weights), kind="stable")
-    return [(names[i], float(weights[i])) for i in order]
-
-
-def _print_table(names: list[str], results: list, loss: str) -> None:
+def _print_table(result) -> None:
     """Weights (sorted by the first fit's), PSNR, loss, evaluations and time, one column a fit."""
-    order = [names.index(name) for name, _ in _ranked(names, results[0][1].weights)]
-    rows = [("material", [label for label, _, _ in results])]
-    rows += [(names[i], [f"{r.weights[i]:.3f}" for _, r, _ in results]) for i in order]
+    from wbcgrade.brdf.workflow import ranked
+
+    names, runs = result.names, result.runs
+    order = [names.index(name) for name, _ in ranked(names, runs[0].fit.weights)]
+    rows = [("material", [run.label for run in runs])]
+    rows += [(names[i], [f"{run.fit.weights[i]:.3f}" for run in runs]) for i in order]
     rows += [
-        ("PSNR vs measurement", [f"{p:.2f} dB" for _, _, p in results]),
-        (f"loss ({loss})", [f"{r.loss:.4g}" for _, r, _ in results]),
-        ("  at uniform weights", [f"{r.initial_loss:.4g}" for _, r, _ in results]),
-        ("evaluations", [str(r.n_evaluations) for _, r, _ in results]),
-        ("time", [f"{r.time_s:.1f}s" for _, r, _ in results]),
+        ("PSNR vs measurement", [f"{run.psnr:.2f} dB" for run in runs]),
+        (f"loss ({result.loss})", [f"{run.fit.loss:.4g}" for run in runs]),
+        ("  at uniform weights", [f"{run.fit.initial_loss:.4g}" for run in runs]),
+        ("evaluations", [str(run.fit.n_evaluations) for run in runs]),
+        ("time", [f"{run.fit.time_s:.1f}s" for run in runs]),
     ]
     first = max(len(name) for name, _ in rows)
     width = max(10, *(len(cell) for _, cells in rows for cell in cells))
