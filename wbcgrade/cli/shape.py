@@ -1,4 +1,8 @@
-"""``wbcgrade shape``: complete meshes and project volumes onto a database (paper §5.3-5.4)."""
+"""``wbcgrade shape``: complete meshes and project volumes onto a database (paper §5.3-5.4).
+
+Parsing, progress and printing only; the work is ``wbcgrade.shape.workflow``
+(imported inside the commands, so that ``wbcgrade --help`` stays fast).
+"""
 
 from __future__ import annotations
 
@@ -8,56 +12,40 @@ from pathlib import Path
 
 import click
 
-from wbcgrade.errors import InputError
-
 # The names of wbcgrade.shape.complete.LOSS_NAMES, repeated so `--help` needs no core import.
 _LOSS_CHOICE = click.Choice(["kl_reverse", "kl", "quadratic", "l1", "wasserstein"],
                             case_sensitive=False)
 
 
-def _progress(enabled: bool, total: int, desc: str):
-    """A tqdm bar on stderr and a callback for the core's fit."""
-    from tqdm import tqdm
+class _FitProgress:
+    """A tqdm bar on stderr, opened at the fit's first evaluation; ``close()`` at the end."""
 
-    bar = tqdm(total=total, desc=desc, unit="eval", disable=not enabled, file=sys.stderr,
-               leave=False)
+    def __init__(self, enabled: bool, total: int, desc: str) -> None:
+        self.enabled, self.total, self.desc, self.bar = enabled, total, desc, None
 
-    def callback(n_evaluations: int, weights, loss: float) -> None:
+    def __call__(self, n_evaluations: int, weights, loss: float) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.total, desc=self.desc, unit="eval",
+                            disable=not self.enabled, file=sys.stderr, leave=False)
+        bar = self.bar
         if n_evaluations > bar.total:
             bar.total = n_evaluations
         bar.update(n_evaluations - bar.n)
         bar.set_postfix(loss=f"{loss:.4g}")
 
-    return bar, callback
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
-def _check_outputs(outputs: list[Path], inputs: list[Path]) -> None:
-    """Never overwrite an input."""
-    resolved = {p.resolve() for p in inputs}
-    for out in outputs:
-        if out.resolve() in resolved:
-            raise InputError(f"{out}: output would overwrite an input")
-
-
-def _print_weights(projection, as_json: bool, extra: dict) -> None:
+def _print_result(result, as_json: bool) -> None:
+    """The weights table and one summary line, or the JSON record."""
     if as_json:
-        record = {
-            "method": projection.method,
-            "loss": projection.loss_name,
-            "missing": projection.missing,
-            "weights": {n: float(w) for n, w in zip(projection.names, projection.weights,
-                                                    strict=True)},
-            "loss_value": projection.loss,
-            "initial_loss": projection.initial_loss,
-            "kernel_width_voxels": projection.width,
-            "evaluations": projection.n_evaluations,
-            "coarse_evaluations": projection.n_coarse_evaluations,
-            "converged": projection.converged,
-            "time_s": round(projection.time_s, 3),
-            **extra,
-        }
-        click.echo(json.dumps(record, indent=2))
+        click.echo(json.dumps(result.as_dict(), indent=2))
         return
+    projection = result.projection
     width = max(len(n) for n in projection.names)
     click.echo(f"{'shape':<{width}}  weight")
     for index in projection.order():
@@ -71,7 +59,7 @@ def _print_weights(projection, as_json: bool, extra: dict) -> None:
         + f", {projection.time_s:.1f} s, "
         f"missing fraction {projection.missing:.3f}"
     )
-    for key, value in extra.items():
+    for key, value in result.details.items():
         if key.endswith("_file"):
             click.echo(f"wrote {value}")
 
@@ -138,63 +126,34 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
     """
     from tqdm import tqdm
 
-    from wbcgrade.shape.complete import (
-        check_database_size,
-        check_memory,
-        complete_shape,
-        completion_sheet,
-        completion_surface,
-        expand_paths,
-        load_shape,
-    )
-    from wbcgrade.shape.mesh import MESH_SUFFIXES, write_mesh
-    from wbcgrade.shape.render import write_png
-    from wbcgrade.shape.volume import write_volume
-
-    if not partial.is_file():
-        raise InputError(f"{partial}: no such mesh file")
-    output = output or Path(f"{partial.stem}_completed.obj")
-    if output.suffix.lower() not in MESH_SUFFIXES:
-        raise InputError(f"{output}: the output mesh must end in {', '.join(MESH_SUFFIXES)}")
-    volume_path = volume_path or output.with_suffix(".npy")
-    png_path = png_path or output.with_suffix(".png")
-    paths = [p for p in expand_paths(database, "mesh") if p.resolve() != partial.resolve()]
-    check_database_size(paths)
-    _check_outputs([output, volume_path, png_path], [partial, *paths])
-    check_memory((resolution,) * 3, len(paths), iterations)
+    from wbcgrade.shape.workflow import complete_mesh_file
 
     def warn(message: str) -> None:
         tqdm.write(f"Warning: {message}", file=sys.stderr)
 
-    shapes = []
-    for path in tqdm([partial, *paths], desc="voxelising", unit="mesh", disable=quiet,
-                     file=sys.stderr, leave=False):
-        reference = shapes[0] if shapes else None
-        shapes.append(load_shape(path, resolution, align=align, reference=reference, warn=warn))
-    bar, callback = _progress(not quiet, max_iter, "fitting")
-    with bar:
-        completion = complete_shape(
-            shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean,
-            width=width, n_iter=iterations, max_iter=max_iter, callback=callback,
-            coarse_to_fine=coarse,
-        )
-    surface = completion_surface(completion, smooth_iterations=smooth)
-    write_mesh(surface, output)
-    write_volume(volume_path, completion.projection.barycenter)
-    write_png(png_path, completion_sheet(completion, top=top))
-    _print_weights(
-        completion.projection,
-        as_json,
-        {
-            "input": str(partial),
-            "resolution": resolution,
-            "missing_estimated": missing is None,
-            "watertight": bool(surface.is_watertight),
-            "mesh_file": str(output),
-            "volume_file": str(volume_path),
-            "png_file": str(png_path),
-        },
-    )
+    bars = []
+
+    def on_mesh(done: int, total: int, path: Path) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, desc="voxelising", unit="mesh", disable=quiet,
+                             file=sys.stderr, leave=False))
+        bars[0].update(done - bars[0].n)
+        if done == total:
+            bars[0].close()
+
+    callback = _FitProgress(not quiet, max_iter, "fitting")
+    try:
+        result = complete_mesh_file(
+            partial, database, output=output, volume_path=volume_path, png_path=png_path,
+            resolution=resolution, missing=missing, loss=loss, euclidean=euclidean,
+            width=width, n_iter=iterations, max_iter=max_iter, coarse_to_fine=coarse,
+            align=align, smooth=smooth, top=top, warn=warn, on_mesh=on_mesh,
+            callback=callback)
+    finally:
+        for bar in bars:
+            bar.close()
+        callback.close()
+    _print_result(result, as_json)
 
 
 @shape.command()
@@ -211,72 +170,14 @@ def project(volume, database, resolution, missing, euclidean, width, iterations,
     The fitted volume is written scaled to the input's total intensity, at the
     (possibly reduced) working resolution.
     """
-    from wbcgrade.shape.complete import (
-        check_database_size,
-        check_memory,
-        expand_paths,
-        projection_sheet,
-    )
-    from wbcgrade.shape.complete import project as project_density
-    from wbcgrade.shape.render import write_png
-    from wbcgrade.shape.volume import (
-        density_from_volume,
-        read_volume,
-        resample_volume,
-        volume_suffix,
-        write_volume,
-    )
+    from wbcgrade.shape.workflow import project_volume_file
 
-    if not volume.is_file():
-        raise InputError(f"{volume}: no such volume file")
-    output = output or Path(volume.name[: -len(volume_suffix(volume))] + "_projected.npy")
-    if not volume_suffix(output):
-        raise InputError(f"{output}: the output volume must end in .npy, .nii or .nii.gz")
-    png_path = png_path or Path(str(output)[: -len(volume_suffix(output))] + ".png")
-    paths = [p for p in expand_paths(database, "volume") if p.resolve() != volume.resolve()]
-    check_database_size(paths)
-    _check_outputs([output, png_path], [volume, *paths])
-
-    original = read_volume(volume)
-    shape_after = tuple(
-        max(2, round(n * min(1.0, resolution / max(original.shape)))) for n in original.shape
-    )
-    check_memory(shape_after, len(paths), iterations)
-    source = resample_volume(original, resolution)
-    volumes = []
-    for path in paths:
-        data = read_volume(path)
-        if data.shape != original.shape:
-            raise InputError(
-                f"{path}: shape {data.shape} differs from the input's {original.shape}"
-            )
-        volumes.append(resample_volume(data, resolution))
-    bar, callback = _progress(not quiet, max_iter, "fitting")
-    with bar:
-        projection = project_density(
-            density_from_volume(source),
-            [density_from_volume(v) for v in volumes],
-            names=[p.name for p in paths],
-            missing=0.0 if missing is None else missing,
-            loss=loss,
-            euclidean=euclidean,
-            width=width,
-            n_iter=iterations,
-            max_iter=max_iter,
-            callback=callback,
-            coarse_to_fine=coarse,
-        )
-    fitted = projection.barycenter / projection.barycenter.sum() * source.sum()
-    write_volume(output, fitted)
-    write_png(png_path, projection_sheet(source, projection, volumes, top=top))
-    _print_weights(
-        projection,
-        as_json,
-        {
-            "input": str(volume),
-            "shape": list(source.shape),
-            "volume_file": str(output),
-            "png_file": str(png_path),
-        },
-    )
-
+    callback = _FitProgress(not quiet, max_iter, "fitting")
+    try:
+        result = project_volume_file(
+            volume, database, output=output, png_path=png_path, resolution=resolution,
+            missing=missing, loss=loss, euclidean=euclidean, width=width, n_iter=iterations,
+            max_iter=max_iter, coarse_to_fine=coarse, top=top, callback=callback)
+    finally:
+        callback.close()
+    _print_result(result, as_json)
