@@ -289,6 +289,42 @@ def test_report_hook_for_apply(folders, tmp_path):
     entry = json.loads(path.read_text())["photos"][0]
     assert entry["photo"] == "chelsea.jpg" and len(entry["weights"]) == 3
     assert (tmp_path / "report" / entry["sheet"]).is_file()
+    # The report says what the fit did (it once called every fit "uniform") and reuses
+    # its single-style losses instead of evaluating them again.
+    assert entry["fit_start"] == graded.fit.start == graded.as_dict()["fit_start"]
+    assert list(entry["single_style_losses"].values()) == pytest.approx(
+        list(graded.fit.vertex_losses))
+    assert entry["loss"] == pytest.approx(graded.fit.loss)
+
+
+@pytest.mark.parametrize("start", ["vertex-refit", "vertex", "given"])
+def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatch, start):
+    """Vertex refits and given weights were labelled "uniform", and every vertex loss was
+    evaluated a second time for the report."""
+    import wbcgrade.color.grading as grading
+    from wbcgrade.color.pipeline import grade_file
+    from wbcgrade.color.report import report_from_grade
+
+    photos, styles = folders
+    opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10,
+                        weights=[1.0, 1.0, 0.0] if start == "given" else None)
+    style_set = load_style_folder(styles, 8)
+    fit = grading.fit_with_vertex_check
+
+    def labelled(*args, **kwargs):
+        summary = fit(*args, **kwargs)
+        if start != "given":
+            summary.start = summary.info["start"] = start
+        return summary
+
+    monkeypatch.setattr(grading, "fit_with_vertex_check", labelled)
+    graded = grade_file(photos / "chelsea.jpg", style_set, opts, output=tmp_path / "c.jpg")
+    calls = []
+    monkeypatch.setattr(grading, "vertex_losses", lambda *a: calls.append(a))
+    path = report_from_grade(tmp_path / "report", graded, style_set, opts)
+    entry = json.loads(path.read_text())["photos"][0]
+    assert entry["fit_start"] == start and calls == []
+    assert graded.as_dict()["fitted"] is (start != "given")
 
 
 def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):

@@ -69,9 +69,25 @@ def test_apply_table_weights_and_strength(tmp_path, styles, photo):
     lines = result.stdout.splitlines()
     assert lines[0].split() == ["style", "weight"]
     assert lines[2].split()[1] == "0.500" and lines[4].split()[1] == "0.000"
-    # Fixed weights skip the fit, but their loss is still evaluated and shown.
-    assert re.search(r"^loss: \d", result.stdout, re.M) and "time:" in result.stdout
+    # Fixed weights skip the fit, but their loss is still evaluated and shown (it once
+    # said "from nan at uniform weights, 0 evaluations").
+    assert re.search(r"^loss: \d\S* at the weights given with --weights$", result.stdout, re.M)
+    assert "nan" not in result.stdout and "time:" in result.stdout
     assert read_image(out).pixels.shape == read_image(photo).pixels.shape
+
+
+def test_apply_json_says_whether_the_weights_were_fitted(tmp_path, styles, photo):
+    """"fitted" was always true, also for --weights."""
+    given = run("apply", photo, "--style", styles, "-o", tmp_path / "a.jpg", "--weights",
+                "1,1,0,0", "--json", *FAST_ARGS)
+    fitted = run("apply", photo, "--style", styles, "-o", tmp_path / "b.jpg", "--json",
+                 *FAST_ARGS)
+    assert given.exit_code == 0 and fitted.exit_code == 0, given.output + fitted.output
+    given, fitted = json.loads(given.stdout), json.loads(fitted.stdout)
+    assert given["fitted"] is False and given["fit_start"] == "given"
+    assert fitted["fitted"] is True
+    assert fitted["fit_start"] in ("uniform", "vertex-refit", "vertex")
+    assert fitted["fit"]["start"] == fitted["fit_start"]
 
 
 def test_preset_build_list_and_apply(tmp_path, styles, photo):

@@ -29,12 +29,18 @@ def _print_report(report, as_json: bool) -> None:
     click.echo(f"{'-' * width}  ------")
     for name, weight in ranked:
         click.echo(f"{name:<{width}}  {weight:6.3f}")
+    fit = grade.info.get("fit", {})
+    start = report.fit_start
     if grade.loss is None:
         click.echo("loss: - (weights given with --weights)")
+    elif start == "given":
+        click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
     else:
-        fit = grade.info.get("fit", {})
-        click.echo(f"loss: {grade.loss:.4g} (from {fit.get('initial_loss', float('nan')):.4g} "
-                   f"at uniform weights, {fit.get('evaluations', 0)} evaluations)")
+        how = {"uniform": "fitted from uniform weights",
+               "vertex-refit": "refitted from the best single style, which beat the fit "
+                               "from uniform weights",
+               "vertex": "the best single style: no fit beat it"}.get(start, start)
+        click.echo(f"loss: {grade.loss:.4g} ({how}; {fit.get('evaluations', 0)} evaluations)")
         if not fit.get("converged", True):
             _warn("the weight fit stopped before converging (raise --max-iter)")
     sink = grade.info.get("sinkhorn", {})

@@ -22,8 +22,8 @@ import numpy as np
 
 from wbcgrade.color.histogram import add_floor, image_histogram
 from wbcgrade.color.imageio import Image, encode_for_grading, read_image
-from wbcgrade.color.pipeline import render
 from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.render import render
 from wbcgrade.color.transfer import (
     Grade,
     GradeOptions,
@@ -139,7 +139,7 @@ def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: Gr
         weights = np.asarray(opts.weights, dtype=np.float64)
         weights = weights / weights.sum()
         loss = _loss_at(target, hists, geometry, weights, opts)
-        return FitSummary(weights, loss, vertices, "given", {},
+        return FitSummary(weights, loss, vertices, "given", {"start": "given"},
                           time.perf_counter() - start)
     fit = fit_weights(photo_fit, style_fit, opts, callback)
     info = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,

@@ -16,17 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.color._files import remove_stale_temporaries
+from wbcgrade.color.grading import FitSummary, grade_photo
 from wbcgrade.color.histogram import HistogramCache
-from wbcgrade.color.imageio import (
-    Image,
-    check_image_output,
-    check_output_path,
-    decode_from_grading,
-    encode_for_grading,
-    stage_image,
-)
+from wbcgrade.color.imageio import check_image_output, check_output_path, stage_image
 from wbcgrade.color.lut import color_map_to_lut, write_cube
 from wbcgrade.color.presets import StyleSet, load_preset, load_style_folder, resolve_preset
+from wbcgrade.color.render import render
 from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError
 
@@ -44,6 +39,14 @@ class GradeReport:
     grade: Grade
     styles_source: str
     timings: dict[str, float] = field(default_factory=dict)
+    fit: FitSummary | None = None
+
+    @property
+    def fit_start(self) -> str:
+        """How the weights were found: "uniform", "vertex-refit", "vertex" or "given"."""
+        if self.fit is not None:
+            return self.fit.start
+        return "given" if self.grade.loss is None else "uniform"
 
     def as_dict(self) -> dict:
         """JSON-friendly summary."""
@@ -54,7 +57,8 @@ class GradeReport:
             "styles": self.styles_source,
             "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
             "loss": self.grade.loss,
-            "fitted": self.grade.loss is not None,
+            "fitted": self.fit_start != "given",
+            "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
             **{k: v for k, v in self.grade.info.items()},
@@ -107,36 +111,6 @@ def load_styles(style_dir: str | os.PathLike | None, preset: str | None, bins: i
     return load_style_folder(style_dir, bins, cache=cache, warn=warn, progress=progress)
 
 
-def render(image: Image, grade: Grade,
-           encoded: tuple[np.ndarray, np.ndarray | None] | None = None) -> tuple[np.ndarray, int]:
-    """Graded pixels of a whole image at full resolution.
-
-    Colour channels go through the grade (in the encoded domain for float
-    images); alpha and any extra channels pass through untouched. A grey
-    photo becomes RGB (a grade may tint it). ``encoded`` may pass the
-    ``encode_for_grading`` result the caller already has (it is not modified).
-
-    Returns
-    -------
-    pixels : (H, W, C') float32 in the image's value convention.
-    alpha_channel : index of alpha in ``pixels`` or -1.
-    """
-    pixels, scale = encoded if encoded is not None else encode_for_grading(image.rgb(),
-                                                                            image.is_float)
-    graded = decode_from_grading(grade.apply(pixels), scale)
-    chans = image.color_channels
-    if chans == [0, 1, 2] and image.pixels.shape[2] == 3:
-        return graded, image.alpha_channel
-    if len(chans) == 3:
-        out = image.pixels.copy()
-        out[:, :, chans] = graded
-        return out, image.alpha_channel
-    others = [c for c in range(image.pixels.shape[2]) if c not in chans]
-    out = np.concatenate([graded, image.pixels[:, :, others]], axis=2)
-    alpha = 3 + others.index(image.alpha_channel) if image.alpha_channel in others else -1
-    return np.ascontiguousarray(out), alpha
-
-
 def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
                output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
                lut_size: int = 33, overwrite: bool = False,
@@ -163,8 +137,6 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     say = stage or (lambda name: None)
 
     # Read, fit (never worse than the best single style), colour map and remap.
-    from wbcgrade.color.grading import grade_photo  # grading builds on this module
-
     graded = grade_photo(photo, styles, opts, callback=fit_callback, stage=say)
     image, pixels, alpha_channel, grade = (
         graded.image, graded.pixels, graded.alpha_channel, graded.grade
@@ -198,4 +170,4 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
         raise
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
     return GradeReport(photo=photo, output=output, lut=lut, grade=grade,
-                       styles_source=styles.source, timings=timings)
+                       styles_source=styles.source, timings=timings, fit=graded.fit)

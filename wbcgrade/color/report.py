@@ -214,11 +214,11 @@ def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
     """Report of one photo graded by ``wbcgrade apply`` (a hook for ``apply --report``).
 
     ``graded`` is the :class:`wbcgrade.color.pipeline.GradeReport` that
-    ``grade_file`` returned; the photo and its written output are read back
-    and the single-style losses are evaluated with the fit's loss (cheap:
-    one barycenter per style on the fit grid). ``apply``'s fit is not
-    vertex-checked: if it is worse than the best single style, the entry says
-    so (``fit_start``: "uniform, worse than a single style").
+    ``grade_file`` returned; the photo and its written output are read back.
+    The weights' loss, the single-style losses and how the weights were found
+    ("uniform", "vertex-refit", "vertex" or "given") come from the report's
+    fit summary; only a report without one (a grade made elsewhere) has its
+    single-style losses evaluated here.
     """
     import time
 
@@ -231,19 +231,23 @@ def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
     start = time.perf_counter()
     image = read_image(graded.photo)
     output = read_image(graded.output)
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
-    photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
-    style_fit = styles.at_bins(opts.fit_bins)
-    vertices = vertex_losses(photo_fit, style_fit, opts)
     grade = graded.grade
     weights = np.asarray(grade.weights, dtype=np.float64)
-    loss = grade.loss
-    if loss is None:
-        target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
-        loss = _loss_at(target, hists, geometry, weights / weights.sum(), opts)
-    how = "given" if grade.loss is None else "uniform"
-    if grade.loss is not None and loss > vertices.min():
-        how = "uniform, worse than a single style"
+    fit = getattr(graded, "fit", None)
+    if fit is not None:
+        vertices, loss, how = fit.vertex_losses, fit.loss, fit.start
+    else:
+        encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+        photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
+        style_fit = styles.at_bins(opts.fit_bins)
+        vertices = vertex_losses(photo_fit, style_fit, opts)
+        loss = grade.loss
+        if loss is None:
+            target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
+            loss = _loss_at(target, hists, geometry, weights / weights.sum(), opts)
+        how = graded.fit_start if hasattr(graded, "fit_start") else "uniform"
+        if how == "uniform" and loss > vertices.min():
+            how = "uniform, worse than a single style"
     result = FileResult(graded.photo.name, str(graded.photo), str(graded.output), "graded",
                         names=list(styles.names), weights=[float(w) for w in weights],
                         loss=float(loss), vertex_losses=[float(v) for v in vertices],
