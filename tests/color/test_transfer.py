@@ -9,9 +9,9 @@ from tests.color.conftest import SAMPLES, small_copy, write_array
 from wbcgrade.color._colour import colour
 from wbcgrade.color.histogram import grid_points, image_histogram
 from wbcgrade.color.imageio import read_image, write_image
-from wbcgrade.color.render import render
 from wbcgrade.color.presets import StyleSet, load_style_folder
 from wbcgrade.color.remap import identity_map
+from wbcgrade.color.render import render
 from wbcgrade.color.transfer import Grade, GradeOptions, grade_image, parse_weights
 from wbcgrade.errors import InputError
 
