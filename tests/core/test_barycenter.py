@@ -361,3 +361,30 @@ def test_solve_rejects_bad_warm_starts():
         solver.solve([0.5, 0.5], init_log_scalings=np.zeros((2, 5, 6)))
     with pytest.raises(ValueError):
         solver.solve([0.5, 0.5], init_log_scalings=np.full((2, 6, 6), np.nan))
+
+
+def test_all_weight_on_one_histogram_is_computed_in_one_step(rng):
+    """P_L(e_s) = P_1(e_s): the scalings of the weighted histogram stay 1 (the
+    shortcut the solver takes); checked against the dense L-step iteration."""
+    geometry = GridGeometry((6, 6, 6), 2 * (1.5 / 5) ** 2)
+    hists = blobs(geometry.shape, 3, rng, floor=1e-3, components=2)
+    for s in range(3):
+        weights = np.eye(3)[s]
+        dense = dense_barycenter(hists, weights, geometry.cost_matrix(), geometry.gamma, 25)
+        np.testing.assert_allclose(barycenter(hists, weights, geometry, 25).ravel(), dense,
+                                   rtol=1e-10, atol=1e-14)
+    steps = []
+    step = barycenter_module._ScalingBackend.step
+
+    def counted(self, *args, **kwargs):
+        steps.append(1)
+        return step(self, *args, **kwargs)
+
+    barycenter_module._ScalingBackend.step = counted
+    try:
+        barycenter(hists, np.eye(3)[1], geometry, 25)
+        one = len(steps)
+        barycenter(hists, [0.5, 0.5, 0.0], geometry, 25)
+    finally:
+        barycenter_module._ScalingBackend.step = step
+    assert one == 1 and len(steps) == 26

@@ -619,13 +619,20 @@ class BarycenterSolver:
         raise AssertionError("the log backend never reports _Unsafe")
 
     def barycenter(self, weights: ArrayLike) -> NDArray:
-        """P_L(weights), shape (*batch, *shape), float64."""
+        """P_L(weights), shape (*batch, *shape), float64.
+
+        With all the weight on one histogram the iteration is at its fixed
+        point after one step (``P = phi`` of that histogram, so its scalings
+        stay 1 and the others have no weight): one step is computed, the same
+        result up to rounding.
+        """
         w = _validate_weights(weights, self.n_histograms)
+        steps = 1 if np.count_nonzero(w) == 1 else self.n_iter
 
         def forward(backend):
             b = backend.initial()
-            for l in range(self.n_iter):
-                b, it = backend.step(b, need_next=l < self.n_iter - 1)
+            for l in range(steps):
+                b, it = backend.step(b, need_next=l < steps - 1)
                 P, it = it.P, None  # drop this iteration's arrays before the next one
             return P
 
