@@ -1,6 +1,6 @@
 """CPU settings that make kernel products fast and predictable.
 
-Two facts measured on the target machines (DESIGN.md §4):
+Two facts measured on the target machines (docs/architecture.md, threads):
 
 - Products whose operands or results are denormal run 10-100 times slower;
   with the CPU's flush-to-zero / denormals-are-zero flags set they do not.
@@ -79,6 +79,15 @@ _controller: ThreadpoolController | None = None
 _pool: ThreadPoolExecutor | None = None
 _lock = threading.Lock()
 
+# Single-threaded BLAS is process-wide state (one OpenBLAS thread count for all
+# threads). It is set by the first thread to enter ``fast_cpu`` and restored by
+# the last one to leave: a per-call save/restore would, with overlapping calls
+# from several threads, restore the caller's count while another thread is
+# still inside (or leave BLAS at 1 thread for good).
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_limiter = None
+
 
 def n_workers() -> int:
     """Threads the core uses for independent kernel products.
@@ -110,19 +119,45 @@ def _get_pool() -> ThreadPoolExecutor:
         return _pool
 
 
+def _enter_single_threaded_blas() -> None:
+    global _controller, _blas_users, _blas_limiter
+    with _blas_lock:
+        if _blas_users == 0:
+            if _controller is None:
+                _controller = ThreadpoolController()
+            _blas_limiter = _controller.limit(limits=1, user_api="blas")
+        _blas_users += 1
+
+
+def _leave_single_threaded_blas() -> None:
+    global _blas_users, _blas_limiter
+    with _blas_lock:
+        _blas_users -= 1
+        if _blas_users == 0 and _blas_limiter is not None:
+            limiter, _blas_limiter = _blas_limiter, None
+            limiter.restore_original_limits()
+
+
 @contextlib.contextmanager
 def fast_cpu() -> Iterator[None]:
-    """Single-threaded BLAS and flushed denormals in this thread, restored on exit."""
-    global _controller
-    if _controller is None:
-        _controller = ThreadpoolController()
-    old = int(_get_flags())
-    with _controller.limit(limits=1, user_api="blas"):
+    """Single-threaded BLAS and flushed denormals in this thread, restored on exit.
+
+    Safe from several threads at once: the BLAS limit (process-wide) is set
+    when the first thread enters and restored when the last one leaves
+    (reference-counted under a lock); the flush-to-zero flags (MXCSR) belong
+    to each thread and are saved and restored per call. See
+    docs/architecture.md (threads).
+    """
+    _enter_single_threaded_blas()
+    try:
+        old = int(_get_flags())
         _set_flags(old | _FLUSH_FLAGS)
         try:
             yield
         finally:
             _set_flags(old)
+    finally:
+        _leave_single_threaded_blas()
 
 
 def parallel_map(function: Callable[[int, int], None], n_items: int) -> None:

@@ -1,21 +1,49 @@
-"""``compiled``: numba's ``njit`` with an on-disk cache that can never fail a run.
+"""``compiled``: numba's ``njit`` with an on-disk cache that can never fail a run,
+and ``parallel=True`` functions that are safe to call from several threads.
 
 numba's own ``cache=True`` raises when the cache cannot be written: a full
 disk, a file-size limit (``ulimit -f``), a read-only or vanished cache folder.
 A grade must not fail because a compiled function could not be *saved*, so
 every compiled function of the package goes through this decorator: the cache
 is used when it works, and a failed load or save only costs a compilation.
+
+Threads. numba runs ``parallel=True`` functions on a *threading layer*:
+``tbb`` or ``omp`` (GNU or Intel OpenMP) are thread-safe, ``workqueue`` (the
+fallback, always present) is not: two threads inside parallel functions at
+once abort the whole process ("Terminating: Nested parallel kernel launch
+detected"). numba picks the first layer that loads, in the order of
+``NUMBA_THREADING_LAYER`` / ``NUMBA_THREADING_LAYER_PRIORITY`` (by default
+tbb, omp, workqueue; Linux with libgomp gets ``omp``, macOS without
+``intel-openmp`` gets ``workqueue``). :func:`parallel_layer` predicts that
+choice without launching anything; when it is ``workqueue``, ``compiled``
+wraps every ``parallel=True`` function so that calls into them hold one
+process-wide lock (they run one at a time, each still on all cores). The
+package never changes numba's settings (they are the user's). A wrapped
+function is an ordinary Python callable (attributes forward to the numba
+dispatcher) and cannot be called from other compiled code; the package's
+parallel functions are only called from Python. See docs/architecture.md
+(threads).
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
 import logging
+import sys
+import threading
 from collections.abc import Callable
 from typing import Any
 
 import numba
 
-__all__ = ["compiled"]
+__all__ = ["compiled", "parallel_layer", "THREAD_SAFE_LAYERS"]
+
+#: numba threading layers that accept parallel calls from several threads at once.
+THREAD_SAFE_LAYERS = ("tbb", "omp")
+
+#: Held while a parallel function runs, when the layer is not thread-safe.
+_PARALLEL_LOCK = threading.Lock()
 
 log = logging.getLogger(__name__)
 
@@ -44,8 +72,74 @@ if _FunctionCache is not None:
                 log.debug("numba cache not written for %s: %s", self._name, exc)
 
 
+def _layer_loads(name: str) -> bool:
+    """Whether numba could load the threading layer ``name`` (as numba itself tries it)."""
+    try:
+        if name == "tbb":
+            from numba.np.ufunc.parallel import _check_tbb_version_compatible
+
+            _check_tbb_version_compatible()
+            importlib.import_module("numba.np.ufunc.tbbpool")
+        elif name == "omp":
+            importlib.import_module("numba.np.ufunc.omppool")
+        else:
+            importlib.import_module("numba.np.ufunc.workqueue")
+    except Exception:  # noqa: BLE001 - ImportError, an OSError of the loader, a bad TBB
+        return False
+    return True
+
+
+@functools.lru_cache(maxsize=1)
+def _predicted_layer() -> str:
+    chosen = str(numba.config.THREADING_LAYER).lower()
+    if chosen in ("tbb", "omp", "workqueue"):
+        return chosen
+    candidates = {
+        "safe": ["tbb"],
+        "threadsafe": ["tbb", "omp"],
+        "forksafe": ["tbb", "workqueue"] if sys.platform.startswith("linux")  # not GNU omp
+        else ["tbb", "omp", "workqueue"],
+    }.get(chosen, list(numba.config.THREADING_LAYER_PRIORITY))
+    for name in candidates:
+        if _layer_loads(name):
+            return name
+    return "workqueue"  # numba would fail to launch; the lock costs nothing then
+
+
+def parallel_layer() -> str:
+    """The numba threading layer of ``parallel=True`` functions: 'tbb', 'omp' or 'workqueue'.
+
+    The layer in use once a parallel function has run, numba's choice
+    predicted from its settings and the libraries that load before that.
+    """
+    try:
+        return numba.threading_layer()
+    except ValueError:  # no parallel function has run yet
+        return _predicted_layer()
+
+
+class _Serialised:
+    """A parallel numba function whose calls hold ``_PARALLEL_LOCK`` (workqueue layer)."""
+
+    def __init__(self, dispatcher) -> None:
+        self.dispatcher = dispatcher
+        functools.update_wrapper(self, dispatcher.py_func)
+
+    def __call__(self, *args, **kwargs):
+        with _PARALLEL_LOCK:
+            return self.dispatcher(*args, **kwargs)
+
+    def __getattr__(self, name: str):
+        return getattr(self.dispatcher, name)
+
+
 def compiled(**options: Any) -> Callable[[Callable], Callable]:
-    """Like ``numba.njit(cache=True, **options)``, but cache I/O errors never raise."""
+    """Like ``numba.njit(cache=True, **options)``, but cache I/O errors never raise.
+
+    With ``parallel=True`` on a threading layer that is not thread-safe
+    (``workqueue``), calls are serialised by a process-wide lock (module
+    docstring); on ``tbb`` and ``omp`` the numba dispatcher is returned as is.
+    """
     options.pop("cache", None)
 
     def decorate(function: Callable) -> Callable:
@@ -55,6 +149,8 @@ def compiled(**options: Any) -> Callable[[Callable], Callable]:
                 dispatcher._cache = _BestEffortCache(dispatcher.py_func)
             except (RuntimeError, OSError) as exc:  # no usable cache folder at all
                 log.debug("numba cache off for %s: %s", function.__qualname__, exc)
+        if options.get("parallel") and parallel_layer() not in THREAD_SAFE_LAYERS:
+            return _Serialised(dispatcher)
         return dispatcher
 
     return decorate

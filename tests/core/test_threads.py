@@ -1,0 +1,159 @@
+"""The core from several threads at once: the same answers as one after another.
+
+Covers the process-wide state the core touches (the BLAS thread count, set
+once for all threads inside ``fast_cpu`` and restored by the last one out)
+and numba's parallel functions (serialised by ``compiled`` on the
+``workqueue`` threading layer, which would otherwise abort the process).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+
+import numba
+import numpy as np
+from threadpoolctl import threadpool_info
+
+from tests.core.helpers import blobs
+from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.core import GridGeometry, barycenter, barycentric_coordinates, sinkhorn
+from wbcgrade.core._jit import THREAD_SAFE_LAYERS, compiled, parallel_layer
+
+N_THREADS = 4
+
+
+def _jobs():
+    """Four small problems, one per entry point; each returns an array."""
+    rng = np.random.default_rng(3)
+    geometry = GridGeometry.with_width((8, 8, 8), 1.5)
+    histograms = blobs((8, 8, 8), 3, rng, components=2)
+    truth = np.array([0.6, 0.3, 0.1])
+    target = barycenter(histograms, truth, geometry, n_iter=20)
+    table = identity_map(9, np.float32) ** 1.3
+    colors = rng.random((50_000, 3)).astype(np.float32)
+    return {
+        "barycenter": lambda: barycenter(histograms, [0.2, 0.5, 0.3], geometry, n_iter=20),
+        "coordinates": lambda: barycentric_coordinates(
+            target, histograms, geometry, n_iter=20, max_iter=8).weights,
+        "sinkhorn": lambda: sinkhorn(histograms[0], histograms[1], geometry, tol=1e-8).log_b,
+        "remap": lambda: apply_color_map(colors, table),
+    }
+
+
+def _blas_threads():
+    return [(lib["internal_api"], lib["num_threads"]) for lib in threadpool_info()
+            if lib["user_api"] == "blas"]
+
+
+def test_four_threads_get_the_sequential_answers():
+    jobs = _jobs()
+    expected = {name: job() for name, job in jobs.items()}
+    blas_before = _blas_threads()
+    results: dict[tuple[int, str], np.ndarray] = {}
+    errors: list[BaseException] = []
+    barrier = threading.Barrier(N_THREADS)
+
+    def run(index: int) -> None:
+        barrier.wait()
+        try:
+            names = list(jobs)
+            for name in names[index:] + names[:index]:  # each thread in its own order
+                for _ in range(2):
+                    results[index, name] = jobs[name]()
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(N_THREADS)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not errors, errors
+    for (index, name), value in results.items():
+        np.testing.assert_allclose(value, expected[name], rtol=1e-10, atol=1e-12,
+                                   err_msg=f"thread {index}, {name}")
+    assert len(results) == N_THREADS * len(jobs)
+    assert _blas_threads() == blas_before  # restored once the last thread left
+
+
+# Four threads in and out of fast_cpu, overlapping (the sleep lets the others enter and
+# leave meanwhile). A per-call save/restore of the BLAS limit fails this: the first thread
+# out restores the old count while others are still inside, and the last one leaves BLAS
+# at 1 thread for good. Run in a fresh interpreter: once the core has run in the main
+# thread, OpenBLAS thread counts set from other threads were seen not to read back.
+_OVERLAP = """
+import threading, time
+import numpy as np
+import scipy.linalg
+from threadpoolctl import threadpool_info
+from wbcgrade.core._cpu import fast_cpu
+
+def blas():
+    return tuple(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
+
+before = blas()
+inside = set()
+def run():
+    for _ in range(40):
+        with fast_cpu():
+            time.sleep(0.0005)
+            inside.add(blas())
+threads = [threading.Thread(target=run) for _ in range(4)]
+for t in threads: t.start()
+for t in threads: t.join()
+print(sorted(inside) == [(1,) * len(before)], blas() == before)
+"""
+
+
+def test_overlapping_fast_cpu_calls_keep_blas_single_threaded_and_restore_it():
+    run = subprocess.run([sys.executable, "-c", _OVERLAP], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["True", "True"]
+
+
+def test_a_parallel_function_keeps_the_dispatcher_on_a_thread_safe_layer():
+    @compiled(parallel=True)
+    def total(x):  # pragma: no cover - compiled
+        s = 0.0
+        for i in numba.prange(x.shape[0]):
+            s += x[i]
+        return s
+
+    assert total(np.ones(10)) == 10.0
+    layer = parallel_layer()
+    assert layer in ("tbb", "omp", "workqueue")
+    assert hasattr(total, "py_func")  # a numba dispatcher, or the lock wrapper forwarding
+    assert (type(total).__name__ == "_Serialised") == (layer not in THREAD_SAFE_LAYERS)
+
+
+# Four threads in the package's parallel remap at once on numba's workqueue layer:
+# it aborts the process ("Concurrent access has been detected") unless calls are serialised.
+_WORKQUEUE = """
+import threading
+import numpy as np
+import numba
+from wbcgrade.color.remap import apply_color_map, identity_map
+table = identity_map(9, np.float32) ** 1.3
+colors = np.random.default_rng(0).random((100_000, 3)).astype(np.float32)
+expected = apply_color_map(colors, table)
+same = []
+def run():
+    for _ in range(10):
+        same.append(bool(np.array_equal(apply_color_map(colors, table), expected)))
+threads = [threading.Thread(target=run) for _ in range(4)]
+for t in threads: t.start()
+for t in threads: t.join()
+print(numba.threading_layer(), len(same), all(same))
+"""
+
+
+def test_workqueue_layer_is_serialised_not_aborted():
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "workqueue"}
+    run = subprocess.run([sys.executable, "-c", _WORKQUEUE], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["workqueue", "40", "True"]
