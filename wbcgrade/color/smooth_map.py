@@ -20,8 +20,9 @@ are those of a 33-node lattice and are rescaled for other sizes so that they
 weigh the same continuous energy. The system is sparse, symmetric positive
 definite and badly conditioned far from the data, so it is solved
 coarse-to-fine (5, 9, 17, 33 nodes: each level's solution, interpolated,
-starts conjugate gradients with a Jacobi preconditioner on the next; three
-right-hand sides, one per channel).
+starts the next), each level by conjugate gradients preconditioned with a
+multigrid V-cycle over the coarser lattices (three right-hand sides, one per
+channel, at once).
 """
 
 from __future__ import annotations
@@ -40,6 +41,10 @@ DEFAULT_MAP_SIZE = 33
 DEFAULT_SMOOTHNESS = 3e-3
 #: Weight of the first-difference penalty (pulls the local gain towards 1).
 DEFAULT_STIFFNESS = 1e-4
+#: Relative residual the coarser lattices are solved to (they give the next its start).
+_START_TOL = 1e-4
+#: Coarsest lattices up to this many nodes are solved directly (the multigrid's bottom).
+_DIRECT_NODES = 4096
 #: Lattice size the penalty weights refer to; other sizes rescale them to the
 #: same continuous energy (curvature x (size-1)/32, first differences / that).
 REFERENCE_SIZE = 33
@@ -117,8 +122,48 @@ def _levels(size: int) -> list[int]:
     return sizes[::-1]
 
 
-def _solve(system: sp.csr_matrix, rhs: np.ndarray, start: np.ndarray, tol: float,
-           max_iter: int) -> np.ndarray:
+class _Multigrid:
+    """V-cycle preconditioner over the nested lattices (coarsest solved directly).
+
+    ``systems[l]`` is the lattice ``sizes[l]``'s own (rediscretised) system and
+    ``prolong[l]`` the trilinear interpolation from lattice ``l - 1`` to ``l``;
+    restriction is its transpose. Two damped-Jacobi sweeps before and after
+    the coarse correction keep the cycle symmetric, so it preconditions
+    conjugate gradients.
+    """
+
+    sweeps = 2
+    #: Jacobi damping times the largest eigenvalue of D^-1 A (bounded by Gershgorin).
+    damping = 4.0 / 3.0
+
+    def __init__(self, systems: list[sp.csr_matrix], prolong: list[sp.csr_matrix | None]):
+        self.systems, self.prolong = systems, prolong
+        self.inv_diag, self.omega = [], []
+        for a in systems:
+            diag = a.diagonal()
+            diag = np.where(diag > 0, diag, 1.0)
+            self.inv_diag.append((1.0 / diag)[:, None])
+            bound = float((abs(a).sum(axis=1).A1 / diag).max())  # >= max eig of D^-1 A
+            self.omega.append(self.damping / bound)
+        self.coarsest = np.linalg.inv(systems[0].toarray())
+
+    def cycle(self, level: int, r: np.ndarray) -> np.ndarray:
+        if level == 0:
+            return self.coarsest @ r
+        a, d, w = self.systems[level], self.inv_diag[level], self.omega[level]
+        x = w * d * r
+        for _ in range(self.sweeps - 1):
+            x += w * d * (r - a @ x)
+        p = self.prolong[level]
+        x += p @ self.cycle(level - 1, p.T @ (r - a @ x))
+        for _ in range(self.sweeps):
+            x += w * d * (r - a @ x)
+        return x
+
+
+def _jacobi_cg(system: sp.csr_matrix, rhs: np.ndarray, start: np.ndarray, tol: float,
+               max_iter: int) -> np.ndarray:
+    """Conjugate gradients with a Jacobi preconditioner, one column at a time."""
     diag = system.diagonal()
     precond = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
     out = np.empty_like(rhs)
@@ -128,10 +173,40 @@ def _solve(system: sp.csr_matrix, rhs: np.ndarray, start: np.ndarray, tol: float
     return out
 
 
+def _solve(multigrid: _Multigrid, level: int, rhs: np.ndarray, start: np.ndarray,
+           tol: float, max_iter: int) -> np.ndarray:
+    """Conjugate gradients on lattice ``level``, preconditioned by a V-cycle, for the
+    three columns of ``rhs`` at once (each with its own steps), to ``|r| <= tol |rhs|``."""
+    system = multigrid.systems[level]
+    if level == 0:
+        return multigrid.coarsest @ rhs
+    x = np.array(start, dtype=np.float64)
+    r = rhs - system @ x
+    goal = tol * np.sqrt((rhs * rhs).sum(axis=0))
+    z = multigrid.cycle(level, r)
+    d = z.copy()
+    rz = (r * z).sum(axis=0)
+    for _ in range(max_iter):
+        active = np.sqrt((r * r).sum(axis=0)) > goal
+        if not active.any():
+            break
+        ad = system @ d
+        dad = (d * ad).sum(axis=0)
+        alpha = np.where(active & (dad > 0), rz / np.where(dad > 0, dad, 1.0), 0.0)
+        x += alpha * d
+        r -= alpha * ad
+        z = multigrid.cycle(level, r)
+        rz_next = (r * z).sum(axis=0)
+        beta = np.where(rz > 0, rz_next / np.where(rz > 0, rz, 1.0), 0.0)
+        d = z + beta * d
+        rz = rz_next
+    return x
+
+
 def fit_smooth_map(raw_map: np.ndarray, density: np.ndarray, size: int = DEFAULT_MAP_SIZE,
                    smoothness: float = DEFAULT_SMOOTHNESS, stiffness: float = DEFAULT_STIFFNESS,
-                   density_power: float = 1.0, tol: float = 1e-8,
-                   max_iter: int = 400) -> np.ndarray:
+                   density_power: float = 1.0, tol: float = 1e-6,
+                   max_iter: int = 200) -> np.ndarray:
     """Fit a smooth lattice colour map to a raw map, weighted by the photo's colours.
 
     Parameters
@@ -143,7 +218,8 @@ def fit_smooth_map(raw_map: np.ndarray, density: np.ndarray, size: int = DEFAULT
     smoothness, stiffness : weights of the curvature and first-difference
         penalties on the displacement (see the module docstring); >= 0.
     density_power : the data weights are ``density ** density_power``.
-    tol, max_iter : conjugate-gradient stopping rule on each level (relative residual).
+    tol, max_iter : conjugate-gradient stopping rule (relative residual) on the
+        finest lattice; at 1e-6 the map is within 1e-4/255 of a converged solve.
 
     Returns
     -------
@@ -163,23 +239,34 @@ def fit_smooth_map(raw_map: np.ndarray, density: np.ndarray, size: int = DEFAULT
     weights = weights[keep] / weights[keep].sum()
     points = identity_map(n, np.float64).reshape(-1, 3)[keep]
     target = raw_map.reshape(-1, 3)[keep].astype(np.float64) - points
-    disp, previous = None, None
-    for level in _levels(size):
+    systems, prolong, rhs_by_level = [], [], []
+    levels = _levels(size)
+    for i, level in enumerate(levels):
         # The penalties approximate one continuous energy: rescale them from the
         # reference lattice (REFERENCE_SIZE nodes) to this level's spacing.
         ratio = (level - 1) / (REFERENCE_SIZE - 1)
         B = _interpolation_matrix(points, level)
         system = (B.T @ sp.diags(weights) @ B
                   + _regulariser(level, smoothness * ratio, stiffness / ratio)).tocsr()
-        system = system + sp.eye(level ** 3) * 1e-12
-        rhs = B.T @ (weights[:, None] * target)
-        if disp is None:
-            mass = B.T @ weights
-            start = np.where(mass[:, None] > 0, rhs / np.maximum(mass, 1e-300)[:, None], 0.0)
-        else:
-            nodes = identity_map(level, np.float64).reshape(-1, 3)
-            start = _interpolation_matrix(nodes, previous) @ disp
-        disp = _solve(system, rhs, start, tol, max_iter)
-        previous = level
+        systems.append((system + sp.eye(level ** 3) * 1e-12).tocsr())
+        rhs_by_level.append(B.T @ (weights[:, None] * target))
+        nodes = identity_map(level, np.float64).reshape(-1, 3)
+        prolong.append(None if i == 0 else _interpolation_matrix(nodes, levels[i - 1]))
+    disp = None
+    if levels[0] ** 3 <= _DIRECT_NODES:
+        multigrid = _Multigrid(systems, prolong)
+        for i in range(len(levels)):  # coarser levels only give the next one its start
+            start = np.zeros_like(rhs_by_level[i]) if disp is None else prolong[i] @ disp
+            level_tol = tol if i == len(levels) - 1 else max(tol, _START_TOL)
+            disp = _solve(multigrid, i, rhs_by_level[i], start, level_tol, max_iter)
+    else:  # no small lattice below this size (e.g. 32 nodes): Jacobi-preconditioned CG
+        for i in range(len(levels)):
+            rhs = rhs_by_level[i]
+            if disp is None:
+                mass = np.asarray(systems[i].sum(axis=1)).ravel()
+                start = rhs / np.maximum(mass, 1e-300)[:, None]
+            else:
+                start = prolong[i] @ disp
+            disp = _jacobi_cg(systems[i], rhs, start, tol, 2 * max_iter)
     lattice = identity_map(size, np.float64) + disp.reshape(size, size, size, 3)
     return np.clip(lattice, 0.0, 1.0).astype(np.float32)
