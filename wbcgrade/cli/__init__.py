@@ -2,7 +2,11 @@
 
 Each command group lives in its own module and is registered below. The CLI
 holds no mathematics: it parses options, calls the library, shows progress and
-turns library errors into one-line messages.
+turns library errors into one-line messages. Command modules import click
+and light modules only; the library (numpy, the core, numba) is imported
+inside the commands, so ``wbcgrade --help`` lists the commands in a fraction
+of a second (tests/cli/test_main.py checks that it imports neither numba nor
+wbcgrade.core). Layers and data flow: docs/architecture.md.
 """
 
 from __future__ import annotations
@@ -47,7 +51,6 @@ def _register() -> None:
     from wbcgrade.cli.apply import apply
     from wbcgrade.cli.batch import batch
     from wbcgrade.cli.brdf import brdf
-    from wbcgrade.cli.demo import demo
     from wbcgrade.cli.preset import preset
     from wbcgrade.cli.report import report
     from wbcgrade.cli.shape import shape
@@ -55,7 +58,6 @@ def _register() -> None:
     main.add_command(apply)
     main.add_command(batch)
     main.add_command(brdf)
-    main.add_command(demo)
     main.add_command(preset)
     main.add_command(report)
     main.add_command(shape)

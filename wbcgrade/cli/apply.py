@@ -6,12 +6,14 @@ import json
 import time
 
 import click
-from tqdm import tqdm
 
-from wbcgrade.cli._progress import style_progress
-from wbcgrade.cli.grading_options import grading_options, take_grading_options
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE
-from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
+from wbcgrade.cli.grading_options import (
+    LazyOptionsCommand,
+    grading_options,
+    lazy_options,
+    lut_size_option,
+    take_grading_options,
+)
 
 
 def _warn(message: str) -> None:
@@ -51,15 +53,14 @@ def _print_report(report, as_json: bool) -> None:
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
 
 
-@click.command("apply")
+@click.command("apply", cls=LazyOptionsCommand)
 @click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Also write the grade as a 3-D LUT (.cube).")
-@click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
-              help="Nodes per axis of the LUT.")
+@lazy_options(lut_size_option)
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
@@ -73,6 +74,11 @@ def apply(photo, output, lut, lut_size, overwrite, as_json, report_dir, **kwargs
     ICC profile. Float (EXR) photos are graded in the sRGB-encoded domain;
     values above 1 keep their intensity and get the grade of their hue.
     """
+    from tqdm import tqdm
+
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
+
     opts, style_args = take_grading_options(kwargs)
     if opts.fit_bins > 32:
         _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes (default 16)")

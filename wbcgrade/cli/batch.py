@@ -4,18 +4,23 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-from tqdm import tqdm
 
-from wbcgrade.cli._progress import style_progress
-from wbcgrade.cli.grading_options import grading_options, take_grading_options
-from wbcgrade.color.batch import BatchContext, BatchPlan, BatchResult, run_batch
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut, write_cube
-from wbcgrade.color.pipeline import load_styles
-from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.cli.grading_options import (
+    LazyOptionsCommand,
+    grading_options,
+    lazy_options,
+    lut_size_option,
+    take_grading_options,
+)
 from wbcgrade.errors import InputError
+
+if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
+    from wbcgrade.color.batch import BatchPlan, BatchResult
+    from wbcgrade.color.presets import StyleSet
+    from wbcgrade.color.transfer import GradeOptions
 
 
 def _warn(message: str) -> None:
@@ -24,6 +29,9 @@ def _warn(message: str) -> None:
 
 def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
     """Load the style set with a progress bar over style photos."""
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.pipeline import load_styles
+
     if opts.fit_bins > 32:
         _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes per photo "
               "(default 16)")
@@ -38,6 +46,10 @@ def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
                       consistent: bool, jobs: int, scheduler: str | None, force: bool,
                       report_dir: str | None, write_outputs: bool) -> BatchResult:
     """Run a batch with a tqdm bar over files (and one over the fit stages in-process)."""
+    from tqdm import tqdm
+
+    from wbcgrade.color.batch import BatchContext, run_batch
+
     if jobs < 1:
         raise InputError("--jobs must be at least 1")
     context = BatchContext(styles=styles, opts=opts, force=force,
@@ -99,7 +111,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
         click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))
 
 
-@click.command("batch")
+@click.command("batch", cls=LazyOptionsCommand)
 @click.argument("in_dir", type=click.Path(exists=True, file_okay=False, path_type=str))
 @click.option("-o", "--output-dir", "out_dir", required=True,
               type=click.Path(file_okay=False, path_type=str),
@@ -119,8 +131,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
               default=None, help="Also write the palette weight report into this folder.")
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="With --consistent: also write the series grade as a 3-D LUT (.cube).")
-@click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
-              help="Nodes per axis of the LUT.")
+@lazy_options(lut_size_option)
 @click.pass_context
 def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, report_dir,
           lut, lut_size, **kwargs):
@@ -143,6 +154,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
         write_settings,
     )
     from wbcgrade.color.imageio import check_output_path
+    from wbcgrade.color.lut import color_map_to_lut, write_cube
 
     opts, style_args = take_grading_options(kwargs)
     if lut is not None:

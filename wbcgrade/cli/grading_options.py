@@ -1,91 +1,101 @@
-"""Click options shared by the commands that grade photos (``batch``, ``report``).
+"""Click options shared by the commands that grade photos (``apply``, ``batch``, ``report``).
 
 One list of options, names, defaults and help for ``apply``, ``batch`` and
-``report``.
+``report``. Their defaults come from the colour library (``GradeOptions``),
+whose import pulls in the core and numba; so that ``wbcgrade --help`` imports
+neither, the options are built the first time a command needs its parameters
+(its own ``--help``, or a run): :func:`grading_options` leaves a placeholder
+that :class:`LazyOptionsCommand` expands (:func:`lazy_options` does the same
+for any option with a heavy default).
 """
 
 from __future__ import annotations
 
 import click
 
-from wbcgrade.color.histogram import HistogramCache
-from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS, set_max_image_pixels
-from wbcgrade.color.transfer import LOSSES, GradeOptions
-from wbcgrade.color.weights import parse_weights
 
-_DEFAULTS = GradeOptions()
+def _options() -> list:
+    """The grading options (click decorators), in the order ``--help`` shows them."""
+    from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS
+    from wbcgrade.color.transfer import LOSSES, GradeOptions
 
-_OPTIONS = [
-    click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
-                 help="Folder of style photos (non-images are skipped)."),
-    click.option("--preset", default=None, metavar="NAME_OR_FILE",
-                 help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz file."),
-    click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
-                 help="Bins per axis of the photo's histogram and the transport plan (the "
-                      "paper's 128; 64 or 32 are faster and coarser)."),
-    click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
-                 help="Bins per axis of the grid the weights are fitted on."),
-    click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
-                 help="Fit loss between the barycenter and the photo's histogram."),
-    click.option("--width", type=float, default=_DEFAULTS.width, show_default=True,
-                 help="Fit kernel width in bins of the fit grid."),
-    click.option("--gamma", type=float, default=None,
-                 help="Fit entropic regularisation gamma (overrides --width)."),
-    click.option("--transfer-width", type=float, default=None,
-                 help="Kernel width in bins of the transfer grid [default: max(1, (bins-1)/31)]."),
-    click.option("--iterations", "n_iter", type=int, default=_DEFAULTS.n_iter,
-                 show_default=True, help="Barycenter iterations."),
-    click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
-                 help="L-BFGS iterations of the fit at most."),
-    click.option("--weights", "weights_text", default=None, metavar="A,B,C",
-                 help="Use these style weights and skip the fit (order: sorted file names of "
-                      "--style DIR, or the preset's order shown by `preset list`)."),
-    click.option("--strength", type=float, default=1.0, show_default=True,
-                 help="Blend: x -> (1-t) x + t T(x)."),
-    click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
-                 metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
-                 "(unbalanced transport: palette colours the photo has no use for are left "
-                 "out; smaller = more relaxed, e.g. 0.05) [default: balanced]."),
-    click.option("--map-size", type=int, default=_DEFAULTS.map_size, show_default=True,
-                 help="Nodes per axis of the smooth colour map (the grade is this LUT)."),
-    click.option("--smoothness", type=float, default=_DEFAULTS.smoothness, show_default=True,
-                 help="Curvature penalty of the smooth colour map (0 with --stiffness 0: "
-                      "the raw transport map, the paper's)."),
-    click.option("--stiffness", type=float, default=_DEFAULTS.stiffness, show_default=True,
-                 help="First-difference penalty of the colour map (holds its local gain "
-                      "near 1: less noise amplification, less contrast change)."),
-    click.option("--monotone/--no-monotone", default=_DEFAULTS.monotone, show_default=True,
-                 help="Keep the order of lightness: the map's output luma never decreases "
-                      "when an input channel increases (no reversed steps in flat areas)."),
-    click.option("--regrain/--no-regrain", default=_DEFAULTS.regrain, show_default=True,
-                 help="Keep the input's grain and edges (edge-aware local linear model; "
-                      "off: every pixel goes exactly through the LUT)."),
-    click.option("--regrain-radius", type=float, default=_DEFAULTS.regrain_radius,
-                 show_default=True, help="Regrain window radius, fraction of the long side."),
-    click.option("--regrain-eps", type=float, default=_DEFAULTS.regrain_eps,
-                 show_default=True, help="Regrain: input variations below about "
-                 "sqrt(eps) (encoded units) are kept as grain."),
-    click.option("--preserve-luminance", is_flag=True,
-                 help="Change hue and chroma only; keep each colour's lightness (Oklab)."),
-    click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms."),
-    click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
-                 help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or "
-                      "~/.cache/wbcgrade]."),
-]
+    _DEFAULTS = GradeOptions()
+    _OPTIONS = [
+        click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
+                     help="Folder of style photos (non-images are skipped)."),
+        click.option("--preset", default=None, metavar="NAME_OR_FILE",
+                     help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz "
+                          "file."),
+        click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
+                     help="Bins per axis of the photo's histogram and the transport plan (the "
+                          "paper's 128; 64 or 32 are faster and coarser)."),
+        click.option("--fit-bins", type=int, default=_DEFAULTS.fit_bins, show_default=True,
+                     help="Bins per axis of the grid the weights are fitted on."),
+        click.option("--loss", type=click.Choice(LOSSES), default=_DEFAULTS.loss, show_default=True,
+                     help="Fit loss between the barycenter and the photo's histogram."),
+        click.option("--width", type=float, default=_DEFAULTS.width, show_default=True,
+                     help="Fit kernel width in bins of the fit grid."),
+        click.option("--gamma", type=float, default=None,
+                     help="Fit entropic regularisation gamma (overrides --width)."),
+        click.option("--transfer-width", type=float, default=None,
+                     help="Kernel width in bins of the transfer grid [default: max(1, "
+                          "(bins-1)/31)]."),
+        click.option("--iterations", "n_iter", type=int, default=_DEFAULTS.n_iter,
+                     show_default=True, help="Barycenter iterations."),
+        click.option("--max-iter", type=int, default=_DEFAULTS.max_iter, show_default=True,
+                     help="L-BFGS iterations of the fit at most."),
+        click.option("--weights", "weights_text", default=None, metavar="A,B,C",
+                     help="Use these style weights and skip the fit (order: sorted file names of "
+                          "--style DIR, or the preset's order shown by `preset list`)."),
+        click.option("--strength", type=float, default=1.0, show_default=True,
+                     help="Blend: x -> (1-t) x + t T(x)."),
+        click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
+                     metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
+                     "(unbalanced transport: palette colours the photo has no use for are left "
+                     "out; smaller = more relaxed, e.g. 0.05) [default: balanced]."),
+        click.option("--map-size", type=int, default=_DEFAULTS.map_size, show_default=True,
+                     help="Nodes per axis of the smooth colour map (the grade is this LUT)."),
+        click.option("--smoothness", type=float, default=_DEFAULTS.smoothness, show_default=True,
+                     help="Curvature penalty of the smooth colour map (0 with --stiffness 0: "
+                          "the raw transport map, the paper's)."),
+        click.option("--stiffness", type=float, default=_DEFAULTS.stiffness, show_default=True,
+                     help="First-difference penalty of the colour map (holds its local gain "
+                          "near 1: less noise amplification, less contrast change)."),
+        click.option("--monotone/--no-monotone", default=_DEFAULTS.monotone, show_default=True,
+                     help="Keep the order of lightness: the map's output luma never decreases "
+                          "when an input channel increases (no reversed steps in flat areas)."),
+        click.option("--regrain/--no-regrain", default=_DEFAULTS.regrain, show_default=True,
+                     help="Keep the input's grain and edges (edge-aware local linear model; "
+                          "off: every pixel goes exactly through the LUT)."),
+        click.option("--regrain-radius", type=float, default=_DEFAULTS.regrain_radius,
+                     show_default=True, help="Regrain window radius, fraction of the long side."),
+        click.option("--regrain-eps", type=float, default=_DEFAULTS.regrain_eps,
+                     show_default=True, help="Regrain: input variations below about "
+                     "sqrt(eps) (encoded units) are kept as grain."),
+        click.option("--preserve-luminance", is_flag=True,
+                     help="Change hue and chroma only; keep each colour's lightness (Oklab)."),
+        click.option("--no-cache", is_flag=True,
+                     help="Do not read or write cached style histograms."),
+        click.option("--cache-dir", type=click.Path(file_okay=False, path_type=str), default=None,
+                     help="Style histogram cache [default: $WBCGRADE_CACHE_DIR or "
+                          "~/.cache/wbcgrade]."),
+    ]
+    #: ``--max-image-pixels N``: raise (or lower) the decompression-bomb limit of this run.
+    max_image_pixels_option = click.option(
+        "--max-image-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
+        callback=_set_max_image_pixels, metavar="N",
+        help=f"Refuse images with more pixels than this, read from the header before "
+             f"decoding [default: $WBCGRADE_MAX_IMAGE_PIXELS or {DEFAULT_MAX_IMAGE_PIXELS:_}].")
+    _OPTIONS.append(max_image_pixels_option)
+    return _OPTIONS
 
 
 def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
+    from wbcgrade.color.imageio import set_max_image_pixels
+
     set_max_image_pixels(value)  # None: back to $WBCGRADE_MAX_IMAGE_PIXELS or the default
     return value
 
-
-#: ``--max-image-pixels N``: raise (or lower) the decompression-bomb limit of this run.
-max_image_pixels_option = click.option(
-    "--max-image-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
-    callback=_set_max_image_pixels, metavar="N",
-    help=f"Refuse images with more pixels than this, read from the header before "
-         f"decoding [default: $WBCGRADE_MAX_IMAGE_PIXELS or {DEFAULT_MAX_IMAGE_PIXELS:_}].")
-_OPTIONS.append(max_image_pixels_option)
 
 #: Options that are GradeOptions fields of the same name.
 _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "n_iter",
@@ -94,18 +104,80 @@ _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
 
 
-def grading_options(function):
-    """Decorator adding the grading options of ``apply`` to a click command."""
-    for option in reversed(_OPTIONS):
-        function = option(function)
-    return function
+class _Deferred:
+    """Stands in a command's parameter list for options built later by ``factory()``."""
+
+    def __init__(self, factory) -> None:
+        self.factory = factory
+
+    def build(self) -> list[click.Parameter]:
+        def holder() -> None:
+            """Collects the options' parameters."""
+
+        for option in reversed(self.factory()):
+            holder = option(holder)
+        return list(reversed(holder.__click_params__))
 
 
-def take_grading_options(kwargs: dict) -> tuple[GradeOptions, dict]:
+class LazyOptionsCommand(click.Command):
+    """A click command whose deferred options are built when its parameters are first used.
+
+    Listing the command (``wbcgrade --help``) needs only its name and help
+    text; its options, parsing and ``--help`` expand the placeholders left by
+    :func:`lazy_options` in place, in their order.
+    """
+
+    @property
+    def params(self) -> list[click.Parameter]:
+        params = self.__dict__["_params"]
+        if any(isinstance(p, _Deferred) for p in params):
+            expanded = []
+            for p in params:
+                expanded.extend(p.build() if isinstance(p, _Deferred) else [p])
+            params[:] = expanded
+        return params
+
+    @params.setter
+    def params(self, value: list[click.Parameter]) -> None:
+        self.__dict__["_params"] = value
+
+
+def lazy_options(factory):
+    """Decorator: the options ``factory()`` returns (click.option decorators), built late.
+
+    For options whose defaults live in heavy modules. The command must be a
+    :class:`LazyOptionsCommand` (``@click.command(cls=LazyOptionsCommand)``).
+    """
+    def decorate(function):
+        if not hasattr(function, "__click_params__"):
+            function.__click_params__ = []
+        function.__click_params__.append(_Deferred(factory))
+        return function
+
+    return decorate
+
+
+#: Decorator adding the grading options of ``apply`` to a LazyOptionsCommand.
+grading_options = lazy_options(_options)
+
+
+def lut_size_option() -> list:
+    """``--lut-size`` (default: the colour library's LUT size), for :func:`lazy_options`."""
+    from wbcgrade.color.lut import DEFAULT_LUT_SIZE
+
+    return [click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
+                         help="Nodes per axis of the LUT.")]
+
+
+def take_grading_options(kwargs: dict) -> tuple:
     """Pop the grading options from a command's kwargs -> (GradeOptions, style arguments).
 
     The style arguments are ``style_dir``, ``preset`` and ``cache`` (a HistogramCache).
     """
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.color.weights import parse_weights
+
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
     text = values["weights_text"]
     opts = GradeOptions(**{key: values[key] for key in _PLAIN_KEYS},

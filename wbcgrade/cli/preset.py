@@ -7,17 +7,16 @@ import os
 
 import click
 
-from wbcgrade.cli._progress import style_progress
-from wbcgrade.color.histogram import HistogramCache
-from wbcgrade.color.presets import (
-    DEFAULT_PRESET_WIDTH,
-    check_preset_width,
-    list_presets,
-    load_preset,
-    load_style_folder,
-    save_preset,
-)
+from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options
 from wbcgrade.errors import InputError
+
+
+def _width_option() -> list:
+    """``--width`` (default: the preset library's), for :func:`lazy_options`."""
+    from wbcgrade.color.presets import DEFAULT_PRESET_WIDTH
+
+    return [click.option("--width", type=float, default=DEFAULT_PRESET_WIDTH, show_default=True,
+                         help="Kernel width (bins) recorded with the preset.")]
 
 
 @click.group("preset")
@@ -25,19 +24,22 @@ def preset() -> None:
     """Build and list style presets (databases of style palettes)."""
 
 
-@preset.command("build")
+@preset.command("build", cls=LazyOptionsCommand)
 @click.argument("folder", type=click.Path(path_type=str))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
               help="Preset file to write (.npz).")
 @click.option("--bins", type=int, default=32, show_default=True,
               help="Bins per axis of the stored histograms (apply re-bins them as needed).")
-@click.option("--width", type=float, default=DEFAULT_PRESET_WIDTH, show_default=True,
-              help="Kernel width (bins) recorded with the preset.")
+@lazy_options(_width_option)
 @click.option("--description", default="", help="One line shown by `preset list`.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing preset file.")
 @click.option("--no-cache", is_flag=True, help="Do not use the style histogram cache.")
 def build(folder, output, bins, width, description, overwrite, no_cache):
     """Build a preset from the photos in FOLDER (non-images are skipped)."""
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.presets import check_preset_width, load_style_folder, save_preset
+
     if not 4 <= bins <= 256:
         raise InputError("--bins must be between 4 and 256")
     width = check_preset_width(width)
@@ -58,6 +60,8 @@ def build(folder, output, bins, width, description, overwrite, no_cache):
 @click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
 def list_(as_json):
     """List the presets shipped with wbcgrade."""
+    from wbcgrade.color.presets import list_presets, load_preset
+
     rows = []
     for name, path in list_presets():
         styles = load_preset(path)

@@ -8,7 +8,11 @@ from pathlib import Path
 import click
 
 from wbcgrade.cli.batch import load_styles_with_progress, print_summary, run_with_progress
-from wbcgrade.cli.grading_options import grading_options, take_grading_options
+from wbcgrade.cli.grading_options import (
+    LazyOptionsCommand,
+    grading_options,
+    take_grading_options,
+)
 from wbcgrade.errors import InputError
 
 
@@ -17,7 +21,7 @@ def _default_report_dir(target: Path) -> Path:
     return target.with_name(f"{target.stem if target.is_file() else target.name}_report")
 
 
-@click.command("report")
+@click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
                 type=click.Path(exists=True, path_type=str))
 @click.option("-o", "--output-dir", "report_dir", default=None,
