@@ -121,7 +121,11 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
 @click.option("--consistent", is_flag=True,
               help="One grade for the whole series: one fit on the pooled palette of all "
                    "photos and one colour map for every photo (costs about one fit).")
-@click.option("--force", is_flag=True, help="Redo photos whose output is already complete.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace existing outputs: redo photos whose output is already complete "
+                   "(and replace an existing --lut file).")
+@click.option("--force", "force_alias", is_flag=True, hidden=True,
+              help="Deprecated alias of --overwrite.")
 @click.option("-j", "--jobs", type=int, default=1, show_default=True,
               help="Grade photos in N local processes.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -133,13 +137,13 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
               help="With --consistent: also write the series grade as a 3-D LUT (.cube).")
 @lazy_options(lut_size_option)
 @click.pass_context
-def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, report_dir,
-          lut, lut_size, **kwargs):
+def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, jobs, scheduler,
+          report_dir, lut, lut_size, **kwargs):
     """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
 
     Each photo gets its own barycentric coordinates, or with --consistent the
     whole series shares one. Outputs are written atomically; a rerun skips
-    photos whose output is complete (--force redoes them) and removes the
+    photos whose output is complete (--overwrite redoes them) and removes the
     temporary files of a killed run. One run at a time may write into OUT_DIR.
     Files that are not images (by extension) are ignored; unreadable photos
     and failed writes (e.g. a full disk) are reported and make the exit
@@ -156,6 +160,9 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
     from wbcgrade.color.imageio import check_output_path
     from wbcgrade.color.lut import color_map_to_lut, write_cube
 
+    if force_alias:
+        _warn("--force is deprecated; use --overwrite")
+    force = overwrite or force_alias  # the batch library's name for it
     opts, style_args = take_grading_options(kwargs)
     if lut is not None:
         if not consistent:
@@ -164,7 +171,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
         if not lut.lower().endswith(".cube"):
             raise InputError(f"{lut}: LUT file name must end in .cube")
         if Path(lut).exists() and not force:
-            raise InputError(f"{lut}: file exists (use --force to replace it)")
+            raise InputError(f"{lut}: file exists (use --overwrite to replace it)")
         check_output_path(lut, overwrite=True)  # folder, writability, a regular file
         if not 2 <= lut_size <= 256:
             raise InputError("--lut-size must be between 2 and 256")
@@ -185,7 +192,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
         changed = settings_changed(out_dir, settings)
         if changed and plan.done:
             _warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
-                  f"settings ({', '.join(changed[:4])}); they are kept — use --force to redo "
+                  f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite to redo "
                   "them")
         result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
                                    scheduler=scheduler, force=force, report_dir=report_dir,
@@ -203,7 +210,8 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, force, jobs, scheduler, r
         if lut is not None:
             grade = result.series_grade
             if grade is None:
-                click.echo("LUT not written: no photo was graded (use --force to redo the series)")
+                click.echo("LUT not written: no photo was graded (use --overwrite to redo the "
+                           "series)")
             else:
                 ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
                 write_cube(lut, color_map_to_lut(grade.color_map, lut_size, grade.strength),
