@@ -20,7 +20,7 @@ the width a fixed fraction (1/63) of the box at other resolutions, never below
 1 voxel: the same physical smoothing whatever the resolution. Measured at
 64^3 (cow 0.9 + triceratops 0.1, L = 60): IoU of the iso-surface with the cow
 0.884 at 1.5 voxels, 0.905 at 1.0, 0.913 at 0.75; all in the fast scaling
-domain; narrower kernels widen the scalings' range (DESIGN.md §4).
+domain; narrower kernels widen the scalings' range (docs/architecture.md, numerics).
 
 Missing fraction. When not given, ``alpha`` is estimated as the volume the
 input lacks relative to the database's mean volume in the unit frame,
