@@ -11,4 +11,8 @@
 - :mod:`wbcgrade.brdf.fit`: barycentric coordinates of a (sparse) measurement.
 - :mod:`wbcgrade.brdf.masked`: losses restricted to the kept measurements.
 - :mod:`wbcgrade.brdf.render`: spheres lit by a directional light, as PNG.
+- :mod:`wbcgrade.brdf.workflow`: what ``wbcgrade brdf synth/fit`` run (files in, files out).
+- :mod:`wbcgrade.brdf.defaults`: default settings (light: read by ``--help``).
+
+Layers and data flow: docs/architecture.md.
 """

@@ -4,4 +4,7 @@
 - :mod:`wbcgrade.shape.volume`: ``.npy`` / NIfTI volumes and densities.
 - :mod:`wbcgrade.shape.complete`: completion and projection onto a database.
 - :mod:`wbcgrade.shape.render`: PNG views without a plotting library.
+- :mod:`wbcgrade.shape.workflow`: what ``wbcgrade shape complete/project`` run.
+
+Layers and data flow: docs/architecture.md.
 """
