@@ -157,7 +157,7 @@ def torch_gradient(hists, weights, target, geometry, n_iter):
     """The same energy's gradient by autograd through the L unrolled iterations."""
     import torch
 
-    torch.set_flush_denormal(True)  # as fast as it can be (DESIGN.md §4)
+    torch.set_flush_denormal(True)  # as fast as it can be (docs/architecture.md, Numerics)
     dtype = geometry.dtype
     K = torch.from_numpy(np.ascontiguousarray(geometry.kernels[0], dtype=dtype))
     H = torch.from_numpy(hists.astype(dtype))

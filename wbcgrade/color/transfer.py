@@ -1,6 +1,6 @@
 """Colour transfer towards the closest barycenter of style palettes (paper §5.1).
 
-Pipeline for one photo (DESIGN.md §1 "Colour transfer"):
+Pipeline for one photo (docs/architecture.md, "Data flow"):
 
 1. soft RGB histograms of the photo and the styles on a coarse *fit* grid;
 2. barycentric coordinates: the weights whose barycenter best explains the
