@@ -5,12 +5,13 @@ fresh subprocess so that its peak resident memory (``ru_maxrss``) is its own;
 the table shows the median wall time over the repeats and that peak.
 
 Data (``--data``): ``blobs``, S smooth synthetic histograms on an n^3 grid
-(each a mixture of three Gaussian blobs plus a small floor), which the plain scaling path handles; ``photos``, colour histograms of
-the sample photos (``shared/data/photos/*.jpg`` in name order: the first is
-the target, the next S the inputs; ``wbcgrade.color.histogram.image_histogram``
-at n bins), sparse and far apart, which need the exact log domain. Kernel 1.5
-bins wide, float64, L unrolled iterations. "above inputs" is the peak
-resident memory minus what the process held once its histograms were loaded.
+(each a mixture of three Gaussian blobs plus a small floor), which the plain
+scaling path handles; ``photos``, colour histograms of the sample photos
+(``shared/data/photos/*.jpg`` in name order: the first is the target, the next
+S the inputs; ``wbcgrade.color.histogram.image_histogram`` at n bins), sparse
+and far apart, which need the exact log domain. Kernel 1.5 bins wide, float64,
+L unrolled iterations. "above inputs" is the peak resident memory minus what
+the process held once its histograms were loaded.
 The log domain's time budget is lifted for these runs
 (``WBCGRADE_LOG_DOMAIN_BUDGET_S=inf``) so that they measure instead of refusing.
 """
