@@ -14,6 +14,11 @@ Run ``python benchmarks/apply.py`` (``--help`` for options). It prints one table
   L-BFGS steps on the plain 128³ energy (same loss, same kernel, L = 60)
   must lower it by less than 2 %, and the photo graded with the refined
   weights must differ from the fast one by less than 2/255 on average;
+- ``--floors``: what bounds each stage on this machine (median of 5): JPEG
+  decode and encode of the photo, one pass over its pixels (a clipped copy),
+  the 128³ kernel product (float64, one histogram; a Sinkhorn iteration takes
+  two, the barycentric projection four), the 64³ product and the fit's 16³
+  product of ten histograms (float32);
 - ``--torch``: the gradient of the same energy at 64³ computed by our reverse
   pass and by PyTorch autograd through the unrolled iterations (CPU,
   ``pip install torch==2.13.0``), each in its own process: time, peak memory,
@@ -180,6 +185,49 @@ def torch_gradient(hists, weights, target, geometry, n_iter):
     return float(loss), w.grad.double().numpy(), time.perf_counter() - start
 
 
+def floors(photo: Path) -> list[tuple[str, str, str, str]]:
+    """Median seconds of the operations that bound the stages (see the module doc)."""
+    import OpenImageIO as oiio
+
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.core import GridGeometry
+    from wbcgrade.core._cpu import fast_cpu
+
+    def median_time(fn, repeats: int = 5) -> float:
+        fn()
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - start)
+        return statistics.median(times)
+
+    pixels = read_image(photo).pixels
+    rows = [("floor: JPEG decode", f"{median_time(lambda: read_image(photo)):.2f} s", "",
+             f"{pixels.shape[1]}x{pixels.shape[0]}, OpenImageIO, to float32")]
+    with tempfile.TemporaryDirectory() as tmp:
+        def encode():
+            out = oiio.ImageOutput.create(str(Path(tmp) / "x.jpg"))
+            spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, "uint8")
+            out.open(str(Path(tmp) / "x.jpg"), spec)
+            out.write_image(pixels)
+            out.close()
+        rows.append(("floor: JPEG encode", f"{median_time(encode):.2f} s", "",
+                     "same pixels, quality 95 (OpenImageIO default)"))
+    one_pass = median_time(lambda: np.clip(pixels, 0, 1))
+    rows.append(("floor: one pass over the pixels", f"{one_pass:.2f} s", "",
+                 "a clipped float32 copy (memory bandwidth)"))
+    for bins, dtype, count in ((128, np.float64, 1), (64, np.float64, 1), (16, np.float32, 10)):
+        geometry = GridGeometry((bins,) * 3, 2 * (1 / 31) ** 2, dtype)
+        values = np.random.default_rng(0).random((count, *geometry.shape)).astype(dtype)
+        operand = values[0] if count == 1 else values
+        with fast_cpu():
+            seconds = median_time(lambda g=geometry, x=operand: g.apply(x))
+        rows.append((f"floor: kernel product {bins}³", f"{seconds * 1e3:.1f} ms", "",
+                     f"{count} histogram(s), {np.dtype(dtype).name}, separable BLAS"))
+    return rows
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -196,6 +244,8 @@ def main() -> None:
                         help="also measure batch --consistent on N copies of the photo")
     parser.add_argument("--verify", action="store_true", help="run the same-answer check")
     parser.add_argument("--verify-steps", type=int, default=3, help="L-BFGS iterations at 128³")
+    parser.add_argument("--floors", action="store_true",
+                        help="also measure what bounds each stage")
     parser.add_argument("--torch", action="store_true", help="compare with PyTorch autograd")
     parser.add_argument("--torch-bins", type=int, default=64,
                         help="grid of the float32 speed comparison")
@@ -247,6 +297,9 @@ def main() -> None:
                      f"{max(peaks):.0f} MB", f"{len(walls)} run(s), {cached}; "
                      "target <= 10 s, <= 2 GB"))
         rows.append(("  stages (s)", "", "", f"{stages}; start-up and imports {startup:.2f}"))
+
+        if args.floors:
+            rows.extend(floors(args.photo))
 
         if args.batch > 0:
             shoot = tmp / "shoot"
