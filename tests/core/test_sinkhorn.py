@@ -40,7 +40,7 @@ def test_scaling_and_log_domains_give_the_same_plan(problem, monkeypatch):
     p, q, geometry = problem
     scaled = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000)
 
-    def unsafe(*args):
+    def unsafe(*args, **kwargs):
         raise sinkhorn_module._Unsafe("forced")
 
     monkeypatch.setattr(sinkhorn_module, "_scaling", unsafe)
@@ -85,3 +85,44 @@ def test_a_large_relaxation_is_balanced_transport_and_a_small_one_is_not(problem
     # The relaxed side no longer matches q; the first marginal still does.
     assert np.abs(tight.sum(axis=0) - q.ravel()).sum() > 1e-2
     assert np.abs(tight.sum(axis=1) - p.ravel()).sum() < 1e-9
+
+
+def test_overrelaxation_reaches_the_same_plan_in_fewer_iterations(rng):
+    geometry = GridGeometry((12, 12, 12), 2 * (0.8 / 11) ** 2)  # narrow: slow plain iterations
+    p, q = blobs(geometry.shape, 2, rng, width=0.12, floor=1e-5, components=3)
+    plain = sinkhorn(p, q, geometry, tol=1e-6, max_iter=20000, check_every=1)
+    fast = sinkhorn(p, q, geometry, tol=1e-6, max_iter=20000, check_every=1,
+                    overrelaxation=1.7)
+    assert plain.converged and fast.converged
+    assert fast.n_iter < 0.6 * plain.n_iter
+    np.testing.assert_allclose(_plan(fast, geometry), _plan(plain, geometry), atol=1e-6)
+
+
+def test_a_diverging_overrelaxation_falls_back_to_plain_iterations(problem, monkeypatch, caplog):
+    p, q, geometry = problem
+    plain = sinkhorn(p, q, geometry, tol=1e-8, max_iter=5000)
+
+    def broken(errors, error, omega):  # as if the relaxed iterations went astray
+        if omega != 1.0:
+            raise sinkhorn_module._Diverged("forced")
+
+    monkeypatch.setattr(sinkhorn_module, "_watch", broken)
+    with caplog.at_level(logging.INFO, logger="wbcgrade.core.sinkhorn"):
+        result = sinkhorn(p, q, geometry, tol=1e-8, max_iter=5000, overrelaxation=1.9)
+    assert "diverged" in caplog.text and result.n_iter == plain.n_iter
+    np.testing.assert_allclose(result.log_a, plain.log_a)
+    with pytest.raises(ValueError, match="overrelaxation"):
+        sinkhorn(p, q, geometry, overrelaxation=2.0)
+
+
+def test_overrelaxation_in_the_log_domain_matches_the_scaling_domain(problem, monkeypatch):
+    p, q, geometry = problem
+    scaled = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000, overrelaxation=1.5)
+
+    def unsafe(*args, **kwargs):
+        raise sinkhorn_module._Unsafe("forced")
+
+    monkeypatch.setattr(sinkhorn_module, "_scaling", unsafe)
+    logged = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000, overrelaxation=1.5)
+    assert logged.n_iter == scaled.n_iter
+    np.testing.assert_allclose(logged.log_b, scaled.log_b, atol=1e-7)

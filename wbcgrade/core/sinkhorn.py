@@ -92,26 +92,49 @@ def _l1_error(a: NDArray, Kb: NDArray, p: NDArray, geometry: Geometry) -> float:
                                      _rows(p, geometry)))
 
 
-def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry) -> bool:
-    """``out = num / den`` (0 where den vanished), fused; False when a bin with mass
+def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry,
+            omega: float = 1.0, power: float = 1.0) -> bool:
+    """``out = out^(1 - omega) (num / den)^(omega power)`` (0 where den vanished; the
+    plain ``(num / den)^power`` where ``out`` is 0), fused; False when a bin with mass
     gets a scaling that is 0, inf or NaN (the scaling domain cannot go on)."""
     if not out.flags.c_contiguous:
         raise ValueError("out must be C-contiguous")
     bad = 0
     for nr, dr, orow in zip(_rows(num, geometry), _rows(den, geometry), _rows(out, geometry)):
-        bad += _kernels.ratio(nr, dr, orow, _FLOAT64_MAX)
+        bad += _kernels.relaxed_ratio(nr, dr, orow, omega, power, _FLOAT64_MAX)
     return bad == 0
 
 
-def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
+#: Over-relaxation speeds up the local convergence only: iterations are plain until
+#: the marginal error is below this (a cold start overshoots otherwise).
+_RELAX_BELOW = 0.05
+
+
+class _Diverged(Exception):
+    """Over-relaxed iterations stopped converging (the plain ones always do)."""
+
+
+def _watch(errors: list[float], error: float, omega: float) -> None:
+    """Raise _Diverged when over-relaxed iterations go astray: the error non-finite,
+    10x above its best, or no new best for 30 checks (relaxed errors oscillate, by up
+    to ~5x, on their way down)."""
+    if omega != 1.0 and errors:
+        best = min(errors)
+        if (not np.isfinite(error) or error > 10.0 * best
+                or (len(errors) >= 30 and min(errors[-30:]) > best and error > best)):
+            raise _Diverged(f"marginal error {error:.3g}")
+    errors.append(error)
+
+
+def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power, omega=1.0):
     # C order throughout: the fused passes work on flat views of these arrays.
     p, q = np.ascontiguousarray(p), np.ascontiguousarray(q)
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        b = np.ones(q.shape) if init_log_b is None else np.exp(init_log_b)
+        b = np.ones(q.shape) if init_log_b is None else np.exp(init_log_b, order="C")
         if not np.all(np.isfinite(b)):
             raise _Unsafe("initial scalings overflow")
         a = np.zeros(p.shape)
-        error, it = np.inf, 0
+        error, it, errors, step = np.inf, 0, [], 1.0
         for it in range(1, max_iter + 1):
             Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)
             if it > 1 and (it % check_every == 0 or it == max_iter):
@@ -119,26 +142,36 @@ def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
                 if error <= tol:
                     it -= 1
                     break
-            if not _update(p, Kb, a, geometry):
-                raise _Unsafe("K b vanishes or overflows where p has mass")
+                step = omega if error <= _RELAX_BELOW or step != 1.0 else 1.0
+                _watch(errors, error, step)
+            if not _update(p, Kb, a, geometry, step):
+                raise (_Diverged if step != 1.0 else _Unsafe)(
+                    "K b vanishes or overflows where p has mass")
             Ka = np.ascontiguousarray(geometry.apply(a), dtype=np.float64)
-            b = np.empty_like(q)
-            if not _update(q, Ka, b, geometry):
-                raise _Unsafe("K a vanishes or overflows where q has mass")
-            if power != 1.0:
-                np.power(b, power, out=b)
+            if not _update(q, Ka, b, geometry, step, power):
+                raise (_Diverged if step != 1.0 else _Unsafe)(
+                    "K a vanishes or overflows where q has mass")
         else:
             Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)
             error = _l1_error(a, Kb, p, geometry)
         return np.log(a), np.log(b), it, error
 
 
-def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
+def _relax(old: NDArray, new: NDArray, omega: float) -> NDArray:
+    """``(1 - omega) old + omega new`` in the log domain (-inf stays -inf)."""
+    if omega == 1.0:
+        return new
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(old) & np.isfinite(new), (1.0 - omega) * old + omega * new,
+                        new)
+
+
+def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every, power, omega=1.0):
     with np.errstate(divide="ignore", invalid="ignore"):
         log_p, log_q = np.log(p), np.log(q)
         log_b = np.zeros_like(q) if init_log_b is None else np.array(init_log_b, dtype=np.float64)
         log_a = np.full_like(p, -np.inf)
-        error, it = np.inf, 0
+        error, it, errors, step = np.inf, 0, [], 1.0
         for it in range(1, max_iter + 1):
             log_Kb = geometry.log_apply(log_b)
             if it > 1 and (it % check_every == 0 or it == max_iter):
@@ -146,8 +179,10 @@ def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every, power):
                 if error <= tol:
                     it -= 1
                     break
-            log_a = log_p - log_Kb
-            log_b = power * (log_q - geometry.log_apply(log_a))
+                step = omega if error <= _RELAX_BELOW or step != 1.0 else 1.0
+                _watch(errors, error, step)
+            log_a = _relax(log_a, log_p - log_Kb, step)
+            log_b = _relax(log_b, power * (log_q - geometry.log_apply(log_a)), step)
         else:
             error = _marginal_error(np.exp(log_a + geometry.log_apply(log_b)), p, geometry)
         return log_a, log_b, it, error
@@ -162,6 +197,7 @@ def sinkhorn(
     init_log_b: ArrayLike | None = None,
     check_every: int = 5,
     relaxation: float | None = None,
+    overrelaxation: float = 1.0,
 ) -> SinkhornResult:
     """Entropic optimal transport between ``p`` and ``q`` on ``geometry``.
 
@@ -183,6 +219,14 @@ def sinkhorn(
         ``rho > 0``: the second marginal is relaxed by ``rho KL(pi^T 1 | q)``
         (in the units of the cost; ``rho -> inf`` is balanced transport). The
         first marginal stays exact, so ``error`` still measures convergence.
+    overrelaxation : float, default 1.0
+        ``omega`` in (0, 2): each scaling moves to ``old^(1 - omega) new^omega``
+        (over-relaxed Sinkhorn; Thibault et al. 2017, Lehmann et al. 2021). The
+        fixed point is the same; with a narrow kernel, ``omega`` near 1.7 takes
+        2-4 times fewer iterations. Iterations are plain until the error is
+        below 0.05; relaxed ones are not guaranteed to converge: when the error
+        grows (10x above its best, or no new best for 30 checks) or the
+        scalings break down, the solve starts again with plain iterations.
 
     Returns
     -------
@@ -202,15 +246,25 @@ def sinkhorn(
         raise ValueError("max_iter must be at least 1")
     if relaxation is not None and not (np.isfinite(relaxation) and relaxation > 0):
         raise ValueError("relaxation must be a positive number (or None for balanced transport)")
+    if not (np.isfinite(overrelaxation) and 0 < overrelaxation < 2):
+        raise ValueError("overrelaxation must be in (0, 2)")
     power = 1.0 if relaxation is None else float(relaxation / (relaxation + geometry.gamma))
     args = (p, q, geometry, float(tol), int(max_iter), init_log_b, max(1, int(check_every)),
             power)
+    omegas = [float(overrelaxation)] + ([1.0] if overrelaxation != 1.0 else [])
     with fast_cpu():
-        try:
-            log_a, log_b, n_iter, error = _scaling(*args)
-        except _Unsafe as why:
-            log.info("sinkhorn: scaling domain unsafe (%s); using the log domain", why)
-            log_a, log_b, n_iter, error = _log_domain(*args)
+        for solve in (_scaling, _log_domain):
+            try:
+                for omega in omegas:
+                    try:
+                        log_a, log_b, n_iter, error = solve(*args, omega=omega)
+                        break
+                    except _Diverged as why:
+                        log.info("sinkhorn: over-relaxation %.3g diverged (%s); plain "
+                                 "iterations", omega, why)
+                break
+            except _Unsafe as why:
+                log.info("sinkhorn: scaling domain unsafe (%s); using the log domain", why)
     return SinkhornResult(log_a, log_b, n_iter, error, bool(error <= tol))
 
 
