@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _kernels
-from wbcgrade.core._cpu import fast_cpu
-from wbcgrade.core.geometry import Geometry
+from wbcgrade.core._cpu import fast_cpu, parallel_map
+from wbcgrade.core.geometry import PARALLEL_BINS, Geometry
 
 __all__ = ["SinkhornResult", "sinkhorn", "barycentric_projection"]
 
@@ -99,10 +99,17 @@ def _update(num: NDArray, den: NDArray, out: NDArray, geometry: Geometry,
     gets a scaling that is 0, inf or NaN (the scaling domain cannot go on)."""
     if not out.flags.c_contiguous:
         raise ValueError("out must be C-contiguous")
-    bad = 0
+    bad: list[int] = []
     for nr, dr, orow in zip(_rows(num, geometry), _rows(den, geometry), _rows(out, geometry)):
-        bad += _kernels.relaxed_ratio(nr, dr, orow, omega, power, _FLOAT64_MAX)
-    return bad == 0
+        def work(lo: int, hi: int, nr=nr, dr=dr, orow=orow) -> None:
+            bad.append(_kernels.relaxed_ratio(nr[lo:hi], dr[lo:hi], orow[lo:hi], omega, power,
+                                              _FLOAT64_MAX))
+
+        if nr.size >= PARALLEL_BINS and (omega != 1.0 or power != 1.0):
+            parallel_map(work, nr.size)  # exp and log per bin: worth the threads
+        else:
+            work(0, nr.size)
+    return sum(bad) == 0
 
 
 #: Over-relaxation speeds up the local convergence only: iterations are plain until
