@@ -10,6 +10,8 @@ process, so :func:`remove_stale_temporaries` (run by the next ``apply`` /
 from one a live run is writing, and removes only the former.
 
 :func:`lock_folder` gives one run exclusive use of an output folder (``batch``).
+The temporary-file mark, the umask and the regular-file check are shared with
+the BRDF and shape writers (:mod:`wbcgrade._publish`).
 """
 
 from __future__ import annotations
@@ -25,13 +27,12 @@ import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from wbcgrade._publish import _UMASK, TEMP_MARK, check_regular_target
 from wbcgrade.errors import InputError
 
 __all__ = ["atomic_path", "check_regular_target", "remove_stale_temporaries", "is_unlocked",
            "lock_folder", "TEMP_MARK", "LOCK_FILE"]
 
-#: Marks the project's temporary files: ``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``.
-TEMP_MARK = ".wbcgrade-tmp-"
 #: Lock file a run keeps in an output folder it has exclusive use of.
 LOCK_FILE = ".wbcgrade.lock"
 #: A temporary file younger than this is never removed (it may be just created and
@@ -45,36 +46,8 @@ _TEMP_RE = re.compile(r"^\..*" + re.escape(TEMP_MARK) + r"[A-Za-z0-9_]{8}")
 _MKSTEMP_CHARS = "[a-z0-9_]{8}"
 
 
-def _read_umask() -> int:
-    # Read once, at import: os.umask can only be read by setting it, which is
-    # not safe once other threads create files.
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
-
-
 def _umask() -> int:
     return _UMASK
-
-
-def check_regular_target(target: str | os.PathLike) -> None:
-    """Raise InputError when ``target`` exists and is not a regular file (a device such
-    as /dev/null, a FIFO, a socket, a folder): replacing it would destroy it."""
-    target = Path(target)
-    try:
-        mode = target.stat().st_mode
-    except FileNotFoundError:
-        return
-    except OSError as exc:
-        raise InputError(f"{target}: cannot be checked ({exc.strerror})") from None
-    if stat.S_ISDIR(mode):
-        raise InputError(f"{target}: is a folder")
-    if not stat.S_ISREG(mode):
-        raise InputError(f"{target}: exists and is not a regular file (a device, pipe or "
-                         "socket); refusing to replace it")
 
 
 def _publish(tmp: str, target: Path, overwrite: bool) -> None:
