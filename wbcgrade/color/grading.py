@@ -34,10 +34,11 @@ from wbcgrade.color.transfer import (
     palette_barycenter,
     regrain_settings,
 )
+from wbcgrade.errors import InputError
 
 __all__ = ["NONZERO_THRESHOLD", "FitSummary", "PhotoGrade", "fit_geometry", "vertex_losses",
            "fit_with_vertex_check", "photo_histograms", "PaletteSum", "pooled_histogram",
-           "series_grade", "grade_photo"]
+           "series_grade", "fit_grade", "grade_array", "grade_photo"]
 
 #: Weights at or above this count as "non-zero" (softmax weights are never exactly 0).
 NONZERO_THRESHOLD = 1e-3
@@ -268,13 +269,82 @@ class PhotoGrade:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
+              alpha: np.ndarray | None = None, callback: FitCallback | None = None,
+              stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+    """The grade of encoded pixels: vertex-checked weights, palette and colour map.
+
+    The one per-photo pipeline (``apply``, ``batch`` without ``--consistent``,
+    :func:`grade_array`): fit never worse than the best single style, then the
+    palette and the smooth colour map of :func:`wbcgrade.color.transfer.grade_image`
+    with those weights.
+
+    Parameters
+    ----------
+    encoded : (H, W, 3) float32 encoded colours in [0, 1].
+    alpha : (H, W) optional; pixels with alpha 0 do not count.
+
+    Returns
+    -------
+    (grade, fit summary); ``grade.timings`` holds the stages.
+    """
+    say = stage or (lambda name: None)
+    opts.validate(len(styles.names))
+    say("fit")
+    photo_fit = image_histogram(encoded, opts.fit_bins, alpha, opts.max_pixels)
+    summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
+    fixed = replace(opts, weights=[float(w) for w in summary.weights])
+    grade = grade_image(encoded, styles, fixed, alpha, None, stage)
+    grade.loss = summary.loss
+    grade.info["fit"] = summary.info
+    grade.timings = {"fit": summary.time_s,
+                     **{k: v for k, v in grade.timings.items() if k != "fit"}}
+    return grade, summary
+
+
+def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = None,
+                alpha: np.ndarray | None = None) -> tuple[np.ndarray, Grade]:
+    """Grade an image held in memory: arrays in, arrays out (no files).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) encoded (e.g. sRGB) colours in [0, 1], any float or
+        integer dtype (integers are scaled by their maximum value).
+    styles : the style palettes (:func:`wbcgrade.color.presets.load_preset`,
+        :func:`~wbcgrade.color.presets.load_style_folder`).
+    opts : grade settings (default :class:`GradeOptions`).
+    alpha : (H, W) optional coverage; transparent pixels do not count.
+
+    Returns
+    -------
+    graded : (H, W, 3) float32 in [0, 1] (colour map and regrain applied)
+    grade : the weights, colour map and diagnostics (``grade.apply`` grades
+        more pixels the same way; ``grade.color_map`` is the LUT).
+    """
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or min(rgb.shape[:2]) < 1:
+        raise InputError(f"rgb must be an (H, W, 3) image, got shape {rgb.shape}")
+    if np.issubdtype(rgb.dtype, np.integer):
+        rgb = rgb / np.float32(np.iinfo(rgb.dtype).max)
+    if not np.all(np.isfinite(rgb)):
+        raise InputError("rgb contains NaN or inf")
+    encoded, _ = encode_for_grading(np.asarray(rgb, dtype=np.float32), False)
+    if alpha is not None:
+        alpha = np.asarray(alpha, dtype=np.float32)
+        if alpha.shape != encoded.shape[:2]:
+            raise InputError(f"alpha must have shape {encoded.shape[:2]}, got {alpha.shape}")
+    grade, _ = fit_grade(encoded, styles, opts or GradeOptions(), alpha)
+    return grade.apply(encoded), grade
+
+
 def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
                 shared: Grade | None = None, callback: FitCallback | None = None,
                 stage: Callable[[str], None] | None = None) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
     With ``shared`` (a series grade), its colour map is applied as is;
-    otherwise the photo gets its own vertex-checked fit and colour map.
+    otherwise the photo gets its own vertex-checked fit and colour map
+    (:func:`fit_grade`).
     """
     say = stage or (lambda name: None)
     timings: dict[str, float] = {}
@@ -287,16 +357,8 @@ def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     if shared is not None:
         grade = shared
     else:
-        opts.validate(len(styles.names))
-        say("fit")
-        photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
-        summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
-        timings["fit"] = summary.time_s
-        fixed = replace(opts, weights=[float(w) for w in summary.weights])
-        grade = grade_image(encoded, styles, fixed, image.alpha(), None, stage)
-        grade.loss = summary.loss
-        grade.info["fit"] = summary.info
-        timings.update({k: v for k, v in grade.timings.items() if k != "fit"})
+        grade, summary = fit_grade(encoded, styles, opts, image.alpha(), callback, stage)
+        timings.update(grade.timings)
     say("remap")
     start = time.perf_counter()
     pixels, alpha_channel = render(image, grade, (encoded, scale))

@@ -1,0 +1,55 @@
+"""The pure-array entry point: the same pipeline as ``apply``, arrays in and out."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.color.conftest import SAMPLES, small_copy, write_array
+from wbcgrade.color.grading import grade_array, grade_photo
+from wbcgrade.color.imageio import read_image
+from wbcgrade.color.presets import load_style_folder
+from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.errors import InputError
+
+
+@pytest.fixture(scope="module")
+def scene(style_dir, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("array")
+    path = small_copy(SAMPLES / "chelsea.jpg", folder / "chelsea.jpg")
+    pixels = np.round(read_image(path).rgb() * 255).astype(np.uint8)
+    png = write_array(folder / "chelsea.png", pixels / 255.0, "uint8")
+    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    return pixels, png, load_style_folder(style_dir, opts.bins), opts
+
+
+def test_an_array_is_graded_as_apply_grades_its_file(scene):
+    pixels, png, styles, opts = scene
+    graded, grade = grade_array(pixels, styles, opts)
+    from_file = grade_photo(png, styles, opts)
+    assert graded.shape == pixels.shape and graded.dtype == np.float32
+    # (the file's pixels come back from OpenImageIO's uint8 conversion, which may
+    # differ from k / 255 in the last bit)
+    np.testing.assert_allclose(grade.weights, from_file.grade.weights, atol=1e-5)
+    np.testing.assert_allclose(graded, from_file.pixels, atol=1e-4)
+    # The vertex check: never worse than the best single style (grade_image has none).
+    assert grade.loss <= min(from_file.fit.vertex_losses) + 1e-12
+    assert grade.info["fit"]["start"] in ("uniform", "vertex-refit", "vertex")
+
+
+def test_integer_and_float_arrays_give_the_same_grade(scene):
+    pixels, _, styles, opts = scene
+    as_int, _ = grade_array(pixels, styles, opts)
+    as_float, _ = grade_array(pixels / 255.0, styles, opts)
+    np.testing.assert_allclose(as_int, as_float, atol=1e-6)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros((4, 4)), "an \\(H, W, 3\\) image"),
+    (np.zeros((4, 4, 4)), "an \\(H, W, 3\\) image"),
+    (np.full((4, 4, 3), np.nan), "NaN or inf"),
+])
+def test_bad_arrays_are_refused(scene, bad, message):
+    _, _, styles, opts = scene
+    with pytest.raises(InputError, match=message):
+        grade_array(bad, styles, opts)
