@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import click
 from click.testing import CliRunner
 
 from wbcgrade.cli import main
@@ -25,3 +26,30 @@ def test_batch_force_still_works_with_a_deprecation_warning(tmp_path):
     assert "--lut needs --consistent" in new.output
     assert "--force is deprecated; use --overwrite" in old.output
     assert "deprecated" not in new.output
+
+
+def _loss_choices(*command: str) -> list[str]:
+    group = main
+    for name in command:
+        group = group.commands[name] if hasattr(group, "commands") else group
+    ctx = click.Context(group)
+    option = next(p for p in group.get_params(ctx) if p.name == "loss")
+    return list(option.type.choices)
+
+
+def test_every_loss_the_cli_offers_is_the_core_registrys():
+    """The loss lists were written by hand in several places and drifted: each
+    command's --loss choices are its domain's list, and every name is a loss of the
+    core's registry."""
+    from wbcgrade.brdf.defaults import BRDF_LOSSES
+    from wbcgrade.color.transfer import LOSSES as COLOR_LOSSES
+    from wbcgrade.core import get_loss
+    from wbcgrade.shape.defaults import LOSS_NAMES
+
+    offered = {("apply",): COLOR_LOSSES, ("batch",): COLOR_LOSSES, ("report",): COLOR_LOSSES,
+               ("shape", "complete"): LOSS_NAMES, ("shape", "project"): LOSS_NAMES,
+               ("brdf", "fit"): BRDF_LOSSES}
+    for command, names in offered.items():
+        assert _loss_choices(*command) == list(names), command
+        for name in names:
+            assert get_loss(name).name == name.replace("-", "_"), name

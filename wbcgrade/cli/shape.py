@@ -12,9 +12,9 @@ from pathlib import Path
 
 import click
 
-# The names of wbcgrade.shape.complete.LOSS_NAMES, repeated so `--help` needs no core import.
-_LOSS_CHOICE = click.Choice(["kl_reverse", "kl", "quadratic", "l1", "wasserstein"],
-                            case_sensitive=False)
+from wbcgrade.shape.defaults import LOSS_NAMES
+
+_LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
 
 
 class _FitProgress:

@@ -54,15 +54,18 @@ import scipy.optimize
 from wbcgrade.core import GridGeometry, Loss, barycentric_coordinates, get_loss
 from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES
 from wbcgrade.errors import InputError
+from wbcgrade.shape.defaults import (  # noqa: F401 - re-exported
+    DEFAULT_LOSS,
+    DEFAULT_MAX_ITER,
+    DEFAULT_N_ITER,
+    DEFAULT_RESOLUTION,
+    LOSS_NAMES,
+)
 from wbcgrade.shape.mesh import MESH_SUFFIXES, normalization_transform, read_mesh, voxelize
 from wbcgrade.shape.volume import DEFAULT_EPS, density_from_volume, volume_suffix
 
 log = logging.getLogger(__name__)
 
-DEFAULT_RESOLUTION = 64
-DEFAULT_LOSS = "kl_reverse"
-DEFAULT_N_ITER = 60
-DEFAULT_MAX_ITER = 15
 COARSE_MIN_SIZE = 16
 MAX_MISSING = 0.9
 
@@ -80,10 +83,6 @@ weights score worse than shapes that avoid the cut (measured: 2.14 against
 1.51 at 20^3). ``KL(q | P)`` only asks the barycenter to cover the observed
 part; a completion costs at most its (linear) mass.
 """
-
-LOSS_NAMES = ("kl_reverse", "kl", "quadratic", "l1", "wasserstein")
-"""Losses a projection accepts; ``kl_reverse`` is the default for shapes."""
-
 
 def resolve_loss(name: str | Loss) -> Loss:
     """The :class:`~wbcgrade.core.Loss` called ``name`` (``kl_reverse`` or a core loss)."""
