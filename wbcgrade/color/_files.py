@@ -10,8 +10,9 @@ process, so :func:`remove_stale_temporaries` (run by the next ``apply`` /
 from one a live run is writing, and removes only the former.
 
 :func:`lock_folder` gives one run exclusive use of an output folder (``batch``).
-The temporary-file mark, the umask and the regular-file check are shared with
-the BRDF and shape writers (:mod:`wbcgrade._publish`).
+:func:`atomic_path`, the temporary-file mark and the regular-file check are
+:mod:`wbcgrade._publish`'s, shared with the BRDF and shape writers (re-exported
+here with the colour-side stale-file cleaner and folder lock).
 """
 
 from __future__ import annotations
@@ -22,12 +23,11 @@ import fcntl
 import os
 import re
 import stat
-import tempfile
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from wbcgrade._publish import _UMASK, TEMP_MARK, check_regular_target
+from wbcgrade._publish import _UMASK, TEMP_MARK, atomic_path, check_regular_target
 from wbcgrade.errors import InputError
 
 __all__ = ["atomic_path", "check_regular_target", "remove_stale_temporaries", "is_unlocked",
@@ -48,64 +48,6 @@ _MKSTEMP_CHARS = "[a-z0-9_]{8}"
 
 def _umask() -> int:
     return _UMASK
-
-
-def _publish(tmp: str, target: Path, overwrite: bool) -> None:
-    """Move the finished temporary file onto ``target``.
-
-    Without ``overwrite`` a hard link publishes it only if ``target`` still
-    does not exist (a file that appeared during a long grade is never
-    replaced); filesystems without hard links fall back to a last check.
-    """
-    check_regular_target(target)
-    if overwrite:
-        os.replace(tmp, target)
-        return
-    try:
-        os.link(tmp, target)
-    except FileExistsError:
-        raise InputError(f"{target}: file exists (use --overwrite to replace it)") from None
-    except OSError:
-        if target.exists():
-            raise InputError(f"{target}: file exists (use --overwrite to replace it)") from None
-        os.replace(tmp, target)
-        return
-    os.unlink(tmp)
-
-
-def _temp_prefix(target: Path) -> str:
-    stem = target.stem[:100]  # keep the temporary name within NAME_MAX
-    return f".{stem}{TEMP_MARK}"
-
-
-@contextlib.contextmanager
-def atomic_path(
-    target: str | os.PathLike, suffix: str = "", overwrite: bool = True
-) -> Iterator[str]:
-    """Yield a temporary path in ``target``'s folder; move it onto ``target`` on success.
-
-    The temporary file (``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``) gets the
-    permissions a new file would get (mkstemp's are 0600), is locked by this
-    process until published, and is removed if the body raises. With
-    ``overwrite=False`` an existing ``target`` is never replaced (InputError
-    instead); a ``target`` that is not a regular file is never replaced.
-    """
-    target = Path(target)
-    check_regular_target(target)
-    folder = target.parent if str(target.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(target), suffix=suffix or target.suffix,
-                               dir=folder)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # tells a cleaner this file is live
-        os.chmod(tmp, 0o666 & ~_umask())
-        yield tmp
-        _publish(tmp, target, overwrite)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    finally:
-        os.close(fd)
 
 
 def is_unlocked(path: str | os.PathLike, min_age: float = MIN_STALE_AGE_S) -> bool:
