@@ -115,6 +115,54 @@ def test_overlapping_fast_cpu_calls_keep_blas_single_threaded_and_restore_it():
     assert run.stdout.split() == ["True", "True"]
 
 
+# The same, in one fixed order: thread A enters (and sets the limit), thread B enters,
+# A leaves, then B leaves and must restore the count that A saved. threadpoolctl 3.8
+# ignores limits set by any thread but the first one that set them, which left BLAS
+# single-threaded for good here (B's restore, made while A is alive, was ignored).
+_HANDOVER = """
+import threading
+import numpy as np
+import scipy.linalg
+from threadpoolctl import threadpool_info
+from wbcgrade.core._cpu import fast_cpu
+
+def blas():
+    return tuple(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
+
+before = blas()
+a_in, b_in, a_out, b_out = (threading.Event() for _ in range(4))
+seen = []
+def a():
+    with fast_cpu():
+        a_in.set()
+        b_in.wait()
+    a_out.set()
+    b_out.wait()  # A stays alive while B restores
+def b():
+    a_in.wait()
+    with fast_cpu():
+        b_in.set()
+        a_out.wait()
+        seen.append(blas())
+    seen.append(blas())
+    b_out.set()
+threads = [threading.Thread(target=a), threading.Thread(target=b)]
+for t in threads: t.start()
+for t in threads: t.join()
+print(seen[0] == (1,) * len(before), seen[1] == before, max(before) > 1)
+"""
+
+
+def test_the_last_thread_out_restores_the_count_the_first_one_saved():
+    run = subprocess.run([sys.executable, "-c", _HANDOVER], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    inside_single, restored, multi = run.stdout.split()
+    assert inside_single == "True"
+    if multi == "True":  # with one core there is nothing to restore
+        assert restored == "True"
+
+
 def test_a_parallel_function_keeps_the_dispatcher_on_a_thread_safe_layer():
     @compiled(parallel=True)
     def total(x):  # pragma: no cover - compiled

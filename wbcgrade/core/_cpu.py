@@ -21,6 +21,7 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 
+import threadpoolctl
 from threadpoolctl import ThreadpoolController
 
 __all__ = ["fast_cpu", "n_workers", "parallel_map"]
@@ -119,12 +120,28 @@ def _get_pool() -> ThreadPoolExecutor:
         return _pool
 
 
+def _take_blas_control() -> None:
+    """Let this thread change OpenBLAS's thread count.
+
+    threadpoolctl (3.8 and later) lets only the first thread that set an
+    OpenBLAS limit change it again and silently ignores the others. Our
+    reference count already serialises the process-wide setting, so whichever
+    thread sets or restores it (under ``_blas_lock``) takes control first and
+    gives it back afterwards.
+    """
+    controller = getattr(threadpoolctl, "OpenBLASController", None)
+    clear = getattr(controller, "clear_controlling_thread", None)
+    if clear is not None:
+        clear(force=True)
+
+
 def _enter_single_threaded_blas() -> None:
     global _controller, _blas_users, _blas_limiter
     with _blas_lock:
         if _blas_users == 0:
             if _controller is None:
                 _controller = ThreadpoolController()
+            _take_blas_control()
             _blas_limiter = _controller.limit(limits=1, user_api="blas")
         _blas_users += 1
 
@@ -135,7 +152,9 @@ def _leave_single_threaded_blas() -> None:
         _blas_users -= 1
         if _blas_users == 0 and _blas_limiter is not None:
             limiter, _blas_limiter = _blas_limiter, None
+            _take_blas_control()
             limiter.restore_original_limits()
+            _take_blas_control()  # leave it free for the caller's own limits
 
 
 @contextlib.contextmanager
