@@ -217,7 +217,7 @@ def test_checkpointing_gives_the_same_gradient_with_any_memory_budget(rng):
     q = rng.random((8, 8))
     w = np.array([0.5, 0.2, 0.3])
     full = barycenter_gradient(H, w, geom, q, n_iter=23, checkpoint_bytes=10**9)
-    for budget in (1, 2 * H.nbytes, 5 * H.nbytes):
+    for budget in (1, 2 * H.nbytes, 3 * H.nbytes, 5 * H.nbytes, 7 * H.nbytes, 13 * H.nbytes):
         value, grad, P = barycenter_gradient(H, w, geom, q, n_iter=23, checkpoint_bytes=budget)
         assert value == full[0]
         np.testing.assert_array_equal(grad, full[1])

@@ -46,6 +46,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _kernels
+from wbcgrade.core._checkpoints import (
+    RECOMPUTE,
+    RECORD,
+    SWEEP,
+    extra_steps,
+    segment_plan,
+    top_plan,
+)
 from wbcgrade.core._cpu import fast_cpu, n_workers, parallel_map
 from wbcgrade.core.geometry import PARALLEL_BINS as _PARALLEL_BINS
 from wbcgrade.core.geometry import Geometry
@@ -70,11 +78,10 @@ DEFAULT_LOG_DOMAIN_BUDGET_S = 3600.0
 #: ~5e7 entries/s on 2 cores.
 _DIRECT_LOG_RATE = 2.5e7
 
-#: Log-domain products per iteration and histogram, over 2: the forward pass 1,
-#: the gradient ~4.6 with the default checkpoints at 128^3 (forward 1,
-#: recomputation from checkpoints ~1.6, the reverse step's own forward step 1,
-#: the adjoint's signed products 1).
-_GRADIENT_PASSES = 4.6
+#: Forward-pass equivalents of a gradient besides the first forward pass and
+#: the schedule's recomputed steps: the adjoint's two (signed) products per
+#: iteration and histogram.
+_ADJOINT_PASSES = 1.2
 
 
 def log_domain_budget(value: float | None = None) -> float:
@@ -445,10 +452,11 @@ class _LogBackend:
         log_b_next = log_P - log_phi if need_next else None
         return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P), log_P)
 
-    record_arrays = 3
+    record_arrays = 2
 
     def compact(self, it: _Iterate) -> _Iterate:
-        return it
+        """What a recorded iteration keeps: log K b, log phi and P (log a is recomputed)."""
+        return _Iterate(it.Kb, None, it.phi, it.log_phi, it.P, it.log_P)
 
     def previous(self, it: _Iterate) -> NDArray:
         return it.log_P - it.phi
@@ -484,7 +492,11 @@ class _LogBackend:
                 part = np.log(np.abs(u))
             part -= it.phi
             part, signs = signed_apply(part, np.sign(u))
-            part += it.a
+            if it.a is None:  # log a = log H - log K b, not kept in records
+                part += self.log_H
+                part -= it.Kb
+            else:
+                part += it.a
             part -= it.Kb
             part, signs = signed_apply(part, signs)
             part += log_b_prev
@@ -496,7 +508,8 @@ class _LogBackend:
         with np.errstate(divide="ignore"):
             for sign in (1.0, -1.0):
                 part = np.log(np.clip(sign * u, 0.0, None)) - it.phi
-                part = geom.log_apply(part) + it.a - it.Kb
+                log_a = self.log_H - it.Kb if it.a is None else it.a
+                part = geom.log_apply(part) + log_a - it.Kb
                 part = geom.log_apply(part) + log_b_prev
                 r_next -= sign * np.exp(part)
         return grad, r_next
@@ -582,7 +595,7 @@ class BarycenterSolver:
         """Estimated seconds of the log domain for ``passes`` forward-pass equivalents.
 
         One forward pass is ``2 L`` kernel products per histogram; a gradient
-        costs about 5.5 passes. The rate is the geometry's ``_log_apply_rate``
+        costs :meth:`gradient_passes`. The rate is the geometry's ``_log_apply_rate``
         (kernel entries per second and core; the shifted BLAS product of
         :class:`GridGeometry`) times the threads, or the per-entry
         log-sum-exp's ~5e7 entries/s.
@@ -691,7 +704,18 @@ class BarycenterSolver:
         q = _validate_target(target, self.batch_shape, loss, self.geometry)
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
             return self._run(w, lambda backend: self._gradient(backend, w, q, loss),
-                             passes=_GRADIENT_PASSES)
+                             passes=self.gradient_passes())
+
+    def gradient_passes(self) -> float:
+        """Forward-pass equivalents of one gradient in the log domain (its time estimate).
+
+        The first forward pass, the steps the checkpoint schedule recomputes
+        within ``checkpoint_bytes``, and the adjoint's products.
+        """
+        state = np.empty(0).itemsize * self.H.size  # float64 log-scalings
+        slots = max(1, self.checkpoint_bytes // max(1, state))
+        recomputed = extra_steps(self.n_iter, slots, _LogBackend.record_arrays)
+        return 1.0 + recomputed / self.n_iter + _ADJOINT_PASSES
 
     # ------------------------------------------------------------------ reverse pass
 
@@ -700,33 +724,43 @@ class BarycenterSolver:
         return max(1, self.checkpoint_bytes // max(1, state.nbytes))
 
     def _gradient(self, backend, w: NDArray, q: NDArray, loss: Loss):
+        """Forward pass, loss, and the reverse pass on the cheapest checkpoint schedule.
+
+        The schedule (:mod:`wbcgrade.core._checkpoints`) keeps scalings ``b``
+        as checkpoints and records whole iterations (``K b``, ``phi``, ``P``)
+        where the memory budget allows; when everything fits, the forward
+        pass records every iteration and the reverse pass recomputes nothing.
+        """
         L = self.n_iter
         b0 = backend.initial()
-        slots = self._slots(b0)
+        slots, per_record = self._slots(b0), backend.record_arrays
 
-        # When every iteration's arrays fit in the budget, one forward pass
-        # records them all and the reverse pass recomputes nothing (the
-        # scalings entering iteration l are rebuilt from iteration l-1's P and
-        # phi). Otherwise the forward pass keeps P_L and the checkpoints the
-        # recursion asks for first (the right spine of the bisection tree).
-        record: list[_Iterate] | None = [] if slots >= backend.record_arrays * L + 1 else None
-        spine, lo, hi, s = [], 0, L, slots
-        while record is None and hi - lo > 1 and 0 < s < hi - lo - 1:
-            lo += (hi - lo) // 2
-            spine.append(lo)
+        # The first forward pass runs through the whole range: along the right
+        # spine of the top plan its checkpoints and the recorded tail are free.
+        saved: dict[int, NDArray] = {}
+        records: dict[int, _Iterate] = {}
+        save_at, record_from = set(), L
+        lo, s = 0, slots
+        while True:
+            plan = top_plan(L - lo, s, per_record)
+            if plan == RECORD:
+                record_from = lo
+                break
+            if plan < 1:  # RECOMPUTE or SWEEP: nothing kept on the way
+                break
+            lo += plan
+            save_at.add(lo)
             s -= 1
-        saved = {}
         b = b0
         for l in range(L):
-            if l in spine:
+            if l in save_at:
                 saved[l] = b
-            b_next, it = backend.step(b, need_next=l < L - 1 and record is None)
-            if record is not None:
-                record.append(backend.compact(it))
-                b_next = backend.previous(it) if l < L - 1 else None
+            b_next, it = backend.step(b, need_next=l < L - 1)
+            if l >= record_from:
+                records[l] = backend.compact(it)
             P, it = it.P, None  # drop this iteration's arrays unless recorded
             b = b_next
-        del b
+        del b, b_next
         value, dloss = loss.value_and_grad(P, q, self.geometry)
         g_final = np.where(P > 0, dloss * P, 0.0)
         if not np.all(np.isfinite(g_final)) or not np.isfinite(value):
@@ -748,42 +782,48 @@ class BarycenterSolver:
             if l > 0:
                 state["r"] = r_next
 
-        def advance(b_from: NDArray, start: int, stop: int) -> NDArray:
-            if stop in saved:
-                return saved[stop]
-            for _ in range(start, stop):
+        def reverse_recorded(lo: int, hi: int, b_lo: NDArray, recs: dict[int, _Iterate]) -> None:
+            for l in range(hi - 1, lo - 1, -1):
+                it = recs.pop(l)
+                b_prev = backend.previous(recs[l - 1]) if l > lo else b_lo
+                reverse_step(l, b_prev, it)
+                del it, b_prev
+
+        def advance(b_from: NDArray, steps: int) -> NDArray:
+            for _ in range(steps):
                 b_from, _ = backend.step(b_from)
             return b_from
 
-        def reverse_range(lo: int, hi: int, b_lo: NDArray, slots: int) -> None:
-            n = hi - lo
-            if n == 1:
-                reverse_step(lo, b_lo)
-            elif slots >= n - 1:
-                states = [b_lo]
-                for _ in range(n - 1):
-                    states.append(backend.step(states[-1])[0])
-                for l in range(hi - 1, lo - 1, -1):
-                    reverse_step(l, states.pop())
-            elif slots == 0:
-                for l in range(hi - 1, lo - 1, -1):
-                    reverse_step(l, advance(b_lo, lo, l))
-            else:
-                mid = lo + n // 2
-                b_mid = advance(b_lo, lo, mid)
-                reverse_range(mid, hi, b_mid, slots - 1)
-                saved.pop(mid, None)
-                del b_mid
-                reverse_range(lo, mid, b_lo, slots)
+        def reverse_segment(lo: int, hi: int, b_lo: NDArray, s: int, first: bool) -> None:
+            """Reverse iterations lo..hi-1 from the held scalings ``b_lo`` with ``s`` free slots.
 
-        if record is not None:
-            for l in range(L - 1, -1, -1):
-                it = record.pop()
-                b_prev = backend.previous(record[-1]) if l > 0 else b0
-                reverse_step(l, b_prev, it)
-                del it, b_prev
-        else:
-            reverse_range(0, L, b0, slots)
+            ``first``: the first forward pass has just run through this segment
+            (its checkpoints and records are in ``saved`` and ``records``).
+            """
+            n = hi - lo
+            plan = (top_plan if first else segment_plan)(n, s, per_record)
+            if plan == RECORD:
+                if not first:
+                    b = b_lo
+                    for l in range(lo, hi):
+                        b_next, it = backend.step(b, need_next=l < hi - 1)
+                        records[l] = backend.compact(it)
+                        b, it = b_next, None
+                    del b
+                reverse_recorded(lo, hi, b_lo, records)
+            elif plan == RECOMPUTE:
+                reverse_step(lo, b_lo)
+            elif plan == SWEEP:
+                for l in range(hi - 1, lo - 1, -1):
+                    reverse_step(l, advance(b_lo, l - lo))
+            else:
+                mid = lo + plan
+                b_mid = saved.pop(mid) if first else advance(b_lo, plan)
+                reverse_segment(mid, hi, b_mid, s - 1, first)
+                del b_mid
+                reverse_segment(lo, mid, b_lo, s, False)
+
+        reverse_segment(0, L, b0, slots, True)
         grad = state["grad"]
         if not np.all(np.isfinite(grad)):
             raise _Unsafe("the gradient is not finite")
