@@ -12,7 +12,9 @@ the pooled palette of all photos and one colour map for all of them.
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -115,6 +117,40 @@ def vertex_losses(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptio
                      for s in range(len(hists))])
 
 
+class _Cancelled(Exception):
+    """Stops a speculative refit whose answer is no longer needed."""
+
+
+class _HeldProgress:
+    """The progress callback of a fit run ahead of time, in another thread.
+
+    Its calls are held until the fit is known to be needed, then replayed in
+    order (the caller sees the same calls as from a sequential run); once
+    cancelled, the next call stops the fit.
+    """
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[int, np.ndarray, float]] = []
+        self.cancelled = threading.Event()
+
+    def __call__(self, n_evaluations: int, weights: np.ndarray, value: float) -> None:
+        if self.cancelled.is_set():
+            raise _Cancelled
+        self.calls.append((n_evaluations, np.array(weights, copy=True), value))
+
+    def replay(self, callback: FitCallback | None) -> None:
+        if callback is not None:
+            for call in self.calls:
+                callback(*call)
+
+
+def _speculate() -> bool:
+    """Whether a second core is there for the refit from the best vertex."""
+    from wbcgrade.core._cpu import n_workers
+
+    return n_workers() >= 2
+
+
 def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions,
                           callback: FitCallback | None = None) -> FitSummary:
     """Barycentric coordinates that are never worse than the best single style.
@@ -123,6 +159,12 @@ def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: Gr
     if the best vertex has a lower loss, refits from it (95 % on that style)
     and keeps the better of the refit and the vertex. With ``opts.weights``
     set, only evaluates the losses of those weights and of the vertices.
+
+    With two cores or more the refit runs ahead of time, beside the fit from
+    uniform weights (the fit runs on one core: its products are too small to
+    share), and is kept only when the vertex beats that fit; otherwise it is
+    stopped. The answer and the callback's calls are those of running the two
+    one after the other (the refit's calls are held and replayed).
 
     Parameters
     ----------
@@ -142,26 +184,44 @@ def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: Gr
         loss = _loss_at(target, hists, geometry, weights, opts)
         return FitSummary(weights, loss, vertices, "given", {"start": "given"},
                           time.perf_counter() - start)
-    fit = fit_weights(photo_fit, style_fit, opts, callback)
-    info = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
-            "converged": fit.converged, "initial_loss": float(fit.initial_loss),
-            "bins": opts.fit_bins, "gamma": float(geometry.gamma)}
-    weights, loss, how = np.asarray(fit.weights, dtype=np.float64), float(fit.loss), "uniform"
-    if vertices[best] < loss and n_styles > 1:
+
+    def refit_from_best(progress: FitCallback | None):
         init = np.full(n_styles, 0.05 / (n_styles - 1))
         init[best] = 0.95
-        refit = barycentric_coordinates(target, hists, geometry, loss=opts.loss,
-                                        n_iter=opts.n_iter, init_weights=init,
-                                        max_iter=opts.max_iter, tol=opts.fit_tol,
-                                        callback=callback)
-        info["uniform_start_loss"] = loss
-        info["evaluations"] += refit.n_evaluations
-        if refit.loss < vertices[best]:
-            weights, loss, how = np.asarray(refit.weights, dtype=np.float64), float(refit.loss), \
-                "vertex-refit"
-            info["converged"] = refit.converged
-        else:
-            weights, loss, how = np.eye(n_styles)[best], float(vertices[best]), "vertex"
+        return barycentric_coordinates(target, hists, geometry, loss=opts.loss,
+                                       n_iter=opts.n_iter, init_weights=init,
+                                       max_iter=opts.max_iter, tol=opts.fit_tol,
+                                       callback=progress)
+
+    ahead: concurrent.futures.Future | None = None
+    held = _HeldProgress()
+    if n_styles > 1 and _speculate():
+        runner = concurrent.futures.ThreadPoolExecutor(1, "refit-ahead")
+        ahead = runner.submit(refit_from_best, held)
+        runner.shutdown(wait=False)
+    try:
+        fit = fit_weights(photo_fit, style_fit, opts, callback)
+        info = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
+                "converged": fit.converged, "initial_loss": float(fit.initial_loss),
+                "bins": opts.fit_bins, "gamma": float(geometry.gamma)}
+        weights, loss, how = np.asarray(fit.weights, dtype=np.float64), float(fit.loss), \
+            "uniform"
+        if vertices[best] < loss and n_styles > 1:
+            if ahead is not None:
+                refit = ahead.result()
+                held.replay(callback)
+            else:
+                refit = refit_from_best(callback)
+            info["uniform_start_loss"] = loss
+            info["evaluations"] += refit.n_evaluations
+            if refit.loss < vertices[best]:
+                weights, loss, how = np.asarray(refit.weights, dtype=np.float64), \
+                    float(refit.loss), "vertex-refit"
+                info["converged"] = refit.converged
+            else:
+                weights, loss, how = np.eye(n_styles)[best], float(vertices[best]), "vertex"
+    finally:
+        held.cancelled.set()  # a refit not needed (or not waited for) stops at its next step
     info["start"] = how
     return FitSummary(weights, loss, vertices, how, info, time.perf_counter() - start)
 
