@@ -29,9 +29,10 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from wbcgrade.color.remap import apply_color_map, block_means_mapped
 from wbcgrade.core._jit import compiled
 
-__all__ = ["regrain", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
+__all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
 
 #: Window radius as a fraction of the image's long side (5 px at 1024 px).
 DEFAULT_REGRAIN_RADIUS = 1.0 / 200.0
@@ -149,14 +150,51 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
     h, w = source.shape[:2]
     source = np.ascontiguousarray(source, dtype=np.float32)
     graded = np.ascontiguousarray(graded, dtype=np.float32)
-    step = max(1, int(np.ceil(np.sqrt(h * w / _MAX_SOLVE_PIXELS))))
-    pixels = max(1, int(round(radius * max(h, w) / step)))
+    step = _step(h, w)
     if step == 1:
+        pixels = max(1, int(round(radius * max(h, w))))
         A, b = _coefficients(source, graded - source, pixels, eps)
         out = source + np.einsum("hwac,hwa->hwc", A, source) + b
         return np.clip(out, 0.0, 1.0)
     small = _downsample(source, step)
     change = _downsample(graded, step) - small
+    return _regrain_upsampled(source, small, change, step, radius, eps)
+
+
+def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0,
+                radius: float = DEFAULT_REGRAIN_RADIUS,
+                eps: float = DEFAULT_REGRAIN_EPS) -> np.ndarray:
+    """``regrain(source, apply_color_map(source, color_map, strength), radius, eps)``.
+
+    The same numbers; on large images (solved on a subsampled copy) the
+    graded image is only needed block-averaged, so the colour map and the
+    block means are one pass (:func:`wbcgrade.color.remap.block_means_mapped`)
+    and the full-size graded image is never made (a pass and ~12 bytes a
+    pixel saved).
+    """
+    if source.ndim != 3 or source.shape[2] != 3:
+        raise ValueError("source must be an (H, W, 3) image")
+    if not (radius > 0 and eps > 0):
+        raise ValueError("radius and eps must be positive")
+    h, w = source.shape[:2]
+    step = _step(h, w)
+    if step == 1:
+        return regrain(source, apply_color_map(source, color_map, strength), radius, eps)
+    source = np.ascontiguousarray(source, dtype=np.float32)
+    small = _downsample(source, step)
+    change = block_means_mapped(source, color_map, strength, step) - small
+    return _regrain_upsampled(source, small, change, step, radius, eps)
+
+
+def _step(h: int, w: int) -> int:
+    """Subsampling step of the coefficients' solve (1: full resolution)."""
+    return max(1, int(np.ceil(np.sqrt(h * w / _MAX_SOLVE_PIXELS))))
+
+
+def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray, step: int,
+                       radius: float, eps: float) -> np.ndarray:
+    h, w = source.shape[:2]
+    pixels = max(1, int(round(radius * max(h, w) / step)))
     A, b = _coefficients(small, change, pixels, eps)
     out = np.empty_like(source)
     _apply_upsampled(source, np.ascontiguousarray(A), np.ascontiguousarray(b), float(step), out)

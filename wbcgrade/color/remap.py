@@ -13,8 +13,8 @@ import numpy as np
 
 from wbcgrade.core._jit import compiled
 
-__all__ = ["apply_color_map", "identity_map", "blend_map", "keep_lightness", "monotone_lightness",
-           "LUMA_WEIGHTS"]
+__all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
+           "monotone_lightness", "LUMA_WEIGHTS"]
 
 
 @compiled(parallel=True, cache=True, fastmath=False)
@@ -41,6 +41,69 @@ def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.n
             mapped = c0 * (1 - fr) + c1 * fr
             x = min(max(colors[p, c], 0.0), 1.0)
             out[p, c] = (1 - strength) * x + strength * mapped
+
+
+@compiled(parallel=True, cache=True, fastmath=False)
+def _block_means_mapped(colors: np.ndarray, table: np.ndarray, strength: float,
+                        step: int) -> np.ndarray:
+    """Mean of every step x step block of an (H, W, 3) image moved through the map.
+
+    Bit for bit ``regrain._downsample(apply_color_map(colors, table, strength), step)``
+    (the arithmetic of ``_trilinear``, the block sums in the same order, partial edge
+    blocks dropped) without the full-size graded image.
+    """
+    n = table.shape[0]
+    scale = n - 1
+    h, w = colors.shape[0] // step, colors.shape[1] // step
+    out = np.zeros((h, w, 3), np.float32)
+    inv = 1.0 / (step * step)
+    for bi in numba.prange(h):
+        mapped = np.empty(3, np.float32)
+        for di in range(step):
+            row = bi * step + di
+            for bj in range(w):
+                for dj in range(step):
+                    col = bj * step + dj
+                    r = min(max(colors[row, col, 0], 0.0), 1.0) * scale
+                    g = min(max(colors[row, col, 1], 0.0), 1.0) * scale
+                    b = min(max(colors[row, col, 2], 0.0), 1.0) * scale
+                    i = min(int(r), n - 2)
+                    j = min(int(g), n - 2)
+                    k = min(int(b), n - 2)
+                    fr = r - i
+                    fg = g - j
+                    fb = b - k
+                    for c in range(3):
+                        c00 = table[i, j, k, c] * (1 - fb) + table[i, j, k + 1, c] * fb
+                        c01 = table[i, j + 1, k, c] * (1 - fb) + table[i, j + 1, k + 1, c] * fb
+                        c10 = table[i + 1, j, k, c] * (1 - fb) + table[i + 1, j, k + 1, c] * fb
+                        c11 = (table[i + 1, j + 1, k, c] * (1 - fb)
+                               + table[i + 1, j + 1, k + 1, c] * fb)
+                        c0 = c00 * (1 - fg) + c01 * fg
+                        c1 = c10 * (1 - fg) + c11 * fg
+                        value = c0 * (1 - fr) + c1 * fr
+                        x = min(max(colors[row, col, c], 0.0), 1.0)
+                        mapped[c] = (1 - strength) * x + strength * value
+                    for c in range(3):
+                        out[bi, bj, c] += mapped[c]
+        for bj in range(w):
+            for c in range(3):
+                out[bi, bj, c] *= inv
+    return out
+
+
+def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
+                       step: int) -> np.ndarray:
+    """Block means (``step`` x ``step``, partial edge blocks dropped) of an (H, W, 3)
+    image moved through a colour map: ``apply_color_map`` then the block means, in
+    one pass and without the full-size result (the same float32 numbers)."""
+    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1:
+        raise ValueError("color_map must be (n, n, n, 3)")
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or step < 1:
+        raise ValueError("rgb must be (H, W, 3) and step >= 1")
+    colors = np.ascontiguousarray(rgb, dtype=np.float32)
+    table = np.ascontiguousarray(color_map, dtype=np.float32)
+    return _block_means_mapped(colors, table, np.float32(strength), int(step))
 
 
 def identity_map(bins: int, dtype=np.float32) -> np.ndarray:

@@ -42,7 +42,7 @@ import numpy as np
 
 from wbcgrade.color.histogram import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS, add_floor, image_histogram
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.regrain import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS, regrain
+from wbcgrade.color.regrain import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS, regrain_map
 from wbcgrade.color.remap import apply_color_map, keep_lightness, monotone_lightness
 from wbcgrade.color.smooth_map import (
     DEFAULT_MAP_SIZE,
@@ -218,10 +218,9 @@ class Grade:
         An (H, W, 3) image also goes through the regrain step when the grade
         has one; other shapes (lists of colours) get the colour map only.
         """
-        mapped = apply_color_map(encoded, self.color_map, self.strength)
         if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
-            mapped = regrain(encoded, mapped, *self.regrain)
-        return mapped
+            return regrain_map(encoded, self.color_map, self.strength, *self.regrain)
+        return apply_color_map(encoded, self.color_map, self.strength)
 
     def ranked(self) -> list[tuple[str, float]]:
         """(name, weight) sorted by decreasing weight."""
