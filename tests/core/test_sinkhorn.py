@@ -126,3 +126,21 @@ def test_overrelaxation_in_the_log_domain_matches_the_scaling_domain(problem, mo
     logged = sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000, overrelaxation=1.5)
     assert logged.n_iter == scaled.n_iter
     np.testing.assert_allclose(logged.log_b, scaled.log_b, atol=1e-7)
+
+
+@pytest.mark.parametrize("shape", [(8, 8, 8), (6, 9, 7)])
+def test_the_grid_projection_is_the_plan_average(rng, shape):
+    """The separable projection on a grid (9 axis products) is the plan's average of the
+    bins' coordinates, as from the full products of the general path."""
+    from wbcgrade.core import barycentric_projection
+
+    geometry = GridGeometry(shape, 2 * (1.2 / 7) ** 2)
+    p, q = blobs(geometry.shape, 2, rng, width=0.15, floor=1e-4, components=2)
+    result = sinkhorn(p, q, geometry, tol=1e-8)
+    fast = barycentric_projection(result, geometry)
+    general = barycentric_projection(result, geometry, values=geometry.points)
+    plan = _plan(result, geometry)
+    exact = (plan @ geometry.points) / plan.sum(axis=1, keepdims=True)
+    assert fast.shape == general.shape == (*shape, 3)
+    np.testing.assert_allclose(fast, general, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(fast.reshape(-1, 3), exact, rtol=0, atol=1e-12)

@@ -305,7 +305,11 @@ def barycentric_projection(
     fields = np.moveaxis(x.reshape(*geometry.shape, -1), -1, 0)
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
         b = np.exp(result.log_b)
-        if np.all(np.isfinite(b)):
+        if values is None and _separable(geometry) and np.all(np.isfinite(b)):
+            weight, moved = _grid_projection(b, geometry)
+            if np.all(weight > 0) and np.all(np.isfinite(moved)):
+                return moved / weight[..., None]
+        elif np.all(np.isfinite(b)):
             scaled = geometry.apply(np.concatenate([b[None], b[None] * fields])).astype(np.float64)
             weight, moved = scaled[0], scaled[1:]
             if np.all(weight > 0) and np.all(np.isfinite(moved)):
@@ -316,3 +320,59 @@ def barycentric_projection(
         log_weight = geometry.log_apply(result.log_b)
         moved = np.exp(geometry.log_apply(result.log_b[None] + np.log(positive)) - log_weight)
         return np.moveaxis(moved, 0, -1) + shift
+
+
+def _separable(geometry: Geometry) -> bool:
+    """A float64 3-D grid: its kernel is three axis kernels (``GridGeometry``)."""
+    from wbcgrade.core.geometry import GridGeometry
+
+    return (isinstance(geometry, GridGeometry) and geometry.ndim == 3
+            and geometry.dtype == np.float64)
+
+
+def _grid_projection(b: NDArray, geometry: Geometry) -> tuple[NDArray, NDArray]:
+    """``K b`` and ``K (b x)`` (x: each bin's grid coordinates) on a 3-D grid.
+
+    The kernel is a product of axis kernels ``K = K0 K1 K2`` and coordinate
+    ``a`` varies along axis ``a`` only, so ``K (b x_a)`` is ``K b`` with
+    ``K_a`` replaced by ``K_a diag(x_a)``: sharing the partial products takes
+    9 axis products instead of 12 (four full kernel products).
+
+    Returns
+    -------
+    weight : (*shape) ``K b``
+    moved : (*shape, 3) ``K (b x_a)`` for a = 0, 1, 2
+    """
+    n0, n1, n2 = geometry.shape
+    K0, K1, K2 = geometry.kernels
+    X0, X1, X2 = (k * x[None, :] for k, x in zip(geometry.kernels, geometry.axes))
+
+    def along(kernel: NDArray, values: NDArray, axis: int, out: NDArray) -> NDArray:
+        if axis == 0:
+            flat, target = values.reshape(n0, -1), out.reshape(n0, -1)
+
+            def work(lo: int, hi: int) -> None:
+                np.matmul(kernel[lo:hi], flat, out=target[lo:hi])
+        elif axis == 1:
+            def work(lo: int, hi: int) -> None:
+                np.matmul(kernel, values[lo:hi], out=out[lo:hi])
+        else:
+            def work(lo: int, hi: int) -> None:
+                np.matmul(values[lo:hi].reshape(-1, n2), kernel.T,
+                          out=out[lo:hi].reshape(-1, n2))
+        parallel_map(work, n0)
+        return out
+
+    moved = np.empty((n0, n1, n2, 3))
+    with fast_cpu():
+        v = along(K2, b, 2, np.empty_like(b))                       # K2 b
+        t = along(K1, v, 1, np.empty_like(b))                       # K1 K2 b
+        weight = along(K0, t, 0, np.empty_like(b))                  # K b
+        scratch = along(X0, t, 0, np.empty_like(b))                 # K0 X0 K1 K2 b
+        moved[..., 0] = scratch
+        along(K0, along(X1, v, 1, t), 0, scratch)                   # K0 K1 X1 K2 b
+        moved[..., 1] = scratch
+        w = along(X2, b, 2, v)                                      # K2 X2 b
+        along(K0, along(K1, w, 1, t), 0, scratch)                   # K0 K1 K2 X2 b
+        moved[..., 2] = scratch
+    return weight, moved
