@@ -58,7 +58,7 @@ class _FakeBackend:
     def initial(self):
         return _State(self.counter, 0)
 
-    def step(self, b, need_next=True):
+    def step(self, b, need_next=True, keep=True):
         self.counter.steps += 1
         it = _Iterate(None, None, None, None, np.ones(3) / 3)
         it.index = b.index + 1

@@ -290,7 +290,13 @@ class _ScalingBackend:
         return b
 
     # ------------------------------------------------------------ forward
-    def step(self, b: NDArray, need_next: bool = True) -> tuple[NDArray | None, _Iterate]:
+    def step(self, b: NDArray, need_next: bool = True,
+             keep: bool = True) -> tuple[NDArray | None, _Iterate]:
+        """One iteration: next scalings (None unless ``need_next``) and what it computed.
+
+        ``keep`` is accepted for the log backend's interface; here the
+        arrays are needed for the next scalings anyway.
+        """
         Kb, a, phi = np.empty_like(self.H), np.empty_like(self.H), np.empty_like(self.H)
         log_phi = np.empty_like(self.H)
         lost = np.zeros(self.items, dtype=np.int64)
@@ -441,16 +447,31 @@ class _LogBackend:
     def to_log(self, log_b: NDArray) -> NDArray:
         return log_b
 
-    def step(self, log_b: NDArray, need_next: bool = True) -> tuple[NDArray, _Iterate]:
-        geom = self.geometry
-        log_Kb = geom.log_apply(log_b)
-        log_a = self.log_H - log_Kb
-        log_phi = geom.log_apply(log_a)
+    def _apply_in_place(self, log_values: NDArray) -> NDArray:
+        """``log_apply`` written over its input where the geometry can (grids)."""
+        in_place = getattr(self.geometry, "_shifted_log_apply", None)
+        if in_place is None:
+            return self.geometry.log_apply(log_values)
+        return in_place(log_values, None, out=log_values)[0]
+
+    def step(self, log_b: NDArray, need_next: bool = True,
+             keep: bool = True) -> tuple[NDArray, _Iterate]:
+        """One iteration in logs. ``keep=False``: only ``P`` and the next scalings are
+        wanted, so ``log K b`` and ``log phi`` are overwritten as they go (three
+        states of memory at the peak instead of five). ``log a`` is never kept
+        (``log H - log K b``: the adjoint recomputes it)."""
+        log_Kb = self.geometry.log_apply(log_b)
+        log_a = np.subtract(self.log_H, log_Kb, out=None if keep else log_Kb)
+        log_phi = self._apply_in_place(log_a)
         log_P = _weighted_sum(self.weights, log_phi)
         if not np.all(np.isfinite(log_P)):
             raise NumericalError("the log-domain barycenter is not finite")
+        P = np.exp(log_P)
+        if not keep:
+            log_b_next = np.subtract(log_P, log_phi, out=log_phi) if need_next else None
+            return log_b_next, _Iterate(None, None, None, None, P, log_P)
         log_b_next = log_P - log_phi if need_next else None
-        return log_b_next, _Iterate(log_Kb, log_a, log_phi, log_phi, np.exp(log_P), log_P)
+        return log_b_next, _Iterate(log_Kb, None, log_phi, log_phi, P, log_P)
 
     record_arrays = 2
 
@@ -482,28 +503,40 @@ class _LogBackend:
         grad = np.tensordot(log_phi, g, axes=g.ndim)
         if not need_r:
             return grad, None
-        u = self.weights.reshape((-1,) + (1,) * g.ndim) * g
-        if r is not None:
-            u -= r
         geom = self.geometry
-        signed_apply = getattr(geom, "_signed_log_apply", None)
-        if signed_apply is not None:  # one signed product per kernel application
+        if getattr(geom, "_signed_log_apply", None) is not None:
+            # One signed product per kernel application, in place: u = w g - r is
+            # written over r (not needed after this step), then carried as
+            # log |.| beside its signs through both products.
+            if r is None:
+                u = np.empty_like(it.phi)
+                for s, w_s in enumerate(self.weights):
+                    np.multiply(g, w_s, out=u[s])
+            else:
+                u = np.negative(r, out=r)
+                for s, w_s in enumerate(self.weights):
+                    u[s] += w_s * g
+            signs = np.sign(u)
+            part = np.abs(u, out=u)
             with np.errstate(divide="ignore"):
-                part = np.log(np.abs(u))
+                np.log(part, out=part)
             part -= it.phi
-            part, signs = signed_apply(part, np.sign(u))
-            if it.a is None:  # log a = log H - log K b, not kept in records
+            geom._shifted_log_apply(part, signs, out=part, out_signs=signs)
+            if it.a is None:  # log a = log H - log K b, not kept
                 part += self.log_H
                 part -= it.Kb
             else:
                 part += it.a
             part -= it.Kb
-            part, signs = signed_apply(part, signs)
+            geom._shifted_log_apply(part, signs, out=part, out_signs=signs)
             part += log_b_prev
             np.exp(part, out=part)
             part *= signs
             np.negative(part, out=part)
             return grad, part
+        u = self.weights.reshape((-1,) + (1,) * g.ndim) * g
+        if r is not None:
+            u -= r
         r_next = np.zeros_like(u)
         with np.errstate(divide="ignore"):
             for sign in (1.0, -1.0):
@@ -645,7 +678,7 @@ class BarycenterSolver:
         def forward(backend):
             b = backend.initial()
             for l in range(steps):
-                b, it = backend.step(b, need_next=l < steps - 1)
+                b, it = backend.step(b, need_next=l < steps - 1, keep=False)
                 P, it = it.P, None  # drop this iteration's arrays before the next one
             return P
 
@@ -683,7 +716,7 @@ class BarycenterSolver:
             P_prev, change, n = None, np.inf, 0
             while n < int(max_iter):
                 n += 1
-                b, it = backend.step(b)
+                b, it = backend.step(b, keep=False)
                 P, it = it.P, None
                 if P_prev is not None:
                     change = float(np.abs(P - P_prev).sum() / max(P.sum(), 1e-300))
@@ -755,7 +788,7 @@ class BarycenterSolver:
         for l in range(L):
             if l in save_at:
                 saved[l] = b
-            b_next, it = backend.step(b, need_next=l < L - 1)
+            b_next, it = backend.step(b, need_next=l < L - 1, keep=l >= record_from)
             if l >= record_from:
                 records[l] = backend.compact(it)
             P, it = it.P, None  # drop this iteration's arrays unless recorded
@@ -791,7 +824,7 @@ class BarycenterSolver:
 
         def advance(b_from: NDArray, steps: int) -> NDArray:
             for _ in range(steps):
-                b_from, _ = backend.step(b_from)
+                b_from, _ = backend.step(b_from, keep=False)
             return b_from
 
         def reverse_segment(lo: int, hi: int, b_lo: NDArray, s: int, first: bool) -> None:

@@ -273,6 +273,15 @@ def _shifted_log_product(
     return repaired
 
 
+def _output(out: NDArray | None, like: NDArray) -> NDArray:
+    """``out`` checked to be a C-contiguous float64 array shaped like ``like``, or a new one."""
+    if out is None:
+        return np.empty_like(like)
+    if out.shape != like.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ValueError("out must be a C-contiguous float64 array of the values' shape")
+    return out
+
+
 def _gibbs(cost: NDArray, gamma: float, dtype: np.dtype) -> NDArray:
     """exp(-cost / gamma) in ``dtype``, with entries that would be denormal set to 0.
 
@@ -553,23 +562,33 @@ class GridGeometry(Geometry):
         """
         return self._shifted_log_apply(log_abs, signs)
 
-    def _shifted_log_apply(self, log_values: NDArray, signs: NDArray | None):
+    def _shifted_log_apply(self, log_values: NDArray, signs: NDArray | None,
+                           out: NDArray | None = None, out_signs: NDArray | None = None):
+        """The shifted log-domain product, optionally into ``out`` (and ``out_signs``).
+
+        ``out`` may be ``log_values`` itself (and ``out_signs`` ``signs``): each
+        histogram is read whole by the first axis's product before the last
+        axis's product writes its result, so the product can run in place
+        (the log-domain barycenter saves whole states of memory that way).
+        """
         self._check_values(log_values)
         x = np.ascontiguousarray(log_values, dtype=np.float64)
         lead = int(np.prod(x.shape[: x.ndim - self.ndim]))
         flat = x.reshape(lead, *self.shape)
-        out = np.empty_like(flat)
-        flat_signs = out_signs = None
+        result = _output(out, x)
+        out = result.reshape(flat.shape)
+        flat_signs = out_signs_flat = None
         if signs is not None:
             flat_signs = np.ascontiguousarray(signs, dtype=np.float64).reshape(flat.shape)
-            out_signs = np.empty_like(flat)
+            out_signs = _output(out_signs, x)
+            out_signs_flat = out_signs.reshape(flat.shape)
         repairs = np.zeros(lead, dtype=np.int64)
 
         def work(lo: int, hi: int) -> None:
             for k in range(lo, hi):
                 repairs[k] = self._log_apply_one(
                     flat[k], out[k], None if signs is None else flat_signs[k],
-                    None if signs is None else out_signs[k])
+                    None if signs is None else out_signs_flat[k])
 
         with fast_cpu():
             if lead >= 2 and self.size >= PARALLEL_BINS:
@@ -577,9 +596,7 @@ class GridGeometry(Geometry):
             else:
                 work(0, lead)
         self.last_log_repairs = int(repairs.sum())
-        if signs is None:
-            return out.reshape(x.shape), None
-        return out.reshape(x.shape), out_signs.reshape(x.shape)
+        return result, out_signs
 
     def _log_apply_one(self, values: NDArray, out: NDArray, signs: NDArray | None = None,
                        out_signs: NDArray | None = None) -> int:
@@ -589,16 +606,22 @@ class GridGeometry(Geometry):
             before = int(np.prod(self.shape[:axis]))
             n, after = self.shape[axis], int(np.prod(self.shape[axis + 1 :]))
             last = axis == self.ndim - 1
-            target = out if last else np.empty(self.shape)
+            # one axis (a 1-D grid) in place: the product reads its input after writing
+            direct = last and not np.may_share_memory(out, current)
+            target = out if direct else np.empty(self.shape)
             target_signs = None
             if signs is not None:
-                target_signs = out_signs if last else np.empty(self.shape)
+                target_signs = out_signs if direct else np.empty(self.shape)
             lines = (before, n, after)
             repairs += _shifted_log_product(
                 self._axis_kernels[axis], current.reshape(lines), target.reshape(lines),
                 None if signs is None else current_signs.reshape(lines),
                 None if signs is None else target_signs.reshape(lines))
             current, current_signs = target, target_signs
+        if current is not out:
+            out[...] = current
+            if signs is not None:
+                out_signs[...] = current_signs
         return repairs
 
     def _log_apply_direct(self, log_values: NDArray) -> NDArray:
