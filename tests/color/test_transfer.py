@@ -150,3 +150,19 @@ def test_coarse_to_fine_plan_matches_a_single_grid_solve(rng):
                    for c in range(3)]
     moved_mean = np.tensordot(photo, multi, axes=3)
     np.testing.assert_allclose(moved_mean, target_mean, atol=0.01)
+
+
+def test_the_palette_rebins_only_the_styles_it_uses(rng):
+    """A palette of one style re-binned all S style histograms to the palette grid."""
+    from wbcgrade.color.transfer import palette_barycenter
+
+    hists = rng.random((4, 16, 16, 16)) ** 6
+    hists /= hists.sum(axis=(1, 2, 3), keepdims=True)
+    styles = StyleSet([f"s{i}" for i in range(4)], hists)
+    opts = GradeOptions(bins=16, palette_bins=8, n_iter=5)
+    for weights in (np.array([0.0, 1.0, 0.0, 0.0]), np.array([0.5, 0.0, 0.5, 0.0])):
+        target, _ = palette_barycenter(styles, weights, opts)
+        assert styles._resampled == {}  # the unused styles were never re-binned
+        expected, _ = palette_barycenter(StyleSet(styles.names, hists).at_bins, weights, opts)
+        assert np.array_equal(target, expected)
+    assert np.array_equal(styles.at_bins(8, [2, 0]), styles.at_bins(8)[[2, 0]])

@@ -293,7 +293,7 @@ def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
     timings["fit"] = summary.time_s
     say("barycenter")
     start = time.perf_counter()
-    target, palette_info = palette_barycenter(styles.at_bins, summary.weights, opts)
+    target, palette_info = palette_barycenter(styles, summary.weights, opts)
     timings["barycenter"] = time.perf_counter() - start
     say("transfer")
     start = time.perf_counter()

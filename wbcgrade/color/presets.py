@@ -22,7 +22,7 @@ import json
 import logging
 import os
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -86,8 +86,17 @@ class StyleSet:
     def bins(self) -> int:
         return int(self.histograms.shape[1])
 
-    def at_bins(self, bins: int) -> np.ndarray:
-        """(S, bins, bins, bins) histograms re-binned to another grid."""
+    def at_bins(self, bins: int, only: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
+        """(S, bins, bins, bins) histograms re-binned to another grid.
+
+        ``only`` (style indices): just those, (len(only), bins, bins, bins); the
+        others are not re-binned (a palette of one style needs one, not S).
+        """
+        if only is not None:
+            only = np.asarray(only, dtype=np.int64)
+            if bins == self.bins or bins in self._resampled:
+                return self.at_bins(bins)[only]
+            return np.stack([resample_histogram(self.histograms[i], bins) for i in only])
         if bins == self.bins:
             return self.histograms
         if bins not in self._resampled:  # resampled once per grid size

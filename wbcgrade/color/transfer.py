@@ -326,7 +326,7 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     return np.clip(color_map, 0.0, 1.0).astype(np.float32), result
 
 
-def palette_barycenter(style_hists: Callable[[int], np.ndarray], weights: np.ndarray,
+def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weights: np.ndarray,
                        opts: GradeOptions) -> tuple[np.ndarray, dict]:
     """The target palette: the styles' barycenter with ``weights``, on the transfer grid.
 
@@ -336,7 +336,8 @@ def palette_barycenter(style_hists: Callable[[int], np.ndarray], weights: np.nda
 
     Parameters
     ----------
-    style_hists : callable ``bins -> (S, bins, bins, bins)`` style histograms.
+    style_hists : the styles (only those with weight are re-binned), or a callable
+        ``bins -> (S, bins, bins, bins)`` style histograms.
     weights : (S,) on the simplex.
 
     Returns
@@ -350,7 +351,9 @@ def palette_barycenter(style_hists: Callable[[int], np.ndarray], weights: np.nda
     sigma = transfer_width_bins(opts) / (n - 1)
     geometry = GridGeometry((m,) * 3, 2.0 * sigma ** 2)
     keep = np.flatnonzero(np.asarray(weights) > 0)
-    floored = np.stack([add_floor(h, opts.floor) for h in style_hists(m)[keep]])
+    hists = (style_hists.at_bins(m, keep) if isinstance(style_hists, StyleSet)
+             else style_hists(m)[keep])
+    floored = np.stack([add_floor(h, opts.floor) for h in hists])
     solver = BarycenterSolver(floored, geometry, opts.n_iter)
     target = solver.barycenter(np.asarray(weights)[keep] / np.sum(np.asarray(weights)[keep]))
     if m != n:
@@ -448,7 +451,7 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
         info["fit"] = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
                        "converged": fit.converged, "initial_loss": float(fit.initial_loss),
                        "bins": opts.fit_bins, "gamma": float(_fit_geometry(opts).gamma)}
-    target, info["palette"] = timed("barycenter", palette_barycenter, styles.at_bins, weights,
+    target, info["palette"] = timed("barycenter", palette_barycenter, styles, weights,
                                     opts)
     color_map, map_info = timed("transfer", grade_color_map, photo_hist, target, opts)
     info.update(map_info)
