@@ -82,6 +82,9 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int,
 @compiled(parallel=True, cache=True)
 def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: float,
                      out: np.ndarray) -> None:
+    """``out = clip(source + A(x)^T source + b(x))`` with ``A, b`` bilinearly interpolated
+    from the coarse grid: each output row first blends its two coarse rows (12
+    coefficients a node), then each pixel blends two nodes of that row."""
     h, w = source.shape[:2]
     lh, lw = A.shape[:2]
     for y in numba.prange(h):
@@ -89,22 +92,26 @@ def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: flo
         y0 = min(int(fy), lh - 2) if lh > 1 else 0
         ty = fy - y0
         y1 = min(y0 + 1, lh - 1)
+        row = np.empty((lw, 12))  # this output row's coefficients at the coarse columns
+        for x in range(lw):
+            for a in range(3):
+                for c in range(3):
+                    row[x, 3 * a + c] = (1 - ty) * A[y0, x, a, c] + ty * A[y1, x, a, c]
+            for c in range(3):
+                row[x, 9 + c] = (1 - ty) * b[y0, x, c] + ty * b[y1, x, c]
         for x in range(w):
             fx = min(max((x + 0.5) / step - 0.5, 0.0), lw - 1.0)
             x0 = min(int(fx), lw - 2) if lw > 1 else 0
             tx = fx - x0
             x1 = min(x0 + 1, lw - 1)
-            w00 = (1 - ty) * (1 - tx)
-            w01 = (1 - ty) * tx
-            w10 = ty * (1 - tx)
-            w11 = ty * tx
+            s0 = source[y, x, 0]
+            s1 = source[y, x, 1]
+            s2 = source[y, x, 2]
             for c in range(3):
-                value = source[y, x, c] + (w00 * b[y0, x0, c] + w01 * b[y0, x1, c]
-                                           + w10 * b[y1, x0, c] + w11 * b[y1, x1, c])
-                for a in range(3):
-                    coef = (w00 * A[y0, x0, a, c] + w01 * A[y0, x1, a, c]
-                            + w10 * A[y1, x0, a, c] + w11 * A[y1, x1, a, c])
-                    value += coef * source[y, x, a]
+                value = source[y, x, c] + (1 - tx) * row[x0, 9 + c] + tx * row[x1, 9 + c]
+                value += ((1 - tx) * row[x0, c] + tx * row[x1, c]) * s0
+                value += ((1 - tx) * row[x0, 3 + c] + tx * row[x1, 3 + c]) * s1
+                value += ((1 - tx) * row[x0, 6 + c] + tx * row[x1, 6 + c]) * s2
                 out[y, x, c] = min(max(value, 0.0), 1.0)
 
 
