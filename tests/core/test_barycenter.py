@@ -7,6 +7,7 @@ from tests.core.helpers import blobs, dense_barycenter, finite_difference
 from wbcgrade.core import (
     BarycenterSolver,
     DenseGeometry,
+    Geometry,
     GridGeometry,
     barycenter,
     barycenter_gradient,
@@ -388,3 +389,39 @@ def test_all_weight_on_one_histogram_is_computed_in_one_step(rng):
     finally:
         barycenter_module._ScalingBackend.step = step
     assert one == 1 and len(steps) == 26
+
+
+class _OutsideGeometry(Geometry):
+    """A geometry written outside the package: only the public contract."""
+
+    def __init__(self, inner):
+        self.inner, self.shape, self.gamma, self.dtype = inner, inner.shape, inner.gamma, inner.dtype
+
+    log_apply_work = property(lambda self: self.inner.log_apply_work)
+    points = property(lambda self: self.inner.points)
+
+    def apply(self, values):
+        return self.inner.apply(values)
+
+    def log_apply(self, log_values):
+        return self.inner.log_apply(log_values)
+
+    def cost_matrix(self):
+        return self.inner.cost_matrix()
+
+
+@pytest.mark.parametrize("gamma", [0.05, 0.0004])  # scaling domain, then log domain
+def test_a_geometry_with_only_the_public_contract_runs_barycenters_and_gradients(gamma, rng):
+    grid = GridGeometry((7, 6), gamma=gamma)
+    dense = DenseGeometry(grid.cost_matrix(), gamma)
+    outside = _OutsideGeometry(dense)
+    H = rng.random((3, 42))
+    H[0, :30] = H[1, 12:] = 0.0  # far apart: the narrow kernel needs the log domain
+    w, q = np.array([0.2, 0.3, 0.5]), rng.random(42) + 0.1
+    expected = barycenter_gradient(H, w, dense, q, n_iter=15)
+    solver = BarycenterSolver(H, outside, 15)
+    got = solver.value_and_grad(w, q)
+    assert solver.last_backend == ("log" if gamma < 0.01 else "scaling-float64")
+    assert got[0] == pytest.approx(expected[0], rel=1e-10)
+    np.testing.assert_allclose(got[1], expected[1], rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(got[2], expected[2], rtol=1e-8, atol=1e-14)

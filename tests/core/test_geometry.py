@@ -113,7 +113,7 @@ def test_one_large_histogram_is_split_over_threads_with_the_same_result(rng):
     geom = GridGeometry((70, 50, 40), 0.01)  # >= 2**17 bins: the split path
     x = rng.random((70, 50, 40))
     reference = np.empty((1, 70, 50, 40))
-    geom._apply_block(x[None], reference)
+    geom.apply_into(x[None], reference)
     np.testing.assert_allclose(geom.apply(x), reference[0], rtol=1e-12)
     np.testing.assert_allclose(geom.apply(x[None]), reference, rtol=1e-12)
 

@@ -375,6 +375,15 @@ class Geometry(ABC):
         ndarray, shape (..., *shape), in ``self.dtype``
         """
 
+    def apply_into(self, block: NDArray, out: NDArray) -> None:
+        """``out = K block`` for a block ``(k, *shape)``, in the calling thread.
+
+        Solvers that spread independent histograms over their own threads call
+        this; the default forwards to :meth:`apply`. ``out`` has the block's
+        shape and ``self.dtype``.
+        """
+        out[...] = self.apply(block)
+
     @abstractmethod
     def log_apply(self, log_values: NDArray) -> NDArray:
         """Log-domain kernel product ``log(K exp(f))`` over the last ``ndim`` axes.
@@ -492,7 +501,7 @@ class GridGeometry(Geometry):
         after = int(np.prod(self.shape[axis + 1 :]))
         return before, self.shape[axis], after
 
-    def _apply_block(self, block: NDArray, out: NDArray) -> None:
+    def apply_into(self, block: NDArray, out: NDArray) -> None:
         """K x for a contiguous block of histograms ``(m, *shape)``, written into ``out``."""
         last, m = self.ndim - 1, block.shape[0]
         for axis, kernel in enumerate(self.kernels):
@@ -507,7 +516,7 @@ class GridGeometry(Geometry):
         self._check_values(values)
         if values.size == self.size and self.ndim >= 2 and self.size >= PARALLEL_BINS:
             return self._apply_one(values)
-        return _apply_in_parallel(self, values, self._apply_block)
+        return _apply_in_parallel(self, values, self.apply_into)
 
     @cached_property
     def _trailing(self) -> GridGeometry:
@@ -527,7 +536,7 @@ class GridGeometry(Geometry):
 
         def other_axes(lo: int, hi: int) -> None:
             block = first[lo:hi].reshape(hi - lo, *rest.shape)
-            rest._apply_block(block, out[lo:hi].reshape(hi - lo, *rest.shape))
+            rest.apply_into(block, out[lo:hi].reshape(hi - lo, *rest.shape))
 
         with fast_cpu():
             parallel_map(first_axis, n)
@@ -698,11 +707,11 @@ class DenseGeometry(Geometry):
     def cost_matrix(self) -> NDArray:
         return self.cost.copy()
 
-    def _apply_block(self, block: NDArray, out: NDArray) -> None:
+    def apply_into(self, block: NDArray, out: NDArray) -> None:
         np.matmul(block.reshape(-1, self.size), self.kernel, out=out.reshape(-1, self.size))
 
     def apply(self, values: NDArray) -> NDArray:
-        return _apply_in_parallel(self, values, self._apply_block)
+        return _apply_in_parallel(self, values, self.apply_into)
 
     def log_apply(self, log_values: NDArray) -> NDArray:
         self._check_values(log_values)

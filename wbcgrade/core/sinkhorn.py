@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from wbcgrade.core import _kernels
+from wbcgrade.core import _kernels, _validation
 from wbcgrade.core._cpu import fast_cpu, parallel_map
 from wbcgrade.core.geometry import PARALLEL_BINS, Geometry
 
@@ -56,23 +56,6 @@ class SinkhornResult:
 
 class _Unsafe(Exception):
     pass
-
-
-def _normalise(x: ArrayLike, geometry: Geometry, name: str) -> NDArray:
-    x = np.array(x, dtype=np.float64)
-    if x.ndim < geometry.ndim or tuple(x.shape[x.ndim - geometry.ndim :]) != geometry.shape:
-        raise ValueError(
-            f"{name} must end with the geometry's shape {geometry.shape}, got {x.shape}"
-        )
-    if not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} contains NaN or inf")
-    if np.any(x < 0):
-        raise ValueError(f"{name} contains negative entries")
-    axes = tuple(range(x.ndim - geometry.ndim, x.ndim))
-    mass = x.sum(axis=axes, keepdims=True)
-    if np.any(mass <= 0):
-        raise ValueError(f"{name} is empty (all zeros)")
-    return x / mass
 
 
 def _marginal_error(p_est: NDArray, p: NDArray, geometry: Geometry) -> float:
@@ -243,8 +226,8 @@ def sinkhorn(
     ----------
     Cuturi (2013), Sinkhorn distances: lightspeed computation of optimal transport.
     """
-    p = _normalise(p, geometry, "p")
-    q = _normalise(q, geometry, "q")
+    p = _validation.histograms(p, geometry, "p")
+    q = _validation.histograms(q, geometry, "q")
     if p.shape != q.shape:
         raise ValueError(f"p and q must have the same shape, got {p.shape} and {q.shape}")
     if init_log_b is not None and np.shape(init_log_b) != q.shape:
