@@ -395,7 +395,8 @@ class _OutsideGeometry(Geometry):
     """A geometry written outside the package: only the public contract."""
 
     def __init__(self, inner):
-        self.inner, self.shape, self.gamma, self.dtype = inner, inner.shape, inner.gamma, inner.dtype
+        self.inner, self.shape = inner, inner.shape
+        self.gamma, self.dtype = inner.gamma, inner.dtype
 
     log_apply_work = property(lambda self: self.inner.log_apply_work)
     points = property(lambda self: self.inner.points)
