@@ -59,3 +59,41 @@ def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse
     out = np.empty_like(source)
     regrain_module._apply_upsampled(source, A, b, step, out)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape, radius", [((17, 23, 5), 3), ((4, 6, 2), 5), ((9, 3, 1), 1)])
+def test_box_mean_is_scipys_reflected_uniform_filter(rng, shape, radius):
+    from scipy import ndimage
+
+    x = rng.random(shape).astype(np.float32)
+    size = 2 * radius + 1
+    expected = ndimage.uniform_filter(x, size=(size, size, 1), mode="reflect")
+    np.testing.assert_allclose(regrain_module._box_mean(x, radius), expected, rtol=0, atol=2e-6)
+
+
+def test_local_linear_coefficients_match_the_guided_filter(rng):
+    """The fused coefficients against the guided filter written with scipy box filters."""
+    from scipy import ndimage
+
+    guide = rng.random((31, 26, 3)).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 + 0.02 * rng.random((31, 26, 3))).astype(np.float32)
+    radius, eps = 2, 0.01
+
+    def box(v):
+        return ndimage.uniform_filter(v.astype(np.float64), size=(5, 5), mode="reflect")
+
+    mean_i = np.stack([box(guide[..., a]) for a in range(3)], -1)
+    mean_d = np.stack([box(change[..., c]) for c in range(3)], -1)
+    def covariance(x, mean_x):
+        return np.stack([np.stack([box(guide[..., a] * x[..., c]) - mean_i[..., a] * mean_x[..., c]
+                                   for c in range(3)], -1) for a in range(3)], -2)
+
+    cov = covariance(guide, mean_i) + eps * np.eye(3)
+    cross = covariance(change, mean_d)
+    A = np.linalg.solve(cov, cross)
+    b = mean_d - np.einsum("hwac,hwa->hwc", A, mean_i)
+    A = np.stack([np.stack([box(A[..., a, c]) for c in range(3)], -1) for a in range(3)], -2)
+    b = np.stack([box(b[..., c]) for c in range(3)], -1)
+    got_A, got_b = regrain_module._coefficients(guide, change, radius, eps)
+    np.testing.assert_allclose(got_A, A, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(got_b, b, rtol=0, atol=2e-5)
