@@ -565,6 +565,10 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image,
             pixels = _premultiply(pixels, alpha)
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)
+    if spec.format.basetype == oiio.UINT8:  # converted here on every core (OIIO's: one)
+        from wbcgrade.color._quantise import to_uint8
+
+        return spec, to_uint8(pixels), format_name
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         pixels = np.clip(pixels, 0.0, 1.0)
     return spec, np.ascontiguousarray(pixels, dtype=np.float32), format_name
