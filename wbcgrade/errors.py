@@ -27,3 +27,11 @@ class OptionError(InputError):
     def __init__(self, message: str, option: str) -> None:
         super().__init__(message)
         self.option = option
+
+
+class ConvergenceWarning(UserWarning):
+    """An iterative solve stopped at its iteration limit before reaching its tolerance.
+
+    The result is still returned (its ``converged`` flag is False); raise the
+    limit, loosen the tolerance, or silence this with ``warn=False``.
+    """

@@ -66,3 +66,26 @@ def test_library_error_becomes_one_line_message(tmp_path):
     assert result.exit_code == 1 and isinstance(result.exception, SystemExit)
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("Error:") and "missing.jpg" in lines[0]
+
+
+def test_library_warnings_reach_the_user_as_one_line():
+    import warnings
+
+    import click
+
+    from wbcgrade.errors import ConvergenceWarning
+
+    @click.command("warns")
+    def warns():
+        warnings.warn(ConvergenceWarning("sinkhorn stopped after 3 iterations\nmore"),
+                      stacklevel=1)
+
+    main.add_command(warns)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            result = CliRunner().invoke(main, ["warns"])
+    finally:
+        main.commands.pop("warns")
+    assert result.exit_code == 0
+    assert result.output.strip() == "Warning: sinkhorn stopped after 3 iterations"

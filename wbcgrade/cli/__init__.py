@@ -12,6 +12,7 @@ wbcgrade.core). Layers and data flow: docs/architecture.md.
 from __future__ import annotations
 
 import sys
+import warnings
 
 import click
 
@@ -19,10 +20,17 @@ from wbcgrade import __version__
 from wbcgrade.errors import WbcgradeError
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Library warnings (e.g. a solve stopping above its tolerance) as one line each."""
+    text = str(message).strip().splitlines()[0] if str(message).strip() else category.__name__
+    click.echo(f"Warning: {text}", err=True)
+
+
 class _Group(click.Group):
-    """A click group that turns library errors into one-line messages."""
+    """A click group that turns library errors into one-line messages (warnings too)."""
 
     def invoke(self, ctx: click.Context):
+        warnings.showwarning = _show_warning
         try:
             return super().invoke(ctx)
         except (click.exceptions.Exit, click.ClickException, click.Abort):

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +61,7 @@ from wbcgrade.core._checkpoints import (
 from wbcgrade.core._cpu import fast_cpu, n_workers
 from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
-from wbcgrade.errors import NumericalError
+from wbcgrade.errors import ConvergenceWarning, NumericalError
 
 __all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver", "BarycenterResult"]
 
@@ -125,6 +126,8 @@ class BarycenterResult:
     change : float
         Relative L1 change of the barycenter in the last iteration.
     converged : bool
+    changes : tuple of float
+        The change at every iteration after the first (the error trace).
     """
 
     barycenter: NDArray
@@ -132,6 +135,7 @@ class BarycenterResult:
     n_iter: int
     change: float
     converged: bool
+    changes: tuple[float, ...] = ()
 
 
 
@@ -154,6 +158,11 @@ class BarycenterSolver:
         used when plain scalings cannot represent the problem; longer jobs
         raise ``NumericalError`` before starting. Default
         ``$WBCGRADE_LOG_DOMAIN_BUDGET_S``, else 3600 (``inf``: no limit).
+    method : {"auto", "scaling", "log"}, default "auto"
+        ``"auto"``: plain scalings (the geometry's precision, then float64),
+        then the log domain if they under- or overflow; ``"scaling"``: never
+        the log domain (``NumericalError`` instead); ``"log"``: the log domain
+        from the start.
     """
 
     def __init__(
@@ -163,7 +172,11 @@ class BarycenterSolver:
         n_iter: int = 60,
         checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
         log_domain_budget_s: float | None = None,
+        method: str = "auto",
     ):
+        if method not in ("auto", "scaling", "log"):
+            raise ValueError(f"method must be 'auto', 'scaling' or 'log', got {method!r}")
+        self.method = method
         self.geometry = geometry
         self.H = _validate_histograms(histograms, geometry)
         self.n_iter = _check_n_iter(n_iter)
@@ -181,9 +194,12 @@ class BarycenterSolver:
         geoms = [self.geometry]
         if self.geometry.dtype != np.float64:
             geoms.append(self.geometry.with_dtype(np.float64))
-        for geom in geoms:
-            yield f"scaling-{geom.dtype.name}", lambda g=geom: _ScalingBackend(self.H, weights, g)
-        yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
+        if self.method != "log":
+            for geom in geoms:
+                yield (f"scaling-{geom.dtype.name}",
+                       lambda g=geom: _ScalingBackend(self.H, weights, g))
+        if self.method != "scaling":
+            yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
 
     def log_domain_seconds(self, passes: float = 1.0) -> float:
         """Estimated seconds of the log domain for ``passes`` forward-pass equivalents.
@@ -223,7 +239,9 @@ class BarycenterSolver:
                 continue
             self.last_backend = name
             return result
-        raise AssertionError("the log backend never reports _Unsafe")
+        raise NumericalError(
+            "the barycenter cannot be computed with plain scalings here (they under- or "
+            "overflow where mass sits); use method='log' or 'auto'")
 
     def barycenter(self, weights: ArrayLike) -> NDArray:
         """P_L(weights), shape (*batch, *shape), float64.
@@ -252,11 +270,13 @@ class BarycenterSolver:
         tol: float = 1e-4,
         max_iter: int = 1000,
         init_log_scalings: ArrayLike | None = None,
+        warn: bool = True,
     ) -> BarycenterResult:
         """Iterate to convergence (not a fixed L), optionally from given scalings.
 
         Stops when the barycenter changes by less than ``tol`` (relative L1)
-        between two iterations, or after ``max_iter`` iterations. Warm starts
+        between two iterations, or after ``max_iter`` iterations (then, with
+        ``warn``, a :class:`~wbcgrade.errors.ConvergenceWarning`). Warm starts
         (``init_log_scalings``, e.g. refined from a coarser grid by
         :func:`wbcgrade.core.refine_grid`) make this much cheaper than a cold
         start on fine grids.
@@ -274,20 +294,27 @@ class BarycenterSolver:
 
         def iterate(backend):
             b = backend.initial() if init is None else backend.from_log(init)
-            P_prev, change, n = None, np.inf, 0
+            P_prev, change, n, changes = None, np.inf, 0, []
             while n < int(max_iter):
                 n += 1
                 b, it = backend.step(b, keep=False)
                 P, it = it.P, None
                 if P_prev is not None:
                     change = float(np.abs(P - P_prev).sum() / max(P.sum(), 1e-300))
+                    changes.append(change)
                     if change < tol:
                         break
                 P_prev = P
-            return BarycenterResult(P, backend.to_log(b), n, change, change < tol)
+            return BarycenterResult(P, backend.to_log(b), n, change, change < tol,
+                                    tuple(changes))
 
         with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-            return self._run(w, iterate, passes=max_iter / self.n_iter)
+            result = self._run(w, iterate, passes=max_iter / self.n_iter)
+        if warn and not result.converged:
+            warnings.warn(ConvergenceWarning(
+                f"the barycenter still changed by {result.change:.3g} > tol {tol:g} after "
+                f"{result.n_iter} iterations"), stacklevel=2)
+        return result
 
     def value_and_grad(
         self, weights: ArrayLike, target: ArrayLike, loss: str | Loss = "quadratic"
@@ -433,6 +460,7 @@ def barycenter(
     geometry: Geometry,
     n_iter: int = 60,
     log_domain_budget_s: float | None = None,
+    method: str = "auto",
 ) -> NDArray:
     """Entropic Wasserstein barycenter after ``n_iter`` iterations.
 
@@ -451,6 +479,8 @@ def barycenter(
         Number of iterations L (the iteration starts from ``b_s = 1``).
     log_domain_budget_s : float, optional
         Time budget of the exact log-domain fallback (see :class:`BarycenterSolver`).
+    method : {"auto", "scaling", "log"}
+        Which domain computes it (see :class:`BarycenterSolver`).
 
     Returns
     -------
@@ -462,7 +492,7 @@ def barycenter(
     projections for regularized transportation problems.
     """
     solver = BarycenterSolver(histograms, geometry, n_iter,
-                              log_domain_budget_s=log_domain_budget_s)
+                              log_domain_budget_s=log_domain_budget_s, method=method)
     return solver.barycenter(weights)
 
 
@@ -475,6 +505,7 @@ def barycenter_gradient(
     n_iter: int = 60,
     checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
     log_domain_budget_s: float | None = None,
+    method: str = "auto",
 ) -> tuple[float, NDArray, NDArray]:
     """Energy ``E(w) = Loss(P_L(w), target)``, its gradient in ``w``, and ``P_L(w)``.
 
@@ -501,6 +532,8 @@ def barycenter_gradient(
         else 3600 (an hour); ``float("inf")`` removes the limit. At 128^3,
         S = 10 photo histograms, L = 60 and a 1.5-bin kernel the estimate is
         ~30 minutes on 2 cores (measured: 29 minutes).
+    method : {"auto", "scaling", "log"}
+        Which domain computes it (see :class:`BarycenterSolver`).
 
     Returns
     -------
@@ -510,5 +543,5 @@ def barycenter_gradient(
     P : ndarray, shape (*batch, *geometry.shape)
     """
     solver = BarycenterSolver(histograms, geometry, n_iter, checkpoint_bytes,
-                              log_domain_budget_s)
+                              log_domain_budget_s, method)
     return solver.value_and_grad(weights, target, loss)

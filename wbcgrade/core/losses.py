@@ -228,7 +228,7 @@ class EntropicTransportLoss:
         if init is not None:
             init = np.where(q_hat > 0, init, -np.inf)
         result = sinkhorn(p_hat, q_hat, geometry, tol=self.tol, max_iter=self.max_iter,
-                          init_log_b=init)
+                          init_log_b=init, warn=False)  # reported below, in context
         self.inner_iterations += result.n_iter
         if not result.converged:
             log.warning("transport loss: Sinkhorn stopped at marginal error %.2g after %d "

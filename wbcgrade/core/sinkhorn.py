@@ -15,6 +15,7 @@ the solver restarts in the log domain, which is exact for any range.
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from wbcgrade.core import _kernels, _validation
 from wbcgrade.core._cpu import fast_cpu, parallel_map
 from wbcgrade.core.geometry import PARALLEL_BINS, Geometry
+from wbcgrade.errors import ConvergenceWarning, NumericalError
 
 __all__ = ["SinkhornResult", "sinkhorn", "barycentric_projection"]
 
@@ -45,6 +47,11 @@ class SinkhornResult:
         Largest L1 error on the first marginal over the batch.
     converged : bool
         Whether ``error <= tol``.
+    errors : tuple of float
+        The error at each convergence check, the last one included (the
+        successful attempt's, after any fallback).
+    method : str
+        ``"scaling"`` or ``"log"``: the domain that computed it.
     """
 
     log_a: NDArray
@@ -52,6 +59,8 @@ class SinkhornResult:
     n_iter: int
     error: float
     converged: bool
+    errors: tuple[float, ...] = ()
+    method: str = "scaling"
 
 
 class _Unsafe(Exception):
@@ -144,7 +153,7 @@ def _scaling(p, q, geometry, tol, max_iter, init_log_b, check_every, power, omeg
         else:
             Kb = np.ascontiguousarray(geometry.apply(b), dtype=np.float64)
             error = _l1_error(a, Kb, p, geometry)
-        return np.log(a), np.log(b), it, error
+        return np.log(a), np.log(b), it, error, errors + [error]
 
 
 def _relax(old: NDArray, new: NDArray, omega: float) -> NDArray:
@@ -175,7 +184,7 @@ def _log_domain(p, q, geometry, tol, max_iter, init_log_b, check_every, power, o
             log_b = _relax(log_b, power * (log_q - geometry.log_apply(log_a)), step)
         else:
             error = _marginal_error(np.exp(log_a + geometry.log_apply(log_b)), p, geometry)
-        return log_a, log_b, it, error
+        return log_a, log_b, it, error, errors + [error]
 
 
 def sinkhorn(
@@ -188,6 +197,8 @@ def sinkhorn(
     check_every: int = 5,
     relaxation: float | None = None,
     overrelaxation: float = 1.0,
+    method: str = "auto",
+    warn: bool = True,
 ) -> SinkhornResult:
     """Entropic optimal transport between ``p`` and ``q`` on ``geometry``.
 
@@ -217,6 +228,13 @@ def sinkhorn(
         below 0.05; relaxed ones are not guaranteed to converge: when the error
         grows (10x above its best, or no new best for 30 checks) or the
         scalings break down, the solve starts again with plain iterations.
+    method : {"auto", "scaling", "log"}, default "auto"
+        ``"scaling"``: plain kernel products only (``NumericalError`` when the
+        scalings under- or overflow); ``"log"``: the exact log domain from the
+        start; ``"auto"``: scaling, then the log domain if needed.
+    warn : bool, default True
+        Issue a :class:`~wbcgrade.errors.ConvergenceWarning` when ``max_iter``
+        iterations end above ``tol``.
 
     Returns
     -------
@@ -238,24 +256,39 @@ def sinkhorn(
         raise ValueError("relaxation must be a positive number (or None for balanced transport)")
     if not (np.isfinite(overrelaxation) and 0 < overrelaxation < 2):
         raise ValueError("overrelaxation must be in (0, 2)")
+    solvers = {"auto": (_scaling, _log_domain), "scaling": (_scaling,), "log": (_log_domain,)}
+    if method not in solvers:
+        raise ValueError(f"method must be 'auto', 'scaling' or 'log', got {method!r}")
     power = 1.0 if relaxation is None else float(relaxation / (relaxation + geometry.gamma))
     args = (p, q, geometry, float(tol), int(max_iter), init_log_b, max(1, int(check_every)),
             power)
     omegas = [float(overrelaxation)] + ([1.0] if overrelaxation != 1.0 else [])
+    result = None
     with fast_cpu():
-        for solve in (_scaling, _log_domain):
+        for solve in solvers[method]:
             try:
                 for omega in omegas:
                     try:
-                        log_a, log_b, n_iter, error = solve(*args, omega=omega)
+                        result = solve(*args, omega=omega)
                         break
                     except _Diverged as why:
                         log.info("sinkhorn: over-relaxation %.3g diverged (%s); plain "
                                  "iterations", omega, why)
                 break
             except _Unsafe as why:
+                if method == "scaling":
+                    raise NumericalError(
+                        f"sinkhorn: the scaling domain cannot represent this problem ({why}); "
+                        "use method='log' or 'auto'") from None
                 log.info("sinkhorn: scaling domain unsafe (%s); using the log domain", why)
-    return SinkhornResult(log_a, log_b, n_iter, error, bool(error <= tol))
+    log_a, log_b, n_iter, error, errors = result
+    converged = bool(error <= tol)
+    if warn and not converged:
+        warnings.warn(ConvergenceWarning(
+            f"sinkhorn stopped after {n_iter} iterations with marginal error {error:.3g} "
+            f"> tol {tol:g}"), stacklevel=2)
+    name = "scaling" if solve is _scaling else "log"
+    return SinkhornResult(log_a, log_b, n_iter, error, converged, tuple(errors), name)
 
 
 def barycentric_projection(
