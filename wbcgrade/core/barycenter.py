@@ -63,7 +63,13 @@ from wbcgrade.core.geometry import Geometry
 from wbcgrade.core.losses import Loss, get_loss
 from wbcgrade.errors import ConvergenceWarning, NumericalError
 
-__all__ = ["barycenter", "barycenter_gradient", "BarycenterSolver", "BarycenterResult"]
+__all__ = [
+    "barycenter",
+    "barycenter_gradient",
+    "BarycenterSolver",
+    "BarycenterResult",
+    "gradient_memory",
+]
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +91,34 @@ _DIRECT_LOG_RATE = 2.5e7
 #: the schedule's recomputed steps: the adjoint's two (signed) products per
 #: iteration and histogram.
 _ADJOINT_PASSES = 1.2
+
+
+#: Stacks of S float64 histograms a gradient holds at its peak besides its
+#: checkpoints and inputs (tracemalloc, tests/core/test_memory.py): the scaling
+#: backend's step keeps K b, a, phi and log phi, its reverse step an iterate
+#: and the adjoint's buffers; the log backend works in place.
+_WORKING_STACKS = {"scaling": 16, "log": 10}
+
+
+def gradient_memory(
+    n_bins: int,
+    n_histograms: int,
+    n_iter: int = 60,
+    checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
+    method: str = "auto",
+) -> int:
+    """Bytes one gradient may hold at its peak beyond its inputs, roughly.
+
+    ``n_bins``: bins of one histogram, batch axes included. The working
+    arrays (see ``_WORKING_STACKS``) plus the stored scalings and records,
+    at most ``checkpoint_bytes``. Domains check it against the memory
+    available before a big run (e.g. ``wbcgrade.shape``).
+    """
+    state = 8 * int(n_bins) * int(n_histograms)
+    # records also keep P and log P (1/S of a state each), beyond the schedule's slots
+    stored = min(int(checkpoint_bytes), (2 * int(n_iter) + 1) * state) * (1 + 1 / n_histograms)
+    backends = ("scaling", "log") if method == "auto" else (method,)
+    return int(max(_WORKING_STACKS[b] for b in backends) * state + stored)
 
 
 def log_domain_budget(value: float | None = None) -> float:
@@ -200,6 +234,11 @@ class BarycenterSolver:
                        lambda g=geom: _ScalingBackend(self.H, weights, g))
         if self.method != "scaling":
             yield "log", lambda: _LogBackend(self.H, weights, geoms[-1])
+
+    def memory_bytes(self) -> int:
+        """Peak bytes of one gradient beyond the inputs, roughly (:func:`gradient_memory`)."""
+        return gradient_memory(int(np.prod(self.batch_shape)), self.n_histograms, self.n_iter,
+                               self.checkpoint_bytes, self.method)
 
     def log_domain_seconds(self, passes: float = 1.0) -> float:
         """Estimated seconds of the log domain for ``passes`` forward-pass equivalents.

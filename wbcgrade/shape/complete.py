@@ -52,7 +52,7 @@ import numpy as np
 import scipy.optimize
 
 from wbcgrade.core import GridGeometry, Loss, barycentric_coordinates, get_loss
-from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES
+from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES, gradient_memory
 from wbcgrade.errors import InputError
 from wbcgrade.shape.defaults import (  # noqa: F401 - re-exported
     DEFAULT_LOSS,
@@ -236,16 +236,13 @@ def estimate_memory(
     n_iter: int = DEFAULT_N_ITER,
     checkpoint_bytes: int = DEFAULT_CHECKPOINT_BYTES,
 ) -> int:
-    """Bytes a fit needs, roughly: the core's working arrays plus stored scalings.
-
-    Measured on the core: about 16 float64 arrays of S volumes while
-    iterating, plus the reverse pass's checkpoints (at most ``checkpoint_bytes``),
-    plus the inputs, the voxelisation and the outputs (about S + 8 volumes).
+    """Bytes a fit needs, roughly: the core's gradient (working arrays and stored
+    scalings, :func:`wbcgrade.core.barycenter.gradient_memory`) plus the inputs,
+    the voxelisation and the outputs (about S + 8 volumes).
     """
     n_voxels = int(np.prod([int(n) for n in shape], dtype=np.float64))
-    stack = 8 * n_voxels * int(n_shapes)
-    stored = min(stack * int(n_iter), int(checkpoint_bytes))
-    return int(16 * stack + stored + 8 * n_voxels * (n_shapes + 8))
+    core = gradient_memory(n_voxels, int(n_shapes), int(n_iter), int(checkpoint_bytes))
+    return int(core + 8 * n_voxels * (int(n_shapes) + 8))
 
 
 def available_memory() -> int | None:
