@@ -16,10 +16,10 @@ from click.testing import CliRunner
 
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
 from wbcgrade.brdf.fit import DEFAULT_LOSS, brdf_histograms, fit_brdf
-from wbcgrade.brdf.masked import masked_loss
 from wbcgrade.cli import main
 from wbcgrade.core import Loss, barycenter, barycenter_gradient, get_loss
 from wbcgrade.core.losses import EntropicTransportLoss
+from wbcgrade.core.masked import masked_loss
 from wbcgrade.errors import InputError
 
 N = 40

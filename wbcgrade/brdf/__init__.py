@@ -9,7 +9,7 @@
 - :mod:`wbcgrade.brdf.sampled`: sampled BRDFs: interpolation, PSNR, decimation.
 - :mod:`wbcgrade.brdf.io`: BRDF files (``.binary``, ``.npz``) and database folders.
 - :mod:`wbcgrade.brdf.fit`: barycentric coordinates of a (sparse) measurement.
-- :mod:`wbcgrade.brdf.masked`: losses restricted to the kept measurements.
+- losses restricted to the kept measurements live in the core (:mod:`wbcgrade.core.masked`).
 - :mod:`wbcgrade.brdf.render`: spheres lit by a directional light, as PNG.
 - :mod:`wbcgrade.brdf.workflow`: what ``wbcgrade brdf synth/fit`` run (files in, files out).
 - :mod:`wbcgrade.brdf.defaults`: default settings (light: read by ``--help``).

@@ -68,8 +68,8 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_N_ITER,
     DEFAULT_TOL,
 )
-from wbcgrade.brdf.masked import masked_loss
 from wbcgrade.core import Geometry, Loss, barycenter, barycentric_coordinates, get_loss
+from wbcgrade.core.masked import masked_loss
 from wbcgrade.errors import InputError, NumericalError
 
 __all__ = ["BRDFFit", "brdf_histograms", "resolve_loss", "fit_brdf", "BRDF_LOSSES",

@@ -1,7 +1,7 @@
 """The mathematical core: arrays in, arrays and small result objects out.
 
 No files, no printing, no colours: geometry, barycenter (+ gradient),
-losses, Sinkhorn and barycentric coordinates.
+losses (masked ones too), Sinkhorn and barycentric coordinates.
 """
 
 from wbcgrade.core.barycenter import (
@@ -9,10 +9,12 @@ from wbcgrade.core.barycenter import (
     BarycenterSolver,
     barycenter,
     barycenter_gradient,
+    gradient_memory,
 )
 from wbcgrade.core.coordinates import CoordinatesResult, barycentric_coordinates, softmax
 from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry, refine_grid
 from wbcgrade.core.losses import LOSSES, Loss, get_loss, register_loss
+from wbcgrade.core.masked import RowSubsetGeometry, masked_loss
 from wbcgrade.core.sinkhorn import SinkhornResult, barycentric_projection, sinkhorn
 
 __all__ = [
@@ -34,4 +36,7 @@ __all__ = [
     "sinkhorn",
     "SinkhornResult",
     "barycentric_projection",
+    "gradient_memory",
+    "RowSubsetGeometry",
+    "masked_loss",
 ]

@@ -1,4 +1,4 @@
-"""Losses that only see the kept measurements of each row (sparse acquisitions).
+"""Losses that only see the kept entries of each row (sparse measurements, e.g. BRDFs).
 
 A decimated measurement keeps a few outgoing directions per incoming direction
 (about 29 of 288 at ``--keep 0.1``). ``masked_loss`` restricts each row of the
@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from wbcgrade.core import Geometry, Loss, get_loss
+from wbcgrade.core.geometry import Geometry
+from wbcgrade.core.losses import Loss, get_loss
 from wbcgrade.errors import InputError
 
 
