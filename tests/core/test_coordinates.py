@@ -71,3 +71,20 @@ def test_bad_init_weights_raise_value_error():
     geom, H, _ = _problem((8, 8), 3, seed=0)
     with pytest.raises(ValueError, match="init_weights"):
         barycentric_coordinates(H[0], H, geom, init_weights=[1.0, -1.0, 1.0])
+
+
+def test_mixture_coordinates_recover_known_mixture_weights(rng):
+    from wbcgrade.core import mixture_coordinates
+
+    geom = GridGeometry((10, 9), gamma=0.02)
+    H = rng.random((4, 10, 9))
+    H /= H.sum(axis=(1, 2), keepdims=True)
+    truth = np.array([0.2, 0.0, 0.8, 0.0])
+    target = np.tensordot(truth, H, axes=1)
+    seen = []
+    fit = mixture_coordinates(target, H, geom, "quadratic", max_iter=50,
+                              callback=lambda n, w, v: seen.append(n))
+    np.testing.assert_allclose(fit.weights, truth, atol=1e-4)
+    np.testing.assert_allclose(fit.barycenter, target, atol=1e-6 * target.max())
+    assert fit.backend == "mixture" and fit.loss < 1e-6 * fit.initial_loss
+    assert seen == list(range(1, fit.n_evaluations + 1))

@@ -11,7 +11,12 @@ from wbcgrade.core.barycenter import (
     barycenter_gradient,
     gradient_memory,
 )
-from wbcgrade.core.coordinates import CoordinatesResult, barycentric_coordinates, softmax
+from wbcgrade.core.coordinates import (
+    CoordinatesResult,
+    barycentric_coordinates,
+    mixture_coordinates,
+    softmax,
+)
 from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry, refine_grid
 from wbcgrade.core.losses import LOSSES, Loss, get_loss, register_loss
 from wbcgrade.core.masked import RowSubsetGeometry, masked_loss
@@ -27,6 +32,7 @@ __all__ = [
     "BarycenterSolver",
     "BarycenterResult",
     "barycentric_coordinates",
+    "mixture_coordinates",
     "CoordinatesResult",
     "softmax",
     "Loss",

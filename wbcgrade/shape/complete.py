@@ -49,9 +49,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.optimize
 
-from wbcgrade.core import GridGeometry, Loss, barycentric_coordinates, get_loss
+from wbcgrade.core import (
+    GridGeometry,
+    Loss,
+    barycentric_coordinates,
+    get_loss,
+    mixture_coordinates,
+)
 from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES, gradient_memory
 from wbcgrade.errors import InputError
 from wbcgrade.shape.defaults import (  # noqa: F401 - re-exported
@@ -418,9 +423,11 @@ def project(
         raise InputError(f"the {loss} loss needs an input density positive everywhere")
     start = time.perf_counter()
     if euclidean:
-        weights, fitted, value, initial, history, converged = _fit_mixture(
-            target, stack, loss_object, max_iter, callback
-        )
+        # the losses see the grid's kernel (transport losses) or just its shape
+        geometry = GridGeometry.with_width(target.shape, default_width(max(target.shape)))
+        mixture = mixture_coordinates(target, stack, geometry, loss_object, max_iter, callback)
+        weights, fitted, value = mixture.weights, mixture.barycenter, mixture.loss
+        initial, history, converged = mixture.initial_loss, mixture.history, mixture.converged
         used_width, n_coarse = 0.0, 0
     else:
         used_width = default_width(max(density.shape)) if width is None else float(width)
@@ -483,60 +490,6 @@ def _coarsen(density: np.ndarray) -> np.ndarray:
     )
     small = np.clip(small, density.min(), None)
     return small * (density.sum() / small.sum())
-
-
-def _fit_mixture(target, stack, loss, max_iter, callback):
-    """Weights on the simplex minimising ``loss(sum_s w_s p_s, target)`` (SLSQP).
-
-    The mixture is linear in the weights, so the energy is convex for the
-    quadratic and KL losses; SLSQP handles the simplex directly (weights may
-    reach exactly 0, as in the paper's Euclidean projections).
-    """
-    loss_object = resolve_loss(loss)
-    axes = tuple(range(1, stack.ndim))
-    stack = stack / stack.sum(axis=axes, keepdims=True)
-    n_shapes = stack.shape[0]
-    flat = stack.reshape(n_shapes, -1)
-    history: list[float] = []
-    best: dict = {}
-    scale: dict = {}
-
-    class _Geometry:  # the losses only read `ndim` (and `gamma` for Wasserstein)
-        ndim = 3
-
-    geometry = _Geometry()
-    if loss_object.name == "wasserstein":
-        geometry = GridGeometry.with_width(target.shape, default_width(max(target.shape)))
-
-    def energy(weights: np.ndarray) -> tuple[float, np.ndarray]:
-        weights = np.clip(weights, 0.0, None)
-        weights = weights / weights.sum()
-        mixture = np.tensordot(weights, stack, axes=1)
-        value, grad_p = loss_object.value_and_grad(mixture, target, geometry)
-        grad = flat @ np.asarray(grad_p).ravel()
-        history.append(float(value))
-        if "value" not in best or value < best["value"]:
-            best.update(value=float(value), weights=weights, mixture=mixture)
-        if callback is not None:
-            callback(len(history), weights, float(value))
-        scale.setdefault("scale", abs(value) if value != 0 else 1.0)
-        return value / scale["scale"], grad / scale["scale"]
-
-    start = np.full(n_shapes, 1.0 / n_shapes)
-    result = scipy.optimize.minimize(
-        energy,
-        start,
-        jac=True,
-        method="SLSQP",
-        bounds=[(0.0, 1.0)] * n_shapes,
-        constraints=[
-            {"type": "eq", "fun": lambda w: w.sum() - 1.0, "jac": lambda w: np.ones_like(w)}
-        ],
-        options={"maxiter": int(max(max_iter, 1)) * 5, "ftol": 1e-10},
-    )
-    return (
-        best["weights"], best["mixture"], best["value"], history[0], history, bool(result.success)
-    )
 
 
 # --------------------------------------------------------------------------- completion
