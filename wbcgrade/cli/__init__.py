@@ -62,6 +62,7 @@ def _register() -> None:
     from wbcgrade.cli.preset import preset
     from wbcgrade.cli.report import report
     from wbcgrade.cli.shape import shape
+    from wbcgrade.cli.video import video
 
     main.add_command(apply)
     main.add_command(batch)
@@ -69,6 +70,7 @@ def _register() -> None:
     main.add_command(preset)
     main.add_command(report)
     main.add_command(shape)
+    main.add_command(video)
 
 
 _register()

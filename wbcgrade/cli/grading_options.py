@@ -161,6 +161,22 @@ def lazy_options(factory):
 grading_options = lazy_options(_options)
 
 
+def grading_options_except(*names: str):
+    """Decorator: the grading options but those whose parameter is named in ``names``
+    (e.g. ``video``, whose grade is a LUT, has no regrain options)."""
+    def factory() -> list:
+        kept = []
+        for option in _options():
+            def holder() -> None:
+                """Reads the option's parameter name."""
+
+            if option(holder).__click_params__[0].name not in names:
+                kept.append(option)
+        return kept
+
+    return lazy_options(factory)
+
+
 def lut_size_option() -> list:
     """``--lut-size`` (default: the colour library's LUT size), for :func:`lazy_options`."""
     from wbcgrade.color.lut import DEFAULT_LUT_SIZE

@@ -1,0 +1,156 @@
+"""``wbcgrade video``: grade a clip with one grade per clip (or per shot), applied by ffmpeg."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import click
+
+from wbcgrade.cli.grading_options import (
+    LazyOptionsCommand,
+    grading_options_except,
+    lazy_options,
+    lut_size_option,
+    take_grading_options,
+)
+
+#: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
+_NOT_FOR_VIDEO = ("regrain", "regrain_radius", "regrain_eps")
+_CODECS = ("x264", "x265", "prores", "ffv1")
+
+
+def _warn(message: str) -> None:
+    click.echo(f"Warning: {message}", err=True)
+
+
+def _default_output(source: str, codec: str) -> str:
+    from wbcgrade.video.workflow import CODECS
+
+    path = Path(source)
+    containers = CODECS[codec][1]
+    suffix = path.suffix.lower() if path.suffix.lower() in containers else containers[0]
+    return str(path.with_name(f"{path.stem}_graded{suffix}"))
+
+
+def _print_result(result, as_json: bool) -> None:
+    if as_json:
+        click.echo(json.dumps(result.as_dict(), indent=2, default=float))
+        return
+    info = result.info
+    click.echo(f"{info.path.name}: {info.width}x{info.height}, {info.fps:.3f} fps, "
+               f"{info.frames} frames, {info.pix_fmt}, {len(info.streams)} stream(s)")
+    for number, shot in enumerate(result.shots, start=1):
+        ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked()[:6])
+        where = (f"shot {number} (frames {shot.first}-{shot.last})" if len(result.shots) > 1
+                 else "weights")
+        click.echo(f"{where}: {ranked}  (loss {shot.fit.loss:.4g}, "
+                   f"{len(shot.samples)} sampled frames)")
+        if not shot.grade.info.get("fit", {}).get("converged", True):
+            _warn("the weight fit stopped before converging (raise --max-iter)")
+    stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items() if k != "total")
+    click.echo(f"time: {stages} (total {result.timings['total']:.1f}s)")
+    written = [str(result.output), *map(str, result.luts)]
+    click.echo(f"wrote {', '.join(written)} ({result.encoder}, {result.pix_fmt})")
+
+
+@click.command("video", cls=LazyOptionsCommand)
+@click.argument("clip", type=click.Path(dir_okay=False, path_type=str))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
+@grading_options_except(*_NOT_FOR_VIDEO)
+@click.option("--per-shot", is_flag=True,
+              help="Detect cuts and fit one grade per shot (blended over --blend-frames at "
+                   "each cut) instead of one grade for the whole clip.")
+@click.option("--sample-every", type=float, default=1.0, show_default=True, metavar="SECONDS",
+              help="Seconds between the frames sampled for the fit.")
+@click.option("--cut-threshold", type=float, default=0.35, show_default=True,
+              help="--per-shot: colour change between consecutive frames (0-1) that "
+                   "starts a new shot.")
+@click.option("--blend-frames", type=int, default=8, show_default=True,
+              help="--per-shot: frames over which the grade changes at a cut (0: switch).")
+@click.option("--codec", type=click.Choice(_CODECS), default="x264", show_default=True,
+              help="Video encoder: x264/x265 (CRF), prores (ProRes 422 HQ, .mov), ffv1 "
+                   "(lossless, .mkv). Other streams are copied.")
+@click.option("--crf", type=int, default=18, show_default=True,
+              help="x264/x265 constant rate factor (lower: better, larger).")
+@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Also write the grade as a 3-D LUT (.cube); with several shots, "
+                   "<stem>_shotNN.cube per shot.")
+@lazy_options(lut_size_option)
+@click.option("--overwrite", is_flag=True, help="Replace existing output files (never CLIP).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
+              default=None, help="Also write a contact sheet per shot (sampled frames before "
+              "and after, weights, palettes) and report.json into this folder.")
+def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, codec, crf, lut,
+          lut_size, overwrite, as_json, report_dir, **kwargs):
+    """Grade CLIP towards the barycenter of style palettes closest to its own.
+
+    Frames sampled every --sample-every seconds are pooled into one palette
+    (as `batch --consistent` pools photos), the weights are fitted once and
+    the grade's colour map is applied to every frame by ffmpeg as a 3-D LUT
+    (lut3d, tetrahedral): one grade for the whole clip, no flicker. Audio and
+    other streams are copied; frame rate, pixel format and colour tags are
+    kept. The output is written atomically and CLIP is never replaced.
+    """
+    from tqdm import tqdm
+
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.pipeline import load_styles
+    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.video.workflow import VideoSettings, check_video_outputs, grade_video
+
+    defaults = GradeOptions()
+    kwargs.update(regrain=False, regrain_radius=defaults.regrain_radius,
+                  regrain_eps=defaults.regrain_eps)
+    opts, style_args = take_grading_options(kwargs)
+    settings = VideoSettings(per_shot=per_shot, sample_every=sample_every,
+                             cut_threshold=cut_threshold, blend=blend_frames, codec=codec,
+                             crf=crf, lut_size=lut_size)
+    output = output or _default_output(clip, codec)
+    check_video_outputs(clip, output, lut, settings, overwrite)  # before any work
+    if report_dir is not None:
+        from wbcgrade.errors import InputError
+
+        try:
+            Path(report_dir).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"{report_dir}: cannot create the report folder "
+                             f"({exc.strerror})") from None
+    start = time.perf_counter()
+    with style_progress() as progress:
+        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
+                             cache=style_args["cache"], warn=_warn, progress=progress)
+    timings = {"styles": time.perf_counter() - start}
+
+    with tqdm(desc="scan", unit="frame", disable=None, leave=False) as bar:
+        current = {"pass": None}
+
+        def on_progress(name, done, total):  # one bar over frames, per ffmpeg pass
+            if current["pass"] != name:
+                current["pass"] = name
+                bar.reset(total=total)
+                bar.set_description(name)
+            bar.total = max(total, done)
+            bar.update(done - bar.n)
+
+        def on_fit(n_eval, weights, value):
+            bar.set_postfix(loss=f"{value:.4g}", refresh=True)
+
+        def on_stage(name):
+            if name not in ("scan", "encode"):
+                bar.set_description(name)
+                bar.refresh()
+
+        result = grade_video(clip, output, styles, opts, settings, lut=lut, overwrite=overwrite,
+                             fit_callback=on_fit, stage=on_stage, progress=on_progress,
+                             timings=timings)
+    _print_result(result, as_json)
+    if report_dir is not None:
+        from wbcgrade.video.report import write_video_report
+
+        path = write_video_report(report_dir, result, styles)
+        if not as_json:
+            click.echo(f"report: {path}")

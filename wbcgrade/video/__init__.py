@@ -1,0 +1,18 @@
+"""Grading footage: one grade per clip (or per shot) applied by ffmpeg as a 3-D LUT.
+
+Layers (each imports only those above it):
+
+- :mod:`wbcgrade.video.ffmpeg`: the ``imageio-ffmpeg`` binary; probing, decoding
+  to RGB with the clip's own matrix and range, running a pass with progress.
+- :mod:`wbcgrade.video.sampling`: one small decoding pass: sampled frames and cuts.
+- :mod:`wbcgrade.video.shots`: which LUT (or blend of two) each frame gets.
+- :mod:`wbcgrade.video.workflow`: :func:`grade_video`, probe to published file.
+- :mod:`wbcgrade.video.report`: contact sheets and ``report.json``.
+
+The grading itself is the colour library's (``color.grading.series_grade``,
+``color.lut``); nothing here touches pixels of the full-size frames.
+"""
+
+from wbcgrade.video.workflow import VideoResult, VideoSettings, grade_video
+
+__all__ = ["VideoResult", "VideoSettings", "grade_video"]

@@ -1,0 +1,379 @@
+"""The ffmpeg binary of the ``imageio-ffmpeg`` wheel: probing, decoding, running a pass.
+
+There is no ffprobe in that wheel, so :func:`probe` parses what ``ffmpeg -i``
+prints (size, frame rate, pixel format, colour tags, streams) and counts the
+frames with a stream copy (no decoding). Every conversion between the
+footage's Y'CbCr and the RGB the grade works in is explicit
+(:func:`to_rgb_filter`, :func:`from_rgb_filter`: ``scale`` with the input's
+matrix and range), so the frames sampled for the fit and the frames the
+LUT is applied to are the same RGB values, whatever ffmpeg's defaults.
+
+:func:`run_pass` runs one ffmpeg command with a progress callback over
+frames (``-progress pipe:1``); on any exception (Ctrl-C included) it kills
+ffmpeg before re-raising. A failed run raises :class:`FfmpegError` with
+ffmpeg's last error line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import signal
+import subprocess
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.errors import InputError, WbcgradeError
+
+__all__ = ["FfmpegError", "VideoInfo", "ffmpeg_exe", "probe", "to_rgb_filter",
+           "from_rgb_filter", "encoder_pixel_formats", "run_pass", "decode_frames",
+           "file_arg", "write_lut3d_file"]
+
+
+class FfmpegError(WbcgradeError):
+    """ffmpeg failed (the message is its last error line)."""
+
+
+@lru_cache(maxsize=1)
+def ffmpeg_exe() -> str:
+    """Path of the ffmpeg binary shipped in the ``imageio-ffmpeg`` wheel."""
+    try:
+        import imageio_ffmpeg
+    except ImportError:  # pragma: no cover - a runtime dependency
+        raise WbcgradeError("video needs the imageio-ffmpeg package "
+                            "(pip install imageio-ffmpeg)") from None
+    try:
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except RuntimeError as exc:  # pragma: no cover - a broken install
+        raise WbcgradeError(f"no ffmpeg binary: {exc}") from None
+
+
+def file_arg(path: str | os.PathLike) -> str:
+    """A path as an ffmpeg file argument (absolute, ``file:`` so no protocol is guessed)."""
+    return "file:" + str(Path(path).absolute())
+
+
+#: swscale's names for the Y'CbCr matrices ffmpeg reports as colour spaces.
+_MATRICES = {"bt709": "bt709", "bt470bg": "bt470", "smpte170m": "smpte170m",
+             "bt2020nc": "bt2020", "bt2020c": "bt2020", "fcc": "fcc", "smpte240m": "smpte240m"}
+
+
+@dataclass
+class VideoInfo:
+    """What ``ffmpeg -i`` says about a file's first video stream (and its other streams).
+
+    Attributes
+    ----------
+    path : the file.
+    width, height : frame size in pixels.
+    fps : frame rate (frames per second; ``r_frame_rate``).
+    pix_fmt : pixel format (``yuv420p``, ``yuv422p10le``, ``gbrp``...).
+    color_range : "tv" (limited), "pc" (full) or None (untagged).
+    colorspace, primaries, transfer : colour tags (None when untagged).
+    frames : number of video frames (counted without decoding).
+    duration : seconds.
+    streams : kind of every stream in file order ("video", "audio", "subtitle", "data"...).
+    codec : the video codec's name.
+    """
+
+    path: Path
+    width: int
+    height: int
+    fps: float
+    pix_fmt: str
+    color_range: str | None
+    colorspace: str | None
+    primaries: str | None
+    transfer: str | None
+    frames: int
+    duration: float
+    streams: list[str] = field(default_factory=list)
+    codec: str = ""
+
+    @property
+    def is_rgb(self) -> bool:
+        """Whether the frames are stored as RGB (no Y'CbCr matrix involved)."""
+        return self.pix_fmt.startswith(("gbr", "rgb", "bgr", "argb", "abgr", "0rgb", "0bgr"))
+
+    @property
+    def high_depth(self) -> bool:
+        """More than 8 bits per component."""
+        return bool(re.search(r"(9|10|12|14|16)(le|be)?$|f(16|32)", self.pix_fmt))
+
+    @property
+    def matrix(self) -> str:
+        """The Y'CbCr matrix used (swscale's name): the tag, else what players assume
+        for untagged footage (BT.709 from 720 lines up, BT.601 below)."""
+        if self.colorspace in _MATRICES:
+            return _MATRICES[self.colorspace]
+        return "bt709" if self.height >= 720 else "smpte170m"
+
+    @property
+    def range(self) -> str:
+        """"pc" (full) or "tv" (limited; the default for untagged Y'CbCr)."""
+        return "pc" if self.color_range == "pc" or self.is_rgb else "tv"
+
+    def tags(self) -> dict[str, str]:
+        """The colour tags the output gets: the input's, the assumed matrix's where untagged."""
+        assumed = {"bt709": "bt709", "smpte170m": "smpte170m"}.get(self.matrix)
+        space = self.colorspace or (None if self.is_rgb else assumed)
+        tags = {"range": self.range,
+                "colorspace": space or "",
+                "color_primaries": self.primaries or (assumed or ""),
+                "color_trc": self.transfer or ("bt709" if assumed else "")}
+        return {k: v for k, v in tags.items() if v and v != "unknown"}
+
+    @property
+    def audio_streams(self) -> int:
+        return self.streams.count("audio")
+
+
+def _split_top(text: str) -> list[str]:
+    """Split at commas outside parentheses."""
+    parts, depth, current = [], 0, ""
+    for char in text:
+        if char == "(":
+            depth += 1
+        elif char == ")":
+            depth -= 1
+        if char == "," and depth == 0:
+            parts.append(current.strip())
+            current = ""
+        else:
+            current += char
+    parts.append(current.strip())
+    return parts
+
+
+def _parse_video_line(line: str) -> dict:
+    """The fields of ``Stream #0:0...: Video: h264 (High) (...), yuv420p(tv, bt709), 64x48 ...``."""
+    body = line.split("Video:", 1)[1]
+    parts = _split_top(body)
+    out: dict = {"codec": parts[0].split()[0] if parts[0] else ""}
+    for part in parts[1:]:
+        fmt = re.fullmatch(r"([0-9a-z_]+)(?:\((.*)\))?", part)
+        if fmt and "pix_fmt" not in out and not re.fullmatch(r"\d+x\d+.*", part):
+            out["pix_fmt"] = fmt.group(1)
+            for item in (fmt.group(2) or "").split(","):
+                item = item.strip()
+                if item in ("tv", "pc"):
+                    out["color_range"] = item
+                elif "/" in item or item in _MATRICES or item in ("gbr", "unknown", "ycgco"):
+                    tags = item.split("/")
+                    if len(tags) == 1:
+                        tags = tags * 3
+                    out["colorspace"], out["primaries"], out["transfer"] = (
+                        None if t == "unknown" else t for t in tags[:3])
+            continue
+        size = re.match(r"(\d+)x(\d+)", part)
+        if size and "width" not in out:
+            out["width"], out["height"] = int(size.group(1)), int(size.group(2))
+            continue
+        rate = re.fullmatch(r"([\d.]+)(k?) (fps|tbr)", part)
+        if rate:
+            value = float(rate.group(1)) * (1000 if rate.group(2) else 1)
+            out.setdefault(rate.group(3), value)
+    return out
+
+
+def _exact_rate(fps: float) -> float:
+    """29.97 -> 30000/1001 (ffmpeg prints NTSC rates rounded)."""
+    for base in (24, 30, 48, 60, 120):
+        if abs(fps - base * 1000 / 1001) < 0.006:
+            return base * 1000 / 1001
+    return fps
+
+
+def probe(path: str | os.PathLike) -> VideoInfo:
+    """Describe a video file -> VideoInfo; InputError when it is missing or not a video."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    run = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", file_arg(path)],
+                         capture_output=True, text=True, errors="replace", timeout=120)
+    text = run.stderr
+    streams, video = [], None
+    for line in text.splitlines():
+        match = re.match(r"\s*Stream #0:\d+.*?: (\w+):", line)
+        if not match:
+            continue
+        kind = match.group(1).lower()
+        streams.append(kind)
+        if kind == "video" and video is None and "attached pic" not in line:
+            video = _parse_video_line(line)
+    if not streams:
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()
+                 and "At least one output file" not in ln]
+        why = lines[-1].split(": ", 1)[-1] if lines else "unreadable"
+        raise InputError(f"{path}: not a video ({why})")
+    if video is None or "width" not in video or "pix_fmt" not in video:
+        raise InputError(f"{path}: no video stream")
+    fps = video.get("fps") or video.get("tbr")
+    if not fps:
+        raise InputError(f"{path}: the video stream has no frame rate (a still image?)")
+    frames, duration = _count_frames(path)
+    if frames < 1:
+        raise InputError(f"{path}: the video stream has no frames")
+    return VideoInfo(path, video["width"], video["height"], _exact_rate(fps), video["pix_fmt"],
+                     video.get("color_range"), video.get("colorspace"), video.get("primaries"),
+                     video.get("transfer"), frames, duration, streams, video["codec"])
+
+
+def _count_frames(path: Path) -> tuple[int, float]:
+    """(frames, seconds) of the first video stream, by a stream copy (no decoding)."""
+    run = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", file_arg(path),
+                          "-map", "0:v:0", "-c", "copy", "-f", "null", "-"],
+                         capture_output=True, text=True, errors="replace", timeout=600)
+    frames = seconds = None
+    for line in run.stderr.splitlines():
+        match = re.search(r"frame=\s*(\d+)", line)
+        if match:
+            frames = int(match.group(1))
+        match = re.search(r"time=\s*(-?)(\d+):(\d+):([\d.]+)", line)
+        if match and not match.group(1):
+            h, m, s = match.group(2, 3, 4)
+            seconds = int(h) * 3600 + int(m) * 60 + float(s)
+    if run.returncode != 0 or frames is None:
+        raise InputError(f"{path}: cannot read the video stream ({_last_error(run.stderr)})")
+    return frames, seconds or 0.0
+
+
+def to_rgb_filter(info: VideoInfo, rgb_format: str, width: int | None = None,
+                  height: int | None = None) -> str:
+    """Filters turning the decoded frames into full-range RGB ``rgb_format`` (optionally
+    resized, area-averaged), with the input's Y'CbCr matrix and range stated explicitly."""
+    size = f"{width}:{height}:flags=area:" if width else ""
+    if info.is_rgb:
+        return f"scale={size.rstrip(':') or 'iw:ih'},format={rgb_format}"
+    return (f"scale={size}in_color_matrix={info.matrix}:in_range={info.range}:out_range=pc,"
+            f"format={rgb_format}")
+
+
+def from_rgb_filter(info: VideoInfo, pix_fmt: str) -> str:
+    """Filters turning full-range RGB back into ``pix_fmt`` with the input's matrix and
+    range, and tagging the frames with the input's colour tags."""
+    tags = ":".join(f"{k}={v}" for k, v in info.tags().items())
+    is_rgb = pix_fmt.startswith(("gbr", "rgb", "bgr"))
+    convert = (f"scale=out_color_matrix={info.matrix}:out_range={info.range}"
+               if not is_rgb else "scale")
+    return f"{convert},format={pix_fmt}" + (f",setparams={tags}" if tags else "")
+
+
+def write_lut3d_file(path: str | os.PathLike, table: np.ndarray) -> None:
+    """A (m, m, m, 3) table indexed [r, g, b] as a plain ``.cube`` for ffmpeg's ``lut3d``.
+
+    For the pass's own temporary LUTs (one per shot and per blended frame):
+    a few milliseconds each, where the published ``--lut`` goes through
+    colour-science (:func:`wbcgrade.color.lut.write_cube`). Same numbers, red
+    varying fastest.
+    """
+    table = np.clip(np.asarray(table, dtype=np.float64), 0.0, 1.0)
+    size = table.shape[0]
+    rows = table.transpose(2, 1, 0, 3).reshape(-1, 3)
+    with open(path, "w", encoding="ascii") as handle:
+        handle.write(f"LUT_3D_SIZE {size}\n")
+        np.savetxt(handle, rows, fmt="%.6f")
+
+
+@lru_cache(maxsize=16)
+def encoder_pixel_formats(encoder: str) -> tuple[str, ...]:
+    """Pixel formats an encoder accepts (its ``Supported pixel formats`` line)."""
+    run = subprocess.run([ffmpeg_exe(), "-hide_banner", "-h", f"encoder={encoder}"],
+                         capture_output=True, text=True, errors="replace", timeout=60)
+    for line in run.stdout.splitlines():
+        if "Supported pixel formats:" in line:
+            return tuple(line.split(":", 1)[1].split())
+    if "is not recognized" in run.stdout + run.stderr:
+        raise InputError(f"this ffmpeg has no {encoder} encoder")
+    return ()
+
+
+def _last_error(stderr: str) -> str:
+    lines = [ln.strip() for ln in stderr.splitlines() if ln.strip()]
+    for line in reversed(lines):
+        if re.search(r"error|invalid|no such|not |unable|cannot|failed", line, re.I) \
+                and not line.startswith("Conversion failed"):
+            return line
+    return lines[-1] if lines else "unknown error"
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child
+    """ffmpeg ends when this process dies (Linux), so a killed run writes nothing more."""
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def _start(args: list[str], cwd: str | None, stderr) -> subprocess.Popen:
+    # Its own session: Ctrl-C reaches this process only, which then kills ffmpeg
+    # (ffmpeg would otherwise finish and close a truncated file on its own).
+    return subprocess.Popen([ffmpeg_exe(), "-hide_banner", "-nostdin", *args], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=stderr, start_new_session=True,
+                            preexec_fn=_die_with_parent if os.name == "posix" else None)
+
+
+@contextlib.contextmanager
+def _process(args: list[str], cwd: str | None = None) -> Iterator[tuple[subprocess.Popen, object]]:
+    """Run ffmpeg; kill it on any exception; raise FfmpegError when it fails."""
+    with tempfile.TemporaryFile() as errors:
+        proc = _start(args, cwd, errors)
+        try:
+            yield proc, errors
+        except BaseException:
+            proc.kill()
+            proc.wait()
+            raise
+        finally:
+            if proc.stdout:
+                proc.stdout.close()
+        code = proc.wait()
+        if code != 0:
+            errors.seek(0)
+            text = errors.read().decode("utf-8", "replace")
+            raise FfmpegError(f"ffmpeg failed: {_last_error(text)}")
+
+
+def run_pass(args: list[str], progress: Callable[[int], None] | None = None,
+             cwd: str | None = None) -> None:
+    """Run ``ffmpeg ARGS``, calling ``progress(frames_done)`` as it goes.
+
+    ``-progress pipe:1 -nostats`` is added; ffmpeg is killed on any
+    exception (KeyboardInterrupt included) before it propagates.
+    """
+    with _process(["-nostats", "-progress", "pipe:1", *args], cwd) as (proc, _):
+        for raw in proc.stdout:
+            line = raw.decode("ascii", "replace").strip()
+            if line.startswith("frame=") and progress is not None:
+                with contextlib.suppress(ValueError):
+                    progress(int(line[6:]))
+
+
+def decode_frames(path: str | os.PathLike, info: VideoInfo, width: int | None = None,
+                  height: int | None = None) -> Iterator[np.ndarray]:
+    """Every frame of the first video stream as (h, w, 3) uint8 RGB, in order.
+
+    Converted with the input's matrix and range (:func:`to_rgb_filter`);
+    optionally resized (area average) to ``width`` x ``height``. Frames are
+    neither dropped nor duplicated (``-fps_mode passthrough``), so the k-th
+    array is the frame the encoding pass's filters see as ``n = k``.
+    """
+    w, h = (width, height) if width else (info.width, info.height)
+    size = w * h * 3
+    args = ["-i", file_arg(path), "-map", "0:v:0", "-fps_mode", "passthrough",
+            "-vf", to_rgb_filter(info, "rgb24", width, height), "-f", "rawvideo",
+            "-pix_fmt", "rgb24", "-loglevel", "error", "pipe:1"]
+    with _process(args) as (proc, _):
+        while True:
+            data = proc.stdout.read(size)
+            if len(data) < size:
+                break
+            yield np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)

@@ -1,0 +1,103 @@
+"""The report of a graded clip: a PNG contact sheet per shot and ``report.json``.
+
+Folder layout (REPORT_DIR)::
+
+    report.json        the clip, the encoding, the cuts, and per shot its frames,
+                       sampled frames, ranked weights, loss against the best
+                       single style and timings (VideoResult.as_dict)
+    shot-NN.png        per shot: up to six sampled frames before and after its
+                       LUT (a grid each), the contributing styles with their
+                       weights, palettes of the frames, the barycenter and the
+                       graded frames (the photo sheet's layout, wbcgrade.color.sheet)
+
+The "after" pictures are the sampled frames through the shot's LUT
+(trilinear, in the library), which is what ffmpeg's ``lut3d`` gives to
+within interpolation and rounding (tests/video checks the encoded frames
+against it). All files are written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade._publish import atomic_path
+from wbcgrade.color.grading import NONZERO_THRESHOLD
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.report import style_pictures
+from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, write_sheet
+from wbcgrade.video.workflow import ShotGrade, VideoResult
+
+__all__ = ["contact_grid", "write_video_report"]
+
+#: Sampled frames shown per shot.
+FRAMES_PER_SHEET = 6
+
+
+def contact_grid(frames: list[np.ndarray], columns: int = 3, gap: int = 4) -> np.ndarray:
+    """Frames (same size, float in [0, 1]) laid out in a grid, white gaps -> (H, W, 3)."""
+    h, w = frames[0].shape[:2]
+    columns = min(columns, len(frames))
+    rows = -(-len(frames) // columns)
+    grid = np.ones((rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 3),
+                   dtype=np.float32)
+    for k, frame in enumerate(frames):
+        r, c = divmod(k, columns)
+        grid[r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = frame
+    return grid
+
+
+def _shown(indices: list[int], count: int) -> list[int]:
+    if len(indices) <= count:
+        return list(indices)
+    picks = np.linspace(0, len(indices) - 1, count).round().astype(int)
+    return [indices[i] for i in picks]
+
+
+def _sheet(result: VideoResult, number: int, shot: ShotGrade,
+           pictures: dict[str, np.ndarray]) -> SheetContent:
+    fps = result.info.fps
+    shown = _shown(shot.samples, FRAMES_PER_SHEET)
+    before = [result.samples.frames[n].astype(np.float32) / 255 for n in shown]
+    after = [apply_color_map(frame, shot.table) for frame in before]
+    weights, names = shot.grade.weights, shot.grade.names
+    order = np.argsort(-weights, kind="stable")
+    tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
+             for i in order if weights[i] >= NONZERO_THRESHOLD]
+    palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
+                ("barycenter", histogram_palette(shot.grade.barycenter)),
+                ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
+    best = shot.fit.best_vertex
+    title = (f"{result.input.name}  shot {number} of {len(result.shots)}: frames "
+             f"{shot.first}-{shot.last} ({shot.first / fps:.2f}-{(shot.last + 1) / fps:.2f} s), "
+             f"{len(shot.samples)} sampled")
+    subtitle = (f"loss {shot.fit.loss:.4g}  |  best single style {names[best]}: "
+                f"{shot.fit.vertex_losses[best]:.4g}  |  {shot.fit.n_nonzero} of {len(names)} "
+                f"weights >= {NONZERO_THRESHOLD:g}  |  frames shown: "
+                + " ".join(str(n) for n in shown))
+    return SheetContent(title=title, subtitle=subtitle, before=contact_grid(before),
+                        after=contact_grid(after), styles=tiles, palettes=palettes,
+                        more_styles=len(names) - len(tiles))
+
+
+def write_video_report(report_dir: str | os.PathLike, result: VideoResult,
+                       styles: StyleSet) -> Path:
+    """Write the sheets and ``report.json`` into ``report_dir`` -> the JSON's path."""
+    report_dir = Path(report_dir)
+    report_dir.mkdir(parents=True, exist_ok=True)
+    pictures = style_pictures(styles)
+    document = result.as_dict()
+    document["styles"] = {"source": styles.source, "names": list(styles.names)}
+    for number, shot in enumerate(result.shots, start=1):
+        name = f"shot-{number:02d}.png"
+        write_sheet(report_dir / name, _sheet(result, number, shot, pictures))
+        document["shots"][number - 1]["sheet"] = name
+    path = report_dir / "report.json"
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+        json.dump(document, handle, indent=2, default=float)
+    return path

@@ -1,0 +1,363 @@
+"""Grade a clip end to end: probe, sample, fit one grade per clip (or shot), one ffmpeg pass.
+
+1. :func:`~wbcgrade.video.ffmpeg.probe` the input; check every output first.
+2. :func:`~wbcgrade.video.sampling.scan`: one small decoding pass keeps a
+   frame every ``sample_every`` seconds (and finds the cuts with ``per_shot``).
+3. Per shot (the whole clip by default), the sampled frames' palettes are
+   pooled as ``batch --consistent`` pools photos (every frame counts once;
+   :class:`~wbcgrade.color.grading.PaletteSum`) and graded once:
+   :func:`~wbcgrade.color.grading.series_grade` (vertex-checked fit, palette,
+   smooth colour map). The grade is its LUT: there is no regrain (a LUT sees
+   one pixel at a time; ffmpeg applies it).
+4. The LUTs are written as ``.cube`` files and scheduled over the frames
+   (:mod:`wbcgrade.video.shots`: blended over ``blend`` frames at each cut);
+   one ffmpeg pass decodes, converts to RGB with the clip's matrix and range,
+   applies them with ``lut3d`` (tetrahedral), converts back to the input's
+   pixel format and colour tags, and encodes, copying every other stream
+   (audio, subtitles, data) as it is, into a temporary file beside the
+   output that is renamed onto it only when ffmpeg succeeded.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade._publish import atomic_path, check_output_path
+from wbcgrade.color._files import remove_stale_temporaries
+from wbcgrade.color.grading import FitSummary, PaletteSum, series_grade
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.imageio import encode_for_grading
+from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut, write_cube
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.transfer import Grade, GradeOptions
+from wbcgrade.errors import InputError
+from wbcgrade.video.ffmpeg import (
+    VideoInfo,
+    encoder_pixel_formats,
+    file_arg,
+    from_rgb_filter,
+    probe,
+    run_pass,
+    to_rgb_filter,
+    write_lut3d_file,
+)
+from wbcgrade.video.sampling import (
+    DEFAULT_CUT_THRESHOLD,
+    DEFAULT_MIN_SHOT,
+    DEFAULT_SAMPLE_EVERY,
+    Samples,
+    scan,
+)
+from wbcgrade.video.shots import Segment, lut_schedule
+
+__all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "ShotGrade",
+           "VideoResult", "check_video_outputs", "shot_lut_paths", "shot_grade", "grade_video",
+           "encode_args"]
+
+#: --codec NAME -> (ffmpeg encoder, containers it may go in).
+CODECS = {
+    "x264": ("libx264", (".mp4", ".m4v", ".mov", ".mkv")),
+    "x265": ("libx265", (".mp4", ".m4v", ".mov", ".mkv")),
+    "prores": ("prores_ks", (".mov", ".mkv")),
+    "ffv1": ("ffv1", (".mkv", ".avi")),
+}
+#: x264/x265 constant rate factor (18: visually lossless for x264).
+DEFAULT_CRF = 18
+#: Frames over which the grade changes at a cut (--per-shot).
+DEFAULT_BLEND = 8
+
+
+@dataclass
+class VideoSettings:
+    """How a clip is sampled, cut and encoded (the grade's own settings are GradeOptions)."""
+
+    per_shot: bool = False
+    sample_every: float = DEFAULT_SAMPLE_EVERY
+    cut_threshold: float = DEFAULT_CUT_THRESHOLD
+    min_shot: float = DEFAULT_MIN_SHOT
+    blend: int = DEFAULT_BLEND
+    codec: str = "x264"
+    crf: int = DEFAULT_CRF
+    lut_size: int = DEFAULT_LUT_SIZE
+
+    def validate(self) -> None:
+        if self.codec not in CODECS:
+            raise InputError(f"--codec must be one of {', '.join(CODECS)}")
+        if not 0 <= self.crf <= 51:
+            raise InputError("--crf must be between 0 and 51")
+        if not 2 <= self.lut_size <= 256:
+            raise InputError("--lut-size must be between 2 and 256")
+        if self.blend < 0:
+            raise InputError("--blend-frames must be 0 or more")
+        if not (np.isfinite(self.sample_every) and self.sample_every > 0):
+            raise InputError("--sample-every must be a positive number of seconds")
+        if not 0 < self.cut_threshold < 1:
+            raise InputError("--cut-threshold must be between 0 and 1")
+
+
+@dataclass
+class ShotGrade:
+    """One shot: its frames, the frames sampled from it and its grade."""
+
+    first: int
+    last: int
+    samples: list[int]
+    grade: Grade
+    fit: FitSummary
+    table: np.ndarray
+
+    def as_dict(self, fps: float) -> dict:
+        ranked = self.grade.ranked()
+        return {"first_frame": self.first, "last_frame": self.last,
+                "start_s": round(self.first / fps, 4), "end_s": round((self.last + 1) / fps, 4),
+                "sampled_frames": self.samples,
+                "weights": [{"style": n, "weight": round(w, 6)} for n, w in ranked],
+                "loss": self.fit.loss, "fit_start": self.fit.start,
+                "single_style_losses": dict(zip(self.grade.names,
+                                                (float(v) for v in self.fit.vertex_losses))),
+                "fit": self.grade.info.get("fit", {}),
+                "timings_s": {k: round(v, 3) for k, v in self.grade.timings.items()}}
+
+
+@dataclass
+class VideoResult:
+    """What :func:`grade_video` did (JSON-friendly via :meth:`as_dict`)."""
+
+    input: Path
+    output: Path
+    luts: list[Path]
+    info: VideoInfo
+    settings: VideoSettings
+    shots: list[ShotGrade]
+    segments: list[Segment]
+    samples: Samples
+    timings: dict[str, float] = field(default_factory=dict)
+    encoder: str = ""
+    pix_fmt: str = ""
+
+    def as_dict(self) -> dict:
+        info = self.info
+        return {
+            "input": str(self.input), "output": str(self.output),
+            "luts": [str(p) for p in self.luts],
+            "video": {"width": info.width, "height": info.height, "fps": info.fps,
+                      "frames": info.frames, "duration_s": info.duration,
+                      "pix_fmt": info.pix_fmt, "codec": info.codec, "streams": info.streams,
+                      "matrix": None if info.is_rgb else info.matrix, "range": info.range,
+                      "tags": info.tags()},
+            "encoding": {"encoder": self.encoder, "pix_fmt": self.pix_fmt,
+                         "crf": self.settings.crf if self.settings.codec in ("x264", "x265")
+                         else None},
+            "settings": {k: v for k, v in vars(self.settings).items()},
+            "cuts": list(self.samples.cuts),
+            "shots": [shot.as_dict(info.fps) for shot in self.shots],
+            "blends": [{"frame": s.first, "shots": list(s.shots), "mix": s.mix}
+                       for s in self.segments if len(s.shots) == 2],
+            "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
+        }
+
+
+def check_video_outputs(source: str | os.PathLike, output: str | os.PathLike,
+                        lut: str | os.PathLike | None, settings: VideoSettings,
+                        overwrite: bool = False) -> tuple[Path, Path | None]:
+    """Check, before any work, that the outputs may be written -> (output, lut).
+
+    The output is never the input, is refused when it exists (unless
+    ``overwrite``) or is not a regular file, its folder must be writable,
+    and its container must hold the codec.
+    """
+    settings.validate()
+    source, output = Path(source), Path(output)
+    if not source.exists():
+        raise InputError(f"{source}: no such file")
+    encoder, containers = CODECS[settings.codec]
+    if output.suffix.lower() not in containers:
+        raise InputError(f"{output}: --codec {settings.codec} needs one of "
+                         f"{', '.join(containers)} as the output's extension")
+    check_output_path(output, [source], overwrite)
+    if lut is not None:
+        lut = Path(lut)
+        if lut.suffix.lower() != ".cube":
+            raise InputError(f"{lut}: LUT file name must end in .cube")
+        if lut.absolute() == output.absolute():
+            raise InputError(f"{lut}: the LUT and the graded clip must be different files")
+        check_output_path(lut, [source, output], overwrite)
+    return output, lut
+
+
+def shot_lut_paths(lut: str | os.PathLike, n_shots: int) -> list[Path]:
+    """Where ``--lut`` goes: the file itself for one grade, else ``<stem>_shotNN.cube`` per
+    shot (NN from 01, in order)."""
+    lut = Path(lut)
+    if n_shots == 1:
+        return [lut]
+    return [lut.with_name(f"{lut.stem}_shot{k:02d}{lut.suffix}") for k in range(1, n_shots + 1)]
+
+
+def shot_grade(frames: list[np.ndarray], styles: StyleSet, opts: GradeOptions,
+               callback: Callable[[int, np.ndarray, float], None] | None = None,
+               stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+    """One grade for a list of (h, w, 3) uint8 frames: their pooled palette, one fit.
+
+    Every frame counts once (as every photo of ``batch --consistent``).
+    """
+    pool_fit, pool = PaletteSum(), PaletteSum()
+    for frame in frames:
+        encoded, _ = encode_for_grading(frame.astype(np.float32) / np.float32(255), False)
+        pool_fit.add(image_histogram(encoded, opts.fit_bins, None, opts.max_pixels))
+        pool.add(image_histogram(encoded, opts.bins, None, opts.max_pixels))
+    return series_grade(pool_fit.result(), pool.result(), styles, opts, callback, stage)
+
+
+def _output_pix_fmt(info: VideoInfo, encoder: str) -> str:
+    """The input's pixel format when the encoder takes it; else the nearest it takes."""
+    supported = encoder_pixel_formats(encoder)
+    if not supported or info.pix_fmt in supported:
+        return info.pix_fmt
+    if info.is_rgb:
+        rgb = [f for f in supported if f.startswith(("gbr", "bgr", "rgb"))]
+        if rgb:
+            return rgb[0]
+    chroma = info.pix_fmt[:6]  # yuv420 / yuv422 / yuv444
+    same = [f for f in supported if f.startswith(chroma)]
+    deep = [f for f in same if info.high_depth == ("10" in f or "12" in f or "16" in f)]
+    return (deep or same or list(supported))[0]
+
+
+def encode_args(info: VideoInfo, settings: VideoSettings, output: Path, chain: str,
+                folder: Path) -> tuple[list[str], str, str]:
+    """ffmpeg arguments of the grading pass -> (args, encoder, output pixel format).
+
+    ``chain`` is the filter chain (``lut3d`` filters) between the conversion to
+    RGB and back; the whole graph is written to ``folder/graph.txt`` (read
+    with ``-/filter_complex``: a clip with many shots makes a long graph) and
+    ffmpeg must run in ``folder``. The output file is given as is (the caller
+    passes a temporary path with the output's extension).
+    """
+    encoder, _ = CODECS[settings.codec]
+    pix_fmt = _output_pix_fmt(info, encoder)
+    rgb = "gbrp16le" if info.high_depth else "gbrp"
+    graph = (f"[0:v:0]{to_rgb_filter(info, rgb)},{chain},"
+             f"{from_rgb_filter(info, pix_fmt)}[graded]")
+    (folder / "graph.txt").write_text(graph, encoding="utf-8")
+    args = ["-i", file_arg(info.path), "-/filter_complex", "graph.txt",
+            "-map", "[graded]", "-map", "0", "-map", "-0:v:0",
+            "-c", "copy", "-c:v:0", encoder]
+    if settings.codec in ("x264", "x265"):
+        args += ["-crf", str(settings.crf), "-preset", "medium"]
+        if settings.codec == "x265":
+            args += ["-x265-params", "log-level=error"]
+            if output.suffix.lower() in (".mp4", ".m4v", ".mov"):
+                args += ["-tag:v:0", "hvc1"]
+    elif settings.codec == "prores":
+        args += ["-profile:v:0", "3" if "444" not in pix_fmt else "4"]
+    elif settings.codec == "ffv1":
+        args += ["-level", "3"]
+    if output.suffix.lower() in (".mp4", ".m4v", ".mov"):
+        args += ["-movflags", "+faststart"]
+    args += ["-fps_mode", "passthrough", "-map_metadata", "0", "-loglevel", "error", "-y",
+             file_arg(output)]
+    return args, encoder, pix_fmt
+
+
+def _lut_chain(segments: list[Segment], names: list[str]) -> str:
+    """The lut3d filters of a schedule, each reading its table's file ``names[i]``."""
+    filters = []
+    for seg, name in zip(segments, names):
+        text = f"lut3d=file={name}:interp=tetrahedral"
+        if len(segments) > 1:
+            text += f":enable='between(n,{seg.first},{seg.last})'"
+        filters.append(text)
+    return ",".join(filters)
+
+
+def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: StyleSet,
+                opts: GradeOptions, settings: VideoSettings | None = None,
+                lut: str | os.PathLike | None = None, overwrite: bool = False,
+                fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
+                stage: Callable[[str], None] | None = None,
+                progress: Callable[[str, int, int], None] | None = None,
+                timings: dict[str, float] | None = None) -> VideoResult:
+    """Grade a clip and write it (and the LUT of its grade).
+
+    Parameters
+    ----------
+    source, output : input clip and graded clip (never the same file).
+    styles, opts : as for photos; ``opts.regrain`` is ignored (a LUT has none).
+    settings : sampling, cuts and encoding (:class:`VideoSettings`).
+    lut : also write the clip's LUT here (with several shots, one file per shot:
+        :func:`shot_lut_paths`).
+    progress : ``progress(pass_name, frames_done, frames_total)`` during the
+        decoding ("scan") and encoding ("encode") passes.
+
+    The output is written to a temporary file beside it and renamed onto it
+    when ffmpeg succeeded; on any failure or Ctrl-C ffmpeg is killed and the
+    temporary file removed.
+    """
+    settings = settings or VideoSettings()
+    opts = replace(opts, regrain=False)
+    opts.validate(len(styles.names))
+    output, lut = check_video_outputs(source, output, lut, settings, overwrite)
+    for target in (output, lut):
+        if target is not None:
+            remove_stale_temporaries(target.parent if str(target.parent) else Path("."),
+                                     [target.name])
+    timings = dict(timings or {})
+    say = stage or (lambda name: None)
+    start = time.perf_counter()
+    info = probe(source)
+
+    say("scan")
+    t0 = time.perf_counter()
+    samples = scan(source, info, settings.sample_every, cuts=settings.per_shot,
+                   cut_threshold=settings.cut_threshold, min_shot=settings.min_shot,
+                   progress=None if progress is None else
+                   (lambda n: progress("scan", n, info.frames)))
+    timings["scan"] = time.perf_counter() - t0
+
+    shots = []
+    t0 = time.perf_counter()
+    for first, last in samples.shots():
+        indices = [n for n in sorted(samples.frames) if first <= n <= last]
+        grade, fit = shot_grade([samples.frames[n] for n in indices], styles, opts,
+                                fit_callback, say)
+        table = color_map_to_lut(grade.color_map, settings.lut_size, grade.strength)
+        shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
+    timings["grade"] = time.perf_counter() - t0
+    segments = lut_schedule(samples.shots(), [s.table for s in shots], settings.blend)
+    luts = [] if lut is None else shot_lut_paths(lut, len(shots))
+    for path in luts[1:]:  # the first was checked with the other outputs
+        check_output_path(path, [source, output], overwrite)
+
+    say("encode")
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="wbcgrade-video-") as folder:
+        names = []
+        for number, seg in enumerate(segments):
+            name = f"lut{number:05d}.cube"
+            write_lut3d_file(Path(folder) / name, seg.table)
+            names.append(name)
+        chain = _lut_chain(segments, names)
+        with atomic_path(output, overwrite=overwrite) as tmp:
+            args, encoder, pix_fmt = encode_args(info, settings, Path(tmp), chain,
+                                                  Path(folder))
+            run_pass(args, None if progress is None else
+                     (lambda n: progress("encode", n, info.frames)), cwd=folder)
+    timings["encode"] = time.perf_counter() - t0
+    for path, shot in zip(luts, shots):
+        ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked())
+        write_cube(path, shot.table, title=f"wbcgrade video {Path(source).name}",
+                   comments=[f"wbcgrade grade of {Path(source).name}, frames {shot.first}-"
+                             f"{shot.last}: {ranked}",
+                             "input: full-range RGB decoded with the clip's own matrix"],
+                   overwrite=overwrite)
+    timings["total"] = time.perf_counter() - start
+    return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
+                       timings, encoder, pix_fmt)
