@@ -121,7 +121,8 @@ class VideoInfo:
 
     def tags(self) -> dict[str, str]:
         """The colour tags the output gets: the input's, the assumed matrix's where untagged."""
-        assumed = {"bt709": "bt709", "smpte170m": "smpte170m"}.get(self.matrix)
+        assumed = None if self.is_rgb else {"bt709": "bt709",
+                                             "smpte170m": "smpte170m"}.get(self.matrix)
         space = self.colorspace or (None if self.is_rgb else assumed)
         tags = {"range": self.range,
                 "colorspace": space or "",
