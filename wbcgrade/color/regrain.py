@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
 from wbcgrade.core._jit import compiled
@@ -42,119 +43,40 @@ DEFAULT_REGRAIN_EPS = 0.2 ** 2
 _MAX_SOLVE_PIXELS = 1_500_000
 
 
-@compiled(cache=True)
-def _reflect(i: int, n: int) -> int:  # pragma: no cover - compiled
-    """Index ``i`` of a line of ``n`` extended by mirroring (d c b a | a b c d | d c b a)."""
-    if 0 <= i < n:
-        return i
-    i = i % (2 * n)
-    return 2 * n - 1 - i if i >= n else i
-
-
-@compiled(parallel=True, cache=True)
-def _box_mean(x: np.ndarray, radius: int) -> np.ndarray:  # pragma: no cover - compiled
-    """Mean of each channel of an (H, W, K) array over (2 radius + 1)^2 windows, edges
-    mirrored (scipy.ndimage.uniform_filter's "reflect"): running sums along the rows,
-    then running sums down the columns (float64 sums)."""
-    h, w, k = x.shape
-    rows = np.empty((h, w * k), np.float32)
-    for y in numba.prange(h):
-        acc = np.zeros(k)
-        for dx in range(-radius, radius + 1):
-            xx = _reflect(dx, w)
-            for c in range(k):
-                acc[c] += x[y, xx, c]
-        for xo in range(w):
-            for c in range(k):
-                rows[y, xo * k + c] = acc[c]
-            leaving, entering = _reflect(xo - radius, w), _reflect(xo + radius + 1, w)
-            for c in range(k):
-                acc[c] += x[y, entering, c] - x[y, leaving, c]
-    out = np.empty((h, w * k), np.float32)
-    scale = 1.0 / ((2 * radius + 1) * (2 * radius + 1))
-    width = w * k
-    chunk = 256
-    for part in numba.prange((width + chunk - 1) // chunk):
-        lo = part * chunk
-        hi = min(lo + chunk, width)
-        acc2 = np.zeros(hi - lo)
-        for dy in range(-radius, radius + 1):
-            yy = _reflect(dy, h)
-            for j in range(lo, hi):
-                acc2[j - lo] += rows[yy, j]
-        for y in range(h):
-            for j in range(lo, hi):
-                out[y, j] = acc2[j - lo] * scale
-            leaving, entering = _reflect(y - radius, h), _reflect(y + radius + 1, h)
-            for j in range(lo, hi):
-                acc2[j - lo] += rows[entering, j] - rows[leaving, j]
-    return out.reshape(h, w, k)
-
-
-@compiled(parallel=True, cache=True)
-def _moments(guide: np.ndarray, change: np.ndarray) -> np.ndarray:  # pragma: no cover
-    """(H, W, 21): guide (3), change (3), guide_a guide_c (a <= c: 6), guide_a change_c (9)."""
-    h, w = guide.shape[:2]
-    out = np.empty((h, w, 21), np.float32)
-    for y in numba.prange(h):
-        for x in range(w):
-            for c in range(3):
-                out[y, x, c] = guide[y, x, c]
-                out[y, x, 3 + c] = change[y, x, c]
-            m = 6
-            for a in range(3):
-                for c in range(a, 3):
-                    out[y, x, m] = guide[y, x, a] * guide[y, x, c]
-                    m += 1
-            for a in range(3):
-                for c in range(3):
-                    out[y, x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
-    return out
-
-
-@compiled(parallel=True, cache=True)
-def _local_models(means: np.ndarray, eps: float) -> np.ndarray:  # pragma: no cover
-    """Per window: A = (Cov(I) + eps Id)^-1 Cov(I, d) (9) and b = mean(d) - A^T mean(I) (3)."""
-    h, w = means.shape[:2]
-    out = np.empty((h, w, 12), np.float32)
-    for y in numba.prange(h):
-        for x in range(w):
-            m = means[y, x]
-            i0, i1, i2 = m[0], m[1], m[2]
-            s00 = m[6] - i0 * i0 + eps
-            s01 = m[7] - i0 * i1
-            s02 = m[8] - i0 * i2
-            s11 = m[9] - i1 * i1 + eps
-            s12 = m[10] - i1 * i2
-            s22 = m[11] - i2 * i2 + eps
-            v00, v01, v02 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
-            v11, v12, v22 = s00 * s22 - s02 * s02, s01 * s02 - s00 * s12, s00 * s11 - s01 * s01
-            det = s00 * v00 + s01 * v01 + s02 * v02
-            for c in range(3):
-                d = m[3 + c]
-                x0 = m[12 + c] - i0 * d
-                x1 = m[15 + c] - i1 * d
-                x2 = m[18 + c] - i2 * d
-                a0 = (v00 * x0 + v01 * x1 + v02 * x2) / det
-                a1 = (v01 * x0 + v11 * x1 + v12 * x2) / det
-                a2 = (v02 * x0 + v12 * x1 + v22 * x2) / det
-                out[y, x, c] = a0
-                out[y, x, 3 + c] = a1
-                out[y, x, 6 + c] = a2
-                out[y, x, 9 + c] = d - (a0 * i0 + a1 * i1 + a2 * i2)
-    return out
+def _box(x: np.ndarray, radius: int) -> np.ndarray:
+    return ndimage.uniform_filter(x, size=(2 * radius + 1, 2 * radius + 1), mode="reflect")
 
 
 def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int,
                   eps: float) -> tuple[np.ndarray, np.ndarray]:
     """Box-averaged (H, W, 3, 3) A and (H, W, 3) b of the local model change = A^T guide + b."""
     h, w = guide.shape[:2]
-    guide = np.ascontiguousarray(guide, dtype=np.float32)
-    change = np.ascontiguousarray(change, dtype=np.float32)
-    means = _box_mean(_moments(guide, change), int(radius))
-    smooth = _box_mean(_local_models(means, float(eps)), int(radius))
-    A = np.ascontiguousarray(smooth[..., :9].reshape(h, w, 3, 3))
-    return A, np.ascontiguousarray(smooth[..., 9:])
+    mean_i = np.stack([_box(guide[..., c], radius) for c in range(3)], axis=-1)
+    mean_d = np.stack([_box(change[..., c], radius) for c in range(3)], axis=-1)
+    # Symmetric 3x3 covariance of the guide (+ eps), inverted in closed form.
+    def cov(a, c, x, mean_x):
+        return _box(guide[..., a] * x[..., c], radius) - mean_i[..., a] * mean_x[..., c]
+
+    s00, s01, s02 = cov(0, 0, guide, mean_i) + eps, cov(0, 1, guide, mean_i), \
+        cov(0, 2, guide, mean_i)
+    s11, s12, s22 = cov(1, 1, guide, mean_i) + eps, cov(1, 2, guide, mean_i), \
+        cov(2, 2, guide, mean_i) + eps
+    i00, i01, i02 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
+    i11, i12, i22 = s00 * s22 - s02 * s02, s01 * s02 - s00 * s12, s00 * s11 - s01 * s01
+    det = s00 * i00 + s01 * i01 + s02 * i02
+    inverse = [[i00, i01, i02], [i01, i11, i12], [i02, i12, i22]]
+    cross = [[cov(a, c, change, mean_d) for c in range(3)] for a in range(3)]
+    A = np.empty((h, w, 3, 3), np.float32)
+    for a in range(3):
+        for c in range(3):
+            A[..., a, c] = (inverse[a][0] * cross[0][c] + inverse[a][1] * cross[1][c]
+                            + inverse[a][2] * cross[2][c]) / det
+    b = mean_d - np.einsum("hwac,hwa->hwc", A, mean_i)
+    for a in range(3):
+        for c in range(3):
+            A[..., a, c] = _box(A[..., a, c], radius)
+    b = np.stack([_box(b[..., c], radius) for c in range(3)], axis=-1)
+    return A, b
 
 
 @compiled(parallel=True, cache=True)
