@@ -12,7 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wbcgrade.core._barycenter_scaling import Iterate, weighted_sum
-from wbcgrade.core.geometry import Geometry
+from wbcgrade.core._cpu import parallel_map
+from wbcgrade.core.geometry import PARALLEL_BINS, Geometry
 from wbcgrade.errors import NumericalError
 
 
@@ -24,6 +25,57 @@ class LogBackend:
         with np.errstate(divide="ignore"):
             self.log_H = np.log(H)
         self.weights = weights
+        self.S = H.shape[0]
+        self.M = int(np.prod(H.shape[1:]))  # bins of one histogram, batch included
+        self.N = geometry.size
+        self.batch = self.M // self.N
+        self.items = self.S * self.batch
+        # Grids: each histogram's whole recursion (products and element-wise
+        # work) runs in one thread, histograms spread over the core's threads.
+        self.per_item = callable(getattr(geometry, "_log_apply_one", None))
+
+    # ------------------------------------------------------------ helpers
+    def _rows(self, x: NDArray) -> NDArray:
+        return x.reshape(self.items, *self.geometry.shape)
+
+    def _over_items(self, work) -> None:
+        if self.items >= 2 and self.N >= PARALLEL_BINS:
+            parallel_map(work, self.items)
+        else:
+            work(0, self.items)
+
+    def _over_bins(self, work) -> None:
+        if self.M >= PARALLEL_BINS:
+            parallel_map(work, self.M)
+        else:
+            work(0, self.M)
+
+    def _combine(self, log_phi: NDArray) -> tuple[NDArray, NDArray]:
+        """``log P = sum_s w_s log phi_s`` and ``P``, split over bins."""
+        log_P = np.empty(self.log_H.shape[1:])
+        flat_P, flat_phi = log_P.reshape(-1), log_phi.reshape(self.S, -1)
+        nonzero = np.flatnonzero(self.weights)
+        w = self.weights[nonzero]
+
+        def work(lo: int, hi: int) -> None:
+            np.dot(w, flat_phi[nonzero, lo:hi], out=flat_P[lo:hi])
+
+        self._over_bins(work)
+        if not np.all(np.isfinite(log_P)):
+            raise NumericalError("the log-domain barycenter is not finite")
+        return log_P, np.exp(log_P)
+
+    def _scalings(self, log_P: NDArray, log_phi: NDArray, out: NDArray | None) -> NDArray:
+        """``log b = log P - log phi`` for every histogram (into ``out``), split over bins."""
+        out = np.empty_like(log_phi) if out is None else out
+        flat_P = log_P.reshape(-1)
+        flat_phi, flat_out = log_phi.reshape(self.S, -1), out.reshape(self.S, -1)
+
+        def work(lo: int, hi: int) -> None:
+            np.subtract(flat_P[lo:hi], flat_phi[:, lo:hi], out=flat_out[:, lo:hi])
+
+        self._over_bins(work)
+        return out
 
     def initial(self) -> NDArray:
         return np.zeros_like(self.log_H)
@@ -44,21 +96,44 @@ class LogBackend:
     def step(self, log_b: NDArray, need_next: bool = True,
              keep: bool = True) -> tuple[NDArray, Iterate]:
         """One iteration in logs. ``keep=False``: only ``P`` and the next scalings are
-        wanted, so ``log K b`` and ``log phi`` are overwritten as they go (three
-        states of memory at the peak instead of five). ``log a`` is never kept
-        (``log H - log K b``: the adjoint recomputes it)."""
+        wanted, so ``log K b`` is not kept and the next scalings overwrite
+        ``log phi``. ``log a`` is never kept (``log H - log K b``: the adjoint
+        recomputes it)."""
+        if not self.per_item:
+            return self._step_whole(log_b, need_next, keep)
+        geom = self.geometry
+        log_Kb = np.empty_like(self.log_H) if keep else None
+        log_phi = np.empty_like(self.log_H)
+        b_rows, H_rows, phi_rows = self._rows(log_b), self._rows(self.log_H), self._rows(log_phi)
+        Kb_rows = None if log_Kb is None else self._rows(log_Kb)
+
+        def work(lo: int, hi: int) -> None:
+            scratch = np.empty(geom.shape)
+            for k in range(lo, hi):
+                kb = scratch if Kb_rows is None else Kb_rows[k]
+                geom._log_apply_one(b_rows[k], kb)
+                np.subtract(H_rows[k], kb, out=scratch)  # log a
+                geom._log_apply_one(scratch, phi_rows[k])
+
+        self._over_items(work)
+        log_P, P = self._combine(log_phi)
+        if not keep:
+            log_b_next = self._scalings(log_P, log_phi, log_phi) if need_next else None
+            return log_b_next, Iterate(None, None, None, None, P, log_P)
+        log_b_next = self._scalings(log_P, log_phi, None) if need_next else None
+        return log_b_next, Iterate(log_Kb, None, log_phi, log_phi, P, log_P)
+
+    def _step_whole(self, log_b: NDArray, need_next: bool, keep: bool):
+        """:meth:`step` for geometries with only the public ``log_apply``."""
         log_Kb = self.geometry.log_apply(log_b)
         log_a = np.subtract(self.log_H, log_Kb, out=None if keep else log_Kb)
-        log_phi = self._apply_in_place(log_a)
+        log_phi = self.geometry.log_apply(log_a)
         log_P = weighted_sum(self.weights, log_phi)
         if not np.all(np.isfinite(log_P)):
             raise NumericalError("the log-domain barycenter is not finite")
         P = np.exp(log_P)
-        if not keep:
-            log_b_next = np.subtract(log_P, log_phi, out=log_phi) if need_next else None
-            return log_b_next, Iterate(None, None, None, None, P, log_P)
         log_b_next = log_P - log_phi if need_next else None
-        return log_b_next, Iterate(log_Kb, None, log_phi, log_phi, P, log_P)
+        return log_b_next, Iterate(log_Kb if keep else None, None, log_phi, log_phi, P, log_P)
 
     record_arrays = 2
 
@@ -77,9 +152,10 @@ class LogBackend:
     ) -> tuple[NDArray, NDArray | None]:
         """Same adjoint as the scaling backend, in logs with signs carried beside them.
 
-        Geometries with a signed log-domain product (``_signed_log_apply``:
-        grids) apply it once per kernel product; others carry the positive
-        and negative parts through separately (twice the products).
+        On grids each histogram's reverse step runs in one thread (one signed
+        product per kernel application, in place); other geometries carry the
+        positive and negative parts through their public ``log_apply``
+        separately (twice the products).
         """
         log_phi = it.log_phi
         if not np.all(np.isfinite(log_phi)):
@@ -91,36 +167,8 @@ class LogBackend:
         if not need_r:
             return grad, None
         geom = self.geometry
-        if getattr(geom, "_signed_log_apply", None) is not None:
-            # One signed product per kernel application, in place: u = w g - r is
-            # written over r (not needed after this step), then carried as
-            # log |.| beside its signs through both products.
-            if r is None:
-                u = np.empty_like(it.phi)
-                for s, w_s in enumerate(self.weights):
-                    np.multiply(g, w_s, out=u[s])
-            else:
-                u = np.negative(r, out=r)
-                for s, w_s in enumerate(self.weights):
-                    u[s] += w_s * g
-            signs = np.sign(u)
-            part = np.abs(u, out=u)
-            with np.errstate(divide="ignore"):
-                np.log(part, out=part)
-            part -= it.phi
-            geom._shifted_log_apply(part, signs, out=part, out_signs=signs)
-            if it.a is None:  # log a = log H - log K b, not kept
-                part += self.log_H
-                part -= it.Kb
-            else:
-                part += it.a
-            part -= it.Kb
-            geom._shifted_log_apply(part, signs, out=part, out_signs=signs)
-            part += log_b_prev
-            np.exp(part, out=part)
-            part *= signs
-            np.negative(part, out=part)
-            return grad, part
+        if self.per_item:
+            return grad, self._adjoint_items(it, log_b_prev, g, r)
         u = self.weights.reshape((-1,) + (1,) * g.ndim) * g
         if r is not None:
             u -= r
@@ -133,3 +181,50 @@ class LogBackend:
                 part = geom.log_apply(part) + log_b_prev
                 r_next -= sign * np.exp(part)
         return grad, r_next
+
+    def _adjoint_items(self, it: Iterate, log_b_prev: NDArray, g: NDArray,
+                       r: NDArray | None) -> NDArray:
+        """The next ``r`` on a grid, histogram by histogram, written over ``r``.
+
+        ``u = w_s g - r_s`` is carried as ``log |u|`` beside its signs through
+        ``K(u / phi)``, times ``a / K b``, through ``K`` again, times ``b``.
+        """
+        geom = self.geometry
+        r_next = np.empty_like(self.log_H) if r is None else r
+        rows = self._rows
+        out_rows, phi_rows, Kb_rows = rows(r_next), rows(it.phi), rows(it.Kb)
+        H_rows, b_rows = rows(self.log_H), rows(log_b_prev)
+        a_rows = None if it.a is None else rows(it.a)
+        r_rows = None if r is None else out_rows
+        g_rows = g.reshape(self.batch, *geom.shape)
+
+        def work(lo: int, hi: int) -> None:
+            signs = np.empty(geom.shape)
+            with np.errstate(divide="ignore"):
+                for k in range(lo, hi):
+                    part = out_rows[k]  # r's row when r is given: u = w g - r in place
+                    np.multiply(g_rows[k % self.batch], self.weights[k // self.batch],
+                                out=signs)
+                    if r_rows is None:
+                        part[...] = signs
+                    else:
+                        np.subtract(signs, part, out=part)
+                    np.sign(part, out=signs)
+                    np.abs(part, out=part)
+                    np.log(part, out=part)
+                    part -= phi_rows[k]
+                    geom._log_apply_one(part, part, signs, signs)
+                    if a_rows is None:  # log a = log H - log K b, not kept
+                        part += H_rows[k]
+                        part -= Kb_rows[k]
+                    else:
+                        part += a_rows[k]
+                    part -= Kb_rows[k]
+                    geom._log_apply_one(part, part, signs, signs)
+                    part += b_rows[k]
+                    np.exp(part, out=part)
+                    part *= signs
+                    np.negative(part, out=part)
+
+        self._over_items(work)
+        return r_next
