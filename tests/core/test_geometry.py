@@ -208,3 +208,16 @@ def test_shifted_log_apply_in_place_equals_out_of_place(shape, width, rng):
     np.testing.assert_array_equal(got_signs, expected_signs)
     with pytest.raises(ValueError, match="out must be"):
         geom._shifted_log_apply(f, None, out=np.empty(f.shape, np.float32))
+
+
+@pytest.mark.parametrize("shape", [(200,), (14, 13, 12)])
+def test_a_product_needed_on_a_subset_is_exact_there_and_repairs_less(shape, rng):
+    geom = GridGeometry.with_width(shape, 0.3)
+    all_repairs = some_repairs = 0
+    for f in _steep_log_values(shape, rng):
+        needed = rng.random(shape) < 0.2
+        full, part = np.empty(shape), np.empty(shape)
+        all_repairs += geom._log_apply_one(f, full)
+        some_repairs += geom._log_apply_one(f, part, needed=needed)
+        np.testing.assert_allclose(part[needed], full[needed], rtol=1e-14)  # to rounding
+    assert all_repairs > 0 and some_repairs < all_repairs

@@ -33,6 +33,9 @@ class LogBackend:
         # Grids: each histogram's whole recursion (products and element-wise
         # work) runs in one thread, histograms spread over the core's threads.
         self.per_item = callable(getattr(geometry, "_log_apply_one", None))
+        # K b matters only where its histogram has mass (a = p / K b is 0 elsewhere):
+        # there only are its products repaired to full precision.
+        self.support = H > 0 if self.per_item else None
 
     # ------------------------------------------------------------ helpers
     def _rows(self, x: NDArray) -> NDArray:
@@ -106,12 +109,14 @@ class LogBackend:
         log_phi = np.empty_like(self.log_H)
         b_rows, H_rows, phi_rows = self._rows(log_b), self._rows(self.log_H), self._rows(log_phi)
         Kb_rows = None if log_Kb is None else self._rows(log_Kb)
+        support = self._rows(self.support)
 
         def work(lo: int, hi: int) -> None:
             scratch = np.empty(geom.shape)
             for k in range(lo, hi):
                 kb = scratch if Kb_rows is None else Kb_rows[k]
-                geom._log_apply_one(b_rows[k], kb)
+                geom._log_apply_one(b_rows[k], kb, needed=support[k])
+                np.copyto(kb, 0.0, where=~support[k])  # unspecified there: finite, unused
                 np.subtract(H_rows[k], kb, out=scratch)  # log a
                 geom._log_apply_one(scratch, phi_rows[k])
 
@@ -193,7 +198,7 @@ class LogBackend:
         r_next = np.empty_like(self.log_H) if r is None else r
         rows = self._rows
         out_rows, phi_rows, Kb_rows = rows(r_next), rows(it.phi), rows(it.Kb)
-        H_rows, b_rows = rows(self.log_H), rows(log_b_prev)
+        H_rows, b_rows, support = rows(self.log_H), rows(log_b_prev), rows(self.support)
         a_rows = None if it.a is None else rows(it.a)
         r_rows = None if r is None else out_rows
         g_rows = g.reshape(self.batch, *geom.shape)
@@ -213,7 +218,8 @@ class LogBackend:
                     np.abs(part, out=part)
                     np.log(part, out=part)
                     part -= phi_rows[k]
-                    geom._log_apply_one(part, part, signs, signs)
+                    # times a = 0 off the support next: only the support must be exact
+                    geom._log_apply_one(part, part, signs, signs, needed=support[k])
                     if a_rows is None:  # log a = log H - log K b, not kept
                         part += H_rows[k]
                         part -= Kb_rows[k]

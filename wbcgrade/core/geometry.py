@@ -184,8 +184,12 @@ def _shifted_log_product(
     out: NDArray,
     signs: NDArray | None = None,
     out_signs: NDArray | None = None,
+    needed: NDArray | None = None,
 ) -> int:
     """``out = log(K exp(values))`` along axis 1 of ``(before, n, after)`` arrays, exactly.
+
+    ``needed`` (bool, broadcastable to the output): only these results must be
+    exact; the others keep the first pass's value (possibly ``-inf``).
 
     With ``signs`` (+1, -1 or 0, same shape), the product of signed values
     ``signs * exp(values)``: ``out = log |K x|`` and ``out_signs = sign(K x)``.
@@ -260,6 +264,8 @@ def _shifted_log_product(
             np.log(scaled, out=out)
             out += shift0[:, None, :]
             del scaled
+        if needed is not None:
+            low &= needed
         if not low.any():
             return 0
         still = np.zeros_like(low)
@@ -608,12 +614,20 @@ class GridGeometry(Geometry):
         return result, out_signs
 
     def _log_apply_one(self, values: NDArray, out: NDArray, signs: NDArray | None = None,
-                       out_signs: NDArray | None = None) -> int:
-        """``log_apply`` of one histogram ``values`` (``self.shape``) into ``out``."""
+                       out_signs: NDArray | None = None, needed: NDArray | None = None) -> int:
+        """``log_apply`` of one histogram ``values`` (``self.shape``) into ``out``.
+
+        ``needed`` (bool, ``self.shape``): only these results must be exact (the
+        others are left unspecified, possibly ``-inf``); each axis's product then
+        repairs only the intermediate results that reach a needed one.
+        """
         current, current_signs, repairs = values, signs, 0
         for axis in range(self.ndim):
             before = int(np.prod(self.shape[:axis]))
             n, after = self.shape[axis], int(np.prod(self.shape[axis + 1 :]))
+            reach = None
+            if needed is not None:  # the later axes mix along axes > axis only
+                reach = needed.reshape(before, n, after).any(axis=2, keepdims=True)
             last = axis == self.ndim - 1
             # one axis (a 1-D grid) in place: the product reads its input after writing
             direct = last and not np.may_share_memory(out, current)
@@ -625,7 +639,7 @@ class GridGeometry(Geometry):
             repairs += _shifted_log_product(
                 self._axis_kernels[axis], current.reshape(lines), target.reshape(lines),
                 None if signs is None else current_signs.reshape(lines),
-                None if signs is None else target_signs.reshape(lines))
+                None if signs is None else target_signs.reshape(lines), reach)
             current, current_signs = target, target_signs
         if current is not out:
             out[...] = current
