@@ -753,8 +753,6 @@ def refine_grid(values: ArrayLike, shape: tuple[int, ...]) -> NDArray:
     -------
     ndarray, shape (..., *shape), float64
     """
-    from scipy.ndimage import zoom
-
     x = np.array(values, dtype=np.float64)
     d = len(shape)
     if x.ndim < d or any(n < 2 for n in x.shape[x.ndim - d :]) or any(n < 2 for n in shape):
@@ -762,10 +760,15 @@ def refine_grid(values: ArrayLike, shape: tuple[int, ...]) -> NDArray:
     finite = np.isfinite(x)
     if not finite.all():
         x[~finite] = x[finite].min() if finite.any() else 0.0
-    lead = x.shape[: x.ndim - d]
-    flat = x.reshape(-1, *x.shape[x.ndim - d :])
-    factors = [n / m for n, m in zip(shape, flat.shape[1:])]
-    out = np.stack([zoom(v, factors, order=1, mode="nearest", grid_mode=False) for v in flat])
-    if out.shape[1:] != tuple(shape):
-        raise AssertionError(f"zoom produced {out.shape[1:]}, expected {shape}")
-    return out.reshape(*lead, *shape)
+    # One gather-and-blend pass per axis: new point i sits at i (n_in - 1) / (n_out - 1)
+    # of the old grid, between old points base and base + 1.
+    lead = x.ndim - d
+    for k, n_out in enumerate(shape):
+        axis, n_in = lead + k, x.shape[lead + k]
+        if n_in == n_out:
+            continue
+        pos = np.arange(n_out) * ((n_in - 1) / (n_out - 1))
+        base = np.minimum(pos.astype(np.int64), n_in - 2)
+        frac = (pos - base).reshape([-1 if a == axis else 1 for a in range(x.ndim)])
+        x = np.take(x, base, axis=axis) * (1.0 - frac) + np.take(x, base + 1, axis=axis) * frac
+    return np.ascontiguousarray(x)
