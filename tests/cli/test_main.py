@@ -17,7 +17,7 @@ def test_version_and_help():
     assert result.exit_code == 0 and __version__ in result.output
     result = runner.invoke(main, ["--help"])
     assert result.exit_code == 0
-    for command in ("apply", "batch", "brdf", "preset", "report", "shape"):
+    for command in ("apply", "batch", "brdf", "preset", "report", "shape", "video"):
         assert command in result.output
     assert "demo" not in result.output  # an example script now: examples/demo.py
 

@@ -77,7 +77,7 @@ class VideoInfo:
     color_range : "tv" (limited), "pc" (full) or None (untagged).
     colorspace, primaries, transfer : colour tags (None when untagged).
     frames : number of video frames (counted without decoding).
-    duration : seconds.
+    duration : seconds (at least frames / fps).
     streams : kind of every stream in file order ("video", "audio", "subtitle", "data"...).
     codec : the video codec's name.
     """
@@ -223,9 +223,11 @@ def probe(path: str | os.PathLike) -> VideoInfo:
     frames, duration = _count_frames(path)
     if frames < 1:
         raise InputError(f"{path}: the video stream has no frames")
-    return VideoInfo(path, video["width"], video["height"], _exact_rate(fps), video["pix_fmt"],
+    fps = _exact_rate(fps)
+    return VideoInfo(path, video["width"], video["height"], fps, video["pix_fmt"],
                      video.get("color_range"), video.get("colorspace"), video.get("primaries"),
-                     video.get("transfer"), frames, duration, streams, video["codec"])
+                     video.get("transfer"), frames, max(duration, frames / fps), streams,
+                     video["codec"])
 
 
 def _count_frames(path: Path) -> tuple[int, float]:
