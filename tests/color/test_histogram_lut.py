@@ -115,15 +115,3 @@ def test_resampling_matches_soft_binning_of_bin_centres_and_upsamples_smoothly(r
     # No comb: every fine bin between two occupied coarse bins gets mass.
     assert np.count_nonzero(fine) > 4 * np.count_nonzero(hist)
     np.testing.assert_allclose(_mean(fine), _mean(hist), atol=2e-3)
-
-
-@pytest.mark.parametrize("coarse, fine", [((4, 4, 4), (7, 7, 7)), ((5, 7, 9), (9, 13, 17)),
-                                          ((6, 3, 5), (6, 11, 5))])
-def test_refine_linear_is_the_core_refine_grid(rng, coarse, fine):
-    from wbcgrade.color.histogram import refine_linear
-    from wbcgrade.core import refine_grid
-
-    values = rng.standard_normal(coarse) * 40
-    values[0, 1, 2] = -np.inf  # a vanished log-scaling
-    np.testing.assert_allclose(refine_linear(values, fine), refine_grid(values, fine),
-                               rtol=1e-14, atol=1e-12)

@@ -290,8 +290,9 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     color_map : (n, n, n, 3) float32 in [0, 1], the raw barycentric projection
     result : wbcgrade.core.SinkhornResult of the final solve
     """
-    from wbcgrade.color.histogram import refine_linear, resample_histogram
+    from wbcgrade.color.histogram import resample_histogram
     from wbcgrade.core import GridGeometry, barycentric_projection, sinkhorn
+    from wbcgrade.core.geometry import refine_grid
 
     n = photo_hist.shape[0]
     sizes = [n]
@@ -311,7 +312,7 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
             if log_b is not None:
                 init = log_b * (gamma_prev / geometry.gamma)
                 if shape_prev != geometry.shape:
-                    init = refine_linear(init, geometry.shape)
+                    init = refine_grid(init, geometry.shape)
             level_tol = tol if size == n else fine_start_tol
             result = sinkhorn(p, q, geometry,
                               tol=level_tol if factor == 1.0 else max(level_tol, 1e-2),
@@ -344,8 +345,8 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
     -------
     ((bins, bins, bins) float64 summing to 1, info dict)
     """
-    from wbcgrade.color.histogram import refine_linear
     from wbcgrade.core import BarycenterSolver, GridGeometry
+    from wbcgrade.core.geometry import refine_grid
 
     n = opts.bins
     m = min(n, opts.palette_bins)
@@ -358,7 +359,7 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
     solver = BarycenterSolver(floored, geometry, opts.n_iter)
     target = solver.barycenter(np.asarray(weights)[keep] / np.sum(np.asarray(weights)[keep]))
     if m != n:
-        target = np.clip(refine_linear(target, (n,) * 3), 0.0, None)
+        target = np.clip(refine_grid(target, (n,) * 3), 0.0, None)
         target /= target.sum()
     return target, {"bins": m, "gamma": float(geometry.gamma), "backend": solver.last_backend}
 
