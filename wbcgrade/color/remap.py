@@ -17,30 +17,38 @@ __all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map",
            "monotone_lightness", "LUMA_WEIGHTS"]
 
 
-@compiled(parallel=True, cache=True, fastmath=False)
-def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.ndarray) -> None:
+@compiled(inline="always", cache=True)
+def _mapped(table, x0, x1, x2, strength, out) -> None:  # pragma: no cover - compiled
+    """``out[c]``: the colour (x0, x1, x2) moved through the map (trilinear), blended
+    with itself by ``strength``; the one lookup both remap kernels inline."""
     n = table.shape[0]
     scale = n - 1
+    r = min(max(x0, 0.0), 1.0) * scale
+    g = min(max(x1, 0.0), 1.0) * scale
+    b = min(max(x2, 0.0), 1.0) * scale
+    i = min(int(r), n - 2)
+    j = min(int(g), n - 2)
+    k = min(int(b), n - 2)
+    fr = r - i
+    fg = g - j
+    fb = b - k
+    for c in range(3):
+        c00 = table[i, j, k, c] * (1 - fb) + table[i, j, k + 1, c] * fb
+        c01 = table[i, j + 1, k, c] * (1 - fb) + table[i, j + 1, k + 1, c] * fb
+        c10 = table[i + 1, j, k, c] * (1 - fb) + table[i + 1, j, k + 1, c] * fb
+        c11 = table[i + 1, j + 1, k, c] * (1 - fb) + table[i + 1, j + 1, k + 1, c] * fb
+        c0 = c00 * (1 - fg) + c01 * fg
+        c1 = c10 * (1 - fg) + c11 * fg
+        value = c0 * (1 - fr) + c1 * fr
+        x = x0 if c == 0 else (x1 if c == 1 else x2)
+        x = min(max(x, 0.0), 1.0)
+        out[c] = (1 - strength) * x + strength * value
+
+
+@compiled(parallel=True, cache=True, fastmath=False)
+def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.ndarray) -> None:
     for p in numba.prange(colors.shape[0]):
-        r = min(max(colors[p, 0], 0.0), 1.0) * scale
-        g = min(max(colors[p, 1], 0.0), 1.0) * scale
-        b = min(max(colors[p, 2], 0.0), 1.0) * scale
-        i = min(int(r), n - 2)
-        j = min(int(g), n - 2)
-        k = min(int(b), n - 2)
-        fr = r - i
-        fg = g - j
-        fb = b - k
-        for c in range(3):
-            c00 = table[i, j, k, c] * (1 - fb) + table[i, j, k + 1, c] * fb
-            c01 = table[i, j + 1, k, c] * (1 - fb) + table[i, j + 1, k + 1, c] * fb
-            c10 = table[i + 1, j, k, c] * (1 - fb) + table[i + 1, j, k + 1, c] * fb
-            c11 = table[i + 1, j + 1, k, c] * (1 - fb) + table[i + 1, j + 1, k + 1, c] * fb
-            c0 = c00 * (1 - fg) + c01 * fg
-            c1 = c10 * (1 - fg) + c11 * fg
-            mapped = c0 * (1 - fr) + c1 * fr
-            x = min(max(colors[p, c], 0.0), 1.0)
-            out[p, c] = (1 - strength) * x + strength * mapped
+        _mapped(table, colors[p, 0], colors[p, 1], colors[p, 2], strength, out[p])
 
 
 @compiled(parallel=True, cache=True, fastmath=False)
@@ -49,11 +57,9 @@ def _block_means_mapped(colors: np.ndarray, table: np.ndarray, strength: float,
     """Mean of every step x step block of an (H, W, 3) image moved through the map.
 
     Bit for bit ``regrain._downsample(apply_color_map(colors, table, strength), step)``
-    (the arithmetic of ``_trilinear``, the block sums in the same order, partial edge
+    (the same lookup as ``_trilinear``, the block sums in the same order, partial edge
     blocks dropped) without the full-size graded image.
     """
-    n = table.shape[0]
-    scale = n - 1
     h, w = colors.shape[0] // step, colors.shape[1] // step
     out = np.zeros((h, w, 3), np.float32)
     inv = 1.0 / (step * step)
@@ -64,26 +70,8 @@ def _block_means_mapped(colors: np.ndarray, table: np.ndarray, strength: float,
             for bj in range(w):
                 for dj in range(step):
                     col = bj * step + dj
-                    r = min(max(colors[row, col, 0], 0.0), 1.0) * scale
-                    g = min(max(colors[row, col, 1], 0.0), 1.0) * scale
-                    b = min(max(colors[row, col, 2], 0.0), 1.0) * scale
-                    i = min(int(r), n - 2)
-                    j = min(int(g), n - 2)
-                    k = min(int(b), n - 2)
-                    fr = r - i
-                    fg = g - j
-                    fb = b - k
-                    for c in range(3):
-                        c00 = table[i, j, k, c] * (1 - fb) + table[i, j, k + 1, c] * fb
-                        c01 = table[i, j + 1, k, c] * (1 - fb) + table[i, j + 1, k + 1, c] * fb
-                        c10 = table[i + 1, j, k, c] * (1 - fb) + table[i + 1, j, k + 1, c] * fb
-                        c11 = (table[i + 1, j + 1, k, c] * (1 - fb)
-                               + table[i + 1, j + 1, k + 1, c] * fb)
-                        c0 = c00 * (1 - fg) + c01 * fg
-                        c1 = c10 * (1 - fg) + c11 * fg
-                        value = c0 * (1 - fr) + c1 * fr
-                        x = min(max(colors[row, col, c], 0.0), 1.0)
-                        mapped[c] = (1 - strength) * x + strength * value
+                    _mapped(table, colors[row, col, 0], colors[row, col, 1],
+                            colors[row, col, 2], strength, mapped)
                     for c in range(3):
                         out[bi, bj, c] += mapped[c]
         for bj in range(w):
