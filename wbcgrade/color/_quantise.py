@@ -2,23 +2,33 @@
 
 OpenImageIO converts float pixels to an 8-bit file's code values in one
 thread: 0.25 s of the 0.33 s it took to encode the 16-megapixel sample as a
-JPEG. This is the same conversion (tested value for value against the
-installed OpenImageIO's): the float32 product by 255, rounded, clamped to
-[0, 255]; NaN becomes 0. How exact halves round changed between OpenImageIO
-releases (3.0: half up; 3.2: half to even), so the rule is read once from the
-installed library; if neither rule reproduces it, OpenImageIO converts.
+JPEG. This is the same conversion: the float32 product by 255, rounded,
+clamped to [0, 255]; NaN becomes 0. Only exact halves (a product of exactly
+k + 0.5) round differently between OpenImageIO releases: 3.0 rounds them up,
+3.2 to even; the rule of the installed release is used (the tests compare
+value for value with it). Probing OpenImageIO's conversion at run time is not
+an option: it starts OpenImageIO's thread pool, which deadlocks the forked
+child that encodes JPEGs under a file size limit (``imageio._encode_in_child``).
 """
 
 from __future__ import annotations
-
-from functools import lru_cache
 
 import numba
 import numpy as np
 
 from wbcgrade.core._jit import compiled
 
-__all__ = ["to_uint8"]
+__all__ = ["to_uint8", "HALVES_TO_EVEN"]
+
+
+def _halves_to_even() -> bool:
+    import OpenImageIO as oiio
+
+    return (oiio.VERSION_MAJOR, oiio.VERSION_MINOR) >= (3, 2)
+
+
+#: Whether exact halves round to even (OpenImageIO >= 3.2) rather than up.
+HALVES_TO_EVEN = _halves_to_even()
 
 
 @compiled(parallel=True, cache=True)
@@ -34,45 +44,13 @@ def _to_uint8(flat: np.ndarray, out: np.ndarray, half_even: bool) -> None:  # pr
             out[i] = np.uint8(value)
 
 
-def _oiio_uint8(values: np.ndarray) -> np.ndarray:
-    """OpenImageIO's own float -> uint8 conversion of a 1-D float32 array."""
-    import OpenImageIO as oiio
+def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
+    """(..., C) float pixels in [0, 1] -> uint8 code values (OpenImageIO's conversion).
 
-    n = values.size
-    buf = oiio.ImageBuf(oiio.ImageSpec(n, 1, 1, "float"))
-    buf.set_pixels(oiio.ROI(0, n, 0, 1, 0, 1, 0, 1), values.reshape(1, n, 1))
-    return np.asarray(buf.get_pixels(oiio.UINT8)).ravel()
-
-
-def probe_values() -> np.ndarray:
-    """Float32 values that tell conversions apart: every code's half-way point and
-    its float32 neighbours, the ends, signed zero, NaN and infinities."""
-    codes = np.arange(256, dtype=np.float32)
-    ties = ((codes + np.float32(0.5)) / np.float32(255)).astype(np.float32)
-    near = (ties.view(np.int32)[:, None] + np.arange(-8, 9, dtype=np.int32)).view(np.float32)
-    ends = np.array([0.0, 1.0, -0.0, -0.5, 1.5, np.nan, np.inf, -np.inf], np.float32)
-    return np.concatenate([near.ravel(), ends])
-
-
-@lru_cache(maxsize=1)
-def _rule() -> bool | None:
-    """True: halves to even; False: halves up; None: neither matches OpenImageIO."""
-    values = probe_values()
-    expected = _oiio_uint8(values)
-    for half_even in (False, True):
-        out = np.empty(values.shape, np.uint8)
-        _to_uint8(values, out, half_even)
-        if np.array_equal(out, expected):
-            return half_even
-    return None
-
-
-def to_uint8(pixels: np.ndarray) -> np.ndarray:
-    """(..., C) float pixels in [0, 1] -> uint8 code values (OpenImageIO's conversion)."""
+    ``half_even``: how exact halves round (default: as the installed
+    OpenImageIO, :data:`HALVES_TO_EVEN`).
+    """
     flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1)
-    half_even = _rule()
-    if half_even is None:
-        return _oiio_uint8(flat).reshape(pixels.shape)
     out = np.empty(flat.shape, np.uint8)
-    _to_uint8(flat, out, half_even)
+    _to_uint8(flat, out, HALVES_TO_EVEN if half_even is None else bool(half_even))
     return out.reshape(pixels.shape)
