@@ -30,8 +30,8 @@ from pathlib import Path
 from wbcgrade._publish import _UMASK, TEMP_MARK, atomic_path, check_regular_target
 from wbcgrade.errors import InputError
 
-__all__ = ["atomic_path", "check_regular_target", "remove_stale_temporaries", "is_unlocked",
-           "lock_folder", "TEMP_MARK", "LOCK_FILE"]
+__all__ = ["atomic_path", "check_regular_target", "remove_stale_temporaries",
+           "remove_stale_beside", "is_unlocked", "lock_folder", "TEMP_MARK", "LOCK_FILE"]
 
 #: Lock file a run keeps in an output folder it has exclusive use of.
 LOCK_FILE = ".wbcgrade.lock"
@@ -107,6 +107,15 @@ def remove_stale_temporaries(folder: str | os.PathLike, targets: Iterable[str] =
                 path.unlink()
                 removed.append(path)
     return removed
+
+
+def remove_stale_beside(*targets: Path | None) -> None:
+    """:func:`remove_stale_temporaries` in the folder of each output about to be written."""
+    for target in targets:
+        if target is not None:
+            target = Path(target)
+            remove_stale_temporaries(target.parent if str(target.parent) else Path("."),
+                                     [target.name])
 
 
 @contextlib.contextmanager

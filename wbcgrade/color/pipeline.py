@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color._files import remove_stale_temporaries
+from wbcgrade.color._files import remove_stale_beside
 from wbcgrade.color.grading import FitSummary, grade_photo
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.imageio import check_image_output, check_output_path, stage_image
@@ -129,10 +129,7 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     photo = Path(photo)
     opts.validate(len(styles.names))
     output, lut = check_outputs(photo, output, lut, lut_size, overwrite)
-    for target in (output, lut):
-        if target is not None:
-            remove_stale_temporaries(target.parent if str(target.parent) else Path("."),
-                                     [target.name])
+    remove_stale_beside(output, lut)
     timings = dict(timings or {})
     say = stage or (lambda name: None)
 

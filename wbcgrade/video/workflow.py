@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path, check_output_path
-from wbcgrade.color._files import remove_stale_temporaries
+from wbcgrade.color._files import remove_stale_beside
 from wbcgrade.color.grading import FitSummary, PaletteSum, series_grade
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.imageio import encode_for_grading
@@ -309,10 +309,7 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     opts = replace(opts, regrain=False)
     opts.validate(len(styles.names))
     output, lut = check_video_outputs(source, output, lut, settings, overwrite)
-    for target in (output, lut):
-        if target is not None:
-            remove_stale_temporaries(target.parent if str(target.parent) else Path("."),
-                                     [target.name])
+    remove_stale_beside(output, lut)
     timings = dict(timings or {})
     say = stage or (lambda name: None)
     start = time.perf_counter()
