@@ -183,11 +183,11 @@ def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
 def test_scheduler_errors_are_one_line(folders, tmp_path, monkeypatch):
     import sys
 
-    import wbcgrade.color.batch as batch
+    import wbcgrade._executor as executor
 
     photos, styles = folders
     pytest.importorskip("distributed")
-    monkeypatch.setattr(batch, "DASK_CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr(executor, "DASK_CONNECT_TIMEOUT", "1s")
     result = _batch(photos, styles, tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1].startswith("Error: cannot reach")
@@ -252,7 +252,7 @@ def test_fit_is_never_worse_than_the_best_single_style():
 
 
 def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
-    import wbcgrade.color.batch as batch
+    import wbcgrade.color.batch.task as batch
 
     photos, styles = folders
     out = tmp_path / "out"

@@ -14,8 +14,8 @@ from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 from tests.color.test_faults import KILLED_WRITER, hidden_files, noise, wbcgrade
+from wbcgrade._publish import TEMP_MARK, lock_folder
 from wbcgrade.cli import main
-from wbcgrade.color._files import TEMP_MARK, lock_folder
 
 
 @pytest.fixture(scope="module")
@@ -180,7 +180,7 @@ def test_relative_paths_work_with_a_scheduler(shoot, tmp_path):
 
 
 def test_outputs_are_checked_before_any_work(shoot, tmp_path, monkeypatch):
-    import wbcgrade.color.batch as batch
+    import wbcgrade.color.batch.task as batch
 
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")

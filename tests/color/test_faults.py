@@ -20,8 +20,8 @@ import pytest
 from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, write_array
+from wbcgrade import _publish
 from wbcgrade.cli import main
-from wbcgrade.color import _files
 from wbcgrade.color.imageio import (
     Image,
     check_output_path,
@@ -113,7 +113,7 @@ def test_write_image_checks_what_it_wrote(tmp_path, monkeypatch):
 
 KILLED_WRITER = textwrap.dedent("""
     import os, signal, sys
-    from wbcgrade.color._files import atomic_path
+    from wbcgrade._publish import atomic_path
     with atomic_path(sys.argv[1]) as tmp:
         open(tmp, "wb").write(b"half a photo")
         if sys.argv[2] == "kill":
@@ -134,7 +134,7 @@ def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo):
                             capture_output=True, timeout=60)
     assert killed.returncode == -signal.SIGKILL
     (stale,) = [p for p in tmp_path.iterdir() if p.name.startswith(".chelsea_graded.")]
-    assert _files.TEMP_MARK in stale.name
+    assert _publish.TEMP_MARK in stale.name
     _age(stale)
     old_style = tmp_path / ".chelsea_graded.ab12cd_3.jpg"  # the previous naming, unlocked
     old_style.write_bytes(b"x")
@@ -264,6 +264,6 @@ def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading):
     assert result.exit_code == 1
     assert "not a regular file" in result.output.strip().splitlines()[-1]
     assert fifo.is_fifo()
-    with pytest.raises(InputError, match="not a regular file"), _files.atomic_path(fifo):
+    with pytest.raises(InputError, match="not a regular file"), _publish.atomic_path(fifo):
         pass
     assert fifo.is_fifo() and hidden_files(tmp_path) == []

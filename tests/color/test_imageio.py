@@ -180,8 +180,8 @@ def test_interrupted_write_removes_the_temporary_file(tmp_path, monkeypatch):
     def fail(*args):
         raise OSError("disk full")
 
-    monkeypatch.setattr("wbcgrade.color._files.os.replace", fail)
-    monkeypatch.setattr("wbcgrade.color._files.os.link", fail)
+    monkeypatch.setattr("wbcgrade._publish.os.replace", fail)
+    monkeypatch.setattr("wbcgrade._publish.os.link", fail)
     with pytest.raises(OSError, match="disk full"):
         write_image(tmp_path / "out.png", image.pixels, image)
     assert _listed(tmp_path / "a.png") == ["a.png"]
@@ -227,7 +227,7 @@ def test_colour_under_partial_alpha_survives_read_and_write(tmp_path, ext):
 
 def test_output_that_appears_during_a_grade_is_not_replaced(tmp_path):
     """The existence check happens early; publishing must not clobber a newer file."""
-    from wbcgrade.color._files import atomic_path
+    from wbcgrade._publish import atomic_path
 
     target = tmp_path / "out.txt"
     with pytest.raises(InputError, match="file exists"):

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import time
+
 import numpy as np
 import pytest
 import trimesh
 
 from tests.shape.helpers import ball, synthetic_meshes
+from wbcgrade._publish import TEMP_MARK
 from wbcgrade.errors import InputError
 from wbcgrade.shape.workflow import complete_mesh_file, project_volume_file
 
@@ -42,9 +46,13 @@ def test_project_volume_file_rescales_to_the_input(tmp_path):
         np.save(paths[-1], ball(10, 0.3, centre))
     source = tmp_path / "scan.npy"
     np.save(source, 3.0 * ball(10, 0.3, (0.5, 0.5, 0.5)))
+    stale = tmp_path / f".fit{TEMP_MARK}a1b2c3d4.npy"  # what a killed run left
+    stale.write_bytes(b"partial")
+    os.utime(stale, (time.time() - 3600, time.time() - 3600))
     result = project_volume_file(source, paths, output=tmp_path / "fit.npy", loss="quadratic",
                                  **FAST)
     fitted = np.load(tmp_path / "fit.npy")
     assert fitted.sum() == pytest.approx(np.load(source).sum())
     assert result.as_dict()["shape"] == [10, 10, 10]
     assert result.projection.weights == pytest.approx([0.5, 0.5], abs=0.05)
+    assert not stale.exists()

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import check_output_path
+from wbcgrade._publish import check_output_path, remove_stale_beside
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
 from wbcgrade.brdf.defaults import (
     DEFAULT_DIRECTIONS,
@@ -288,6 +288,7 @@ def fit_measurement(
         runs.append(FitRun(label, result, psnr))
 
     final = runs[1] if keeps and compare else runs[0]
+    remove_stale_beside(out, png_path)  # what killed runs left
     io.save_brdf(out, final.fit.values, dirs, name=f"{measured.stem} {final.label} fit")
     if png_path is not None:
         render.write_png(png_path, comparison_picture(reference, dirs, measured.stem, names,

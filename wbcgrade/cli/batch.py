@@ -149,7 +149,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     and failed writes (e.g. a full disk) are reported and make the exit
     status 1.
     """
-    from wbcgrade.color._files import lock_folder
+    from wbcgrade._publish import lock_folder
     from wbcgrade.color.batch import (
         batch_settings,
         plan_batch,

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wbcgrade.color._files import atomic_path, check_regular_target
+from wbcgrade._publish import atomic_path, check_regular_target
 from wbcgrade.errors import InputError
 
 __all__ = [

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color._files import atomic_path
+from wbcgrade._publish import atomic_path
 from wbcgrade.color.imageio import check_output_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError

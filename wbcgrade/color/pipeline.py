@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color._files import remove_stale_beside
+from wbcgrade._publish import remove_stale_beside
 from wbcgrade.color.grading import FitSummary, grade_photo
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.imageio import check_image_output, check_output_path, stage_image

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color._files import atomic_path
+from wbcgrade._publish import atomic_path
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,

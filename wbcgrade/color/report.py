@@ -23,13 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color._files import atomic_path
-from wbcgrade.color.batch import BatchResult
-from wbcgrade.color.grading import NONZERO_THRESHOLD
+from wbcgrade._publish import atomic_path
+from wbcgrade.color.batch.results import BatchResult, FileResult
+from wbcgrade.color.grading import NONZERO_THRESHOLD, PhotoGrade
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.transfer import GradeOptions
 
-__all__ = ["style_pictures", "write_report", "report_entries", "report_from_grade"]
+__all__ = ["style_pictures", "write_report", "report_entries", "report_from_grade",
+           "sheet_content"]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -69,6 +70,37 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
                 picture[edges[j]:edges[j + 1]] = colour
         pictures[name] = picture
     return pictures
+
+
+def sheet_content(result: FileResult, graded: PhotoGrade,
+                  style_pictures: dict[str, np.ndarray] | None = None):
+    """The SheetContent of a graded photo (pictures, style tiles, palettes, losses)."""
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.imageio import encode_for_grading
+    from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
+
+    image = graded.image
+    before, _ = encode_for_grading(image.rgb(), image.is_float)
+    color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
+    after, _ = encode_for_grading(graded.pixels[:, :, color], image.is_float)
+    small_before = thumbnail(before, 300, 480)
+    small_after = thumbnail(after, 300, 480)
+    pictures = style_pictures or {}
+    order = sorted(range(len(result.weights)), key=lambda i: -result.weights[i])
+    tiles = [StyleTile(result.names[i], result.weights[i],
+                       pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
+             for i in order if result.weights[i] >= NONZERO_THRESHOLD]
+    bins = 16
+    palettes = [("input", histogram_palette(image_histogram(before, bins))),
+                ("barycenter", histogram_palette(graded.grade.barycenter)),
+                ("output", histogram_palette(image_histogram(after, bins)))]
+    best = int(np.argmin(result.vertex_losses))
+    subtitle = (f"loss {result.loss:.4g}  |  best single style {result.names[best]}: "
+                f"{result.vertex_losses[best]:.4g}  |  {result.n_nonzero} of {len(result.names)} "
+                f"weights >= {NONZERO_THRESHOLD:g}  |  {result.timings.get('total', 0):.1f} s")
+    return SheetContent(title=result.relative, subtitle=subtitle, before=small_before,
+                        after=small_after, styles=tiles, palettes=palettes,
+                        more_styles=len(result.weights) - len(tiles))
 
 
 def _record_path(report_dir: Path, relative: str) -> Path:
@@ -222,8 +254,7 @@ def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
     """
     import time
 
-    from wbcgrade.color.batch import FileResult, sheet_content
-    from wbcgrade.color.grading import PhotoGrade, _fit_problem, _loss_at, vertex_losses
+    from wbcgrade.color.grading import _fit_problem, _loss_at, vertex_losses
     from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.imageio import encode_for_grading, read_image
 

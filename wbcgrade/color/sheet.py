@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wbcgrade.color._files import atomic_path
+from wbcgrade._publish import atomic_path
 from wbcgrade.color.histogram import grid_points, resample_histogram
 
 __all__ = ["Palette", "histogram_palette", "thumbnail", "StyleTile", "SheetContent",

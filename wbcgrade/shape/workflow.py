@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import (
     DEFAULT_LOSS,
@@ -187,6 +188,7 @@ def complete_mesh_file(
         n_iter=n_iter, max_iter=max_iter, callback=callback, coarse_to_fine=coarse_to_fine,
     )
     surface = completion_surface(completion, smooth_iterations=smooth)
+    remove_stale_beside(output, volume_path, png_path)  # what killed runs left
     write_mesh(surface, output)
     write_volume(volume_path, completion.projection.barycenter)
     write_png(png_path, completion_sheet(completion, top=top))
@@ -286,6 +288,7 @@ def project_volume_file(
         coarse_to_fine=coarse_to_fine,
     )
     fitted = projection.barycenter / projection.barycenter.sum() * source.sum()
+    remove_stale_beside(output, png_path)  # what killed runs left
     write_volume(output, fitted)
     write_png(png_path, projection_sheet(source, projection, volumes, top=top))
     return ShapeResult(projection, {

@@ -29,8 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path, check_output_path
-from wbcgrade.color._files import remove_stale_beside
+from wbcgrade._publish import atomic_path, check_output_path, remove_stale_beside
 from wbcgrade.color.grading import FitSummary, PaletteSum, series_grade
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.imageio import encode_for_grading

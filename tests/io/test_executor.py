@@ -1,0 +1,65 @@
+"""The shared executor: one function over many items, here or in local worker processes."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from wbcgrade._executor import Executor
+from wbcgrade.errors import InputError
+
+_SETUP_MARK = "WBCGRADE_TEST_EXECUTOR_SETUP"
+
+
+def scaled(item: int, context: dict, offset: int = 0, seen: list | None = None):
+    """item * context['factor'] + offset, with the worker's pid and its setup mark."""
+    if seen is not None:
+        seen.append(item)
+    if item < 0:
+        raise ValueError(f"negative item {item}")
+    return item * context["factor"] + offset, os.getpid(), os.environ.get(_SETUP_MARK)
+
+
+def mark_worker(context: dict) -> None:
+    os.environ[_SETUP_MARK] = str(context["factor"])
+
+
+def test_in_process_runs_in_order_with_the_local_callbacks():
+    seen: list[int] = []
+    with Executor({"factor": 3}) as executor:
+        assert executor.in_process
+        pairs = list(executor.map_unordered(scaled, [1, 2, 5], 10,
+                                            local_kwargs={"seen": seen}))
+    assert [item for item, _ in pairs] == [1, 2, 5] == seen
+    assert [value for _, (value, pid, _) in pairs] == [13, 16, 25]
+    assert {pid for _, (_, pid, _) in pairs} == {os.getpid()}
+
+
+def test_local_processes_get_the_context_once_and_the_setup():
+    items = list(range(8))
+    with Executor({"factor": 2}, jobs=2, worker_setup=mark_worker) as executor:
+        assert not executor.in_process
+        results = dict(executor.map_unordered(scaled, items, 1))
+        assert sorted(results) == items
+        assert all(results[i][0] == 2 * i + 1 for i in items)
+        assert all(results[i][1] != os.getpid() for i in items)  # ran in the workers
+        assert {results[i][2] for i in items} == {"2"}  # worker_setup ran with the context
+        executor.set_context({"factor": 5})  # e.g. a series grade found after reading
+        again = dict(executor.map_unordered(scaled, items))
+    assert all(again[i][0] == 5 * i and again[i][2] == "5" for i in items)
+
+
+def test_an_error_in_a_worker_reaches_the_caller():
+    with Executor({"factor": 1}, jobs=2) as executor, \
+            pytest.raises(ValueError, match="negative item -1"):
+        list(executor.map_unordered(scaled, [1, -1, 2]))
+
+
+def test_a_missing_dask_is_a_one_line_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # as if not installed
+    with pytest.raises(InputError, match=r"pip install 'wbcgrade\[dask\]'"), \
+            Executor({}, scheduler="tcp://127.0.0.1:9"):
+        pass

@@ -1,0 +1,236 @@
+"""Run one function over many independent items: here, in local processes, or on Dask.
+
+Shared by the domains' many-file commands (colour ``batch`` and ``report``,
+shape ``complete`` and ``project`` when given ``--jobs``). The function is
+called as ``function(item, context, *args)``: ``context`` is what every item
+needs (styles, options, a reference shape), sent once to each worker rather
+than with every item.
+
+- ``jobs=1``, no scheduler: in this process, in order, with ``local_kwargs``
+  (progress callbacks, which cannot cross processes).
+- ``jobs>1``: a local ``ProcessPoolExecutor`` (``spawn``). Workers end when
+  their parent dies (``PR_SET_PDEATHSIG`` and a parent-pid watch), cap their
+  own threads (the machine's cores shared between the workers), and start
+  no queued item once Ctrl-C has reached them.
+- ``scheduler``: a Dask distributed cluster (optional extra
+  ``wbcgrade[dask]``); the context is scattered once to every worker, and
+  ``to_remote`` rewrites items and context for machines that run in another
+  folder (absolute paths).
+
+Results come back as ``(item, result)`` pairs as they finish (unordered).
+Exceptions raised by ``function`` propagate; functions that must not stop a
+run (one bad file) return their failure as a value instead.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Any
+
+from wbcgrade.errors import InputError
+
+__all__ = ["Executor", "cpu_count", "DASK_CONNECT_TIMEOUT", "PARENT_WATCH_S"]
+
+#: How long to wait for a Dask scheduler to answer.
+DASK_CONNECT_TIMEOUT = "20s"
+
+#: How often a worker checks that its parent process is still alive (seconds).
+PARENT_WATCH_S = 1.0
+
+_WORKER_CONTEXT: Any = None
+_WORKER_INTERRUPTED = False
+
+
+def cpu_count() -> int:
+    """Cores this process may run on (its affinity mask where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(PARENT_WATCH_S)
+        if os.getppid() != parent:
+            os._exit(1)  # the run is gone: write nothing more (temporaries are cleaned later)
+
+
+def _die_with_parent(parent: int) -> None:
+    """End this worker as soon as the process ``parent`` dies (even by SIGKILL).
+
+    ``PR_SET_PDEATHSIG`` (Linux) kills it at once; a daemon thread watching
+    the parent pid covers other systems and the case the signal was missed.
+    """
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                     name="wbcgrade-parent-watch").start()
+
+
+def _init_worker(context: Any, threads: int, parent: int | None,
+                 setup: Callable[[Any], None] | None) -> None:
+    """Process-pool initializer: die with the parent, keep the context, cap threads."""
+    global _WORKER_CONTEXT
+    if parent is not None:
+        _die_with_parent(parent)
+    _WORKER_CONTEXT = context
+    os.environ["WBCGRADE_THREADS"] = str(max(1, threads))  # the core's kernel-product threads
+    with contextlib.suppress(ImportError):
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    with contextlib.suppress(Exception):
+        import numba
+
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    if setup is not None:
+        setup(context)
+
+
+def _call_in_worker(function: Callable, item: Any, *args: Any) -> Any:
+    """Run one item in a pool worker with the worker's context."""
+    global _WORKER_INTERRUPTED
+    if _WORKER_INTERRUPTED:  # Ctrl-C reached this worker: start no queued item
+        raise KeyboardInterrupt
+    try:
+        return function(item, _WORKER_CONTEXT, *args)
+    except KeyboardInterrupt:
+        _WORKER_INTERRUPTED = True
+        raise
+
+
+def _dask_client(address: str):
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InputError("--scheduler needs Dask: pip install 'wbcgrade[dask]' "
+                         "(dask[distributed])") from None
+    try:
+        return Client(address, timeout=DASK_CONNECT_TIMEOUT)
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+
+
+def _same(value: Any) -> Any:
+    return value
+
+
+class Executor:
+    """Map ``function(item, context, *args)`` over items: in process, local processes or Dask.
+
+    Parameters
+    ----------
+    context : what every item needs (picklable when ``jobs > 1`` or on Dask).
+    jobs : local worker processes (1: in this process).
+    scheduler : Dask scheduler address (overrides ``jobs``).
+    worker_setup : ``worker_setup(context)`` run once in each local worker after
+        its threads are capped (module-level function: it is pickled).
+    to_remote : ``(item -> item, context -> context)`` applied before sending to
+        Dask workers (e.g. absolute paths); identity by default.
+
+    Use as a context manager; ``map_unordered`` yields ``(item, result)`` pairs.
+    """
+
+    def __init__(self, context: Any, jobs: int = 1, scheduler: str | None = None,
+                 worker_setup: Callable[[Any], None] | None = None,
+                 to_remote: tuple[Callable[[Any], Any], Callable[[Any], Any]] | None = None):
+        self.context, self.jobs, self.scheduler = context, max(1, int(jobs)), scheduler
+        self.worker_setup = worker_setup
+        self.item_to_remote, self.context_to_remote = to_remote or (_same, _same)
+        self.pool: ProcessPoolExecutor | None = None
+        self.client = None
+        self.context_future = None
+
+    @property
+    def in_process(self) -> bool:
+        """True when items run in this process (no pool, no cluster)."""
+        return self.pool is None and self.client is None
+
+    def _start_pool(self) -> None:
+        import multiprocessing
+
+        threads = max(1, cpu_count() // self.jobs)
+        self.pool = ProcessPoolExecutor(
+            self.jobs, mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker,
+            initargs=(self.context, threads, os.getpid(), self.worker_setup))
+
+    def __enter__(self) -> Executor:
+        if self.scheduler is not None:
+            self.client = _dask_client(self.scheduler)
+            self.context_future = self.client.scatter(self.context_to_remote(self.context),
+                                                      broadcast=True)
+        elif self.jobs > 1:
+            self._start_pool()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        if self.client is not None:
+            self.client.close()
+
+    def set_context(self, context: Any) -> None:
+        """Replace the context (local workers are restarted, Dask gets it again)."""
+        self.context = context
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+            self._start_pool()
+        if self.client is not None:
+            self.context_future = self.client.scatter(self.context_to_remote(context),
+                                                      broadcast=True)
+
+    def map_unordered(self, function: Callable, items: Iterable[Any], *args: Any,
+                      local_kwargs: dict | None = None) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(item, function(item, context, *args))`` as each finishes.
+
+        ``function`` must be a module-level function when it runs in other
+        processes. ``local_kwargs`` are passed only when running in this process.
+        Queued items are cancelled when the caller stops iterating or an
+        exception (Ctrl-C included) propagates.
+        """
+        items = list(items)
+        if self.client is not None:
+            yield from self._dask(items, function, args)
+        elif self.pool is not None:
+            yield from self._pool(items, function, args)
+        else:
+            for item in items:
+                yield item, function(item, self.context, *args, **(local_kwargs or {}))
+
+    def _pool(self, items: list, function: Callable, args: tuple):
+        futures = {self.pool.submit(_call_in_worker, function, item, *args): item
+                   for item in items}
+        try:
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    yield futures[future], future.result()
+        finally:
+            for future in futures:
+                future.cancel()
+
+    def _dask(self, items: list, function: Callable, args: tuple):
+        from dask.distributed import as_completed
+
+        futures = {self.client.submit(function, self.item_to_remote(item), self.context_future,
+                                      *args, pure=False): item
+                   for item in items}
+        try:
+            for future in as_completed(list(futures)):
+                yield futures[future], future.result()
+        finally:
+            self.client.cancel(list(futures))

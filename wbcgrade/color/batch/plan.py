@@ -1,0 +1,196 @@
+"""Which photos a batch grades, where each graded copy goes, and cleaning up after killed runs.
+
+The input tree is mirrored under the output folder (file names and formats
+kept). An output that exists is complete (outputs are published atomically):
+it is skipped when it is newer than its photo and has the photo's pixel
+count, unless forced.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import OpenImageIO as oiio
+
+from wbcgrade._publish import is_unlocked, remove_stale_temporaries
+from wbcgrade.errors import InputError
+
+__all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
+           "recheck_plan", "remove_stale_outputs", "remove_temporaries"]
+
+
+def image_extensions() -> set[str]:
+    """Lower-case file extensions (with the dot) that OpenImageIO can read."""
+    text = oiio.get_string_attribute("extension_list")
+    exts = set()
+    for entry in text.split(";"):
+        _, _, names = entry.partition(":")
+        exts.update(f".{e.strip().lower()}" for e in names.split(",") if e.strip())
+    return exts
+
+
+@dataclass(frozen=True)
+class BatchTask:
+    """One photo: its path, the output path, and the path relative to the input folder."""
+
+    source: Path
+    output: Path | None
+    relative: str
+
+
+@dataclass
+class BatchPlan:
+    """What a batch will do.
+
+    Attributes
+    ----------
+    tasks : photos to grade.
+    done : photos whose output is already complete (skipped unless forced).
+    ignored : relative paths of files that are not images (by extension).
+    """
+
+    tasks: list[BatchTask]
+    done: list[BatchTask] = field(default_factory=list)
+    ignored: list[str] = field(default_factory=list)
+
+    @property
+    def all_photos(self) -> list[BatchTask]:
+        return sorted(self.tasks + self.done, key=lambda t: t.relative)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        path.resolve().relative_to(folder.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def output_is_complete(source: Path, output: Path) -> bool:
+    """True when ``output`` exists, is not older than ``source`` and has its pixel count."""
+    try:
+        if not output.is_file() or output.stat().st_mtime_ns < source.stat().st_mtime_ns:
+            return False
+    except OSError:
+        return False
+    sizes = []
+    for path in (source, output):
+        inp = oiio.ImageInput.open(str(path))
+        if inp is None:
+            oiio.geterror()
+            return False
+        spec = inp.spec()
+        sizes.append(spec.width * spec.height)
+        inp.close()
+    return sizes[0] == sizes[1]
+
+
+def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
+               recursive: bool = False, force: bool = False,
+               exclude: Iterable[str | os.PathLike] = ()) -> BatchPlan:
+    """List the photos under ``in_path`` (a folder, or one photo) and their outputs.
+
+    Hidden files and anything inside ``out_dir`` or an ``exclude`` folder
+    (e.g. a report folder) are left out. With
+    ``out_dir`` None (a report only), nothing is written and nothing is
+    skipped. Raises InputError when the folder is missing or the output
+    folder is the input folder.
+    """
+    in_path = Path(in_path)
+    if not in_path.exists():
+        raise InputError(f"{in_path}: no such file or folder")
+    out = Path(out_dir) if out_dir is not None else None
+    if in_path.is_file():
+        root, files = in_path.parent, [in_path]
+    else:
+        root = in_path
+        pattern = root.rglob("*") if recursive else root.iterdir()
+        files = sorted(p for p in pattern if p.is_file())
+    if out is not None:
+        if out.exists() and not out.is_dir():
+            raise InputError(f"{out}: output path exists and is not a folder")
+        if out.exists() and out.resolve() == root.resolve():
+            raise InputError(f"{out}: the output folder must differ from the input folder")
+    exts = image_extensions()
+    skip_dirs = [Path(p) for p in exclude] + ([out] if out is not None else [])
+    plan = BatchPlan(tasks=[])
+    for path in files:
+        rel = path.relative_to(root)
+        if any(part.startswith(".") for part in rel.parts):
+            continue
+        if any(folder.exists() and _inside(path, folder) for folder in skip_dirs):
+            continue
+        if path.suffix.lower() not in exts:
+            plan.ignored.append(rel.as_posix())
+            continue
+        task = BatchTask(path, None if out is None else out / rel, rel.as_posix())
+        if task.output is not None and not force and output_is_complete(path, task.output):
+            plan.done.append(task)
+        else:
+            plan.tasks.append(task)
+    return plan
+
+
+def recheck_plan(plan: BatchPlan, force: bool = False) -> BatchPlan:
+    """Move tasks whose output became complete since planning to ``done`` (unless forced).
+
+    Used once a run holds the output folder's lock: a run that finished in
+    between is not redone.
+    """
+    if force:
+        return plan
+    tasks, done = [], list(plan.done)
+    for task in plan.tasks:
+        if task.output is not None and output_is_complete(task.source, task.output):
+            done.append(task)
+        else:
+            tasks.append(task)
+    return BatchPlan(tasks=tasks, done=done, ignored=list(plan.ignored))
+
+
+def _output_folders(tasks: Iterable[BatchTask]) -> dict[Path, set[str]]:
+    folders: dict[Path, set[str]] = {}
+    for task in tasks:
+        if task.output is not None:
+            folders.setdefault(task.output.parent, set()).add(task.output.name)
+    return folders
+
+
+def remove_stale_outputs(plan: BatchPlan, extra_folders: Iterable[Path] = (),
+                         min_age: float | None = None) -> list[Path]:
+    """Remove the temporary files a killed run left beside this plan's outputs.
+
+    Only the project's own temporaries that no live process holds locked
+    are removed (see :func:`wbcgrade._publish.remove_stale_temporaries`);
+    -> the removed paths.
+    """
+    folders = _output_folders(plan.tasks + plan.done)
+    for folder in extra_folders:
+        folders.setdefault(Path(folder), set())
+    removed: list[Path] = []
+    for folder, names in folders.items():
+        if folder.is_dir():
+            kwargs = {} if min_age is None else {"min_age": min_age}
+            removed += remove_stale_temporaries(folder, names, **kwargs)
+    return removed
+
+
+def remove_temporaries(tasks: Iterable[BatchTask], since_ns: int) -> None:
+    """Delete temporary files this run left beside the outputs (after an interrupt).
+
+    Hidden ``.<stem>.*<ext>`` files of this run's outputs made since it
+    started go, unless a live writer still holds them locked.
+    """
+    for task in tasks:
+        if task.output is None or not task.output.parent.is_dir():
+            continue
+        for tmp in task.output.parent.glob(
+                f".{glob.escape(task.output.stem)}.*{glob.escape(task.output.suffix)}"):
+            with contextlib.suppress(OSError):
+                if tmp.stat().st_mtime_ns >= since_ns and is_unlocked(tmp, 0.0):
+                    tmp.unlink()

@@ -1,0 +1,76 @@
+"""What a batch did: one FileResult per photo, and the BatchResult of a run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbcgrade.color.grading import NONZERO_THRESHOLD, FitSummary
+from wbcgrade.color.transfer import Grade
+
+__all__ = ["FileResult", "BatchResult"]
+
+
+@dataclass
+class FileResult:
+    """What happened to one photo (JSON-friendly via :meth:`as_dict`)."""
+
+    relative: str
+    source: str
+    output: str | None
+    status: str  # "graded", "skipped" or "failed"
+    error: str = ""
+    names: list[str] = field(default_factory=list)
+    weights: list[float] = field(default_factory=list)
+    loss: float | None = None
+    vertex_losses: list[float] = field(default_factory=list)
+    start: str = ""
+    sheet: str | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_nonzero(self) -> int:
+        return int(sum(w >= NONZERO_THRESHOLD for w in self.weights))
+
+    def as_dict(self) -> dict:
+        """Report entry: ranked weights, fitted and best single-style loss, time."""
+        order = sorted(range(len(self.weights)), key=lambda i: -self.weights[i])
+        entry: dict = {"photo": self.relative, "source": self.source, "output": self.output,
+                       "status": self.status}
+        if self.error:
+            entry["error"] = self.error
+        if self.weights:
+            best = int(np.argmin(self.vertex_losses)) if self.vertex_losses else None
+            entry.update({
+                "weights": [{"style": self.names[i], "weight": round(self.weights[i], 6)}
+                            for i in order],
+                "loss": self.loss,
+                "best_single_style": None if best is None else {
+                    "style": self.names[best], "loss": self.vertex_losses[best]},
+                "single_style_losses": dict(zip(self.names, self.vertex_losses)),
+                "fit_start": self.start,
+                "nonzero_weights": self.n_nonzero,
+                "nonzero_threshold": NONZERO_THRESHOLD,
+            })
+        if self.sheet:
+            entry["sheet"] = self.sheet
+        entry["time_s"] = round(self.timings.get("total", 0.0), 3)
+        entry["timings_s"] = {k: round(v, 3) for k, v in self.timings.items()}
+        return entry
+
+
+@dataclass
+class BatchResult:
+    """Outcome of a batch: one FileResult per photo (graded, skipped, failed), the time,
+    and for a series its weights (``series``) and grade (``series_grade``, colour map)."""
+
+    results: list[FileResult]
+    ignored: list[str]
+    time_s: float
+    series: FitSummary | None = None
+    style_names: list[str] = field(default_factory=list)
+    series_grade: Grade | None = None
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.results)

@@ -1,0 +1,49 @@
+"""The settings a batch's outputs depend on, recorded in its output folder.
+
+A rerun with other settings (styles, options, series mode) is told which
+changed, so that it does not mix grades made two ways in one folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from wbcgrade._publish import atomic_path
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.transfer import GradeOptions
+
+__all__ = ["SETTINGS_FILE", "batch_settings", "settings_changed", "write_settings"]
+
+#: File in the output folder recording the settings of the last batch run there.
+SETTINGS_FILE = ".wbcgrade-batch.json"
+
+
+def batch_settings(styles: StyleSet, opts: GradeOptions, consistent: bool) -> dict:
+    """What determines the outputs of a batch (JSON-friendly)."""
+    options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opts).items()}
+    return {"styles": styles.source, "style_names": list(styles.names), "options": options,
+            "consistent": bool(consistent)}
+
+
+def settings_changed(out_dir: str | os.PathLike, settings: dict) -> list[str]:
+    """Names of the settings that differ from those recorded in ``out_dir`` (none if unrecorded)."""
+    try:
+        previous = json.loads((Path(out_dir) / SETTINGS_FILE).read_text("utf-8"))
+    except (OSError, ValueError):
+        return []
+    if not isinstance(previous, dict):
+        return []
+    changed = [k for k in ("styles", "style_names", "consistent")
+               if previous.get(k) != settings[k]]
+    old = previous.get("options") if isinstance(previous.get("options"), dict) else {}
+    changed += [k for k, v in settings["options"].items() if old.get(k) != v]
+    return changed
+
+
+def write_settings(out_dir: str | os.PathLike, settings: dict) -> None:
+    """Record the settings of this run in ``out_dir`` (atomically)."""
+    path = Path(out_dir) / SETTINGS_FILE
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+        json.dump(settings, handle, indent=1)
