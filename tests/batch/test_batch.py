@@ -107,6 +107,11 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     result = _batch(photos, styles, out)
     assert "graded 1, skipped 2, failed 1" in result.output
     assert _pixels(out / "chelsea.jpg").shape == _pixels(photos / "chelsea.jpg").shape
+    # The library says overwrite= as the command says --overwrite; force= still works, warned.
+    assert len(plan_batch(photos, out, recursive=True).done) == 3
+    assert not plan_batch(photos, out, recursive=True, overwrite=True).done
+    with pytest.warns(DeprecationWarning, match="overwrite="):
+        assert not plan_batch(photos, out, recursive=True, force=True).done
 
 
 def test_good_folder_exits_zero(folders, tmp_path):

@@ -376,7 +376,7 @@ def test_cli_synth_and_fit(tmp_path):
         "brdf", "fit", str(measured), "--database", str(database),
         "--keep", "0.3", "--keep", "0.15",
         "--directions", "32", "--fit-directions", "6", "--loss", "quadratic",
-        "--max-iter", "4", "--n-iter", "20", "-o", str(out), "--json",
+        "--max-iter", "4", "--iterations", "20", "-o", str(out), "--json",
     ])
     assert result.exit_code == 0, result.output
     report = json.loads(result.output[result.output.index("{"):])

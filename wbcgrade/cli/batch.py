@@ -43,7 +43,7 @@ def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
 
 
 def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
-                      consistent: bool, jobs: int, scheduler: str | None, force: bool,
+                      consistent: bool, jobs: int, scheduler: str | None,
                       report_dir: str | None, write_outputs: bool) -> BatchResult:
     """Run a batch with a tqdm bar over files (and one over the fit stages in-process)."""
     from tqdm import tqdm
@@ -52,7 +52,7 @@ def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
 
     if jobs < 1:
         raise InputError("--jobs must be at least 1")
-    context = BatchContext(styles=styles, opts=opts, force=force,
+    context = BatchContext(styles=styles, opts=opts,
                            sheet_dir=None if report_dir is None else Path(report_dir),
                            write_outputs=write_outputs)
     if report_dir is not None:
@@ -162,7 +162,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
 
     if force_alias:
         _warn("--force is deprecated; use --overwrite")
-    force = overwrite or force_alias  # the batch library's name for it
+    overwrite = overwrite or force_alias
     opts, style_args = take_grading_options(kwargs)
     if lut is not None:
         if not consistent:
@@ -170,12 +170,12 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
                              "LUTs come from `wbcgrade apply --lut`")
         if not lut.lower().endswith(".cube"):
             raise InputError(f"{lut}: LUT file name must end in .cube")
-        if Path(lut).exists() and not force:
+        if Path(lut).exists() and not overwrite:
             raise InputError(f"{lut}: file exists (use --overwrite to replace it)")
         check_output_path(lut, overwrite=True)  # folder, writability, a regular file
         if not 2 <= lut_size <= 256:
             raise InputError("--lut-size must be between 2 and 256")
-    plan = plan_batch(in_dir, out_dir, recursive=recursive, force=force,
+    plan = plan_batch(in_dir, out_dir, recursive=recursive, overwrite=overwrite,
                       exclude=[report_dir] if report_dir else [])
     if not plan.tasks and not plan.done:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
@@ -185,7 +185,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     except OSError as exc:
         raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
     with lock_folder(out_dir, "batch"):  # one run at a time per output folder
-        plan = recheck_plan(plan, force)  # a run that held the lock may have finished some
+        plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
         start = time.perf_counter()
         styles = load_styles_with_progress(opts, style_args)
         settings = batch_settings(styles, opts, consistent)
@@ -195,7 +195,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
                   f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite to redo "
                   "them")
         result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
-                                   scheduler=scheduler, force=force, report_dir=report_dir,
+                                   scheduler=scheduler, report_dir=report_dir,
                                    write_outputs=True)
         if result.count("graded"):
             write_settings(out_dir, settings)

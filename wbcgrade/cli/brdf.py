@@ -105,8 +105,9 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
 @click.option("--width", default=DEFAULT_WIDTH, show_default=True,
               type=click.FloatRange(0.1, 20.0),
               help="Kernel width in sample spacings (sets gamma).")
-@click.option("--n-iter", default=DEFAULT_N_ITER, show_default=True,
-              type=click.IntRange(1, 10000), help="Barycenter iterations.")
+@click.option("--iterations", "--n-iter", "n_iter", default=DEFAULT_N_ITER, show_default=True,
+              type=click.IntRange(1, 10000),
+              help="Barycenter iterations L (--n-iter: its former name).")
 @click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
               type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")
 @click.option("--tol", default=DEFAULT_TOL, show_default=True, type=click.FloatRange(0, 1),

@@ -59,7 +59,7 @@ def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, **kw
     styles = load_styles_with_progress(opts, style_args)
     out.mkdir(parents=True, exist_ok=True)  # only once the styles are known to load
     result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
-                               scheduler=scheduler, force=False, report_dir=str(out),
+                               scheduler=scheduler, report_dir=str(out),
                                write_outputs=False)
     result.time_s = time.perf_counter() - start
     path = write_report(out, result, styles, opts, "consistent" if consistent else "per-photo")

@@ -10,7 +10,7 @@ whole file; a file that fails is recorded and the others go on.
 
 Resuming: outputs are written atomically (temporary file + rename), so an
 output that exists is complete; it is skipped when it is newer than its photo
-and has the photo's pixel count (``force`` redoes it). Interrupting
+and has the photo's pixel count (``overwrite`` redoes it). Interrupting
 (Ctrl-C) cancels the queued files, lets the running ones clean up their
 temporary files, and removes any temporary file of this run that is left.
 A run first removes the temporary files a killed run left in its output

@@ -3,7 +3,7 @@
 The input tree is mirrored under the output folder (file names and formats
 kept). An output that exists is complete (outputs are published atomically):
 it is skipped when it is newer than its photo and has the photo's pixel
-count, unless forced.
+count, unless ``overwrite`` is set.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import glob
 import os
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,7 +51,7 @@ class BatchPlan:
     Attributes
     ----------
     tasks : photos to grade.
-    done : photos whose output is already complete (skipped unless forced).
+    done : photos whose output is already complete (skipped unless ``overwrite``).
     ignored : relative paths of files that are not images (by extension).
     """
 
@@ -61,6 +62,14 @@ class BatchPlan:
     @property
     def all_photos(self) -> list[BatchTask]:
         return sorted(self.tasks + self.done, key=lambda t: t.relative)
+
+
+def _overwrite(overwrite: bool, force: bool | None) -> bool:
+    """``overwrite``, or the deprecated ``force`` keyword (with a DeprecationWarning)."""
+    if force is None:
+        return bool(overwrite)
+    warnings.warn("force= is deprecated; use overwrite=", DeprecationWarning, stacklevel=3)
+    return bool(overwrite or force)
 
 
 def _inside(path: Path, folder: Path) -> bool:
@@ -91,16 +100,19 @@ def output_is_complete(source: Path, output: Path) -> bool:
 
 
 def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
-               recursive: bool = False, force: bool = False,
-               exclude: Iterable[str | os.PathLike] = ()) -> BatchPlan:
+               recursive: bool = False, overwrite: bool = False,
+               exclude: Iterable[str | os.PathLike] = (), *,
+               force: bool | None = None) -> BatchPlan:
     """List the photos under ``in_path`` (a folder, or one photo) and their outputs.
 
     Hidden files and anything inside ``out_dir`` or an ``exclude`` folder
     (e.g. a report folder) are left out. With
     ``out_dir`` None (a report only), nothing is written and nothing is
     skipped. Raises InputError when the folder is missing or the output
-    folder is the input folder.
+    folder is the input folder. ``overwrite`` plans every photo, finished
+    outputs included (``force`` is its former name, deprecated).
     """
+    overwrite = _overwrite(overwrite, force)
     in_path = Path(in_path)
     if not in_path.exists():
         raise InputError(f"{in_path}: no such file or folder")
@@ -129,20 +141,21 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             plan.ignored.append(rel.as_posix())
             continue
         task = BatchTask(path, None if out is None else out / rel, rel.as_posix())
-        if task.output is not None and not force and output_is_complete(path, task.output):
+        if task.output is not None and not overwrite and output_is_complete(path, task.output):
             plan.done.append(task)
         else:
             plan.tasks.append(task)
     return plan
 
 
-def recheck_plan(plan: BatchPlan, force: bool = False) -> BatchPlan:
-    """Move tasks whose output became complete since planning to ``done`` (unless forced).
+def recheck_plan(plan: BatchPlan, overwrite: bool = False, *,
+                 force: bool | None = None) -> BatchPlan:
+    """Move tasks whose output became complete since planning to ``done`` (unless ``overwrite``).
 
     Used once a run holds the output folder's lock: a run that finished in
     between is not redone.
     """
-    if force:
+    if _overwrite(overwrite, force):
         return plan
     tasks, done = [], list(plan.done)
     for task in plan.tasks:

@@ -45,7 +45,6 @@ class BatchContext:
     opts : grading options.
     shared : the series grade (``--consistent``), or None for one fit per photo.
     shared_fit : its weights and single-style losses.
-    force : replace existing outputs.
     sheet_dir : write a PNG sheet per photo here (None: no sheets).
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
@@ -57,7 +56,6 @@ class BatchContext:
     opts: GradeOptions
     shared: Grade | None = None
     shared_fit: FitSummary | None = None
-    force: bool = False
     sheet_dir: Path | None = None
     style_pictures: dict[str, np.ndarray] | None = None
     write_outputs: bool = True
