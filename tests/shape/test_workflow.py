@@ -37,6 +37,14 @@ def test_complete_mesh_file_reports_progress_and_files(tmp_path):
     with pytest.raises(InputError, match="would overwrite an input"):
         complete_mesh_file(partial, [folder], output=tmp_path / "x.obj",
                            png_path=folder / "box.off", **FAST)
+    # The database voxelised by two worker processes: the same fit, in the same order.
+    meshes.clear()
+    parallel = complete_mesh_file(partial, [folder], output=tmp_path / "two.obj", missing=0.1,
+                                  on_mesh=lambda done, total, path: meshes.append((done, total)),
+                                  jobs=2, **FAST)
+    assert parallel.projection.names == result.projection.names
+    np.testing.assert_array_equal(parallel.projection.weights, result.projection.weights)
+    assert sorted(meshes) == [(0, 4), (1, 4), (2, 4), (3, 4), (4, 4)]
 
 
 def test_project_volume_file_rescales_to_the_input(tmp_path):

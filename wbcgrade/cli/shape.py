@@ -116,9 +116,11 @@ def shape() -> None:
               default=None, help="Barycenter volume (.npy; default beside -o).")
 @click.option("--smooth", type=click.IntRange(min=0), default=10, show_default=True,
               help="Taubin smoothing passes on the surface.")
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes voxelising the database meshes.")
 def complete(partial, database, resolution, missing, euclidean, width, iterations, max_iter,
              coarse, png_path, top, as_json, quiet, loss, align, output, volume_path,
-             smooth) -> None:
+             smooth, jobs) -> None:
     """Infer the missing geometry of the mesh PARTIAL from a database of meshes.
 
     Writes the completed surface (-o), the barycenter volume (.npy) and a PNG
@@ -148,7 +150,7 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
             resolution=resolution, missing=missing, loss=loss, euclidean=euclidean,
             width=width, n_iter=iterations, max_iter=max_iter, coarse_to_fine=coarse,
             align=align, smooth=smooth, top=top, warn=warn, on_mesh=on_mesh,
-            callback=callback)
+            callback=callback, jobs=jobs)
     finally:
         for bar in bars:
             bar.close()

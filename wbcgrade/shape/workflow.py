@@ -1,8 +1,9 @@
 """Shape workflows: files in, fits and files out (what ``wbcgrade shape`` runs).
 
 - :func:`complete_mesh_file`: voxelise a partial mesh and a database of
-  meshes (optionally aligned on their principal axes), fit, and write the
-  completed surface, the barycenter volume and a picture.
+  meshes (optionally aligned on their principal axes; the database in
+  ``jobs`` worker processes through :class:`wbcgrade._executor.Executor`),
+  fit, and write the completed surface, the barycenter volume and a picture.
 - :func:`project_volume_file`: read a volume and a database of volumes,
   shrink them to the working resolution, fit, and write the fitted volume
   rescaled to the input's total intensity, and a picture.
@@ -13,6 +14,7 @@ prints the result. Data flow and names: ``docs/architecture.md``.
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -20,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import (
@@ -28,6 +31,7 @@ from wbcgrade.shape.complete import (
     DEFAULT_N_ITER,
     DEFAULT_RESOLUTION,
     Projection,
+    VoxelShape,
     check_database_size,
     check_memory,
     complete_shape,
@@ -47,6 +51,8 @@ from wbcgrade.shape.volume import (
     volume_suffix,
     write_volume,
 )
+
+log = logging.getLogger(__name__)
 
 __all__ = ["ShapeResult", "complete_mesh_file", "project_volume_file", "check_not_inputs"]
 
@@ -95,6 +101,23 @@ def check_not_inputs(outputs: Sequence[Path], inputs: Sequence[Path]) -> None:
             raise InputError(f"{out}: output would overwrite an input")
 
 
+@dataclass(frozen=True)
+class _Voxelising:
+    """What every database mesh's voxelisation needs (sent once to each worker)."""
+
+    resolution: int
+    align: bool
+    reference: VoxelShape | None
+
+
+def _voxelise(path: Path, settings: _Voxelising) -> tuple[VoxelShape, list[str]]:
+    """One database mesh, voxelised; -> the shape and its repair messages."""
+    messages: list[str] = []
+    shape = load_shape(path, settings.resolution, align=settings.align,
+                       reference=settings.reference, warn=messages.append)
+    return shape, messages
+
+
 def complete_mesh_file(
     partial: str | os.PathLike,
     database: Sequence[str | os.PathLike],
@@ -116,6 +139,7 @@ def complete_mesh_file(
     warn: Callable[[str], None] | None = None,
     on_mesh: Callable[[int, int, Path], None] | None = None,
     callback: FitCallback | None = None,
+    jobs: int = 1,
 ) -> ShapeResult:
     """Infer the missing geometry of the mesh ``partial`` from a database of meshes.
 
@@ -148,6 +172,9 @@ def complete_mesh_file(
         the first mesh's path) and after each mesh is voxelised.
     callback : callable, optional
         ``callback(n_evaluations, weights, loss)`` after each evaluation.
+    jobs : int
+        Worker processes voxelising the database (1: in this process). The
+        voxelisations, hence the result, are the same for any ``jobs``.
 
     Returns
     -------
@@ -174,15 +201,21 @@ def complete_mesh_file(
     check_not_inputs([output, volume_path, png_path], [partial, *paths])
     check_memory((resolution,) * 3, len(paths), n_iter)
 
-    files = [partial, *paths]
     if on_mesh is not None:
-        on_mesh(0, len(files), partial)
-    shapes = []
-    for index, path in enumerate(files):
-        reference = shapes[0] if shapes else None
-        shapes.append(load_shape(path, resolution, align=align, reference=reference, warn=warn))
-        if on_mesh is not None:
-            on_mesh(index + 1, len(files), path)
+        on_mesh(0, len(paths) + 1, partial)
+    reference = load_shape(partial, resolution, align=align, warn=warn)
+    if on_mesh is not None:
+        on_mesh(1, len(paths) + 1, partial)
+    loaded: dict[Path, VoxelShape] = {}
+    settings = _Voxelising(resolution, align, reference if align else None)
+    with Executor(settings, jobs=min(jobs, len(paths))) as executor:
+        for path, (shape, messages) in executor.map_unordered(_voxelise, paths):
+            loaded[path] = shape
+            for message in messages:
+                (warn or log.warning)(message)
+            if on_mesh is not None:
+                on_mesh(len(loaded) + 1, len(paths) + 1, path)
+    shapes = [reference, *(loaded[path] for path in paths)]
     completion = complete_shape(
         shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean, width=width,
         n_iter=n_iter, max_iter=max_iter, callback=callback, coarse_to_fine=coarse_to_fine,
