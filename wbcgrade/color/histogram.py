@@ -110,39 +110,15 @@ def image_histogram(rgb: np.ndarray, bins: int, alpha: np.ndarray | None = None,
 
 
 def resample_histogram(hist: np.ndarray, bins: int) -> np.ndarray:
-    """Re-bin an (n, n, n) histogram onto a (bins, bins, bins) grid.
+    """Re-bin an (n, n, n) histogram onto a (bins, bins, bins) grid, normalised to sum 1.
 
-    Going to a coarser grid, each source bin's mass is soft-binned at its
-    position: the adjoint of trilinear interpolation (mass is conserved and the
-    mean colour too). Going to a finer grid, the density is interpolated
-    (trilinearly) and renormalised.
+    :func:`wbcgrade.core.resample_grid`: soft binning (the adjoint of trilinear
+    interpolation: mass and mean colour kept) to a coarser grid, the density
+    interpolated to a finer one. The histogram itself when ``bins == n``.
     """
-    n = hist.shape[0]
-    if n == bins:
-        return hist
-    if bins > n:  # finer grid: interpolate the density (moving masses would leave gaps)
-        from wbcgrade.core.geometry import refine_grid
+    from wbcgrade.core import resample_grid
 
-        fine = np.clip(refine_grid(hist, (bins,) * 3), 0.0, None)
-        return fine / fine.sum()
-    # Soft binning of grid points is separable: one (bins, n) matrix per axis.
-    weights = _binning_matrix(n, bins)
-    out = np.asarray(hist, dtype=np.float64)
-    for axis in range(3):
-        out = np.moveaxis(np.tensordot(weights, out, axes=(1, axis)), 0, axis)
-    out = np.clip(out, 0.0, None)
-    return out / out.sum()
-
-
-def _binning_matrix(n: int, bins: int) -> np.ndarray:
-    """(bins, n): how each of n grid points' mass splits over the two nearest of ``bins``."""
-    pos = np.linspace(0.0, 1.0, n) * (bins - 1)
-    base = np.minimum(pos.astype(np.int64), bins - 2)
-    frac = pos - base
-    matrix = np.zeros((bins, n))
-    matrix[base, np.arange(n)] += 1.0 - frac
-    matrix[base + 1, np.arange(n)] += frac
-    return matrix
+    return hist if hist.shape[0] == bins else resample_grid(hist, (bins,) * 3, mass=1.0)
 
 
 def add_floor(hist: np.ndarray, floor: float = DEFAULT_FLOOR) -> np.ndarray:
@@ -183,7 +159,9 @@ class HistogramCache:
     """On-disk cache of style-photo histograms.
 
     Keyed by the file's absolute path, modification time, size, the number of
-    bins and the subsampling limit, so an edited photo is re-read. Entries are
+    bins, the subsampling limit and the colour spaces (``space``: the
+    OpenColorIO config and the working space the colours were converted into),
+    so an edited photo is re-read. Entries are
     small sparse ``.npz`` files (no pickle). A cache that cannot be written is
     only logged: caching never makes a run fail.
     """
@@ -194,29 +172,30 @@ class HistogramCache:
         self.folder = Path(folder) if folder is not None else default_cache_dir()
         self.enabled = enabled
 
-    def _key(self, path: Path, bins: int, max_pixels: int) -> Path:
+    def _key(self, path: Path, bins: int, max_pixels: int, space: str = "") -> Path:
         stat = path.stat()
         text = (f"{self.VERSION}|{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
-                f"|{bins}|{max_pixels}")
+                f"|{bins}|{max_pixels}" + (f"|{space}" if space else ""))
         return self.folder / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".npz")
 
-    def get(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray | None:
+    def get(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS,
+            space: str = "") -> np.ndarray | None:
         """The cached histogram (bins, bins, bins), or None."""
         if not self.enabled:
             return None
         try:
-            with np.load(self._key(path, bins, max_pixels), allow_pickle=False) as data:
+            with np.load(self._key(path, bins, max_pixels, space), allow_pickle=False) as data:
                 return from_sparse(data["index"], data["values"], bins)
         except (OSError, KeyError, ValueError):
             return None
 
     def put(self, path: Path, bins: int, hist: np.ndarray,
-            max_pixels: int = DEFAULT_MAX_PIXELS) -> None:
+            max_pixels: int = DEFAULT_MAX_PIXELS, space: str = "") -> None:
         """Store a histogram (failures are logged, not raised)."""
         if not self.enabled:
             return
         try:
-            target = self._key(path, bins, max_pixels)
+            target = self._key(path, bins, max_pixels, space)
             self.folder.mkdir(parents=True, exist_ok=True)
             index, values = to_sparse(hist)
             fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".npz.tmp")

@@ -109,6 +109,9 @@ class GradeOptions:
         hue and chroma.
     monotone : make the map's output luma non-decreasing in each input
         channel (no lightness reversals between neighbouring colours).
+    input_space, working_space : colour space names (OpenColorIO config;
+        :mod:`wbcgrade.color.colorspace`); None: what the file says, and
+        sRGB-encoded Rec.709.
     """
 
     bins: int = 128
@@ -136,6 +139,8 @@ class GradeOptions:
     regrain_eps: float = DEFAULT_REGRAIN_EPS
     preserve_luminance: bool = False
     monotone: bool = True
+    input_space: str | None = None
+    working_space: str | None = None
 
     def validate(self, n_styles: int | None = None) -> None:
         """Raise InputError on an option out of range."""
@@ -270,57 +275,35 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     target on their (n, n, n) grid with a kernel ``width`` bins wide, then the
     barycentric projection of the plan ``T(x_i) = (K (b x))_i / (K b)_i``.
 
-    A narrow kernel converges slowly from a cold start, so the plan is first
-    solved on coarser grids (halving down to ``coarsest`` bins, same kernel
-    in colour units) and, on the coarsest, with kernels ``schedule`` times
-    wider (to a loose tolerance); each solve warm-starts the next (epsilon
-    scaling and multigrid: the dual potential ``gamma log b`` carries over).
-    The coarser grids are solved to ``coarse_tol`` (default ``tol / 3``):
-    what error they leave is removed on the finest grid, where an iteration
-    costs 8 times more (on the 16 MP sample this takes the 128^3 solve from
-    ~22 to ~6 iterations, and the map closer to a converged solve).
-    Iterations are over-relaxed (``overrelaxation`` on the coarser grids,
-    ``fine_overrelaxation`` on the finest; see :func:`wbcgrade.core.sinkhorn`):
-    measured on four sample photos, 2-4 times fewer coarse iterations and a
-    map 2-5 times closer to a converged solve (0.01-0.05/255 on average; the
-    transfer 10-30 % faster: the relaxed update costs an exp and a log per bin).
+    The plan is solved coarse to fine (:func:`wbcgrade.core.multiscale_sinkhorn`):
+    first on coarser grids (halving down to ``coarsest`` bins, same kernel in
+    colour units) and, on the coarsest, with kernels ``schedule`` times wider
+    (to a loose tolerance); each solve warm-starts the next. Every level's
+    histograms are mixed with ``floor`` of the uniform one. The coarser grids
+    are solved to ``coarse_tol`` (default ``tol / 3``): what error they leave
+    is removed on the finest grid, where an iteration costs 8 times more (on
+    the 16 MP sample this takes the 128^3 solve from ~22 to ~6 iterations, and
+    the map closer to a converged solve). Iterations are over-relaxed
+    (``overrelaxation`` on the coarser grids, ``fine_overrelaxation`` on the
+    finest): measured on four sample photos, 2-4 times fewer coarse iterations
+    and a map 2-5 times closer to a converged solve (0.01-0.05/255 on average;
+    the transfer 10-30 % faster: the relaxed update costs an exp and a log per
+    bin).
 
     Returns
     -------
     color_map : (n, n, n, 3) float32 in [0, 1], the raw barycentric projection
     result : wbcgrade.core.SinkhornResult of the final solve
     """
-    from wbcgrade.color.histogram import resample_histogram
-    from wbcgrade.core import GridGeometry, barycentric_projection, sinkhorn
-    from wbcgrade.core.geometry import refine_grid
+    from wbcgrade.core import GridGeometry, barycentric_projection, multiscale_sinkhorn
 
     n = photo_hist.shape[0]
-    sizes = [n]
-    while sizes[-1] // 2 >= coarsest and sizes[-1] // 2 >= 4:
-        sizes.append(sizes[-1] // 2)
-    sizes.reverse()
     sigma = width / (n - 1)  # kernel in colour units, the same on every grid
-    fine_start_tol = tol / 3.0 if coarse_tol is None else coarse_tol
-    log_b, gamma_prev, shape_prev = None, None, None
-    for size in sizes:
-        p = add_floor(resample_histogram(photo_hist, size), floor)
-        q = add_floor(resample_histogram(target_hist, size), floor)
-        factors = [f for f in schedule if f > 1.0] if size == sizes[0] else []
-        for factor in factors + [1.0]:
-            geometry = GridGeometry((size,) * 3, 2.0 * (sigma * factor) ** 2)
-            init = None
-            if log_b is not None:
-                init = log_b * (gamma_prev / geometry.gamma)
-                if shape_prev != geometry.shape:
-                    init = refine_grid(init, geometry.shape)
-            level_tol = tol if size == n else fine_start_tol
-            result = sinkhorn(p, q, geometry,
-                              tol=level_tol if factor == 1.0 else max(level_tol, 1e-2),
-                              max_iter=max_iter, init_log_b=init, relaxation=relaxation,
-                              check_every=1,
-                              overrelaxation=fine_overrelaxation if size == n
-                              else overrelaxation)
-            log_b, gamma_prev, shape_prev = result.log_b, geometry.gamma, geometry.shape
+    geometry = GridGeometry((n,) * 3, 2.0 * sigma ** 2)
+    result = multiscale_sinkhorn(
+        photo_hist, target_hist, geometry, coarsest=coarsest, schedule=schedule, tol=tol,
+        coarse_tol=coarse_tol, max_iter=max_iter, floor=floor, relaxation=relaxation,
+        overrelaxation=overrelaxation, fine_overrelaxation=fine_overrelaxation)
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):
         raise NumericalError("the colour map is not finite (try a larger --transfer-width)")

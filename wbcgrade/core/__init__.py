@@ -1,7 +1,8 @@
 """The mathematical core: arrays in, arrays and small result objects out.
 
-No files, no printing, no colours: geometry, barycenter (+ gradient),
-losses (masked ones too), Sinkhorn and barycentric coordinates.
+No files, no printing, no colours: geometry and grid resampling, barycenter
+(+ gradient), losses (masked ones too), Sinkhorn (single-grid and
+multiscale) and barycentric coordinates.
 """
 
 from wbcgrade.core.barycenter import (
@@ -17,9 +18,16 @@ from wbcgrade.core.coordinates import (
     mixture_coordinates,
     softmax,
 )
-from wbcgrade.core.geometry import DenseGeometry, Geometry, GridGeometry, refine_grid
+from wbcgrade.core.geometry import (
+    DenseGeometry,
+    Geometry,
+    GridGeometry,
+    refine_grid,
+    resample_grid,
+)
 from wbcgrade.core.losses import LOSSES, Loss, get_loss, register_loss
 from wbcgrade.core.masked import RowSubsetGeometry, masked_loss
+from wbcgrade.core.multiscale import multiscale_sinkhorn
 from wbcgrade.core.sinkhorn import SinkhornResult, barycentric_projection, sinkhorn
 
 __all__ = [
@@ -27,6 +35,7 @@ __all__ = [
     "GridGeometry",
     "DenseGeometry",
     "refine_grid",
+    "resample_grid",
     "barycenter",
     "barycenter_gradient",
     "BarycenterSolver",
@@ -40,6 +49,7 @@ __all__ = [
     "get_loss",
     "register_loss",
     "sinkhorn",
+    "multiscale_sinkhorn",
     "SinkhornResult",
     "barycentric_projection",
     "gradient_memory",

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,11 +27,21 @@ from wbcgrade.core._cpu import fast_cpu, parallel_map
 from wbcgrade.core.geometry import PARALLEL_BINS, Geometry
 from wbcgrade.errors import ConvergenceWarning, NumericalError
 
-__all__ = ["SinkhornResult", "sinkhorn", "barycentric_projection"]
+__all__ = ["SinkhornResult", "SinkhornLevel", "sinkhorn", "barycentric_projection"]
 
 log = logging.getLogger(__name__)
 
 _FLOAT64_MAX = float(np.finfo(np.float64).max)
+
+
+class SinkhornLevel(NamedTuple):
+    """One solve of a multiscale run (:func:`wbcgrade.core.multiscale_sinkhorn`)."""
+
+    shape: tuple[int, ...]
+    gamma: float
+    n_iter: int
+    error: float
+    method: str
 
 
 @dataclass(frozen=True)
@@ -52,6 +63,10 @@ class SinkhornResult:
         successful attempt's, after any fallback).
     method : str
         ``"scaling"`` or ``"log"``: the domain that computed it.
+    levels : tuple of SinkhornLevel
+        From :func:`~wbcgrade.core.multiscale_sinkhorn`: every solve (grid
+        shape, gamma, iterations, error, domain), coarsest first, this one
+        last; empty from :func:`sinkhorn`.
     """
 
     log_a: NDArray
@@ -61,6 +76,7 @@ class SinkhornResult:
     converged: bool
     errors: tuple[float, ...] = ()
     method: str = "scaling"
+    levels: tuple[SinkhornLevel, ...] = ()
 
 
 class _Unsafe(Exception):

@@ -56,6 +56,7 @@ from wbcgrade.core import (
     barycentric_coordinates,
     get_loss,
     mixture_coordinates,
+    resample_grid,
 )
 from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES, gradient_memory
 from wbcgrade.errors import InputError
@@ -433,8 +434,10 @@ def project(
         used_width = default_width(max(density.shape)) if width is None else float(width)
         init_weights, fine_iter, coarse_history = None, max_iter, []
         if coarse_to_fine and min(density.shape) >= 2 * COARSE_MIN_SIZE:
-            coarse_target = _coarsen(target)
-            coarse_stack = np.stack([_coarsen(h) for h in stack])
+            # Half size, corners aligned, each density's mass kept (positive stays positive).
+            coarse_shape = tuple((n + 1) // 2 for n in density.shape)
+            coarse_target = resample_grid(target, coarse_shape)
+            coarse_stack = resample_grid(stack, coarse_shape)
             coarse_width = used_width * (max(coarse_target.shape) - 1) / (max(density.shape) - 1)
             coarse = barycentric_coordinates(
                 coarse_target, coarse_stack,
@@ -477,19 +480,6 @@ def project(
         time_s=time.perf_counter() - start,
         history=history,
     )
-
-
-def _coarsen(density: np.ndarray) -> np.ndarray:
-    """Half-size copy on the grid ``linspace(0, 1, m)`` (corners aligned), same total mass."""
-    from scipy.ndimage import gaussian_filter, zoom
-
-    shape = tuple((n + 1) // 2 for n in density.shape)
-    small = zoom(
-        gaussian_filter(density, 0.7), [m / n for m, n in zip(shape, density.shape, strict=True)],
-        order=1, grid_mode=False,
-    )
-    small = np.clip(small, density.min(), None)
-    return small * (density.sum() / small.sum())
 
 
 # --------------------------------------------------------------------------- completion
