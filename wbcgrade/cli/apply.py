@@ -11,7 +11,9 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     lazy_options,
+    lut_format_option,
     lut_size_option,
+    space_options,
     take_grading_options,
 )
 
@@ -58,21 +60,27 @@ def _print_report(report, as_json: bool) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
+@space_options
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Also write the grade as a 3-D LUT (.cube).")
+              help="Also write the grade as a 3-D LUT (.cube or .clf; its header names the "
+                   "colour spaces it expects and produces).")
 @lazy_options(lut_size_option)
+@lazy_options(lut_format_option)
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
               "index.html) into this folder.")
-def apply(photo, output, lut, lut_size, overwrite, as_json, report_dir, **kwargs):
+def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_dir, **kwargs):
     """Grade PHOTO towards the barycenter of style palettes closest to its own.
 
     The style palettes come from a folder of photos (--style DIR) or a preset
     (--preset NAME_OR_FILE). The photo keeps its format, bit depth, EXIF and
-    ICC profile. Float (EXR) photos are graded in the sRGB-encoded domain;
-    values above 1 keep their intensity and get the grade of their hue.
+    ICC profile. By default 8/16-bit photos are graded as sRGB (or the space
+    their ICC profile names, converted) and float (EXR) photos in the
+    sRGB-encoded domain; values above 1 keep their intensity and get the
+    grade of their hue. --working-space (e.g. acescct) grades elsewhere;
+    the output stays in the photo's own space.
     """
     from tqdm import tqdm
 
@@ -82,11 +90,16 @@ def apply(photo, output, lut, lut_size, overwrite, as_json, report_dir, **kwargs
     opts, style_args = take_grading_options(kwargs)
     if opts.fit_bins > 32:
         _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes (default 16)")
-    check_outputs(photo, output, lut, lut_size, overwrite)
+    check_outputs(photo, output, lut, lut_size, overwrite, lut_format)
+    if lut is not None and lut_format == "clf":
+        from wbcgrade.color.lut import check_clf_support
+
+        check_clf_support()  # before any work
     start = time.perf_counter()
     with style_progress() as progress:
         styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress)
+                             cache=style_args["cache"], warn=_warn, progress=progress,
+                             working_space=opts.working_space)
     timings = {"styles": time.perf_counter() - start}
 
     with tqdm(desc="fit", unit="eval", disable=None, leave=False) as bar:
@@ -99,7 +112,7 @@ def apply(photo, output, lut, lut_size, overwrite, as_json, report_dir, **kwargs
 
         report = grade_file(photo, styles, opts, output=output, lut=lut, lut_size=lut_size,
                             overwrite=overwrite, fit_callback=on_fit, stage=on_stage,
-                            timings=timings)
+                            timings=timings, lut_format=lut_format)
     _print_report(report, as_json)
     if report_dir is not None:
         from wbcgrade.color.report import report_from_grade

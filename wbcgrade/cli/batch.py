@@ -12,7 +12,9 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     lazy_options,
+    lut_format_option,
     lut_size_option,
+    space_options,
     take_grading_options,
 )
 from wbcgrade.errors import InputError
@@ -37,7 +39,8 @@ def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
               "(default 16)")
     with style_progress() as progress:
         styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress)
+                             cache=style_args["cache"], warn=_warn, progress=progress,
+                             working_space=opts.working_space)
     opts.validate(len(styles.names))
     return styles
 
@@ -117,6 +120,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
               type=click.Path(file_okay=False, path_type=str),
               help="Folder for the graded copies (the input tree is mirrored).")
 @grading_options
+@space_options
 @click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
 @click.option("--consistent", is_flag=True,
               help="One grade for the whole series: one fit on the pooled palette of all "
@@ -134,11 +138,13 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write the palette weight report into this folder.")
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="With --consistent: also write the series grade as a 3-D LUT (.cube).")
+              help="With --consistent: also write the series grade as a 3-D LUT (.cube or "
+                   ".clf; its header names the colour spaces).")
 @lazy_options(lut_size_option)
+@lazy_options(lut_format_option)
 @click.pass_context
 def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, jobs, scheduler,
-          report_dir, lut, lut_size, **kwargs):
+          report_dir, lut, lut_size, lut_format, **kwargs):
     """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
 
     Each photo gets its own barycentric coordinates, or with --consistent the
@@ -158,7 +164,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
         write_settings,
     )
     from wbcgrade.color.imageio import check_output_path
-    from wbcgrade.color.lut import color_map_to_lut, write_cube
+    from wbcgrade.color.lut import check_clf_support, check_lut_path, write_grade_lut
 
     if force_alias:
         _warn("--force is deprecated; use --overwrite")
@@ -168,8 +174,9 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
         if not consistent:
             raise InputError("--lut needs --consistent (one grade for the series); per-photo "
                              "LUTs come from `wbcgrade apply --lut`")
-        if not lut.lower().endswith(".cube"):
-            raise InputError(f"{lut}: LUT file name must end in .cube")
+        check_lut_path(lut, lut_format)
+        if lut_format == "clf":
+            check_clf_support()
         if Path(lut).exists() and not overwrite:
             raise InputError(f"{lut}: file exists (use --overwrite to replace it)")
         check_output_path(lut, overwrite=True)  # folder, writability, a regular file
@@ -213,13 +220,14 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
                 click.echo("LUT not written: no photo was graded (use --overwrite to redo the "
                            "series)")
             else:
+                from wbcgrade.color.colorspace import spaces_for
+
                 ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-                write_cube(lut, color_map_to_lut(grade.color_map, lut_size, grade.strength),
-                           title=f"wbcgrade series {Path(in_dir).name}",
-                           comments=[f"wbcgrade series grade of {in_dir}: {ranked}",
-                                     "input: encoded RGB in [0, 1] (sRGB-encoded for float "
-                                     "images)"],
-                           overwrite=True)
+                write_grade_lut(lut, grade.color_map, spaces_for(None, opts.working_space),
+                                lut_size, grade.strength, lut_format,
+                                title=f"wbcgrade series {Path(in_dir).name}",
+                                comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
+                                overwrite=True)
                 click.echo(f"wrote {lut}")
     if result.count("failed"):
         ctx.exit(1)

@@ -90,6 +90,31 @@ def _options() -> list:
     return _OPTIONS
 
 
+def _space_options() -> list:
+    """``--input-space`` and ``--working-space`` (colour management, OpenColorIO)."""
+    return [
+        click.option("--input-space", default=None, metavar="NAME",
+                     help="Colour space of the photos (an OpenColorIO name, alias or role, or "
+                          "srgb, display-p3, adobe-rgb, linear-rec709, acescg, acescct; case "
+                          "ignored) [default: what the file says (ICC profile, EXR "
+                          "chromaticities), else sRGB for 8/16-bit and Linear Rec.709 for "
+                          "float files]."),
+        click.option("--working-space", default=None, metavar="NAME",
+                     help="Colour space whose unit cube the histograms, the transport and the "
+                          "colour map live in, e.g. acescct [default: sRGB-encoded Rec.709]. "
+                          "Config: $OCIO, else OpenColorIO's built-in ocio://default."),
+    ]
+
+
+def lut_format_option() -> list:
+    """``--lut-format cube|clf``, for :func:`lazy_options`."""
+    return [click.option("--lut-format", type=click.Choice(["cube", "clf"]), default="cube",
+                         show_default=True,
+                         help="LUT file format: .cube (Resolve/Adobe; with a 1D shaper for a "
+                              "logarithmic working space) or .clf (Academy/ASC Common LUT "
+                              "Format; needs the opencolorio package).")]
+
+
 def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
     from wbcgrade.color.imageio import set_max_image_pixels
 
@@ -102,6 +127,8 @@ _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "
                "max_iter", "strength", "relaxation", "map_size", "smoothness", "stiffness",
                "monotone", "regrain", "regrain_radius", "regrain_eps", "preserve_luminance")
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
+#: Options of :data:`space_options` (GradeOptions fields of the same name).
+_SPACE_KEYS = ("input_space", "working_space")
 
 
 class _Deferred:
@@ -160,6 +187,9 @@ def lazy_options(factory):
 #: Decorator adding the grading options of ``apply`` to a LazyOptionsCommand.
 grading_options = lazy_options(_options)
 
+#: Decorator adding ``--input-space`` and ``--working-space`` to a LazyOptionsCommand.
+space_options = lazy_options(_space_options)
+
 
 def grading_options_except(*names: str):
     """Decorator: the grading options but those whose parameter is named in ``names``
@@ -189,15 +219,24 @@ def take_grading_options(kwargs: dict) -> tuple:
     """Pop the grading options from a command's kwargs -> (GradeOptions, style arguments).
 
     The style arguments are ``style_dir``, ``preset`` and ``cache`` (a HistogramCache).
+    ``--input-space``/``--working-space`` (:data:`space_options`) are taken
+    when the command has them and resolved here (an unknown name is an
+    OptionError naming the valid ones, before any work).
     """
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.transfer import GradeOptions
     from wbcgrade.color.weights import parse_weights
 
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
+    spaces = {key: kwargs.pop(key, None) for key in _SPACE_KEYS}
+    if any(spaces.values()):
+        from wbcgrade.color.colorspace import resolve_space
+
+        spaces = {key: resolve_space(value, "--" + key.replace("_", "-")) if value else None
+                  for key, value in spaces.items()}
     text = values["weights_text"]
     opts = GradeOptions(**{key: values[key] for key in _PLAIN_KEYS},
-                        weights=parse_weights(text) if text else None)
+                        weights=parse_weights(text) if text else None, **spaces)
     opts.validate()
     cache = HistogramCache(values["cache_dir"], enabled=not values["no_cache"])
     return opts, {"style_dir": values["style_dir"], "preset": values["preset"], "cache": cache}

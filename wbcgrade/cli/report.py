@@ -11,6 +11,7 @@ from wbcgrade.cli.batch import load_styles_with_progress, print_summary, run_wit
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
+    space_options,
     take_grading_options,
 )
 from wbcgrade.errors import InputError
@@ -28,6 +29,7 @@ def _default_report_dir(target: Path) -> Path:
               type=click.Path(file_okay=False, path_type=str),
               help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
+@space_options
 @click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
 @click.option("--consistent", is_flag=True,
               help="Report the one series grade (pooled palette) instead of one fit per photo.")

@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.colorspace import Spaces, plan_spaces, spaces_for, to_working
 from wbcgrade.color.histogram import add_floor, image_histogram
-from wbcgrade.color.imageio import Image, encode_for_grading, read_image
-from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.imageio import Image, read_image
+from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.color.render import render
 from wbcgrade.color.transfer import (
     Grade,
@@ -227,10 +228,16 @@ def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: Gr
 
 
 def photo_histograms(path: str | os.PathLike, bins: tuple[int, ...],
-                     max_pixels: int) -> dict[int, np.ndarray]:
-    """Histograms of a photo file at several grid sizes -> {bins: (b, b, b)}."""
+                     max_pixels: int, input_space: str | None = None,
+                     working_space: str | None = None) -> dict[int, np.ndarray]:
+    """Histograms of a photo file at several grid sizes -> {bins: (b, b, b)}.
+
+    The colours are those of the working space (``None``: sRGB-encoded
+    Rec.709); ``input_space`` None: what the file says.
+    """
     image = read_image(path)
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    spaces = plan_spaces(image, input_space, working_space)
+    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
     return {b: image_histogram(encoded, b, image.alpha(), max_pixels) for b in bins}
 
 
@@ -319,6 +326,7 @@ class PhotoGrade:
     fit : weights and single-style comparison (None for a shared series grade
         whose summary the caller holds).
     timings : seconds per stage.
+    spaces : the photo's input and working colour spaces.
     """
 
     image: Image
@@ -327,6 +335,7 @@ class PhotoGrade:
     grade: Grade
     fit: FitSummary | None
     timings: dict[str, float] = field(default_factory=dict)
+    spaces: Spaces | None = None
 
 
 def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
@@ -369,7 +378,10 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = N
     Parameters
     ----------
     rgb : (H, W, 3) encoded (e.g. sRGB) colours in [0, 1], any float or
-        integer dtype (integers are scaled by their maximum value).
+        integer dtype (integers are scaled by their maximum value); in
+        ``opts.input_space`` when given (default sRGB), graded in
+        ``opts.working_space`` (default sRGB-encoded Rec.709) and returned
+        in the input space.
     styles : the style palettes (:func:`wbcgrade.color.presets.load_preset`,
         :func:`~wbcgrade.color.presets.load_style_folder`).
     opts : grade settings (default :class:`GradeOptions`).
@@ -377,7 +389,8 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = N
 
     Returns
     -------
-    graded : (H, W, 3) float32 in [0, 1] (colour map and regrain applied)
+    graded : (H, W, 3) float32 in [0, 1] (colour map and regrain applied;
+        colour-managed: in the input space, out-of-gamut values not clipped)
     grade : the weights, colour map and diagnostics (``grade.apply`` grades
         more pixels the same way; ``grade.color_map`` is the LUT).
     """
@@ -388,13 +401,17 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = N
         rgb = rgb / np.float32(np.iinfo(rgb.dtype).max)
     if not np.all(np.isfinite(rgb)):
         raise InputError("rgb contains NaN or inf")
-    encoded, _ = encode_for_grading(np.asarray(rgb, dtype=np.float32), False)
+    opts = opts or GradeOptions()
+    spaces = spaces_for(opts.input_space, opts.working_space, is_float=False)
+    encoded, state = to_working(np.asarray(rgb, dtype=np.float32), spaces, False)
     if alpha is not None:
         alpha = np.asarray(alpha, dtype=np.float32)
         if alpha.shape != encoded.shape[:2]:
             raise InputError(f"alpha must have shape {encoded.shape[:2]}, got {alpha.shape}")
-    grade, _ = fit_grade(encoded, styles, opts or GradeOptions(), alpha)
-    return grade.apply(encoded), grade
+    styles = styles_in_space(styles, spaces.working)
+    grade, _ = fit_grade(encoded, styles, opts, alpha)
+    graded = grade.apply(encoded)
+    return (graded if spaces.legacy else state.decode(graded)), grade
 
 
 def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
@@ -411,16 +428,18 @@ def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     say("read")
     start = time.perf_counter()
     image = read_image(Path(path))
-    encoded, scale = encode_for_grading(image.rgb(), image.is_float)
+    spaces = plan_spaces(image, opts.input_space, opts.working_space)
+    encoded, scale = to_working(image.rgb(), spaces, image.is_float)
     timings["read"] = time.perf_counter() - start
     summary = None
     if shared is not None:
         grade = shared
     else:
+        styles = styles_in_space(styles, spaces.working)
         grade, summary = fit_grade(encoded, styles, opts, image.alpha(), callback, stage)
         timings.update(grade.timings)
     say("remap")
     start = time.perf_counter()
     pixels, alpha_channel = render(image, grade, (encoded, scale))
     timings["remap"] = time.perf_counter() - start
-    return PhotoGrade(image, pixels, alpha_channel, grade, summary, timings)
+    return PhotoGrade(image, pixels, alpha_channel, grade, summary, timings, spaces)

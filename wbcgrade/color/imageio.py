@@ -14,7 +14,10 @@ replaces the input or anything that is not a regular file.
 Pixel domains: integer images (8/16-bit JPEG, PNG, TIFF) are treated as
 display-encoded values in [0, 1]. Float images (EXR, float TIFF) are treated as
 scene-linear and graded in the sRGB-encoded domain (colour-science's sRGB
-encoding); see :func:`encode_for_grading` for what happens above 1.
+encoding); see :func:`encode_for_grading` for what happens above 1. That is
+the default pair of colour spaces; other input and working spaces go through
+OpenColorIO (:mod:`wbcgrade.color.colorspace`), whose state
+:func:`decode_from_grading` also accepts.
 """
 
 from __future__ import annotations
@@ -286,8 +289,16 @@ def encode_for_grading(rgb: np.ndarray, is_float: bool) -> tuple[np.ndarray, np.
     return np.clip(encoded, 0.0, 1.0).astype(np.float32), scale
 
 
-def decode_from_grading(encoded: np.ndarray, scale: np.ndarray | None) -> np.ndarray:
-    """Inverse of :func:`encode_for_grading` ((H, W, 3) float32 -> pixel values)."""
+def decode_from_grading(encoded: np.ndarray, scale) -> np.ndarray:
+    """Inverse of :func:`encode_for_grading` ((H, W, 3) float32 -> pixel values).
+
+    ``scale`` is the second value :func:`encode_for_grading` returned, or the
+    state of a colour-managed conversion
+    (:func:`wbcgrade.color.colorspace.to_working`), which converts back into
+    the photo's own colour space.
+    """
+    if hasattr(scale, "decode"):  # colorspace.WorkingState
+        return scale.decode(encoded)
     if scale is None:
         return encoded.astype(np.float32, copy=False)
     from wbcgrade.color._colour import colour

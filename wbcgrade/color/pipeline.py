@@ -19,8 +19,14 @@ from wbcgrade._publish import remove_stale_beside
 from wbcgrade.color.grading import FitSummary, grade_photo
 from wbcgrade.color.histogram import HistogramCache
 from wbcgrade.color.imageio import check_image_output, check_output_path, stage_image
-from wbcgrade.color.lut import color_map_to_lut, write_cube
-from wbcgrade.color.presets import StyleSet, load_preset, load_style_folder, resolve_preset
+from wbcgrade.color.lut import check_lut_path, write_cube, write_grade_lut
+from wbcgrade.color.presets import (
+    StyleSet,
+    load_preset,
+    load_style_folder,
+    resolve_preset,
+    styles_in_space,
+)
 from wbcgrade.color.render import render
 from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError
@@ -40,6 +46,7 @@ class GradeReport:
     styles_source: str
     timings: dict[str, float] = field(default_factory=dict)
     fit: FitSummary | None = None
+    color: dict = field(default_factory=dict)
 
     @property
     def fit_start(self) -> str:
@@ -62,6 +69,7 @@ class GradeReport:
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
             **{k: v for k, v in self.grade.info.items()},
+            "color": self.color,
         }
 
 
@@ -73,13 +81,14 @@ def default_output_path(photo: str | os.PathLike) -> Path:
 
 def check_outputs(photo: str | os.PathLike, output: str | os.PathLike | None,
                   lut: str | os.PathLike | None, lut_size: int = 33,
-                  overwrite: bool = False) -> tuple[Path, Path | None]:
+                  overwrite: bool = False, lut_format: str = "cube") -> tuple[Path, Path | None]:
     """Check the photo exists and the outputs may be written; -> (output, lut) paths.
 
     Checked before any work: the output's file type can be written, its
     folder exists and is writable, it is not the photo, not an existing file
     (unless ``overwrite``) and not a device or other non-regular file; the
-    same for the LUT, which must end in ``.cube`` and differ from the output.
+    same for the LUT, which must end in ``.cube`` (``.clf`` for ``lut_format``
+    "clf") and differ from the output.
     """
     photo = Path(photo)
     if not photo.exists():
@@ -88,9 +97,7 @@ def check_outputs(photo: str | os.PathLike, output: str | os.PathLike | None,
     check_output_path(output, [photo], overwrite)
     check_image_output(output)
     if lut is not None:
-        lut = Path(lut)
-        if lut.suffix.lower() != ".cube":
-            raise InputError(f"{lut}: LUT file name must end in .cube")
+        lut = check_lut_path(lut, lut_format)
         if lut.absolute() == output.absolute():
             raise InputError(f"{lut}: the LUT and the graded photo must be different files")
         check_output_path(lut, [photo, output], overwrite)
@@ -102,13 +109,26 @@ def check_outputs(photo: str | os.PathLike, output: str | os.PathLike | None,
 def load_styles(style_dir: str | os.PathLike | None, preset: str | None, bins: int,
                 cache: HistogramCache | None = None,
                 warn: Callable[[str], None] | None = None,
-                progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
-    """Styles from a folder (histograms at ``bins``, cached) or a preset NAME/FILE."""
+                progress: Callable[[int, int, str], None] | None = None,
+                working_space: str | None = None) -> StyleSet:
+    """Styles from a folder (histograms at ``bins``, cached) or a preset NAME/FILE.
+
+    The histograms are those of ``working_space`` (None: sRGB-encoded
+    Rec.709): style photos are converted from their own spaces before
+    binning; a preset built in another working space is converted
+    (:func:`wbcgrade.color.presets.styles_in_space`).
+    """
     if (style_dir is None) == (preset is None):
         raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
     if preset is not None:
-        return load_preset(resolve_preset(preset))
-    return load_style_folder(style_dir, bins, cache=cache, warn=warn, progress=progress)
+        styles = load_preset(resolve_preset(preset))
+        if working_space is None and "working_space" not in styles.meta:
+            return styles  # the default: sRGB-encoded Rec.709 on both sides
+        from wbcgrade.color.colorspace import default_working_space
+
+        return styles_in_space(styles, working_space or default_working_space())
+    return load_style_folder(style_dir, bins, cache=cache, warn=warn, progress=progress,
+                             working_space=working_space)
 
 
 def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
@@ -116,7 +136,8 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
                lut_size: int = 33, overwrite: bool = False,
                fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
                stage: Callable[[str], None] | None = None,
-               timings: dict[str, float] | None = None) -> GradeReport:
+               timings: dict[str, float] | None = None,
+               lut_format: str = "cube") -> GradeReport:
     """Grade ``photo`` towards ``styles`` and write the result (and a LUT).
 
     The output paths are checked before any computation; files are written
@@ -125,10 +146,16 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
     not published either. Temporary files a killed earlier run left in the
     output folders are removed. ``timings`` may hold stages timed by the
     caller (e.g. loading styles); they are kept in the report.
+
+    Colour spaces: ``opts.input_space`` (None: what the file says) and
+    ``opts.working_space`` (None: sRGB-encoded Rec.709); the styles are
+    converted into the working space when they are in another, the output
+    is written in the input space, the LUT (``lut_format`` "cube" or "clf")
+    names the spaces it expects and produces.
     """
     photo = Path(photo)
     opts.validate(len(styles.names))
-    output, lut = check_outputs(photo, output, lut, lut_size, overwrite)
+    output, lut = check_outputs(photo, output, lut, lut_size, overwrite, lut_format)
     remove_stale_beside(output, lut)
     timings = dict(timings or {})
     say = stage or (lambda name: None)
@@ -151,13 +178,11 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
             if lut is not None:  # written while the photo waits, published just before it
                 say("lut")
                 start = time.perf_counter()
-                table = color_map_to_lut(grade.color_map, lut_size, grade.strength)
                 ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-                write_cube(lut, table, title=f"wbcgrade {photo.stem}",
-                           comments=[f"wbcgrade grade of {photo.name}: {ranked}",
-                                     "input: encoded RGB in [0, 1] (sRGB-encoded for float "
-                                     "images)"],
-                           overwrite=overwrite)
+                write_grade_lut(lut, grade.color_map, graded.spaces, lut_size, grade.strength,
+                                lut_format, title=f"wbcgrade {photo.stem}",
+                                comments=[f"wbcgrade grade of {photo.name}: {ranked}"],
+                                overwrite=overwrite, cube_writer=write_cube)
                 lut_written = True
                 timings["lut"] = time.perf_counter() - start
     except BaseException:
@@ -166,5 +191,7 @@ def grade_file(photo: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
                 lut.unlink()
         raise
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
+    color = {**graded.spaces.as_dict(), "styles_space": styles.working_space}
     return GradeReport(photo=photo, output=output, lut=lut, grade=grade,
-                       styles_source=styles.source, timings=timings, fit=graded.fit)
+                       styles_source=styles.source, timings=timings, fit=graded.fit,
+                       color=color)

@@ -5,7 +5,12 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
 
 - ``header``: uint8 bytes of a UTF-8 JSON object ``{"format": "wbcgrade-preset",
   "version": 1, "bins": n, "names": [...], "width": w, "gamma": g,
-  "description": "...", "space": "sRGB-encoded RGB"}``;
+  "description": "...", "space": "...", "working_space": "ACEScct",
+  "ocio_config": "ocio://default"}``; ``working_space`` (an OpenColorIO
+  colour space name) is the space whose unit cube the histograms cover;
+  presets written before it existed lack it and mean sRGB-encoded Rec.709.
+  Grading in another working space converts the histograms
+  (:func:`styles_in_space`);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid;
 - ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``.
@@ -29,6 +34,14 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path
+from wbcgrade.color.colorspace import (
+    config_path,
+    convert,
+    default_working_space,
+    plan_spaces,
+    resolve_space,
+    to_working,
+)
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
@@ -37,7 +50,7 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import check_output_path, encode_for_grading, read_image
+from wbcgrade.color.imageio import check_output_path, read_image
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -50,6 +63,7 @@ __all__ = [
     "shipped_presets_dir",
     "PRESET_FORMAT",
     "PRESET_VERSION",
+    "styles_in_space",
 ]
 
 log = logging.getLogger(__name__)
@@ -72,6 +86,8 @@ class StyleSet:
     histograms : (S, n, n, n) float64, each summing to 1.
     source : folder or preset file they came from.
     width : kernel width (bins) recorded with a preset, or None.
+    meta : the preset's header; ``meta["working_space"]`` names the colour
+        space of the histograms (absent: sRGB-encoded Rec.709).
     """
 
     names: list[str]
@@ -85,6 +101,13 @@ class StyleSet:
     @property
     def bins(self) -> int:
         return int(self.histograms.shape[1])
+
+    @property
+    def working_space(self) -> str:
+        """The colour space whose unit cube the histograms cover (config name)."""
+        name = self.meta.get("working_space")
+        return resolve_space(name, "working space of the styles") if name \
+            else default_working_space()
 
     def at_bins(self, bins: int, only: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(S, bins, bins, bins) histograms re-binned to another grid.
@@ -105,9 +128,11 @@ class StyleSet:
         return self._resampled[bins]
 
 
-def _photo_histogram(path: Path, bins: int, max_pixels: int) -> np.ndarray:
+def _photo_histogram(path: Path, bins: int, max_pixels: int,
+                     working_space: str | None = None) -> np.ndarray:
     image = read_image(path)
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+    spaces = plan_spaces(image, None, working_space)  # each style photo in its own space
+    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
     try:
         return image_histogram(encoded, bins, image.alpha(), max_pixels)
     except InputError as exc:  # e.g. fully transparent: say which photo
@@ -118,11 +143,15 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
                       cache: HistogramCache | None = None,
                       max_pixels: int = DEFAULT_MAX_PIXELS,
                       warn: Callable[[str], None] | None = None,
-                      progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
+                      progress: Callable[[int, int, str], None] | None = None,
+                      working_space: str | None = None) -> StyleSet:
     """Histograms of every photo in a folder (not recursive), sorted by name.
 
     Files that are not readable images are skipped with a warning (passed to
     ``warn``, else logged). Histograms come from ``cache`` when it holds them.
+    Each photo is converted from its own colour space (ICC profile, EXR
+    metadata; :func:`wbcgrade.color.colorspace.detect_input_space`) into
+    ``working_space`` (None: sRGB-encoded Rec.709) before its histogram.
 
     Raises InputError when the folder is missing or holds no usable photo.
     """
@@ -131,22 +160,24 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
     cache = cache or HistogramCache(enabled=False)
+    working = resolve_space(working_space) if working_space else default_working_space()
+    space = f"{config_path()}|{working}"
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
     names, hists = [], []
     for number, path in enumerate(files):
         if progress:
             progress(number, len(files), path.name)
-        hist = cache.get(path, bins, max_pixels)
+        hist = cache.get(path, bins, max_pixels, space)
         if hist is None:
             try:
-                hist = _photo_histogram(path, bins, max_pixels)
+                hist = _photo_histogram(path, bins, max_pixels, working)
             except InputError as exc:
                 if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
                     warn(f"skipping {exc}")
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue
-            cache.put(path, bins, hist, max_pixels)
+            cache.put(path, bins, hist, max_pixels, space)
         names.append(path.stem)
         hists.append(hist)
     if progress:
@@ -156,7 +187,8 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     if len(set(names)) != len(names):
         dupes = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"{folder}: several style photos share the name {dupes[0]!r}")
-    return StyleSet(names=names, histograms=np.stack(hists), source=str(folder))
+    return StyleSet(names=names, histograms=np.stack(hists), source=str(folder),
+                    meta={"working_space": working, "ocio_config": config_path()})
 
 
 def check_preset_width(width: float) -> float:
@@ -194,9 +226,11 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
         indices.append(index)
         values.append(vals)
         offsets.append(offsets[-1] + len(index))
+    working = styles.working_space
     header = {"format": PRESET_FORMAT, "version": PRESET_VERSION, "bins": bins,
               "names": list(styles.names), "width": float(width), "gamma": gamma,
-              "description": description, "space": "sRGB-encoded RGB"}
+              "description": description, "space": f"{working}-encoded RGB",
+              "working_space": working, "ocio_config": config_path()}
     with atomic_path(path, suffix=".npz.tmp", overwrite=overwrite) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(
@@ -255,6 +289,9 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     width = header.get("width")
     if width is not None and not (isinstance(width, (int, float)) and width > 0):
         raise _bad(path, "bad kernel width")
+    working = header.get("working_space")
+    if working is not None and not (isinstance(working, str) and working):
+        raise _bad(path, "bad working space")
     if (offsets.ndim != 1 or len(offsets) != len(names) + 1 or offsets[0] != 0
             or np.any(np.diff(offsets) <= 0) or offsets[-1] != len(index)
             or index.shape != values.shape or index.ndim != 1):
@@ -305,3 +342,37 @@ def resolve_preset(name_or_path: str) -> Path:
         raise InputError(f"{name_or_path}: no such preset file")
     names = ", ".join(shipped) or "none installed"
     raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")
+
+
+def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
+    """The styles' histograms in another working space (the same set when already there).
+
+    Each non-empty bin's centre is converted from the styles' working space
+    into ``working_space`` (OpenColorIO, :func:`wbcgrade.color.colorspace.convert`)
+    and its mass soft-binned again at the same grid size
+    (:func:`wbcgrade.color.histogram.soft_histogram`). Colours that fall
+    outside the new unit cube are clipped onto its faces (e.g. an sRGB-built
+    preset's highlights in a linear working space); a logarithmic working
+    space such as ACEScct holds every sRGB colour. The converted set is
+    kept on ``styles`` (converted once per working space).
+    """
+    from wbcgrade.color.histogram import grid_points, soft_histogram
+
+
+    working = resolve_space(working_space)
+    source = styles.working_space
+    if working == source:
+        return styles
+    key = ("space", working)
+    if key not in styles._resampled:
+        centres = grid_points(styles.bins)
+        hists = []
+        for hist in styles.histograms:
+            flat = hist.ravel()
+            keep = np.flatnonzero(flat > 0)
+            moved = convert(centres[keep], source, working)
+            hists.append(soft_histogram(moved, styles.bins, flat[keep]))
+        meta = {**styles.meta, "working_space": working, "converted_from": source}
+        styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
+                                          styles.width, styles.description, meta)
+    return styles._resampled[key]

@@ -228,7 +228,11 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
             "graded": result.count("graded"), "skipped": result.count("skipped"),
             "failed": result.count("failed"), "time_s": round(result.time_s, 2)}
     options = {k: v for k, v in vars(opts).items()}
-    document = {"format": "wbcgrade-report", "version": 1, **meta,
+    from wbcgrade.color.colorspace import config_info, default_working_space
+
+    color = {**config_info(), "input_space": opts.input_space or "what each file says",
+             "working_space": opts.working_space or default_working_space()}
+    document = {"format": "wbcgrade-report", "version": 1, **meta, "color": color,
                 "style_names": names, "nonzero_threshold": NONZERO_THRESHOLD,
                 "options": options, "ignored": result.ignored, "photos": entries}
     if result.series is not None:
@@ -282,7 +286,8 @@ def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
     result = FileResult(graded.photo.name, str(graded.photo), str(graded.output), "graded",
                         names=list(styles.names), weights=[float(w) for w in weights],
                         loss=float(loss), vertex_losses=[float(v) for v in vertices],
-                        start=how, timings=dict(graded.timings))
+                        start=how, timings=dict(graded.timings),
+                        color=dict(getattr(graded, "color", {}) or {}))
     photo = PhotoGrade(image, output.pixels, output.alpha_channel, grade, None)
     from wbcgrade.color.sheet import write_sheet
 

@@ -28,6 +28,7 @@ class FileResult:
     start: str = ""
     sheet: str | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    color: dict = field(default_factory=dict)  # colour spaces and config (colorspace.Spaces)
 
     @property
     def n_nonzero(self) -> int:
@@ -53,6 +54,8 @@ class FileResult:
                 "nonzero_weights": self.n_nonzero,
                 "nonzero_threshold": NONZERO_THRESHOLD,
             })
+        if self.color:
+            entry["color"] = self.color
         if self.sheet:
             entry["sheet"] = self.sheet
         entry["time_s"] = round(self.timings.get("total", 0.0), 3)

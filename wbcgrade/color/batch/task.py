@@ -89,6 +89,7 @@ def run_task(task: BatchTask, context: BatchContext,
         result.vertex_losses = [float(v) for v in fit.vertex_losses]
         result.start = fit.start
         result.timings = dict(graded.timings)
+        result.color = graded.spaces.as_dict() if graded.spaces is not None else {}
         if context.write_outputs and task.output is not None:
             if stage:
                 stage("write")
@@ -120,7 +121,8 @@ def read_histograms(task: BatchTask, context: BatchContext,
     """The photo's histograms ``{bins: (bins, bins, bins)}``, or its one-line error."""
     set_max_image_pixels(context.max_image_pixels)
     try:
-        return photo_histograms(task.source, bins, context.opts.max_pixels)
+        return photo_histograms(task.source, bins, context.opts.max_pixels,
+                                context.opts.input_space, context.opts.working_space)
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
         text = str(exc).strip().splitlines()
         return text[0] if text else type(exc).__name__

@@ -1,0 +1,486 @@
+"""Colour spaces: which space a photo is in, and the working space the grade lives in.
+
+Everything goes through OpenImageIO's built-in OpenColorIO
+(``ImageBufAlgo.colorconvert``) with the config named by ``$OCIO``, else the
+library's built-in ``ocio://default`` (the ACES "CG" config). Space names
+are resolved through the config's own names, aliases and roles, and through
+a few short aliases of ours (``srgb``, ``display-p3``, ``adobe-rgb``,
+``acescg``, ``acescct``, ``linear-rec709``, ...), case-insensitively, so
+that the code does not depend on one release's spelling.
+
+The grade's histograms live on the unit cube of the *working space*
+(docs/architecture.md, "Data flow"). A photo goes there and back as follows
+(:func:`to_working`, :func:`from_working`):
+
+1. the default pair (an sRGB 8/16-bit file, or a Linear Rec.709 float file,
+   graded in sRGB-encoded Rec.709) runs today's code unchanged
+   (:func:`wbcgrade.color.imageio.encode_for_grading`): outputs are byte for
+   byte what they were before colour management;
+2. otherwise the pixels are converted by OpenColorIO from the input space
+   into the working space's *linear partner* (ACEScg for ACEScct/ACEScc,
+   Linear P3-D65 for sRGB-encoded P3, ...). Float pixels whose largest
+   channel m exceeds the partner's *peak* (the linear value the working
+   space encodes as 1: 1.0 for sRGB, ~222.9 for ACEScct) are divided by
+   m / peak, as today's exposure rule does for sRGB, and multiplied back
+   after grading: highlights keep their intensity, only their colour is
+   graded;
+3. what is still outside [0, 1] in the working space (out-of-gamut colours,
+   e.g. saturated P3 reds in sRGB, or negative values) is carried as a
+   residual: the grade sees the clipped colour and the residual is added
+   back to its result, so an identity grade returns every pixel unchanged;
+4. after grading the same steps run backwards, into the *input* space: the
+   written file keeps its space, its ICC profile and its metadata.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbcgrade.errors import InputError, OptionError
+
+__all__ = [
+    "DEFAULT_CONFIG",
+    "SHORT_ALIASES",
+    "Spaces",
+    "WorkingState",
+    "config_path",
+    "config_info",
+    "space_names",
+    "resolve_space",
+    "canonical",
+    "default_working_space",
+    "detect_input_space",
+    "plan_spaces",
+    "spaces_for",
+    "convert",
+    "linear_partner",
+    "is_logarithmic",
+    "to_working",
+    "from_working",
+    "icc_description",
+]
+
+#: The config used when ``$OCIO`` is not set: OpenColorIO's built-in default.
+DEFAULT_CONFIG = "ocio://default"
+
+#: Our short names -> candidate names in the config (first found wins; the
+#: candidates cover the spellings of the ACES configs OpenColorIO 2.2-2.6 ship).
+SHORT_ALIASES: dict[str, tuple[str, ...]] = {
+    "srgb": ("sRGB Encoded Rec.709 (sRGB)", "srgb_tx", "srgb_texture", "sRGB - Texture",
+             "Utility - sRGB - Texture"),
+    "linear-rec709": ("Linear Rec.709 (sRGB)", "lin_rec709_srgb", "lin_rec709", "lin_srgb",
+                      "Utility - Linear - sRGB"),
+    "display-p3": ("sRGB Encoded P3-D65", "srgb_encoded_p3d65", "srgb_displayp3",
+                   "srgb_p3d65"),
+    "linear-p3": ("Linear P3-D65", "lin_p3d65", "lin_displayp3"),
+    "adobe-rgb": ("Gamma 2.2 Encoded AdobeRGB", "g22_encoded_adobergb", "adobergb"),
+    "linear-adobe-rgb": ("Linear AdobeRGB", "lin_adobergb"),
+    "linear-rec2020": ("Linear Rec.2020", "lin_rec2020"),
+    "acescg": ("ACEScg", "lin_ap1", "ACES - ACEScg"),
+    "acescct": ("ACEScct", "acescct_ap1", "ACES - ACEScct"),
+    "acescc": ("ACEScc", "acescc_ap1", "ACES - ACEScc"),
+    "aces2065-1": ("ACES2065-1", "aces2065_1", "lin_ap0", "ACES - ACES2065-1"),
+}
+
+#: More spellings of the short names (compared with case, spaces and punctuation removed).
+_SPELLINGS = {
+    "srgb": "srgb", "srgbrec709": "srgb", "rec709srgb": "srgb",
+    "linear": "linear-rec709", "linearrec709": "linear-rec709", "linrec709": "linear-rec709",
+    "linearsrgb": "linear-rec709", "linsrgb": "linear-rec709",
+    "displayp3": "display-p3", "p3": "display-p3", "dcip3": "display-p3", "p3d65": "display-p3",
+    "linearp3": "linear-p3", "linearp3d65": "linear-p3", "lindisplayp3": "linear-p3",
+    "adobergb": "adobe-rgb", "adobergb1998": "adobe-rgb",
+    "linearadobergb": "linear-adobe-rgb",
+    "linearrec2020": "linear-rec2020", "linrec2020": "linear-rec2020",
+    "acescg": "acescg", "acescct": "acescct", "acescc": "acescc",
+    "aces": "aces2065-1", "aces20651": "aces2065-1", "ap0": "aces2065-1",
+}
+
+#: Working space (short name) -> its linear partner (short name): where the
+#: exposure rule for values above the working space's range divides.
+_LINEAR_PARTNER = {
+    "srgb": "linear-rec709", "linear-rec709": "linear-rec709",
+    "display-p3": "linear-p3", "linear-p3": "linear-p3",
+    "adobe-rgb": "linear-adobe-rgb", "linear-adobe-rgb": "linear-adobe-rgb",
+    "linear-rec2020": "linear-rec2020",
+    "acescg": "acescg", "acescct": "acescg", "acescc": "acescg",
+    "aces2065-1": "aces2065-1",
+}
+_LOGARITHMIC = ("acescct", "acescc")
+
+#: EXR ``chromaticities`` (rx, ry, gx, gy, bx, by, wx, wy) -> linear space (short name).
+_CHROMATICITIES = {
+    "linear-rec709": (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290),
+    "acescg": (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767),
+    "aces2065-1": (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767),
+    "linear-p3": (0.680, 0.320, 0.265, 0.690, 0.150, 0.060, 0.3127, 0.3290),
+    "linear-rec2020": (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290),
+    "linear-adobe-rgb": (0.64, 0.33, 0.21, 0.71, 0.15, 0.06, 0.3127, 0.3290),
+}
+
+#: ICC profile descriptions (lower case, searched in order) -> short name.
+_ICC_DESCRIPTIONS = (("display p3", "display-p3"), ("p3", "display-p3"),
+                     ("adobe rgb", "adobe-rgb"), ("adobergb", "adobe-rgb"),
+                     ("srgb", "srgb"))
+
+
+def _squash(name: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", name.lower())
+
+
+def config_path() -> str:
+    """The OpenColorIO config in use: ``$OCIO`` when set, else ``ocio://default``."""
+    return os.environ.get("OCIO", "").strip() or DEFAULT_CONFIG
+
+
+@functools.lru_cache(maxsize=4)
+def _config(path: str):
+    import OpenImageIO as oiio
+
+    config = oiio.ColorConfig(path)
+    names = list(config.getColorSpaceNames())
+    if not names:
+        raise InputError(f"OpenColorIO config {path!r} could not be read or lists no colour "
+                         f"spaces ({config.geterror().strip() or 'check $OCIO'})")
+    return config
+
+
+@functools.lru_cache(maxsize=4)
+def _lookup(path: str) -> dict[str, str]:
+    """Squashed spelling -> config colour space name, for every name, alias and role."""
+    config = _config(path)
+    names = list(config.getColorSpaceNames())
+    table: dict[str, str] = {}
+    for role in config.getRoles():
+        target = config.getColorSpaceNameByRole(role)
+        if target in names:
+            table.setdefault(_squash(role), target)
+    for name in names:
+        for alias in config.getAliases(name):
+            table[_squash(alias)] = name
+    for name in names:
+        table[_squash(name)] = name
+    for short, candidates in SHORT_ALIASES.items():
+        for candidate in candidates:
+            found = table.get(_squash(candidate))
+            if found is not None:
+                table[_squash(short)] = found
+                break
+    for spelling, short in _SPELLINGS.items():
+        if _squash(short) in table:
+            table[spelling] = table[_squash(short)]
+    return table
+
+
+def space_names() -> list[str]:
+    """The colour space names of the config in use (its order)."""
+    return list(_config(config_path()).getColorSpaceNames())
+
+
+def canonical(short: str) -> str | None:
+    """The config's name for one of :data:`SHORT_ALIASES`, or None when it has none."""
+    return _lookup(config_path()).get(_squash(short))
+
+
+def resolve_space(name: str, option: str = "--working-space") -> str:
+    """A colour space name, alias or role -> the config's colour space name.
+
+    Case, spaces and punctuation do not matter (``ACEScct``, ``acescct``,
+    ``display-p3``, ``Display P3``, ``lin_rec709``). Raises OptionError
+    (one line, naming ``option`` and listing the valid names) otherwise.
+    """
+    text = str(name).strip()
+    found = _lookup(config_path()).get(_squash(text)) if text else None
+    if found is None:
+        shorts = ", ".join(s for s in SHORT_ALIASES if canonical(s))
+        raise OptionError(
+            f"{option}: unknown colour space {name!r} in OpenColorIO config {config_path()} "
+            f"(valid: {', '.join(space_names())}; or {shorts})", option)
+    return found
+
+
+def _short_of(space: str) -> str | None:
+    for short in SHORT_ALIASES:
+        if canonical(short) == space:
+            return short
+    return None
+
+
+def default_working_space() -> str:
+    """The working space of today's behaviour: sRGB-encoded Rec.709."""
+    found = canonical("srgb")
+    if found is None:
+        raise InputError(f"OpenColorIO config {config_path()} has no sRGB-encoded Rec.709 "
+                         "space; name one with --working-space")
+    return found
+
+
+def linear_partner(space: str) -> str:
+    """The linear space whose values ``space`` encodes (ACEScg for ACEScct; itself if linear).
+
+    Spaces we do not know fall back to the config's ``scene_linear`` role.
+    """
+    short = _short_of(space)
+    if short is not None and canonical(_LINEAR_PARTNER[short]) is not None:
+        return canonical(_LINEAR_PARTNER[short])
+    return _lookup(config_path()).get("scenelinear", space)
+
+
+def is_logarithmic(space: str) -> bool:
+    """Whether ``space`` is a logarithmic encoding (ACEScct, ACEScc)."""
+    return _short_of(space) in _LOGARITHMIC
+
+
+def convert(rgb: np.ndarray, source: str, target: str) -> np.ndarray:
+    """Convert colours between two colour spaces of the config (OpenColorIO via OpenImageIO).
+
+    Parameters
+    ----------
+    rgb : (..., 3) float colours in ``source``.
+    source, target : config colour space names (:func:`resolve_space`).
+
+    Returns
+    -------
+    (..., 3) float32 in ``target`` (values are not clipped). Runs on the
+    calling thread only (OpenImageIO's thread pool is never started: the
+    JPEG writer may fork, see ``imageio._encode_in_child``).
+    """
+    rgb = np.asarray(rgb, dtype=np.float32)
+    if source == target:
+        return rgb.copy()
+    import OpenImageIO as oiio
+
+    shape = rgb.shape
+    flat = np.ascontiguousarray(rgb.reshape(1, -1, 3) if rgb.ndim != 3 else rgb)
+    buf = oiio.ImageBuf(flat)
+    out = oiio.ImageBufAlgo.colorconvert(buf, source, target, False, "", "", config_path(),
+                                         oiio.ROI.All, 1)
+    if out.has_error:
+        raise InputError(f"colour conversion {source!r} -> {target!r} failed "
+                         f"({out.geterror().strip().splitlines()[0]})")
+    return np.asarray(out.get_pixels(oiio.FLOAT), dtype=np.float32).reshape(shape)
+
+
+@functools.lru_cache(maxsize=32)
+def _peak(linear: str, working: str, path: str) -> float:
+    """The largest grey value of ``linear`` that ``working`` encodes at or below 1."""
+    low, high = 1e-3, 1e5
+    for _ in range(2):  # a coarse ramp, then a fine one between its two samples around 1
+        ramp = np.geomspace(low, high, 4097)
+        grey = np.repeat(ramp[:, None], 3, axis=1)
+        encoded = convert(grey, linear, working).max(axis=1)
+        inside = np.flatnonzero(encoded <= 1.0 + 1e-6)
+        if len(inside) == 0:
+            return 1.0
+        if inside[-1] == len(ramp) - 1:
+            return float(ramp[-1])
+        low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
+    return low
+
+
+def icc_description(profile: bytes) -> str:
+    """The description ('desc' tag, ICC v2 text or v4 'mluc') of an ICC profile, or ''."""
+    data = bytes(profile)
+    if len(data) < 132:
+        return ""
+    count = int.from_bytes(data[128:132], "big")
+    for i in range(min(count, 200)):
+        entry = data[132 + 12 * i:144 + 12 * i]
+        if len(entry) < 12 or entry[:4] != b"desc":
+            continue
+        offset, size = int.from_bytes(entry[4:8], "big"), int.from_bytes(entry[8:12], "big")
+        tag = data[offset:offset + size]
+        if tag[:4] == b"desc" and len(tag) >= 12:
+            length = int.from_bytes(tag[8:12], "big")
+            return tag[12:12 + length].split(b"\0")[0].decode("latin-1").strip()
+        if tag[:4] == b"mluc" and len(tag) >= 28:
+            rec_length = int.from_bytes(tag[20:24], "big")
+            rec_offset = int.from_bytes(tag[24:28], "big")
+            text = tag[rec_offset:rec_offset + rec_length]
+            return text.decode("utf-16-be", "replace").split("\0")[0].strip()
+    return ""
+
+
+def detect_input_space(image) -> tuple[str, str]:
+    """The colour space a decoded photo says it is in -> (config name, where it came from).
+
+    8/16-bit files: the ICC profile's description (sRGB, Display P3, Adobe
+    RGB (1998)), else sRGB. Float files (EXR): the ``chromaticities``
+    attribute (Rec.709, ACES AP1/AP0, P3-D65, Rec.2020, Adobe RGB
+    primaries: the linear space with those primaries), else a
+    ``colorInteropID`` or ``oiio:ColorSpace`` the config knows, else Linear
+    Rec.709.
+    """
+    spec = image.spec
+    table = _lookup(config_path())
+    if not image.is_float:
+        attrib = spec.getattribute("ICCProfile")
+        if attrib is not None:
+            text = icc_description(np.asarray(attrib, dtype=np.uint8).tobytes())
+            for key, short in _ICC_DESCRIPTIONS:
+                if key in text.lower() and canonical(short):
+                    return canonical(short), f"ICC profile {text!r}"
+            if text:
+                return default_working_space(), f"ICC profile {text!r} not recognised: sRGB assumed"
+        return default_working_space(), "8/16-bit file without a known profile: sRGB"
+    chroma = spec.getattribute("chromaticities")
+    if chroma is not None and len(tuple(chroma)) == 8:
+        values = np.asarray(tuple(chroma), dtype=np.float64)
+        for short, ref in _CHROMATICITIES.items():
+            if np.max(np.abs(values - np.asarray(ref))) < 2e-3 and canonical(short):
+                return canonical(short), "EXR chromaticities"
+    for name in ("colorInteropID", "oiio:ColorSpace"):
+        value = spec.get_string_attribute(name, "")
+        if value and table.get(_squash(value)):
+            return table[_squash(value)], f"{name} {value!r}"
+    return canonical("linear-rec709") or default_working_space(), \
+        "float file without colour metadata: Linear Rec.709"
+
+
+@dataclass(frozen=True)
+class Spaces:
+    """The colour spaces of one photo's grade.
+
+    Attributes
+    ----------
+    input : the photo's space (pixels read and written in it).
+    working : where histograms, transport and the colour map live.
+    linear : the working space's linear partner (where the exposure rule divides).
+    peak : the largest grey value of ``linear`` that ``working`` encodes <= 1.
+    legacy : True for the default pair (sRGB 8/16-bit or Linear Rec.709 float
+        in sRGB-encoded Rec.709): today's code runs, byte for byte.
+    source : where ``input`` came from ("--input-space", "ICC profile ...").
+    config : the OpenColorIO config.
+    """
+
+    input: str
+    working: str
+    linear: str
+    peak: float
+    legacy: bool
+    source: str
+    config: str
+
+    def as_dict(self) -> dict:
+        """JSON-friendly description (config, OpenColorIO version, spaces)."""
+        return {**config_info(), "input_space": self.input, "input_space_from": self.source,
+                "working_space": self.working, "linear_space": self.linear,
+                "peak": round(self.peak, 4), "default_path": self.legacy}
+
+
+def plan_spaces(image, input_space: str | None = None,
+                working_space: str | None = None) -> Spaces:
+    """The :class:`Spaces` of a decoded photo (``input_space`` None: what the file says)."""
+    if input_space:
+        source_space, source = resolve_space(input_space, "--input-space"), "--input-space"
+    else:
+        source_space, source = detect_input_space(image)
+    return _plan(source_space, source, working_space, image.is_float)
+
+
+def spaces_for(input_space: str | None, working_space: str | None,
+               is_float: bool = False) -> Spaces:
+    """:class:`Spaces` without a file: ``input_space`` None means sRGB (integer
+    values) or Linear Rec.709 (``is_float``)."""
+    if input_space:
+        source_space, source = resolve_space(input_space, "--input-space"), "--input-space"
+    elif is_float:
+        source_space, source = canonical("linear-rec709") or default_working_space(), "default"
+    else:
+        source_space, source = default_working_space(), "default"
+    return _plan(source_space, source, working_space, is_float)
+
+
+def _plan(source_space: str, source: str, working_space: str | None, is_float: bool) -> Spaces:
+    working = (resolve_space(working_space, "--working-space") if working_space
+               else default_working_space())
+    srgb, linear709 = default_working_space(), canonical("linear-rec709")
+    legacy = working == srgb and (source_space == (linear709 if is_float else srgb))
+    linear = linear_partner(working)
+    peak = 1.0 if legacy else _peak(linear, working, config_path())
+    return Spaces(source_space, working, linear, peak, legacy, source, config_path())
+
+
+def config_info() -> dict:
+    """The config in use and the library versions, for JSON and reports."""
+    import OpenImageIO as oiio
+
+    return {"ocio_config": config_path(),
+            "ocio_version": oiio.get_string_attribute("opencolorio_version"),
+            "openimageio_version": oiio.VERSION_STRING if hasattr(oiio, "VERSION_STRING")
+            else ""}
+
+
+@dataclass
+class WorkingState:
+    """What :func:`from_working` needs to undo :func:`to_working` for one image.
+
+    ``scale`` (H, W, 1) is the exposure factor (>= 1) or None; ``residual``
+    (H, W, 3) the part of the working-space colours outside [0, 1], or None.
+    """
+
+    spaces: Spaces
+    is_float: bool
+    scale: np.ndarray | None = None
+    residual: np.ndarray | None = None
+
+    def decode(self, graded: np.ndarray) -> np.ndarray:
+        """Graded working-space colours -> pixel values in the input space."""
+        return from_working(graded, self)
+
+
+def to_working(rgb: np.ndarray, spaces: Spaces, is_float: bool) -> tuple[np.ndarray, object]:
+    """Pixels of the input space -> colours in the working space's unit cube.
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) float32 pixel values (integer files scaled to [0, 1]).
+    spaces : from :func:`plan_spaces`.
+    is_float : whether the file holds float pixels (exposure rule above the peak).
+
+    Returns
+    -------
+    encoded : (H, W, 3) float32 in [0, 1]
+    state : for :func:`wbcgrade.color.imageio.decode_from_grading` (the default
+        pair: its per-pixel scale or None, as before; else a :class:`WorkingState`).
+    """
+    from wbcgrade.color.imageio import encode_for_grading
+
+    if spaces.legacy:
+        return encode_for_grading(rgb, is_float)
+    scale = None
+    if is_float:
+        linear = convert(rgb, spaces.input, spaces.linear)
+        top = linear.max(axis=-1, keepdims=True) / np.float32(spaces.peak)
+        if np.any(top > 1.0):
+            scale = np.maximum(top, 1.0).astype(np.float32)
+            linear /= scale
+        working = convert(linear, spaces.linear, spaces.working)
+    else:
+        working = convert(rgb, spaces.input, spaces.working)
+    encoded = np.clip(working, 0.0, 1.0)
+    residual = working - encoded
+    if not np.any(residual):
+        residual = None
+    return encoded.astype(np.float32, copy=False), WorkingState(spaces, is_float, scale, residual)
+
+
+def from_working(graded: np.ndarray, state: WorkingState) -> np.ndarray:
+    """Inverse of :func:`to_working`: (H, W, 3) graded working colours -> input-space pixels.
+
+    Float outputs keep values above 1 (the exposure factor is multiplied
+    back in the linear partner); integer outputs are clipped by the writer.
+    """
+    spaces = state.spaces
+    working = np.asarray(graded, dtype=np.float32)
+    if state.residual is not None:
+        working = working + state.residual
+    if state.scale is None:
+        return convert(working, spaces.working, spaces.input)
+    linear = convert(working, spaces.working, spaces.linear) * state.scale
+    return convert(linear, spaces.linear, spaces.input)
