@@ -19,7 +19,13 @@ from threadpoolctl import threadpool_info
 
 from tests.core.helpers import blobs
 from wbcgrade.color.remap import apply_color_map, identity_map
-from wbcgrade.core import GridGeometry, barycenter, barycentric_coordinates, sinkhorn
+from wbcgrade.core import (
+    GridGeometry,
+    barycenter,
+    barycentric_coordinates,
+    multiscale_sinkhorn,
+    sinkhorn,
+)
 from wbcgrade.core._jit import THREAD_SAFE_LAYERS, compiled, parallel_layer
 
 N_THREADS = 4
@@ -29,16 +35,20 @@ def _jobs():
     """Four small problems, one per entry point; each returns an array."""
     rng = np.random.default_rng(3)
     geometry = GridGeometry.with_width((8, 8, 8), 1.5)
+    fine = GridGeometry.with_width((16, 16, 16), 3.0)  # solved on 8^3 first
     histograms = blobs((8, 8, 8), 3, rng, components=2)
     truth = np.array([0.6, 0.3, 0.1])
     target = barycenter(histograms, truth, geometry, n_iter=20)
     table = identity_map(9, np.float32) ** 1.3
     colors = rng.random((50_000, 3)).astype(np.float32)
+    pair = blobs((16, 16, 16), 2, rng, components=2)
     return {
         "barycenter": lambda: barycenter(histograms, [0.2, 0.5, 0.3], geometry, n_iter=20),
         "coordinates": lambda: barycentric_coordinates(
             target, histograms, geometry, n_iter=20, max_iter=8).weights,
         "sinkhorn": lambda: sinkhorn(histograms[0], histograms[1], geometry, tol=1e-8).log_b,
+        "multiscale": lambda: multiscale_sinkhorn(pair[0], pair[1], fine, coarsest=8,
+                                                  tol=1e-8).log_b,
         "remap": lambda: apply_color_map(colors, table),
     }
 
