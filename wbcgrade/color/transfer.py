@@ -403,7 +403,13 @@ def grade_image(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
                 alpha: np.ndarray | None = None,
                 callback: Callable[[int, np.ndarray, float], None] | None = None,
                 stage: Callable[[str], None] | None = None) -> Grade:
-    """Fit a grade for an encoded (H, W, 3) photo against a style set.
+    """Fit a grade for an encoded (H, W, 3) photo against a style set (one pass, no checks).
+
+    The building block of the per-photo pipeline: one weight fit from
+    ``opts`` (or ``opts.weights``), the palette and the colour map. It does
+    not check the fit against each single style, refit, or convert colour
+    spaces; library users call :func:`wbcgrade.color.grading.grade_array`
+    (arrays in and out, the command's guarantees) instead.
 
     ``callback`` receives the fit's progress (n_evaluations, weights, loss);
     ``stage`` the name of each stage as it starts. Returns a :class:`Grade`;
