@@ -264,6 +264,11 @@ def test_presets_record_their_working_space_and_convert(tmp_path, style_dir):
     path = save_preset(tmp_path / "cct.npz", direct)
     saved = load_preset(path)
     assert saved.meta["working_space"] == cs.resolve_space("acescct")
+    built = tmp_path / "built.npz"
+    result = CliRunner().invoke(cli, ["preset", "build", str(style_dir), "-o", str(built),
+                                      "--working-space", "ACEScct", "--no-cache"])
+    assert result.exit_code == 0 and "ACEScct" in result.output, result.output
+    assert load_preset(built).working_space == cs.resolve_space("acescct")
     converted = styles_in_space(srgb, "acescct")
     assert converted.working_space == cs.resolve_space("acescct")
     assert styles_in_space(srgb, "srgb") is srgb

@@ -34,8 +34,15 @@ def preset() -> None:
 @click.option("--description", default="", help="One line shown by `preset list`.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing preset file.")
 @click.option("--no-cache", is_flag=True, help="Do not use the style histogram cache.")
-def build(folder, output, bins, width, description, overwrite, no_cache):
-    """Build a preset from the photos in FOLDER (non-images are skipped)."""
+@click.option("--working-space", default=None, metavar="NAME",
+              help="Colour space of the histograms (OpenColorIO name or alias, e.g. acescct), "
+                   "recorded in the preset [default: sRGB-encoded Rec.709].")
+def build(folder, output, bins, width, description, overwrite, no_cache, working_space):
+    """Build a preset from the photos in FOLDER (non-images are skipped).
+
+    Each photo is converted from its own colour space (ICC profile, EXR
+    metadata) into the working space before its histogram.
+    """
     from wbcgrade.cli._progress import style_progress
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.presets import check_preset_width, load_style_folder, save_preset
@@ -47,13 +54,18 @@ def build(folder, output, bins, width, description, overwrite, no_cache):
         raise InputError(f"{output}: preset file name must end in .npz")
     if os.path.exists(output) and not overwrite:
         raise InputError(f"{output}: file exists (use --overwrite to replace it)")
+    if working_space:
+        from wbcgrade.color.colorspace import resolve_space
+
+        working_space = resolve_space(working_space, "--working-space")
     with style_progress() as progress:
         styles = load_style_folder(
             folder, bins, cache=HistogramCache(enabled=not no_cache),
-            warn=lambda m: click.echo(f"Warning: {m}", err=True), progress=progress)
+            warn=lambda m: click.echo(f"Warning: {m}", err=True), progress=progress,
+            working_space=working_space)
     path = save_preset(output, styles, width=width, description=description, overwrite=overwrite)
     click.echo(f"wrote {path}: {len(styles.names)} styles ({', '.join(styles.names)}), "
-               f"{bins}^3 bins, {path.stat().st_size / 1024:.0f} KiB")
+               f"{bins}^3 bins in {styles.working_space}, {path.stat().st_size / 1024:.0f} KiB")
 
 
 @preset.command("list")
