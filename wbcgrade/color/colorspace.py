@@ -407,13 +407,34 @@ def _plan(source_space: str, source: str, working_space: str | None, is_float: b
 
 
 def config_info() -> dict:
-    """The config in use and the library versions, for JSON and reports."""
+    """The config in use and the library versions, for JSON and reports.
+
+    ``ocio_config_name`` is the config's own name (e.g. the built-in
+    ``cg-config-v2.2.0_aces-v1.3_ocio-v2.4``) when the ``opencolorio`` package
+    of the same OpenColorIO release as OpenImageIO's can read it, else the
+    config's path or URI.
+    """
     import OpenImageIO as oiio
 
+    version = oiio.get_string_attribute("opencolorio_version")
     return {"ocio_config": config_path(),
-            "ocio_version": oiio.get_string_attribute("opencolorio_version"),
-            "openimageio_version": oiio.VERSION_STRING if hasattr(oiio, "VERSION_STRING")
-            else ""}
+            "ocio_config_name": _config_name(config_path(), version),
+            "ocio_version": version,
+            "openimageio_version": getattr(oiio, "VERSION_STRING", "")}
+
+
+@functools.lru_cache(maxsize=4)
+def _config_name(path: str, version: str) -> str:
+    try:
+        import PyOpenColorIO as ocio
+    except ImportError:
+        return path
+    if ocio.__version__.split(".")[:2] != version.split(".")[:2]:
+        return path  # another release's built-in configs: not the one OpenImageIO uses
+    try:
+        return ocio.Config.CreateFromFile(path).getName() or path
+    except Exception:  # noqa: BLE001 - any failure: the path is still a true name
+        return path
 
 
 @dataclass
