@@ -33,6 +33,8 @@ from wbcgrade.color.presets import (
 from wbcgrade.errors import InputError, OptionError
 
 AP1 = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
+#: The colour tests' fast settings and a small colour map (each grade well under a second).
+FAST = [*FAST_ARGS, "--map-size", "9"]
 
 
 # --- a real ICC profile -------------------------------------------------------------------
@@ -109,7 +111,7 @@ def test_an_unknown_space_is_an_option_error_listing_the_valid_names():
 
 def test_unknown_space_on_the_command_line_is_one_line_without_traceback(tmp_path, photo):
     result = CliRunner().invoke(cli, ["apply", str(photo), "--preset", "warm", "--working-space",
-                                      "Rec.9999", "-o", str(tmp_path / "o.jpg"), *FAST_ARGS])
+                                      "Rec.9999", "-o", str(tmp_path / "o.jpg"), *FAST])
     assert result.exit_code != 0 and "Traceback" not in result.output
     assert result.exception is None or isinstance(result.exception, SystemExit)
     lines = [line for line in result.output.splitlines() if line.strip()]
@@ -166,7 +168,7 @@ def test_default_and_explicit_srgb_write_the_same_bytes(tmp_path, photo):
     for extra in ([], ["--input-space", "sRGB", "--working-space", "srgb_tx"]):
         out = tmp_path / f"o{len(outs)}.jpg"
         result = runner.invoke(cli, ["apply", str(photo), "--preset", "warm", "-o", str(out),
-                                     *FAST_ARGS, *extra])
+                                     *FAST, *extra])
         assert result.exit_code == 0, result.output
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
@@ -184,7 +186,7 @@ def test_a_display_p3_photo_and_its_srgb_copy_grade_alike(tmp_path):
     runner = CliRunner()
     for src in (a, b):
         result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--json",
-                                     "-o", str(src.with_name(src.stem + "_g.png")), *FAST_ARGS])
+                                     "-o", str(src.with_name(src.stem + "_g.png")), *FAST])
         assert result.exit_code == 0, result.output
     graded_srgb = read_image(tmp_path / "srgb_g.png").rgb()
     out_p3 = read_image(tmp_path / "p3_g.png")
@@ -212,7 +214,7 @@ def test_an_acescg_exr_keeps_values_above_one(tmp_path, working):
     runner = CliRunner()
     out = tmp_path / f"g_{working}.exr"
     result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--working-space",
-                                 working, "-o", str(out), "--json", *FAST_ARGS])
+                                 working, "-o", str(out), "--json", *FAST])
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)
     assert report["color"]["input_space"] == cs.resolve_space("acescg")
@@ -229,7 +231,7 @@ def test_an_acescg_exr_keeps_values_above_one(tmp_path, working):
     same = tmp_path / f"s_{working}.exr"
     result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--working-space",
                                  working, "--strength", "0", "--no-regrain", "-o", str(same),
-                                 *FAST_ARGS])
+                                 *FAST])
     assert result.exit_code == 0, result.output
     np.testing.assert_allclose(read_image(same).rgb(), before, rtol=2e-4, atol=2e-5)
 
@@ -288,7 +290,7 @@ def test_luts_name_their_spaces(tmp_path, photo):
         lut = tmp_path / name
         result = runner.invoke(cli, ["apply", str(photo), "--preset", "warm", "--working-space",
                                      working, "--lut", str(lut), "--lut-size", "9",
-                                     "-o", str(tmp_path / f"{name}.jpg"), *FAST_ARGS])
+                                     "-o", str(tmp_path / f"{name}.jpg"), *FAST])
         assert result.exit_code == 0, result.output
         header = [line for line in lut.read_text().splitlines() if line.startswith("#")]
         space = cs.resolve_space(working)
@@ -315,7 +317,7 @@ def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch):
     lut = tmp_path / "g.clf"
     args = ["apply", str(photo), "--preset", "warm", "--working-space", "acescct", "--lut",
             str(lut), "--lut-format", "clf", "--lut-size", "9", "-o", str(tmp_path / "o.jpg"),
-            *FAST_ARGS]
+            *FAST]
     try:
         import PyOpenColorIO  # noqa: F401
     except ImportError:
@@ -329,7 +331,7 @@ def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch):
     text = " ".join(e.text or "" for e in root.iter() if e.tag.endswith("Description"))
     assert "input space: ACEScg" in text and "output space: ACEScct" in text
     monkeypatch.setitem(__import__("sys").modules, "PyOpenColorIO", None)
-    result = CliRunner().invoke(cli, [*args[:-len(FAST_ARGS)], "--overwrite", *FAST_ARGS])
+    result = CliRunner().invoke(cli, [*args[:-len(FAST)], "--overwrite", *FAST])
     assert result.exit_code != 0 and "pip install" in result.output
 
 
@@ -339,7 +341,8 @@ def test_grade_array_in_a_working_space():
 
     rgb = np.random.default_rng(3).random((24, 32, 3)).astype(np.float32)
     styles = load_preset(resolve_preset("warm"))
-    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30, working_space="acescct")
+    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30, map_size=9,
+                        working_space="acescct")
     graded, grade = grade_array(rgb, styles, opts)
     assert graded.shape == rgb.shape and np.isfinite(graded).all()
     assert 0.01 < np.abs(graded - rgb).mean() < 0.3
@@ -354,3 +357,18 @@ def test_histograms_live_on_the_unit_cube_of_the_working_space():
     assert np.isclose(hist.sum(), 1.0)
     # sRGB [0, 1] sits in about [0.07, 0.55] of ACEScct's cube
     assert 0.05 < encoded.min() and encoded.max() < 0.56
+
+
+def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path):
+    src = _acescg_exr(tmp_path / "cg.exr")
+    result = CliRunner().invoke(cli, ["report", str(src), "--preset", "warm", "--working-space",
+                                      "acescct", "-o", str(tmp_path / "rep"), *FAST])
+    assert result.exit_code == 0, result.output
+    document = json.loads((tmp_path / "rep" / "report.json").read_text())
+    assert document["color"]["working_space"] == cs.resolve_space("acescct")
+    assert document["color"]["ocio_version"]
+    entry = document["photos"][0]
+    assert entry["color"]["input_space"] == cs.resolve_space("acescg")
+    assert entry["color"]["input_space_from"] == "EXR chromaticities"
+    sheet = read_image(tmp_path / "rep" / entry["sheet"]).rgb()
+    assert sheet.shape[0] > 100 and 0.05 < sheet.mean() < 0.95

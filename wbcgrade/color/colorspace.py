@@ -63,6 +63,7 @@ __all__ = [
     "to_working",
     "from_working",
     "icc_description",
+    "to_display",
 ]
 
 #: The config used when ``$OCIO`` is not set: OpenColorIO's built-in default.
@@ -505,3 +506,20 @@ def from_working(graded: np.ndarray, state: WorkingState) -> np.ndarray:
         return convert(working, spaces.working, spaces.input)
     linear = convert(working, spaces.working, spaces.linear) * state.scale
     return convert(linear, spaces.linear, spaces.input)
+
+
+def to_display(rgb: np.ndarray, spaces: Spaces, working: bool = False) -> np.ndarray:
+    """Colours for a picture on screen: sRGB-encoded Rec.709 in [0, 1].
+
+    Parameters
+    ----------
+    rgb : (..., 3) colours of the photo's input space, or with ``working``
+        of the working space (e.g. a palette of the grade's histograms).
+    spaces : the photo's :class:`Spaces`.
+
+    Returns
+    -------
+    (..., 3) float32, clipped to [0, 1] (highlights above 1 clip).
+    """
+    source = spaces.working if working else spaces.input
+    return np.clip(convert(rgb, source, default_working_space()), 0.0, 1.0)

@@ -45,9 +45,18 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
 
     Returns {name: (h, w, 3) float32 in [0, 1]}.
     """
-    from wbcgrade.color.imageio import encode_for_grading, read_image
+    from wbcgrade.color.colorspace import (
+        default_working_space,
+        plan_spaces,
+        spaces_for,
+        to_display,
+        to_working,
+    )
+    from wbcgrade.color.imageio import read_image
     from wbcgrade.color.sheet import histogram_palette, thumbnail
 
+    working = styles.working_space
+    palette_spaces = None if working == default_working_space() else spaces_for(None, working)
     folder = Path(styles.source) if styles.source else None
     pictures = {}
     files = {}
@@ -58,12 +67,16 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
         if name in files:
             try:
                 image = read_image(files[name])
-                encoded, _ = encode_for_grading(image.rgb(), image.is_float)
+                spaces = plan_spaces(image)  # shown in sRGB, as the file says it looks
+                encoded = (to_working(image.rgb(), spaces, image.is_float)[0] if spaces.legacy
+                           else to_display(image.rgb(), spaces))
                 picture = thumbnail(encoded, size, size * 4 // 3)
             except (ValueError, OSError):
                 picture = None
         if picture is None:
             palette = histogram_palette(hist, k=6)
+            if palette_spaces is not None:  # the styles' histograms are in another space
+                palette.colors = to_display(palette.colors, palette_spaces, working=True)
             picture = np.zeros((size, size * 4 // 3, 3), dtype=np.float32)
             edges = np.round(np.concatenate([[0], np.cumsum(palette.shares)]) * size).astype(int)
             for j, colour in enumerate(palette.colors):
@@ -80,9 +93,17 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
     from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
 
     image = graded.image
-    before, _ = encode_for_grading(image.rgb(), image.is_float)
     color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
-    after, _ = encode_for_grading(graded.pixels[:, :, color], image.is_float)
+    spaces = getattr(graded, "spaces", None)
+    managed = spaces is not None and not spaces.legacy
+    if managed:  # pictures and palettes shown in sRGB, whatever the photo's space
+        from wbcgrade.color.colorspace import to_display
+
+        before = to_display(image.rgb(), spaces)
+        after = to_display(graded.pixels[:, :, color], spaces)
+    else:
+        before, _ = encode_for_grading(image.rgb(), image.is_float)
+        after, _ = encode_for_grading(graded.pixels[:, :, color], image.is_float)
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
@@ -91,8 +112,11 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
     bins = 16
+    target = histogram_palette(graded.grade.barycenter)  # in the working space
+    if managed:
+        target.colors = to_display(target.colors, spaces, working=True)
     palettes = [("input", histogram_palette(image_histogram(before, bins))),
-                ("barycenter", histogram_palette(graded.grade.barycenter)),
+                ("barycenter", target),
                 ("output", histogram_palette(image_histogram(after, bins)))]
     best = int(np.argmin(result.vertex_losses))
     subtitle = (f"loss {result.loss:.4g}  |  best single style {result.names[best]}: "
@@ -288,7 +312,10 @@ def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
                         loss=float(loss), vertex_losses=[float(v) for v in vertices],
                         start=how, timings=dict(graded.timings),
                         color=dict(getattr(graded, "color", {}) or {}))
-    photo = PhotoGrade(image, output.pixels, output.alpha_channel, grade, None)
+    from wbcgrade.color.colorspace import plan_spaces
+
+    photo = PhotoGrade(image, output.pixels, output.alpha_channel, grade, None,
+                       spaces=plan_spaces(image, opts.input_space, opts.working_space))
     from wbcgrade.color.sheet import write_sheet
 
     sheet = Path("sheets") / f"{result.relative}.png"
