@@ -372,3 +372,12 @@ def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path):
     assert entry["color"]["input_space_from"] == "EXR chromaticities"
     sheet = read_image(tmp_path / "rep" / entry["sheet"]).rgb()
     assert sheet.shape[0] > 100 and 0.05 < sheet.mean() < 0.95
+
+
+def test_ocio_environment_variable_names_the_config(tmp_path, monkeypatch):
+    monkeypatch.setenv("OCIO", str(tmp_path / "missing.ocio"))
+    assert cs.config_path() == str(tmp_path / "missing.ocio")
+    with pytest.raises(OptionError, match="missing.ocio; \\$OCIO names no readable file"):
+        cs.resolve_space("acescct")
+    monkeypatch.delenv("OCIO")
+    assert cs.config_path() == cs.DEFAULT_CONFIG and cs.resolve_space("acescct")

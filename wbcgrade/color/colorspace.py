@@ -199,8 +199,11 @@ def resolve_space(name: str, option: str = "--working-space") -> str:
     found = _lookup(config_path()).get(_squash(text)) if text else None
     if found is None:
         shorts = ", ".join(s for s in SHORT_ALIASES if canonical(s))
+        path = config_path()
+        missing = ("; $OCIO names no readable file: OpenImageIO fell back to its minimal "
+                   "config" if "://" not in path and not os.path.isfile(path) else "")
         raise OptionError(
-            f"{option}: unknown colour space {name!r} in OpenColorIO config {config_path()} "
+            f"{option}: unknown colour space {name!r} in OpenColorIO config {path}{missing} "
             f"(valid: {', '.join(space_names())}; or {shorts})", option)
     return found
 
