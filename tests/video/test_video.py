@@ -9,6 +9,14 @@ average, 1.0-1.6/255 at most). The default x264 path (yuv420p, CRF 18) halves
 chroma resolution and is lossy, which at 64x48 on a test pattern's sharp
 colour edges moves single pixels by tens of levels, so there only each
 frame's mean colour is compared.
+
+Colour spaces (``--input-space``/``--working-space``): the default pair must
+run the code of before colour management; another working space bakes the
+LUT in the clip's encoding, which ffmpeg applies exactly as above; a PQ copy
+of the lossless clip (10-bit RGB, BT.2020/ST 2084 tags, sRGB white at
+100 cd/m²) is graded in its Rec.2100-PQ space, like the sRGB clip once
+converted back; an HLG clip, for which the built-in config has no space, is
+a one-line error.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ import pytest
 from click.testing import CliRunner
 
 from wbcgrade.cli import main
+from wbcgrade.color.colorspace import convert
 from wbcgrade.color.lut import read_cube
 from wbcgrade.color.remap import apply_color_map
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
@@ -40,11 +49,14 @@ def _ffmpeg(*args: str) -> None:
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory) -> dict[str, Path]:
     """32 frames of 64x48 at 25 fps with a 440 Hz audio track: x264 + AAC (BT.709 tags),
-    lossless RGB (FFV1 + PCM), and an RGB clip with a hard cut at frame 16."""
+    lossless RGB (FFV1 + PCM), and an RGB clip with a hard cut at frame 16; the lossless
+    clip converted to PQ (10-bit RGB FFV1, tagged smpte2084/bt2020; no audio), and 12
+    frames of 10-bit Y'CbCr tagged HLG."""
     folder = tmp_path_factory.mktemp("clips")
     src = "testsrc2=size=64x48:rate=25:duration=1.28"
     sine = "sine=frequency=440:sample_rate=48000:duration=1.28"
-    out = {"x264": folder / "plain.mp4", "rgb": folder / "rgb.mkv", "cut": folder / "cut.mkv"}
+    out = {"x264": folder / "plain.mp4", "rgb": folder / "rgb.mkv", "cut": folder / "cut.mkv",
+           "pq": folder / "pq.mkv", "hlg": folder / "hlg.mkv"}
     _ffmpeg("-f", "lavfi", "-i", src, "-f", "lavfi", "-i", sine,
             "-vf", "setparams=range=tv:colorspace=bt709:color_primaries=bt709:color_trc=bt709",
             "-c:v", "libx264", "-pix_fmt", "yuv420p", "-c:a", "aac", str(out["x264"]))
@@ -55,6 +67,17 @@ def clips(tmp_path_factory) -> dict[str, Path]:
             half + ",hue=h=120,eq=brightness=-0.15", "-f", "lavfi", "-i", sine,
             "-filter_complex", "[0:v][1:v]concat=n=2:v=1:a=0,format=bgr0[v]",
             "-map", "[v]", "-map", "2:a", "-c:v", "ffv1", "-c:a", "pcm_s16le", str(out["cut"]))
+    pq = convert(frames(out["rgb"]), "sRGB Encoded Rec.709 (sRGB)", "Rec.2100-PQ - Display")
+    subprocess.run([ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo",
+                    "-pix_fmt", "rgb48le", "-s", "64x48", "-r", "25", "-i", "pipe:0", "-vf",
+                    "format=gbrp10le,setparams=range=pc:colorspace=gbr:color_primaries=bt2020:"
+                    "color_trc=smpte2084", "-c:v", "ffv1", str(out["pq"])],
+                   input=np.round(np.clip(pq, 0, 1) * 65535).astype("<u2").tobytes(),
+                   check=True, timeout=60)
+    short = "testsrc2=size=64x48:rate=25:duration=0.48"
+    _ffmpeg("-f", "lavfi", "-i", short, "-vf", "format=yuv420p10le,setparams=range=tv:"
+            "colorspace=bt2020nc:color_primaries=bt2020:color_trc=arib-std-b67", "-c:v", "ffv1",
+            str(out["hlg"]))
     return out
 
 
@@ -66,6 +89,16 @@ def run(*args) -> object:
 def frames(path: Path) -> np.ndarray:
     """All frames as (n, h, w, 3) float32 in [0, 1] (the clip's own matrix and range)."""
     return np.stack(list(decode_frames(path, probe(path)))).astype(np.float32) / 255
+
+
+def frames16(path: Path) -> np.ndarray:
+    """All frames of an RGB clip as (n, h, w, 3) float32 in [0, 1], 16 bits per channel."""
+    info = probe(path)
+    raw = subprocess.run([ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-i", str(path),
+                          "-f", "rawvideo", "-pix_fmt", "rgb48le", "pipe:1"],
+                         check=True, capture_output=True, timeout=60).stdout
+    video = np.frombuffer(raw, dtype="<u2").reshape(-1, info.height, info.width, 3)
+    return video.astype(np.float32) / 65535
 
 
 def mean_steps(video: np.ndarray) -> np.ndarray:
@@ -187,4 +220,146 @@ def test_ctrl_c_while_encoding_kills_ffmpeg_and_leaves_nothing(clips, tmp_path, 
     result = run(clips["rgb"], "-o", tmp_path / "graded.mkv", "--codec", "ffv1", *FAST,
                  *WEIGHTS)
     assert result.exit_code == 130
+    assert list(tmp_path.iterdir()) == []
+
+
+# --- colour spaces ---------------------------------------------------------------------------
+
+def _json(result) -> dict:
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output[result.output.index("{"):])
+
+
+def test_default_spaces_run_the_code_of_before_colour_management(clips, tmp_path):
+    from wbcgrade.color.grading import PaletteSum, series_grade
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.imageio import encode_for_grading
+    from wbcgrade.color.lut import color_map_to_lut
+    from wbcgrade.color.presets import load_preset, resolve_preset
+    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.video.workflow import VideoSettings, grade_video
+
+    styles = load_preset(resolve_preset("warm"))
+    opts = GradeOptions(bins=32, weights=[0.5, 0.3, 0.2], regrain=False)
+    result = grade_video(clips["rgb"], tmp_path / "graded.mkv", styles, opts,
+                         VideoSettings(codec="ffv1"))
+    assert result.spaces.legacy and result.as_dict()["color"]["default_path"]
+    assert result.spaces.input == result.spaces.working == "sRGB Encoded Rec.709 (sRGB)"
+    # the grade and LUT of before: sRGB-encoded samples, the map sampled at the LUT's nodes
+    shot = result.shots[0]
+    pool_fit, pool = PaletteSum(), PaletteSum()
+    for n in shot.samples:
+        encoded, _ = encode_for_grading(result.samples.frames[n].astype(np.float32) / 255, False)
+        pool_fit.add(image_histogram(encoded, opts.fit_bins, None, opts.max_pixels))
+        pool.add(image_histogram(encoded, opts.bins, None, opts.max_pixels))
+    before, _ = series_grade(pool_fit.result(), pool.result(), styles, opts)
+    assert np.array_equal(shot.grade.color_map, before.color_map)
+    assert np.array_equal(shot.table, color_map_to_lut(before.color_map, 33).astype(np.float32))
+
+
+def test_explicit_srgb_spaces_equal_the_default(clips, tmp_path):
+    outputs = {}
+    for name, spaces in (("default", []),
+                         ("srgb", ["--input-space", "sRGB", "--working-space", "srgb_tx"])):
+        out, lut = tmp_path / f"{name}.mkv", tmp_path / f"{name}.cube"
+        document = _json(run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS,
+                             "--lut", lut, "--json", *spaces))
+        assert document["color"]["default_path"] is True
+        outputs[name] = frames(out), read_cube(lut).table
+    assert np.array_equal(outputs["default"][0], outputs["srgb"][0])
+    assert np.array_equal(outputs["default"][1], outputs["srgb"][1])
+
+
+@pytest.fixture(scope="module")
+def acescct(clips, tmp_path_factory) -> dict:
+    """The lossless clip graded in ACEScct: output, LUT and JSON."""
+    folder = tmp_path_factory.mktemp("acescct")
+    out, lut = folder / "graded.mkv", folder / "grade.cube"
+    document = _json(run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS,
+                         "--working-space", "acescct", "--lut", lut, "--json"))
+    return {"output": out, "lut": lut, "json": document}
+
+
+def test_acescct_working_space_bakes_the_lut_in_the_clips_encoding(clips, acescct, tmp_path):
+    out, lut, color = acescct["output"], acescct["lut"], acescct["json"]["color"]
+    assert (color["input_space"], color["working_space"]) == ("sRGB Encoded Rec.709 (sRGB)",
+                                                              "ACEScct")
+    assert color["default_path"] is False and color["styles_space"] == "ACEScct"
+    assert color["ocio_config"] and color["ocio_version"]
+    header = [ln for ln in lut.read_text().splitlines() if ln.startswith("#")]
+    assert any("input space: sRGB Encoded Rec.709" in ln for ln in header)
+    assert any("working space: ACEScct" in ln for ln in header)
+    assert any("OpenColorIO config" in ln for ln in header)
+    before, after = frames(clips["rgb"]), frames(out)
+    table = read_cube(lut).table
+    expected = apply_color_map(before, table)
+    error = np.abs(after - expected) * 255
+    assert error.max() <= 2 and error.mean() < 0.6, (error.max(), error.mean())
+    default = tmp_path / "default.mkv"
+    assert run(clips["rgb"], "-o", default, "--codec", "ffv1", *FAST, *WEIGHTS).exit_code == 0
+    assert np.abs(after - frames(default)).mean() > 2 / 255  # another grade
+    assert np.abs(after - before).mean() > 5 / 255  # that did grade
+
+
+def test_bake_lut_is_the_grade_through_the_working_space_and_back():
+    from wbcgrade.color.colorspace import from_working, to_working
+    from wbcgrade.color.remap import identity_map
+    from wbcgrade.video.ffmpeg import VideoInfo
+    from wbcgrade.video.spaces import bake_lut, plan_clip_spaces
+
+    info = VideoInfo(Path("pq.mkv"), 64, 48, 25.0, "gbrp10le", "pc", "gbr", "bt2020",
+                     "smpte2084", 12, 0.48)
+    spaces = plan_clip_spaces(info, None, "acescct")
+    assert (spaces.input, spaces.source) == ("Rec.2100-PQ - Display", "tags smpte2084/bt2020")
+    identity = identity_map(9)
+    assert np.array_equal(bake_lut(identity, spaces, 17), identity_map(17))  # exactly
+    # a grade in ACEScct: a little less contrast, warmer
+    warm = 0.5 + (identity_map(9) - 0.5) * np.float32(0.9) + np.float32([0.02, 0.0, -0.02])
+    table = bake_lut(warm, spaces, 33)
+    x = np.random.default_rng(1).random((5000, 3)).astype(np.float32) * 0.8  # to 4000 cd/m²
+    working, state = to_working(x, spaces, False)
+    exact = np.clip(from_working(apply_color_map(working, warm), state), 0, 1)
+    error = np.abs(apply_color_map(x, table) - exact)  # the 33³ LUT's interpolation
+    assert error.max() < 8e-3 and error.mean() < 3e-4, (error.max(), error.mean())  # 5e-3, 1.4e-4
+    middle = np.all((x > 0.2) & (x < 0.75), axis=1)  # no channel near PQ's steep toe
+    assert error[middle].max() < 1.5e-3  # measured 0.7e-3
+    assert np.abs(exact - x).mean() > 0.02
+
+
+def test_unknown_spaces_are_one_line_errors(clips, tmp_path):
+    out = tmp_path / "o.mkv"
+    _refused(run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, "--working-space",
+                 "Rec.9999"), "--working-space", "Rec.9999", "ACEScct")
+    _refused(run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, "--input-space", "nope"),
+             "--input-space", "nope")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_pq_clip_is_graded_in_its_rec2100_pq_space(clips, acescct, tmp_path):
+    out, lut = tmp_path / "graded.mkv", tmp_path / "grade.cube"
+    document = _json(run(clips["pq"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS,
+                         "--working-space", "acescct", "--lut", lut, "--json"))
+    color = document["color"]
+    assert color["input_space"] == "Rec.2100-PQ - Display"
+    assert color["input_space_from"] == "tags smpte2084/bt2020"
+    assert color["working_space"] == "ACEScct"
+    src, dst = probe(clips["pq"]), probe(out)
+    assert dst.pix_fmt == "gbrp10le" and dst.frames == 32 and dst.tags() == src.tags()
+    assert any("input space: Rec.2100-PQ - Display" in ln for ln in lut.read_text().splitlines())
+    before, after = frames16(clips["pq"]), frames16(out)
+    error = np.abs(after - apply_color_map(before, read_cube(lut).table)) * 255
+    assert error.max() <= 2 and error.mean() < 0.6, (error.max(), error.mean())  # 1.5, 0.08
+    assert np.abs(after - before).mean() > 2 / 255
+    # the same pictures in two encodings grade alike: the PQ grade, back in sRGB, is the
+    # sRGB clip's grade (10-bit PQ, 8-bit samples of it: measured 3.1/255 at most, 0.9 mean)
+    back = np.clip(convert(after, color["input_space"], "sRGB Encoded Rec.709 (sRGB)"), 0, 1)
+    srgb = frames(acescct["output"])
+    gap = np.abs(back - srgb) * 255
+    assert gap.max() < 5 and gap.mean() < 1.5, (gap.max(), gap.mean())
+    assert np.abs(srgb - frames(clips["rgb"])).mean() * 255 > 20  # against a large grade
+
+
+def test_an_hlg_clip_without_a_config_space_asks_for_input_space(clips, tmp_path):
+    result = run(clips["hlg"], "-o", tmp_path / "o.mkv", "--codec", "ffv1", *FAST, *WEIGHTS)
+    _refused(result, "HLG", "arib-std-b67", "--input-space")
     assert list(tmp_path.iterdir()) == []

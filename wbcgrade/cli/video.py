@@ -41,6 +41,9 @@ def _print_result(result, as_json: bool) -> None:
     info = result.info
     click.echo(f"{info.path.name}: {info.width}x{info.height}, {info.fps:.3f} fps, "
                f"{info.frames} frames, {info.pix_fmt}, {len(info.streams)} stream(s)")
+    spaces = result.spaces
+    if spaces is not None and not spaces.legacy:
+        click.echo(f"colour: {spaces.input} ({spaces.source}), graded in {spaces.working}")
     for number, shot in enumerate(result.shots, start=1):
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked()[:6])
         where = (f"shot {number} (frames {shot.first}-{shot.last})" if len(result.shots) > 1
@@ -79,6 +82,17 @@ def _print_result(result, as_json: bool) -> None:
               help="Also write the grade as a 3-D LUT (.cube); with several shots, "
                    "<stem>_shotNN.cube per shot.")
 @lazy_options(lut_size_option)
+@click.option("--input-space", default=None, metavar="NAME",
+              help="Colour space of the clip's code values (an OpenColorIO name, alias or "
+                   "role, or srgb, display-p3, linear-rec709, acescct, ...; case ignored) "
+                   "[default: from its tags: PQ (smpte2084) with BT.2020 primaries is the "
+                   "config's Rec.2100-PQ space; BT.709, BT.601, untagged and other SDR "
+                   "footage sRGB code values; HLG needs this option].")
+@click.option("--working-space", default=None, metavar="NAME",
+              help="Colour space whose unit cube the histograms, the transport and the "
+                   "colour map live in, e.g. acescct [default: sRGB-encoded Rec.709]; the "
+                   "LUT ffmpeg applies is baked in the input space. Config: $OCIO, else "
+                   "OpenColorIO's built-in ocio://default.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never CLIP).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
@@ -94,6 +108,10 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
     (lut3d, tetrahedral): one grade for the whole clip, no flicker. Audio and
     other streams are copied; frame rate, pixel format and colour tags are
     kept. The output is written atomically and CLIP is never replaced.
+
+    Colour management: --working-space (e.g. acescct) fits the grade in
+    another space; the LUT is baked in the clip's own encoding (--input-space,
+    else its tags: HDR PQ footage is Rec.2100-PQ, SDR footage sRGB code values).
     """
     from tqdm import tqdm
 
@@ -122,7 +140,8 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
     start = time.perf_counter()
     with style_progress() as progress:
         styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress)
+                             cache=style_args["cache"], warn=_warn, progress=progress,
+                             working_space=opts.working_space)
     timings = {"styles": time.perf_counter() - start}
 
     with tqdm(desc="scan", unit="frame", disable=None, leave=False) as bar:

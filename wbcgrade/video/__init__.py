@@ -6,6 +6,8 @@ Layers (each imports only those above it):
   to RGB with the clip's own matrix and range, running a pass with progress.
 - :mod:`wbcgrade.video.sampling`: one small decoding pass: sampled frames and cuts.
 - :mod:`wbcgrade.video.shots`: which LUT (or blend of two) each frame gets.
+- :mod:`wbcgrade.video.spaces`: the clip's colour space (``--input-space`` or its
+  tags) and the grade baked as a LUT in the clip's encoding.
 - :mod:`wbcgrade.video.workflow`: :func:`grade_video`, probe to published file.
 - :mod:`wbcgrade.video.report`: contact sheets and ``report.json``.
 

@@ -13,7 +13,11 @@ Folder layout (REPORT_DIR)::
 The "after" pictures are the sampled frames through the shot's LUT
 (trilinear, in the library), which is what ffmpeg's ``lut3d`` gives to
 within interpolation and rounding (tests/video checks the encoded frames
-against it). All files are written atomically.
+against it). Footage in another space than sRGB (a PQ clip, say) is shown
+converted to sRGB, and the barycenter's palette from the working space
+(:func:`wbcgrade.video.spaces.frames_for_display`); ``report.json`` records
+the spaces and the OpenColorIO config (``color``). All files are written
+atomically.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.remap import apply_color_map
 from wbcgrade.color.report import style_pictures
 from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, write_sheet
+from wbcgrade.video.spaces import frames_for_display, palette_for_display
 from wbcgrade.video.workflow import ShotGrade, VideoResult
 
 __all__ = ["contact_grid", "write_video_report"]
@@ -65,12 +70,16 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     shown = _shown(shot.samples, FRAMES_PER_SHEET)
     before = [result.samples.frames[n].astype(np.float32) / 255 for n in shown]
     after = [apply_color_map(frame, shot.table) for frame in before]
+    before = frames_for_display(before, result.spaces)  # pictures in sRGB
+    after = frames_for_display(after, result.spaces)
     weights, names = shot.grade.weights, shot.grade.names
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]
+    target = histogram_palette(shot.grade.barycenter)  # in the working space
+    target.colors = palette_for_display(target.colors, result.spaces)
     palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
-                ("barycenter", histogram_palette(shot.grade.barycenter)),
+                ("barycenter", target),
                 ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
     best = shot.fit.best_vertex
     title = (f"{result.input.name}  shot {number} of {len(result.shots)}: frames "

@@ -16,6 +16,13 @@
    pixel format and colour tags, and encodes, copying every other stream
    (audio, subtitles, data) as it is, into a temporary file beside the
    output that is renamed onto it only when ffmpeg succeeded.
+
+Colour spaces (:mod:`wbcgrade.video.spaces`): the sampled frames are
+converted from the clip's input space (``opts.input_space``, else its tags)
+into the working space (``opts.working_space``) before their histograms are
+taken, the styles are converted into the working space, and each shot's LUT
+is baked in the input encoding (what ``lut3d`` sees). The default pair runs
+the code of before colour management, byte for byte.
 """
 
 from __future__ import annotations
@@ -30,11 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path, check_output_path, remove_stale_beside
+from wbcgrade.color.colorspace import Spaces
 from wbcgrade.color.grading import FitSummary, PaletteSum, series_grade
 from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.imageio import encode_for_grading
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut, write_cube
-from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.lut import DEFAULT_LUT_SIZE, write_cube
+from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.color.transfer import Grade, GradeOptions
 from wbcgrade.errors import InputError
 from wbcgrade.video.ffmpeg import (
@@ -55,6 +62,7 @@ from wbcgrade.video.sampling import (
     scan,
 )
 from wbcgrade.video.shots import Segment, lut_schedule
+from wbcgrade.video.spaces import bake_lut, frame_to_working, lut_comments, plan_clip_spaces
 
 __all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "ShotGrade",
            "VideoResult", "check_video_outputs", "shot_lut_paths", "shot_grade", "grade_video",
@@ -140,6 +148,8 @@ class VideoResult:
     timings: dict[str, float] = field(default_factory=dict)
     encoder: str = ""
     pix_fmt: str = ""
+    spaces: Spaces | None = None
+    styles_space: str = ""
 
     def as_dict(self) -> dict:
         info = self.info
@@ -160,6 +170,8 @@ class VideoResult:
             "blends": [{"frame": s.first, "shots": list(s.shots), "mix": s.mix}
                        for s in self.segments if len(s.shots) == 2],
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
+            **({} if self.spaces is None else
+               {"color": {**self.spaces.as_dict(), "styles_space": self.styles_space}}),
         }
 
 
@@ -202,14 +214,17 @@ def shot_lut_paths(lut: str | os.PathLike, n_shots: int) -> list[Path]:
 
 def shot_grade(frames: list[np.ndarray], styles: StyleSet, opts: GradeOptions,
                callback: Callable[[int, np.ndarray, float], None] | None = None,
-               stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+               stage: Callable[[str], None] | None = None,
+               spaces: Spaces | None = None) -> tuple[Grade, FitSummary]:
     """One grade for a list of (h, w, 3) uint8 frames: their pooled palette, one fit.
 
-    Every frame counts once (as every photo of ``batch --consistent``).
+    Every frame counts once (as every photo of ``batch --consistent``). The
+    frames are in ``spaces.input`` and graded in ``spaces.working`` (the
+    styles must be there already); None: sRGB in sRGB.
     """
     pool_fit, pool = PaletteSum(), PaletteSum()
     for frame in frames:
-        encoded, _ = encode_for_grading(frame.astype(np.float32) / np.float32(255), False)
+        encoded = frame_to_working(frame, spaces)
         pool_fit.add(image_histogram(encoded, opts.fit_bins, None, opts.max_pixels))
         pool.add(image_histogram(encoded, opts.bins, None, opts.max_pixels))
     return series_grade(pool_fit.result(), pool.result(), styles, opts, callback, stage)
@@ -295,6 +310,9 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     source, output : input clip and graded clip (never the same file).
     styles, opts : as for photos; ``opts.regrain`` is ignored (a LUT has none).
     settings : sampling, cuts and encoding (:class:`VideoSettings`).
+    opts.input_space, opts.working_space : colour spaces (None: the clip's tags,
+        else sRGB code values; sRGB-encoded Rec.709), :mod:`wbcgrade.video.spaces`.
+        The styles are converted into the working space when they are elsewhere.
     lut : also write the clip's LUT here (with several shots, one file per shot:
         :func:`shot_lut_paths`).
     progress : ``progress(pass_name, frames_done, frames_total)`` during the
@@ -313,6 +331,8 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     say = stage or (lambda name: None)
     start = time.perf_counter()
     info = probe(source)
+    spaces = plan_clip_spaces(info, opts.input_space, opts.working_space)
+    styles = styles_in_space(styles, spaces.working)
 
     say("scan")
     t0 = time.perf_counter()
@@ -327,8 +347,8 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         grade, fit = shot_grade([samples.frames[n] for n in indices], styles, opts,
-                                fit_callback, say)
-        table = color_map_to_lut(grade.color_map, settings.lut_size, grade.strength)
+                                fit_callback, say, spaces)
+        table = bake_lut(grade.color_map, spaces, settings.lut_size, grade.strength)
         shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
     timings["grade"] = time.perf_counter() - t0
     segments = lut_schedule(samples.shots(), [s.table for s in shots], settings.blend)
@@ -356,8 +376,9 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
         write_cube(path, shot.table, title=f"wbcgrade video {Path(source).name}",
                    comments=[f"wbcgrade grade of {Path(source).name}, frames {shot.first}-"
                              f"{shot.last}: {ranked}",
-                             "input: full-range RGB decoded with the clip's own matrix"],
+                             "input: full-range RGB decoded with the clip's own matrix",
+                             *lut_comments(spaces)],
                    overwrite=overwrite)
     timings["total"] = time.perf_counter() - start
     return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
-                       timings, encoder, pix_fmt)
+                       timings, encoder, pix_fmt, spaces, styles.working_space)
