@@ -84,8 +84,8 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     """
     from tqdm import tqdm
 
-    from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.pipeline import check_outputs, grade_file, load_styles
+    from wbcgrade.cli._progress import load_styles_with_bar
+    from wbcgrade.color.pipeline import check_outputs, grade_file
 
     opts, style_args = take_grading_options(kwargs)
     if opts.fit_bins > 32:
@@ -96,10 +96,7 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
 
         check_clf_support()  # before any work
     start = time.perf_counter()
-    with style_progress() as progress:
-        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress,
-                             working_space=opts.working_space)
+    styles = load_styles_with_bar(opts, style_args, _warn)
     timings = {"styles": time.perf_counter() - start}
 
     with tqdm(desc="fit", unit="eval", disable=None, leave=False) as bar:

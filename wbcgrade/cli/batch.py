@@ -31,16 +31,12 @@ def _warn(message: str) -> None:
 
 def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
     """Load the style set with a progress bar over style photos."""
-    from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.pipeline import load_styles
+    from wbcgrade.cli._progress import load_styles_with_bar
 
     if opts.fit_bins > 32:
         _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes per photo "
               "(default 16)")
-    with style_progress() as progress:
-        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress,
-                             working_space=opts.working_space)
+    styles = load_styles_with_bar(opts, style_args, _warn)
     opts.validate(len(styles.names))
     return styles
 

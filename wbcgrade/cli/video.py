@@ -115,8 +115,7 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
     """
     from tqdm import tqdm
 
-    from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.pipeline import load_styles
+    from wbcgrade.cli._progress import load_styles_with_bar
     from wbcgrade.color.transfer import GradeOptions
     from wbcgrade.video.workflow import VideoSettings, check_video_outputs, grade_video
 
@@ -138,10 +137,7 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
             raise InputError(f"{report_dir}: cannot create the report folder "
                              f"({exc.strerror})") from None
     start = time.perf_counter()
-    with style_progress() as progress:
-        styles = load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                             cache=style_args["cache"], warn=_warn, progress=progress,
-                             working_space=opts.working_space)
+    styles = load_styles_with_bar(opts, style_args, _warn)
     timings = {"styles": time.perf_counter() - start}
 
     with tqdm(desc="scan", unit="frame", disable=None, leave=False) as bar:
