@@ -355,11 +355,9 @@ def barycentric_projection(
 
 
 def _separable(geometry: Geometry) -> bool:
-    """A float64 3-D grid: its kernel is three axis kernels (``GridGeometry``)."""
-    from wbcgrade.core.geometry import GridGeometry
-
-    return (isinstance(geometry, GridGeometry) and geometry.ndim == 3
-            and geometry.dtype == np.float64)
+    """A float64 3-D geometry whose kernel is three axis kernels (a grid's)."""
+    return (geometry.ndim == 3 and geometry.dtype == np.float64
+            and geometry.separable_factors() is not None)
 
 
 def _grid_projection(b: NDArray, geometry: Geometry) -> tuple[NDArray, NDArray]:
@@ -376,8 +374,9 @@ def _grid_projection(b: NDArray, geometry: Geometry) -> tuple[NDArray, NDArray]:
     moved : (*shape, 3) ``K (b x_a)`` for a = 0, 1, 2
     """
     n0, n1, n2 = geometry.shape
-    K0, K1, K2 = geometry.kernels
-    X0, X1, X2 = (k * x[None, :] for k, x in zip(geometry.kernels, geometry.axes))
+    factors = geometry.separable_factors()
+    K0, K1, K2 = (kernel for kernel, _ in factors)
+    X0, X1, X2 = (kernel * x[None, :] for kernel, x in factors)
 
     def along(kernel: NDArray, values: NDArray, axis: int, out: NDArray) -> NDArray:
         if axis == 0:
