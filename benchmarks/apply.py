@@ -100,7 +100,7 @@ def read_8bit(path: Path) -> np.ndarray:
 
 def energy_problem(photo: Path, styles: Path, bins: int):
     """(target, style histograms, fit geometry at ``bins``, opts) of the apply pipeline."""
-    from wbcgrade.color.encoding import ColorEncoding
+    from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.histogram import add_floor, image_histogram
     from wbcgrade.color.imageio import read_image
     from wbcgrade.color.options import FitOptions, TransferOptions

@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 from wbcgrade.cli import main as cli
 from wbcgrade.color import colorspace as cs
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import HistogramCache, image_histogram
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.presets import (

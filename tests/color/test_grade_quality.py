@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wbcgrade.color import regrain as regrain_module
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.options import GradeOptions

@@ -7,7 +7,7 @@ import OpenImageIO as oiio
 import pytest
 
 from tests.color.conftest import SAMPLES, write_array
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.imageio import orient, read_image, write_image
 from wbcgrade.errors import InputError
 

@@ -9,7 +9,7 @@ import pytest
 
 from tests.color.conftest import SAMPLES, grade_of, small_copy, write_array
 from wbcgrade.color._colour import colour
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import Grade
 from wbcgrade.color.histogram import grid_points, image_histogram
 from wbcgrade.color.imageio import read_image, write_image

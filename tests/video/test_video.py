@@ -233,7 +233,7 @@ def _json(result) -> dict:
 def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     """A shot's grade is the one grade path of photos on its frames' pooled palette, and its
     LUT the map sampled at the LUT's nodes (sRGB footage graded in sRGB)."""
-    from wbcgrade.color.encoding import ColorEncoding
+    from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.grading import PhotoHistograms, grade_histograms, photo_histograms
     from wbcgrade.color.histogram import PaletteSum
     from wbcgrade.color.lut import color_map_to_lut

@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut

@@ -15,7 +15,7 @@ Pixel values: integer images (8/16-bit JPEG, PNG, TIFF) are read as
 display-encoded values in [0, 1], float images (EXR, float TIFF) as they
 are (scene-linear). Which colour space they are in and how they reach the
 working space is not this module's business
-(:mod:`wbcgrade.color.encoding`). Orientation and alpha association use
+(:mod:`wbcgrade.color.colorspace`). Orientation and alpha association use
 OpenImageIO's own ``ImageBufAlgo.reorient``, ``unpremult`` and ``premult``.
 Outputs are checked before any work by :func:`wbcgrade._publish.check_output_path`
 (the one output checker); the writers here publish atomically and never
@@ -516,20 +516,26 @@ def stage_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     """
     path = Path(path)
     spec, data, format_name = _prepare(path, pixels, like, alpha_channel)
-    if not hasattr(os, "memfd_create"):  # pragma: no cover - not Linux
-        with atomic_path(path, overwrite=overwrite) as tmp:
-            _encode_into(tmp, path, spec, data)
-            _verify_written(tmp, path, spec)
-            yield path
-        return
-    fd = _encode(path, spec, data, format_name)
+    # encoded in memory first where the system can (Linux): see _encode
+    fd = _encode(path, spec, data, format_name) if hasattr(os, "memfd_create") else None
     try:
         with atomic_path(path, overwrite=overwrite) as tmp:
-            _copy_encoded(fd, tmp, path)
-            _verify_written(tmp, path, spec)
+            _write_encoded(fd, tmp, path, spec, data)
             yield path
     finally:
-        os.close(fd)
+        if fd is not None:
+            os.close(fd)
+
+
+def _write_encoded(fd: int | None, tmp: str, path: Path, spec: oiio.ImageSpec,
+                   data: np.ndarray) -> None:
+    """Fill the temporary file: the bytes encoded in ``fd``, or (no memory files) an
+    encoder writing it directly; then check what was written."""
+    if fd is None:  # pragma: no cover - not Linux
+        _encode_into(tmp, path, spec, data)
+    else:
+        _copy_encoded(fd, tmp, path)
+    _verify_written(tmp, path, spec)
 
 
 def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,

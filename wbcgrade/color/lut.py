@@ -169,7 +169,7 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     Parameters
     ----------
     grade : the grade (its map lives in ``encoding.working``).
-    encoding : a :class:`~wbcgrade.color.encoding.ColorEncoding`: its input
+    encoding : a :class:`~wbcgrade.color.colorspace.ColorEncoding`: its input
         is what the LUT takes and gives (the working space itself: a LUT in
         the working space, with a shaper when it is logarithmic; another
         space: the grade baked in its code values, :meth:`Grade.lut`).

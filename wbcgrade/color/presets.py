@@ -34,8 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path, check_output_path
-from wbcgrade.color.colorspace import config_path, convert, default_working_space, resolve_space
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import (
+    ColorEncoding,
+    config_path,
+    convert,
+    default_working_space,
+    resolve_space,
+)
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,

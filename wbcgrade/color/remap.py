@@ -142,7 +142,7 @@ def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:
     Parameters
     ----------
     color_map : (n, n, n, 3) working-space colours in [0, 1].
-    encoding : the grade's :class:`wbcgrade.color.encoding.ColorEncoding`.
+    encoding : the grade's :class:`wbcgrade.color.colorspace.ColorEncoding`.
 
     Returns
     -------

@@ -27,7 +27,7 @@ import numpy as np
 
 from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import NONZERO_THRESHOLD
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet

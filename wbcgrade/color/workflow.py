@@ -8,7 +8,7 @@ callbacks of :class:`Progress`). The data flow (docs/architecture.md):
 1. the outputs are planned and checked once, before any work
    (:func:`plan_photo`, through :func:`wbcgrade._publish.plan_outputs`);
 2. the photo is read (:func:`wbcgrade.color.imageio.read_image`) and
-   encoded into the working space (:class:`~wbcgrade.color.encoding.ColorEncoding`);
+   encoded into the working space (:class:`~wbcgrade.color.colorspace.ColorEncoding`);
 3. the grade path fits and builds the grade
    (:func:`wbcgrade.color.grading.grade_encoded`), or a series' shared
    grade is used as it is;
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import plan_outputs
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, grade_encoded
 from wbcgrade.color.imageio import Image, check_image_output, read_image, stage_image
@@ -109,8 +109,10 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     photo = Path(photo)
     if not photo.exists():
         raise InputError(f"{photo}: no such file")
-    output = (Path(output) if output is not None else default_output_path(photo)) if write \
-        else None
+    if not write:
+        output = None
+    else:
+        output = Path(output) if output is not None else default_output_path(photo)
     if output is not None:
         check_image_output(output)
     if lut is not None:
@@ -190,8 +192,9 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     progress.say("read")
     start = time.perf_counter()
     image = read_image(photo)
+    rgb = image.rgb()
     encoding = ColorEncoding.for_image(image, options.spaces.input, options.spaces.working)
-    encoded = encoding.encode(image.rgb(), image.is_float)
+    encoded = encoding.encode(rgb, image.is_float)
     timings["read"] = time.perf_counter() - start
     fit = None
     if shared is not None:

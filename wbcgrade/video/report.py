@@ -15,7 +15,7 @@ The "after" pictures are the sampled frames through the shot's LUT
 within interpolation and rounding (tests/video checks the encoded frames
 against it). Footage in another space than sRGB (a PQ clip, say) is shown
 converted to sRGB, and the barycenter's palette from the working space
-(the clip's :class:`~wbcgrade.color.encoding.ColorEncoding`); ``report.json``
+(the clip's :class:`~wbcgrade.color.colorspace.ColorEncoding`); ``report.json``
 records the spaces and the OpenColorIO config (``color``). All files are
 written atomically, and only into a folder whose files they do not replace
 (:func:`plan_video_report`) unless asked.

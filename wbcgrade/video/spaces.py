@@ -19,7 +19,7 @@ values, whatever space the grade was fitted in:
   colour management.
 - The *working space* (``--working-space``; default sRGB-encoded Rec.709) is
   where the sampled frames' histograms, the styles and the colour map live,
-  exactly as for photos (one :class:`~wbcgrade.color.encoding.ColorEncoding`,
+  exactly as for photos (one :class:`~wbcgrade.color.colorspace.ColorEncoding`,
   :func:`clip_encoding`).
 - The LUT is *baked in the input encoding*
   (:meth:`wbcgrade.color.grading.Grade.lut` with the clip's encoding):
@@ -35,8 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import config_info, resolve_space
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding, config_info, resolve_space
 from wbcgrade.color.options import SpaceOptions
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import VideoInfo
@@ -90,7 +89,7 @@ def tagged_space(info: VideoInfo) -> tuple[str | None, str]:
 
 
 def clip_encoding(info: VideoInfo, spaces: SpaceOptions | None = None) -> ColorEncoding:
-    """The :class:`~wbcgrade.color.encoding.ColorEncoding` of a clip's grade.
+    """The :class:`~wbcgrade.color.colorspace.ColorEncoding` of a clip's grade.
 
     ``spaces.input`` None: what the tags say (:func:`tagged_space`), else
     sRGB code values; ``spaces.working`` None: sRGB-encoded Rec.709.

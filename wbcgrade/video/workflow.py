@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path, plan_outputs
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
 from wbcgrade.color.histogram import PaletteSum

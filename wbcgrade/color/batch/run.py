@@ -16,7 +16,7 @@ from wbcgrade.color.batch.task import (
     run_task,
     setup_worker,
 )
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import PhotoHistograms, grade_histograms
 from wbcgrade.color.histogram import PaletteSum
 from wbcgrade.color.workflow import Progress

@@ -19,7 +19,7 @@ import numpy as np
 
 from wbcgrade.color.batch.plan import BatchTask
 from wbcgrade.color.batch.results import FileResult
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, photo_histograms
 from wbcgrade.color.imageio import (

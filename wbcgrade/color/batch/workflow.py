@@ -22,7 +22,7 @@ from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.batch.run import run_batch
 from wbcgrade.color.batch.settings import batch_settings, settings_changed, write_settings
 from wbcgrade.color.batch.task import BatchContext
-from wbcgrade.color.encoding import ColorEncoding
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
