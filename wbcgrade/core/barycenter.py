@@ -529,6 +529,19 @@ def barycenter(
     ----------
     Benamou, Carlier, Cuturi, Nenna, Peyré (2015), Iterative Bregman
     projections for regularized transportation problems.
+
+    Examples
+    --------
+    Half-way between two bumps on a line is a bump in the middle:
+
+    >>> import numpy as np
+    >>> from wbcgrade.core import GridGeometry, barycenter
+    >>> x = np.linspace(0, 1, 50)
+    >>> bumps = np.stack([np.exp(-(x - c) ** 2 / 0.002) for c in (0.2, 0.8)])
+    >>> P = barycenter(bumps / bumps.sum(axis=1, keepdims=True), [0.5, 0.5],
+    ...                GridGeometry.with_width(50, 1.0), n_iter=100)
+    >>> round(float(x[np.argmax(P)]), 1), round(float(P.sum()), 6)
+    (0.5, 1.0)
     """
     solver = BarycenterSolver(histograms, geometry, n_iter,
                               log_domain_budget_s=log_domain_budget_s, method=method)

@@ -113,6 +113,13 @@ def resample_grid(values: ArrayLike, shape: tuple[int, ...], mass: float | None 
     Returns
     -------
     ndarray, shape (..., *shape), float64
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from wbcgrade.core import resample_grid
+    >>> resample_grid(np.array([0.0, 1.0, 0.0, 0.0, 1.0]), (3,)).tolist()  # mass 2 kept
+    [0.5, 0.5, 1.0]
     """
     x = np.asarray(values, dtype=np.float64)
     shape = tuple(int(n) for n in shape)
