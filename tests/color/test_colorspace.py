@@ -420,7 +420,7 @@ def _oklab_lightness(acescg: np.ndarray) -> np.ndarray:
 def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, working):
     """An ACEScg EXR with highlights above 1: --preserve-luminance keeps each pixel's
     lightness to 1 % in ACEScct as in the default space (it once decoded ACEScct values
-    as sRGB: 2 % off on average); without it the same grade moves lightness far more."""
+    as sRGB); without it the same grade moves lightness far more."""
     src = _acescg_exr(tmp_path / "cg.exr")
     before = read_image(src).rgb()
     lightness = _oklab_lightness(before)
@@ -429,11 +429,12 @@ def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, worki
         out = tmp_path / f"g{len(changes)}.exr"
         result = CliRunner().invoke(cli, ["apply", str(src), "--preset", "warm",
                                           "--working-space", working, "-o", str(out), *extra,
-                                          *FAST_ARGS, "--map-size", "17"])
+                                          *FAST_ARGS])
         assert result.exit_code == 0, result.output
         after = read_image(out).rgb()
         changes[bool(extra)] = np.abs(_oklab_lightness(after) - lightness) / lightness
-    assert changes[True].mean() < 0.01 and np.percentile(changes[True], 90) < 0.02
+    # kept to 1 % (90 % of the pixels; it was 1.6 % in ACEScct, reading ACEScct as sRGB)
+    assert changes[True].mean() < 0.01 and np.percentile(changes[True], 90) < 0.01
     assert changes[False].mean() > 3 * changes[True].mean()
 
 
