@@ -82,7 +82,8 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import bar_callbacks
-    from wbcgrade.color.workflow import Progress, apply_photo
+    from wbcgrade.color.apply import apply_photo
+    from wbcgrade.color.workflow import Progress
 
     options, source = take_grading_options(kwargs)
     if options.fit.bins > 32:

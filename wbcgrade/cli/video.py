@@ -109,7 +109,8 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
 
     from wbcgrade.cli._progress import bar_callbacks
     from wbcgrade.color.options import flat_defaults
-    from wbcgrade.video.workflow import VideoProgress, VideoSettings, grade_clip
+    from wbcgrade.video.command import grade_clip
+    from wbcgrade.video.workflow import VideoProgress, VideoSettings
 
     defaults = flat_defaults()  # a LUT has no regrain
     kwargs.update(regrain=False, regrain_radius=defaults["regrain_radius"],

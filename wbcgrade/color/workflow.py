@@ -1,8 +1,8 @@
 """One photo file graded end to end: plan the outputs, read, grade, write (``apply``, ``batch``).
 
-This is the library behind ``wbcgrade apply`` (:func:`apply_photo`) and
-behind every photo of ``wbcgrade batch`` (:func:`grade_file`); it knows files
-and colours but no command line (progress and messages go through the
+This is the library behind ``wbcgrade apply`` (:func:`wbcgrade.color.apply.apply_photo`)
+and behind every photo of ``wbcgrade batch`` (:func:`grade_file`); it knows
+files and colours but no command line (progress and messages go through the
 callbacks of :class:`Progress`). The data flow (docs/architecture.md):
 
 1. the outputs are planned and checked once, before any work
@@ -41,11 +41,11 @@ from wbcgrade.color.lut import (
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
+from wbcgrade.color.presets import StyleSet
 from wbcgrade.errors import InputError
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
-           "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
+           "plan_photo", "graded_pixels", "grade_photo", "grade_file"]
 
 
 @dataclass(frozen=True)
@@ -300,31 +300,3 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
     return GradeReport(plan.photo, plan.output, plan.lut, grade, styles.source, graded,
                        timings, graded.fit)
-
-
-def apply_photo(photo: str | os.PathLike, source: StyleSource, options: GradeOptions,
-                output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
-                lut_size: int = DEFAULT_LUT_SIZE, lut_format: str = "cube",
-                overwrite: bool = False, report_dir: str | os.PathLike | None = None,
-                progress: Progress | None = None) -> GradeReport:
-    """``wbcgrade apply``: grade ``photo`` towards the styles of ``source`` and write it.
-
-    Every output (the graded photo, the LUT, the report's files) is planned
-    and checked before any work; then the styles are loaded, the photo is
-    graded and written (:func:`grade_file`) and, with ``report_dir``, the
-    palette weight report is written (:func:`wbcgrade.color.report.report_from_grade`).
-    """
-    from wbcgrade.color.report import plan_report, report_from_grade
-
-    progress = progress or Progress()
-    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite)
-    if report_dir is not None:
-        plan_report(report_dir, [plan.photo.name], [plan.photo], overwrite)
-    start = time.perf_counter()
-    styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
-    report = grade_file(plan, styles, options, progress=progress,
-                        timings={"styles": time.perf_counter() - start})
-    if report_dir is not None:
-        report.report = report_from_grade(report_dir, report, styles, options, overwrite)
-    return report

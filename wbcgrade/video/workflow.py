@@ -24,9 +24,9 @@ converted from the clip's input space (``opts.input_space``, else its tags)
 into the working space (``opts.working_space``) before their histograms are
 taken, the styles are converted into the working space, and each shot's LUT
 is baked in the input encoding (what ``lut3d`` sees:
-:meth:`wbcgrade.color.grading.Grade.lut`). :func:`grade_clip` is the
-``video`` command: outputs planned, styles loaded, the clip graded, the
-report written.
+:meth:`wbcgrade.color.grading.Grade.lut`). The ``video`` command's
+workflow (outputs planned, styles loaded, the clip graded, the report
+written) is :func:`wbcgrade.video.command.grade_clip`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -46,8 +46,8 @@ from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
 from wbcgrade.color.histogram import PaletteSum
 from wbcgrade.color.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
-from wbcgrade.color.options import GradeOptions, RegrainOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, styles_in_space
+from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import (
@@ -71,7 +71,7 @@ from wbcgrade.video.spaces import clip_encoding, frame_to_working, lut_comments
 
 __all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "VideoProgress",
            "ShotGrade", "VideoResult", "default_output", "plan_video", "shot_lut_paths",
-           "shot_grade", "grade_video", "grade_clip", "encode_args"]
+           "shot_grade", "grade_video", "encode_args"]
 
 #: --codec NAME -> (ffmpeg encoder, containers it may go in).
 CODECS = {
@@ -342,14 +342,15 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     """
     settings = settings or VideoSettings()
     planned = plan_video(source, output, lut, settings, overwrite)
-    return _grade_planned(*planned, styles, options, settings, overwrite,
+    return grade_planned(*planned, styles, options, settings, overwrite,
                           progress or VideoProgress(), timings)
 
 
-def _grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
+def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
                    options: GradeOptions, settings: VideoSettings, overwrite: bool,
                    progress: VideoProgress, timings: dict[str, float] | None) -> VideoResult:
-    """:func:`grade_video` once :func:`plan_video` checked the outputs."""
+    """:func:`grade_video` once :func:`plan_video` checked the outputs (the outputs as
+    it returned them)."""
     timings = dict(timings or {})
     start = time.perf_counter()
     info = probe(source)
@@ -405,33 +406,3 @@ def _grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSe
     timings["total"] = time.perf_counter() - start
     return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
                        timings, encoder, pix_fmt, encoding, styles.working_space)
-
-
-def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
-               styles: StyleSource, options: GradeOptions, settings: VideoSettings | None = None,
-               lut: str | os.PathLike | None = None, overwrite: bool = False,
-               report_dir: str | os.PathLike | None = None,
-               progress: VideoProgress | None = None) -> VideoResult:
-    """``wbcgrade video``: plan every output, load the styles, grade the clip, write the report.
-
-    The clip's grade is a LUT: ``options.regrain`` is turned off. The report
-    (a contact sheet per shot and report.json, :mod:`wbcgrade.video.report`)
-    never replaces files it did not write unless ``overwrite``.
-    """
-    from wbcgrade.video.report import plan_video_report, write_video_report
-
-    settings = settings or VideoSettings()
-    progress = progress or VideoProgress()
-    source, output, lut = plan_video(source, output, lut, settings, overwrite)
-    if report_dir is not None:
-        plan_video_report(report_dir, [source], overwrite)
-    if options.regrain.enabled:
-        options = replace(options, regrain=RegrainOptions(enabled=False))
-    start = time.perf_counter()
-    loaded = load_styles(styles, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
-    result = _grade_planned(source, output, lut, loaded, options, settings, overwrite, progress,
-                            {"styles": time.perf_counter() - start})
-    if report_dir is not None:
-        result.report = write_video_report(report_dir, result, loaded, overwrite)
-    return result
