@@ -118,12 +118,10 @@ class Grade:
         holding ``x + (back(graded) - back(working))`` (an identity grade
         gives exactly the identity), clipped to [0, 1].
         """
-        if encoding is None or encoding.input == encoding.working:
-            if encoding is not None and self.working and encoding.working != self.working:
-                raise InputError(f"the grade lives in {self.working}, not {encoding.working}")
-            return color_map_to_lut(self.color_map, size, self.strength)
-        if self.working and encoding.working != self.working:
+        if encoding is not None and self.working and encoding.working != self.working:
             raise InputError(f"the grade lives in {self.working}, not {encoding.working}")
+        if encoding is None or encoding.input == encoding.working:
+            return color_map_to_lut(self.color_map, size, self.strength)
         nodes = identity_map(check_lut_size(size))
         working, state = encoding.encode(nodes)
         graded = apply_color_map(working, self.color_map, self.strength)
