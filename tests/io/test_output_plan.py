@@ -73,9 +73,10 @@ def test_batch_never_replaces_a_file_it_did_not_write(tmp_path, styles, foreign)
     assert (out / "x.jpg").read_bytes() == kept
     assert "x.jpg: file exists (use --overwrite to replace it)" in result.output
     assert "graded 1, skipped 0, failed 1" in result.output and (out / "y.jpg").is_file()
-    result = _run("batch", src, "-o", out, "--style", styles, *FAST, "--overwrite")
-    assert result.exit_code == 0, result.output
-    assert (out / "x.jpg").read_bytes() != kept
+    if foreign == "other-size":  # (one case is enough to show --overwrite replaces it)
+        result = _run("batch", src, "-o", out, "--style", styles, *FAST, "--overwrite")
+        assert result.exit_code == 0, result.output
+        assert (out / "x.jpg").read_bytes() != kept
 
 
 def _report_folder(folder: Path, name: str = "index.html") -> dict[str, str]:
@@ -96,9 +97,11 @@ def test_report_never_replaces_a_report_it_did_not_write(tmp_path, styles, name)
     result = _run("report", src, "-o", report, "--style", styles, *FAST)
     assert result.exit_code == 1 and "file exists (use --overwrite" in result.output
     assert _digest(report) == before  # nothing written: checked before any work
-    result = _run("report", src, "-o", report, "--style", styles, *FAST, "--overwrite")
-    assert result.exit_code == 0, result.output
-    assert json.loads((report / "report.json").read_text())["photos"][0]["photo"] == "x.jpg"
+    if name == "index.html":  # (one case is enough to show --overwrite replaces them)
+        result = _run("report", src, "-o", report, "--style", styles, *FAST, "--overwrite")
+        assert result.exit_code == 0, result.output
+        document = json.loads((report / "report.json").read_text())
+        assert document["photos"][0]["photo"] == "x.jpg"
 
 
 def test_apply_report_never_replaces_a_report_it_did_not_write(tmp_path, styles):
