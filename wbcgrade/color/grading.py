@@ -359,6 +359,8 @@ def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     """
     say = stage or (lambda name: None)
     opts.validate(len(styles.names))
+    if opts.mode == "look" and opts.weights is None:
+        return _look_grade(encoded, styles, opts, alpha, say)
     say("fit")
     photo_fit = image_histogram(encoded, opts.fit_bins, alpha, opts.max_pixels)
     summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
@@ -368,6 +370,40 @@ def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     grade.info["fit"] = summary.info
     grade.timings = {"fit": summary.time_s,
                      **{k: v for k, v in grade.timings.items() if k != "fit"}}
+    return grade, summary
+
+
+def _look_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
+                alpha: np.ndarray | None, say: Callable[[str], None]) -> tuple[Grade, FitSummary]:
+    """The grade of ``mode="look"``: the set's look, corrected towards the photo's scene."""
+    from wbcgrade.color.look import MAP_BINS, look_color_map, natural_palettes
+    from wbcgrade.color.presets import load_preset
+    from wbcgrade.color.remap import keep_lightness, monotone_lightness
+
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    say("histograms")
+    photo_hist = image_histogram(encoded, MAP_BINS, alpha, opts.max_pixels)
+    timings["histograms"] = time.perf_counter() - start
+    say("look")
+    start = time.perf_counter()
+    naturals = load_preset(opts.natural) if opts.natural else natural_palettes()
+    naturals = styles_in_space(naturals, styles.working_space)
+    color_map, photo, info = look_color_map(photo_hist, styles, naturals, opts.map_size)
+    if opts.monotone and not opts.preserve_luminance:
+        color_map = monotone_lightness(color_map)
+    if opts.preserve_luminance:
+        color_map = keep_lightness(color_map)
+    timings["look"] = time.perf_counter() - start
+    info["map"] = {"size": opts.map_size, "monotone": opts.monotone,
+                   "preserve_luminance": opts.preserve_luminance}
+    info["fit"] = {"start": "look", "match": info["look"]["match"],
+                   "confidence": info["look"]["confidence"]}
+    grade = Grade(names=list(styles.names), weights=photo.weights, loss=None,
+                  color_map=color_map, strength=opts.strength, timings=timings, info=info,
+                  barycenter=None, regrain=regrain_settings(opts))
+    summary = FitSummary(photo.weights, float(photo.residuals[photo.match]),
+                         photo.residuals, "look", info["fit"], timings["look"])
     return grade, summary
 
 
