@@ -526,10 +526,11 @@ def crop_rows(photo, truth, outs: dict, size: int) -> list:
     side = max(32, size // 8)
     if min(photo.shape[:2]) <= side:
         return []
-    windows = [("flat", *smooth_crop(photo, side))]
+    r0, c0 = smooth_crop(photo, side)
+    windows = [("flat", r0, c0)]
     feature = feature_crop(photo, side)
-    if feature:
-        windows.append(feature)
+    if feature and max(abs(feature[1] - r0), abs(feature[2] - c0)) > side // 2:
+        windows.append(feature)  # unless it is the flat window again
     rows = []
     for kind, r, c in windows:
         images = {"photo": photo, "truth": truth, **outs}
