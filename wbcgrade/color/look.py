@@ -233,7 +233,7 @@ def _fit_geometry(bins: int):
 
 
 def look_coordinates(target: np.ndarray, palettes: np.ndarray, floor: float = 1e-4,
-                     max_iter: int = 30) -> tuple[np.ndarray, float]:
+                     max_iter: int = 15) -> tuple[np.ndarray, float]:
     """KL barycentric coordinates of ``target`` (m, m, m) over ``palettes`` (K, m, m, m).
 
     Returns (weights (K,), loss).
@@ -243,7 +243,7 @@ def look_coordinates(target: np.ndarray, palettes: np.ndarray, floor: float = 1e
     bins = target.shape[0]
     result = barycentric_coordinates(
         add_floor(target, floor), np.stack([add_floor(h, floor) for h in palettes]),
-        _fit_geometry(bins), loss="kl", n_iter=60, max_iter=max_iter, tol=1e-6)
+        _fit_geometry(bins), loss="kl", n_iter=30, max_iter=max_iter, tol=1e-5)
     return np.asarray(result.weights, dtype=np.float64), float(result.loss)
 
 
@@ -355,11 +355,15 @@ class PairFit:
         photo's colours after the map and where the relaxed plan sends them:
         small when the style is the photo's own scene in some look.
     kept : share of the photo's mass the relaxed plan moved.
+    overlap : shared mass of the mapped photo's histogram and the style's
+        (each blurred by half a bin; 1 = the same palette): high when the
+        style shows the photo's own scene.
     """
 
     look: LookMap
     residual: float
     kept: float
+    overlap: float = 0.0
 
 
 def fit_pair(photo: np.ndarray, style: np.ndarray, prior: LookMap | None = None,
@@ -380,7 +384,17 @@ def fit_pair(photo: np.ndarray, style: np.ndarray, prior: LookMap | None = None,
     _, targets, mass, moved = _correspondences(photo, style, look, width, relaxation)
     total = max(float(mass.sum()), 1e-300)
     residual = float(np.sum(mass * np.sum((targets - moved) ** 2, axis=1)) / total)
-    return PairFit(look, residual, float(mass.sum() / photo.sum()))
+    return PairFit(look, residual, float(mass.sum() / photo.sum()),
+                   _overlap(push_histogram(photo, look), style))
+
+
+def _overlap(first: np.ndarray, second: np.ndarray, blur: float = 0.5) -> float:
+    """Shared mass of two histograms, each blurred by ``blur`` bins and normalised."""
+    from scipy.ndimage import gaussian_filter
+
+    a = gaussian_filter(first / first.sum(), blur, mode="constant")
+    b = gaussian_filter(second / second.sum(), blur, mode="constant")
+    return float(np.minimum(a / a.sum(), b / b.sum()).sum())
 
 
 @dataclass(frozen=True)
@@ -393,12 +407,14 @@ class PhotoLook:
     match : index of the style whose scene fits the photo best.
     confidence : in [0, 1], how far the correction towards that style was taken.
     residuals : (S,) :attr:`PairFit.residual` of every style.
+    overlap : :attr:`PairFit.overlap` of the match.
     """
 
     look: LookMap
     match: int
     confidence: float
     residuals: np.ndarray
+    overlap: float = 0.0
 
     @property
     def weights(self) -> np.ndarray:
@@ -413,6 +429,11 @@ class PhotoLook:
 #: no style counts as the photo's own scene, and at or below which one surely does.
 UNSURE_RATIO = 0.75
 SURE_RATIO = 0.35
+#: Overlap of the mapped photo's palette with the match's at or below which the
+#: match is not the photo's scene, and at or above which it surely is
+#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
+UNSURE_OVERLAP = 0.55
+SURE_OVERLAP = 0.65
 
 
 def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None = None,
@@ -421,10 +442,13 @@ def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None =
 
     Every style gets a :func:`fit_pair` from the photo starting at the set's
     look; the style left with the smallest residual is the photo's scene
-    candidate. How sure that is comes from its residual against the others'
-    (ratio to their median: ``SURE_RATIO`` or less is sure, ``UNSURE_RATIO``
-    or more is not); the map moves from the set's look towards that pair's
-    look by the confidence (coefficients blended: the family is linear).
+    candidate. How sure that is: the product of two ramps, one on its
+    residual against the others' (ratio to their median: ``SURE_RATIO`` or
+    less is sure, ``UNSURE_RATIO`` or more is not) and one on how much of
+    the mapped palette it shares (``UNSURE_OVERLAP`` .. ``SURE_OVERLAP``). A
+    wrong match repaints the photo, so both must agree. The map moves from
+    the set's look towards that pair's look by the confidence (coefficients
+    blended: the family is linear).
 
     Parameters
     ----------
@@ -438,14 +462,18 @@ def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None =
     match = int(np.argmin(residuals))
     if len(fits) > 1:
         ratio = residuals[match] / max(float(np.median(np.delete(residuals, match))), 1e-300)
-        confidence = float(np.clip((UNSURE_RATIO - ratio) / (UNSURE_RATIO - SURE_RATIO),
-                                   0.0, 1.0))
+        sure_of_ratio = np.clip((UNSURE_RATIO - ratio) / (UNSURE_RATIO - SURE_RATIO), 0.0, 1.0)
     else:
-        confidence = 1.0
+        sure_of_ratio = 1.0
+    overlap = fits[match].overlap
+    sure_of_overlap = np.clip((overlap - UNSURE_OVERLAP) / (SURE_OVERLAP - UNSURE_OVERLAP),
+                              0.0, 1.0)
+    confidence = float(sure_of_ratio * sure_of_overlap)
     chosen = fits[match].look
     coefficients = set_look.coefficients + confidence * (chosen.coefficients
                                                          - set_look.coefficients)
-    return PhotoLook(LookMap(coefficients, set_look.knots), match, confidence, residuals)
+    return PhotoLook(LookMap(coefficients, set_look.knots), match, confidence, residuals,
+                     overlap)
 
 
 # --------------------------------------------------------------------------- grading with looks
@@ -454,6 +482,13 @@ def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None =
 #: look extracted across scenes is half believed (measured: full strength
 #: lands more of the look on average and damages a few photos).
 SET_LOOK_STRENGTH = 0.5
+
+#: The per-photo correction towards the photo's own scene (when a style shows
+#: it): the palette grade with this loss and relaxation (benchmarks/look.py,
+#: shot matching: KL with rho = 0.01 recovers +0.33 against -0.05 for the
+#: quadratic, balanced fit).
+SCENE_LOSS = "kl"
+SCENE_RELAXATION = 0.01
 
 #: Grids of the look fits: coordinates on 16^3, plans and maps on 32^3.
 FIT_BINS = 16
@@ -486,9 +521,13 @@ def _natural_path():
 _SET_LOOKS: dict[tuple, LookResult] = {}
 
 
-def set_look(styles, naturals=None,
-             progress: Callable[[int, int], None] | None = None) -> LookResult:
-    """The look a style set shares (:func:`extract_look`), computed once per set and process.
+def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None = None,
+             cache: bool = True) -> LookResult:
+    """The look a style set shares (:func:`extract_look`), computed once per set.
+
+    Kept in memory for the process and, with ``cache``, on disk beside the
+    style histogram cache (``looks/`` in :func:`~wbcgrade.color.histogram.default_cache_dir`),
+    keyed by the histograms themselves.
 
     Parameters
     ----------
@@ -502,18 +541,69 @@ def set_look(styles, naturals=None,
     digest = hashlib.sha1()
     for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS)):
         digest.update(np.ascontiguousarray(hists, dtype=np.float64).tobytes())
+    digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS)).encode())
     key = (digest.hexdigest(),)
     if key not in _SET_LOOKS:
-        _SET_LOOKS[key] = extract_look(
-            {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
-            {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
-            fit_bins=FIT_BINS, map_bins=MAP_BINS, progress=progress)
+        found = _read_cached_look(key[0]) if cache else None
+        if found is None:
+            found = extract_look(
+                {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                fit_bins=FIT_BINS, map_bins=MAP_BINS, progress=progress)
+            if cache:
+                _write_cached_look(key[0], found)
+        _SET_LOOKS[key] = found
     return _SET_LOOKS[key]
 
 
-def look_color_map(photo_hist: np.ndarray, styles, naturals=None, map_size: int = 33,
-                   set_strength: float = SET_LOOK_STRENGTH) -> tuple[np.ndarray, PhotoLook, dict]:
-    """The colour map of a look grade: the set's look, corrected towards the photo's scene.
+#: Bumped when extraction changes, so cached looks of an older version are not used.
+LOOK_VERSION = 1
+
+
+def _look_cache_path(key: str):
+    from wbcgrade.color.histogram import default_cache_dir
+
+    return default_cache_dir() / "looks" / f"{key}.npz"
+
+
+def _read_cached_look(key: str) -> LookResult | None:
+    import json
+
+    path = _look_cache_path(key)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            look = LookMap(np.array(data["coefficients"]), int(data["knots"]))
+            return LookResult(look, np.array(data["weights"]), np.array(data["losses"]),
+                              json.loads(str(data["info"])))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _write_cached_look(key: str, result: LookResult) -> None:
+    """Best effort: a cache that cannot be written is skipped."""
+    import json
+    import os
+    import tempfile
+
+    path = _look_cache_path(key)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
+        with os.fdopen(handle, "wb") as out:
+            np.savez(out, coefficients=result.look.coefficients, knots=result.look.knots,
+                     weights=result.weights, losses=result.losses,
+                     info=json.dumps(result.info))
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            os.unlink(tmp)
+        except (OSError, UnboundLocalError):
+            pass
+
+
+def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
+                   set_strength: float = SET_LOOK_STRENGTH) -> tuple[LookMap, PhotoLook, dict]:
+    """The set's look and how sure it is that a style shows the photo's own scene.
 
     Parameters
     ----------
@@ -523,7 +613,7 @@ def look_color_map(photo_hist: np.ndarray, styles, naturals=None, map_size: int 
 
     Returns
     -------
-    color_map : (map_size,) * 3 + (3,) float32 lattice LUT.
+    base : the set's look at ``set_strength`` (what a photo of another scene gets).
     photo : the :class:`PhotoLook` (match, confidence, residuals).
     info : JSON-friendly diagnostics.
     """
@@ -536,10 +626,10 @@ def look_color_map(photo_hist: np.ndarray, styles, naturals=None, map_size: int 
                      "set_strength": set_strength,
                      "match": styles.names[photo.match],
                      "confidence": photo.confidence,
+                     "overlap": photo.overlap,
                      "residuals": [float(r) for r in photo.residuals],
-                     "amplitude": photo.look.amplitude(),
                      **extracted.info}}
-    return photo.look.lattice(map_size), photo, info
+    return base, photo, info
 
 
 def set_look_map(styles, naturals=None, strength: float = SET_LOOK_STRENGTH,
