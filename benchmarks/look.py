@@ -372,8 +372,8 @@ def idt_pooled(photo, styles, context):
 
 METHODS: dict[str, Method] = {
     "nothing": nothing,
-    "wbcgrade": wbcgrade_method(mode="look"),
-    "wbcgrade-palette": wbcgrade_method(mode="palette"),
+    "wbcgrade": wbcgrade_method(),
+    "wbcgrade-look": wbcgrade_method(mode="look"),
     "wbcgrade-relax0.1": wbcgrade_method(mode="palette", relaxation=0.1),
     "wbcgrade-kl-relax0.01": wbcgrade_method(mode="palette", loss="kl", relaxation=0.01),
     "mkl-nearest": mkl_nearest,
