@@ -301,12 +301,38 @@ def nothing(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np
     return photo
 
 
+def natural_preset(context: Context) -> str:
+    """A preset file of the shipped natural palettes this case may learn from.
+
+    The shipped palettes (``wbcgrade/color/data/natural.npz``) are built from
+    the benchmark's photos; the case's graded photos and the sources of its
+    style images are left out (held out), so a look is never learnt from them.
+    """
+    from wbcgrade.color.look import natural_palettes
+    from wbcgrade.color.presets import save_preset
+
+    allowed = sorted(context.natural)
+    key = ("natural", tuple(allowed))
+    if key not in context.memo:
+        shipped = natural_palettes()
+        held_out = set(shipped.names) - set(allowed)
+        digest = hashlib.sha1(",".join(allowed).encode()).hexdigest()[:16]
+        path = Path(context.cache_dir) / f"natural-{digest}.npz"
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            save_preset(path, natural_palettes(exclude=held_out), overwrite=True)
+        context.memo[key] = str(path)
+    return context.memo[key]
+
+
 def wbcgrade_method(**options) -> Method:
-    """A method grading with wbcgrade with these grade settings (flat names or groups)."""
+    """A method grading with wbcgrade with these grade settings (flat names or groups; look
+    mode: held-out naturals)."""
 
     def method(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
+        extra = {"natural": natural_preset(context)} if options.get("mode") == "look" else {}
         out, weights = wbcgrade_grade(photo, styles, context.style_names, context.memo,
-                                      **options)
+                                      **options, **extra)
         context.info["weights"] = weights
         return out
 
@@ -351,8 +377,9 @@ def idt_pooled(photo, styles, context):
 METHODS: dict[str, Method] = {
     "nothing": nothing,
     "wbcgrade": wbcgrade_method(),
-    "wbcgrade-relax0.1": wbcgrade_method(relaxation=0.1),
-    "wbcgrade-kl-relax0.01": wbcgrade_method(loss="kl", relaxation=0.01),
+    "wbcgrade-look": wbcgrade_method(mode="look"),
+    "wbcgrade-relax0.1": wbcgrade_method(mode="palette", relaxation=0.1),
+    "wbcgrade-kl-relax0.01": wbcgrade_method(mode="palette", loss="kl", relaxation=0.01),
     "mkl-nearest": mkl_nearest,
     "mkl-pooled": mkl_pooled,
     "idt-nearest": idt_nearest,
@@ -503,10 +530,11 @@ def crop_rows(photo, truth, outs: dict, size: int) -> list:
     side = max(32, size // 8)
     if min(photo.shape[:2]) <= side:
         return []
-    windows = [("flat", *smooth_crop(photo, side))]
+    r0, c0 = smooth_crop(photo, side)
+    windows = [("flat", r0, c0)]
     feature = feature_crop(photo, side)
-    if feature:
-        windows.append(feature)
+    if feature and max(abs(feature[1] - r0), abs(feature[2] - c0)) > side // 2:
+        windows.append(feature)  # unless it is the flat window again
     rows = []
     for kind, r, c in windows:
         images = {"photo": photo, "truth": truth, **outs}

@@ -4,13 +4,19 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
 
 1. the photo's histograms (:func:`photo_histograms`), on the fit grid and
    the transfer grid, of colours in the working space's unit cube;
-2. the weights (:func:`wbcgrade.color.fit.fit_weights`): barycentric
-   coordinates never worse than the best single style;
-3. the colour map, built by the *map builder* that ``options.map.builder``
-   names (:data:`MAP_BUILDERS`; "transport": the fitted palette, Sinkhorn,
-   the smooth map, :func:`wbcgrade.color.transfer.transport_map`), then
-   finished in the working space's own terms (monotone in its luma, or
-   keeping each colour's Oklab lightness; :func:`finish_map`);
+2. the colour map, built by the *map builder* that ``options.map.builder``
+   names (:data:`MAP_BUILDERS`):
+
+   - "palette" (:func:`palette_map`): the weights
+     (:func:`wbcgrade.color.fit.fit_weights`: barycentric coordinates never
+     worse than the best single style), then the fitted palette, Sinkhorn
+     and the smooth map (:func:`wbcgrade.color.transfer.transport_map`);
+   - "look" (:func:`look_map`): the look the style set shares
+     (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
+     photo by how sure it is that a style shows the photo's own scene;
+
+3. the map finished in the working space's own terms (monotone in its
+   luma, or keeping each colour's Oklab lightness; :func:`finish_map`);
 4. a frozen :class:`Grade`: ``grade.apply(encoded)`` grades pixels (colour
    map and regrain), ``grade.lut(size, encoding)`` is the grade as a LUT
    table in any encoding of its working space.
@@ -19,9 +25,10 @@ A series (``batch --consistent``, a video shot) takes the same path with a
 pooled histogram (:class:`wbcgrade.color.histogram.PaletteSum`).
 
 Other ways of building the map plug in with :func:`register_map_builder`:
-a builder takes a :class:`MapRequest` (the photo's transfer histogram, the
-styles in the working space, the fit, the options, the encoding, a stage
-callback) and returns ``(color_map, palette, info, timings)``.
+a builder takes a :class:`MapRequest` (the photo's histograms, the styles
+in the working space, the options, the encoding, progress callbacks) and
+returns a :class:`BuiltMap` (the map before finishing, the palette it aimed
+at, diagnostics, timings, and the weights with how sure it is of them).
 
 >>> import numpy as np
 >>> from wbcgrade.color.grading import grade_array
@@ -41,14 +48,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary, fit_weights
-from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.presets import StyleSet, styles_in_space
@@ -58,7 +65,7 @@ from wbcgrade.color.transfer import transport_map
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
-           "register_map_builder", "photo_histograms", "build_grade", "finish_map",
+           "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
            "grade_histograms", "grade_encoded", "grade_array"]
 
 FitCallback = Callable[[int, np.ndarray, float], None]
@@ -138,42 +145,149 @@ class Grade:
 
 
 @dataclass(frozen=True)
+class PhotoHistograms:
+    """A photo's (or a series') histograms: ``fit`` on the fit grid, ``transfer`` on the
+    transfer grid, both of working-space colours; :meth:`at` gives other grids."""
+
+    fit: np.ndarray
+    transfer: np.ndarray
+    pixels: tuple | None = field(default=None, repr=False, compare=False)
+
+    def at(self, bins: int) -> np.ndarray:
+        """The histogram on a ``bins``^3 grid: binned from the pixels when there are
+        some (a photo), else re-binned from the transfer grid's (a pooled series)."""
+        for hist in (self.transfer, self.fit):
+            if hist.shape[0] == bins:
+                return hist
+        if self.pixels is not None:
+            encoded, alpha, limit = self.pixels
+            return image_histogram(encoded, bins, alpha, limit)
+        return resample_histogram(self.transfer, bins)
+
+
+def photo_histograms(encoded: np.ndarray, options: GradeOptions,
+                     alpha: np.ndarray | None = None) -> PhotoHistograms:
+    """The histograms of working-space colours (H, W, 3) in [0, 1]; pixels with alpha 0
+    do not count; photos above ``transfer.max_pixels`` are subsampled."""
+    limit = options.transfer.max_pixels
+    return PhotoHistograms(image_histogram(encoded, options.fit.bins, alpha, limit),
+                           image_histogram(encoded, options.transfer.bins, alpha, limit),
+                           (encoded, alpha, limit))
+
+
+@dataclass(frozen=True)
 class MapRequest:
     """What a map builder gets.
 
     Attributes
     ----------
-    photo : (n, n, n) the photo's (or series') histogram on the transfer grid.
+    photo : the photo's (or series') histograms.
     styles : the style set, in the working space.
-    fit : the fitted weights and how sure the fit is (loss, vertex losses).
     options : every setting of the grade.
     encoding : the colour encoding (working space) of the grade.
+    callback : ``callback(n_evaluations, weights, loss)`` of a weight fit, or None.
     stage : ``stage(name)`` as each stage starts (progress).
     """
 
-    photo: np.ndarray
+    photo: PhotoHistograms
     styles: StyleSet
-    fit: FitSummary
     options: GradeOptions
     encoding: ColorEncoding
+    callback: FitCallback | None = None
     stage: Callable[[str], None] = _quiet
 
 
 class BuiltMap(NamedTuple):
-    """What a map builder returns: the map (before finishing), the palette it aimed
-    at (or None), diagnostics and seconds per stage."""
+    """What a map builder returns: the map before finishing, the palette it aimed at
+    (or None), diagnostics, seconds per stage, and the weights with how sure the
+    builder is of them (a :class:`~wbcgrade.color.fit.FitSummary`)."""
 
     color_map: np.ndarray
     palette: np.ndarray | None
     info: dict
     timings: dict
+    fit: FitSummary
 
 
-#: Map builders by name (``map.builder``): MapRequest -> BuiltMap (or the same 4-tuple).
-MAP_BUILDERS: dict[str, Callable[[MapRequest], tuple]] = {"transport": transport_map}
+def palette_map(request: MapRequest) -> BuiltMap:
+    """The "palette" builder: the weights (never worse than one style alone), then the
+    map onto their barycenter palette (:func:`wbcgrade.color.transfer.transport_map`)."""
+    options, styles = request.options, request.styles
+    request.stage("fit")
+    fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
+                      request.callback)
+    color_map, palette, info, timings = transport_map(request.photo.transfer, styles,
+                                                      fit.weights, options, request.stage)
+    return BuiltMap(color_map, palette, info, {"fit": fit.time_s, **timings}, fit)
 
 
-def register_map_builder(name: str, builder: Callable[[MapRequest], tuple]) -> None:
+def look_map(request: MapRequest) -> BuiltMap:
+    """The "look" builder: the set's look, corrected towards the photo's scene.
+
+    The colour map is the look the style set shares
+    (:func:`wbcgrade.color.look.look_color_map`, content modelled by the
+    natural palettes of ``map.natural``), moved towards the photo's palette
+    grade (the "palette" builder with a KL fit and relaxed transport) by how
+    sure it is that a style shows the photo's own scene. Fixed weights
+    (``fit.weights``) give the palette grade.
+    """
+    from wbcgrade.color.look import (
+        MAP_BINS,
+        SCENE_LOSS,
+        SCENE_RELAXATION,
+        look_color_map,
+        natural_palettes,
+    )
+    from wbcgrade.color.presets import load_preset
+
+    options, styles, say = request.options, request.styles, request.stage
+    if options.fit.weights is not None:
+        return palette_map(request)
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    say("histograms")
+    photo_hist = request.photo.at(MAP_BINS)
+    timings["histograms"] = time.perf_counter() - start
+    say("look")
+    start = time.perf_counter()
+    naturals = load_preset(options.map.natural) if options.map.natural else natural_palettes()
+    naturals = styles_in_space(naturals, styles.working_space)
+    base, photo, info = look_color_map(photo_hist, styles, naturals)
+    timings["look"] = time.perf_counter() - start
+    n_styles = len(styles.names)
+    confidence = photo.confidence
+    weights = np.full(n_styles, 1.0 / n_styles)
+    color_map = base.lattice(options.map.size)
+    fit_info: dict = {"start": "look", "match": info["look"]["match"],
+                      "confidence": confidence}
+    if confidence > 0:
+        scene_options = GradeOptions(
+            replace(options.fit, loss=SCENE_LOSS),
+            replace(options.transfer,
+                    relaxation=options.transfer.relaxation or SCENE_RELAXATION),
+            replace(options.map, builder="palette"), options.regrain, options.spaces)
+        scene, summary = grade_histograms(request.photo, styles, scene_options,
+                                          request.encoding, None,
+                                          lambda name: say(f"scene {name}"))
+        for name, seconds in scene.timings.items():
+            timings[f"scene {name}"] = seconds
+        base_map = base.lattice(scene.color_map.shape[0])
+        color_map = (base_map + confidence * (scene.color_map - base_map)).astype(np.float32)
+        weights = confidence * np.asarray(summary.weights) + (1.0 - confidence) * weights
+        fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
+                                 "loss": summary.loss}
+        info.update({k: v for k, v in scene.info.items() if k != "fit"})
+    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
+                     fit_info, sum(timings.values()))
+    return BuiltMap(color_map, None, info, timings, fit)
+
+
+#: Map builders by name (``map.builder``): MapRequest -> BuiltMap.
+MAP_BUILDERS: dict[str, Callable[[MapRequest], BuiltMap]] = {"palette": palette_map,
+                                                              "look": look_map}
+
+
+def register_map_builder(name: str, builder: Callable[[MapRequest], BuiltMap]) -> None:
     """Make ``builder`` the map builder that ``MapOptions(builder=name)`` selects."""
     if not isinstance(name, str) or not name:
         raise ValueError("a map builder needs a name")
@@ -197,73 +311,38 @@ def finish_map(color_map: np.ndarray, options: GradeOptions,
     return color_map
 
 
-def build_grade(photo: np.ndarray, styles: StyleSet, fit: FitSummary, options: GradeOptions,
-                encoding: ColorEncoding,
-                stage: Callable[[str], None] | None = None) -> Grade:
-    """The colour map of fitted weights, finished, as a :class:`Grade`.
-
-    Parameters
-    ----------
-    photo : (n, n, n) histogram on the transfer grid (n = options.transfer.bins).
-    styles : the styles, in ``encoding.working``.
-    fit : the weights (:func:`wbcgrade.color.fit.fit_weights`).
-    """
-    name = options.map.builder
-    if name not in MAP_BUILDERS:
-        raise OptionError(f"map.builder must be one of {', '.join(MAP_BUILDERS)}",
-                          "map.builder")
-    request = MapRequest(photo, styles, fit, options, encoding, stage or _quiet)
-    color_map, palette, info, timings = MAP_BUILDERS[name](request)
-    start = time.perf_counter()
-    color_map = finish_map(color_map, options, encoding)
-    timings = dict(timings)
-    timings["finish"] = time.perf_counter() - start
-    info = {"fit": fit.info, **info}
-    info.setdefault("map", {})
-    info["map"] = {**info["map"], "builder": name, "monotone": options.map.monotone,
-                   "preserve_luminance": options.map.preserve_luminance}
-    return Grade(names=tuple(styles.names), weights=np.asarray(fit.weights, dtype=np.float64),
-                 color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
-                 strength=options.map.strength, regrain=options.regrain.settings,
-                 loss=fit.loss, barycenter=palette, info=info,
-                 timings={"fit": fit.time_s, **timings})
-
-
 # ------------------------------------------------------------------------------ the path
-
-
-@dataclass(frozen=True)
-class PhotoHistograms:
-    """A photo's (or a series') histograms: ``fit`` on the fit grid, ``transfer`` on the
-    transfer grid, both of working-space colours."""
-
-    fit: np.ndarray
-    transfer: np.ndarray
-
-
-def photo_histograms(encoded: np.ndarray, options: GradeOptions,
-                     alpha: np.ndarray | None = None) -> PhotoHistograms:
-    """The histograms of working-space colours (H, W, 3) in [0, 1]; pixels with alpha 0
-    do not count; photos above ``transfer.max_pixels`` are subsampled."""
-    limit = options.transfer.max_pixels
-    return PhotoHistograms(image_histogram(encoded, options.fit.bins, alpha, limit),
-                           image_histogram(encoded, options.transfer.bins, alpha, limit))
 
 
 def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOptions,
                      encoding: ColorEncoding, callback: FitCallback | None = None,
                      stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
-    """The one grade path: fit the weights (vertex check inside), build the grade.
+    """The one grade path: the map builder (the fit inside), the finishing, a Grade.
 
     ``styles`` must be in ``encoding.working`` (:func:`styles_in_space`).
-    ``callback`` receives the fit's progress ``(n_evaluations, weights, loss)``,
-    ``stage`` each stage's name as it starts. Returns the grade and the fit.
+    ``callback`` receives a fit's progress ``(n_evaluations, weights, loss)``,
+    ``stage`` each stage's name as it starts. Returns the grade and how its
+    weights were found.
     """
     options.check_styles(len(styles.names))
-    say = stage or _quiet
-    say("fit")
-    fit = fit_weights(photo.fit, styles.at_bins(options.fit.bins), options.fit, callback)
-    return build_grade(photo.transfer, styles, fit, options, encoding, say), fit
+    name = options.map.builder
+    if name not in MAP_BUILDERS:
+        raise OptionError(f"map.builder must be one of {', '.join(MAP_BUILDERS)}",
+                          "map.builder")
+    built = MAP_BUILDERS[name](MapRequest(photo, styles, options, encoding, callback,
+                                          stage or _quiet))
+    start = time.perf_counter()
+    color_map = finish_map(built.color_map, options, encoding)
+    timings = {**built.timings, "finish": time.perf_counter() - start}
+    info = {"fit": built.fit.info, **built.info}
+    info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
+                   "preserve_luminance": options.map.preserve_luminance}
+    grade = Grade(names=tuple(styles.names),
+                  weights=np.asarray(built.fit.weights, dtype=np.float64),
+                  color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
+                  strength=options.map.strength, regrain=options.regrain.settings,
+                  loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
+    return grade, built.fit
 
 
 def grade_encoded(encoded: np.ndarray, styles: StyleSet, options: GradeOptions,

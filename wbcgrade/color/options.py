@@ -23,7 +23,7 @@ sorted into the groups (:data:`FLAT_FIELDS`).
 >>> from wbcgrade.color.options import GradeOptions, TransferOptions
 >>> opts = GradeOptions(transfer=TransferOptions(bins=64, relaxation=0.05))
 >>> opts.transfer.bins, opts.fit.bins, opts.map.builder
-(64, 16, 'transport')
+(64, 16, 'palette')
 >>> GradeOptions(bins=64, relaxation=0.05) == opts  # the former flat names
 True
 >>> GradeOptions(strength=2)
@@ -39,7 +39,7 @@ from dataclasses import dataclass, field, fields
 
 from wbcgrade.errors import OptionError
 
-__all__ = ["LOSSES", "FitOptions", "TransferOptions", "MapOptions", "RegrainOptions",
+__all__ = ["LOSSES", "MODES", "FitOptions", "TransferOptions", "MapOptions", "RegrainOptions",
            "SpaceOptions", "GradeOptions", "FLAT_FIELDS", "flat_defaults", "as_options",
            "DEFAULT_FLOOR",
            "DEFAULT_MAX_PIXELS", "DEFAULT_MAP_SIZE", "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS",
@@ -47,6 +47,10 @@ __all__ = ["LOSSES", "FitOptions", "TransferOptions", "MapOptions", "RegrainOpti
 
 #: Losses the weight fit may use (``wbcgrade.core.get_loss`` names).
 LOSSES = ("quadratic", "l1", "kl", "wasserstein")
+#: The shipped map builders (``map.builder``, ``--mode``): "palette", the paper's
+#: colour transfer onto the closest barycenter of the style palettes; "look", the
+#: look the style set shares, corrected towards the photo's own scene.
+MODES = ("look", "palette")
 #: Fraction of mass spread uniformly over every histogram before fitting (real
 #: photo histograms are sparse; KL needs > 0).
 DEFAULT_FLOOR = 1e-4
@@ -205,9 +209,13 @@ class MapOptions:
 
     Attributes
     ----------
-    builder : how the map is built from the fit (a name registered with
-        :func:`wbcgrade.color.grading.register_map_builder`; "transport": the
-        fitted palette, unbalanced Sinkhorn, smooth map).
+    builder : how the map is built (a name registered with
+        :func:`wbcgrade.color.grading.register_map_builder`; :data:`MODES`:
+        "palette": the fitted barycenter palette, (unbalanced) Sinkhorn, smooth
+        map; "look": the look the style set shares, moved towards the photo's
+        own scene by how sure it is that a style shows it).
+    natural : preset file (.npz) of ungraded photos, the content model of the
+        "look" builder; None: the shipped one.
     size : nodes per axis of the smooth colour map (the grade is this lattice
         LUT; ``--lut`` at the same size writes it exactly).
     smoothness, stiffness : curvature and first-difference penalties of the
@@ -220,7 +228,8 @@ class MapOptions:
     strength : t in [0, 1]: x -> (1 - t) x + t T(x).
     """
 
-    builder: str = "transport"
+    builder: str = "palette"
+    natural: str | None = None
     size: int = DEFAULT_MAP_SIZE
     smoothness: float = DEFAULT_SMOOTHNESS
     stiffness: float = DEFAULT_STIFFNESS
@@ -231,6 +240,8 @@ class MapOptions:
     def __post_init__(self) -> None:
         if not isinstance(self.builder, str) or not self.builder:
             raise _fail("map.builder", "must name a map builder")
+        if self.natural is not None and (not isinstance(self.natural, str) or not self.natural):
+            raise _fail("map.natural", "must name a preset file")
         _int_in("map", "size", self.size, 2, 129)
         _non_negative("map", "smoothness", self.smoothness)
         _non_negative("map", "stiffness", self.stiffness)
@@ -302,6 +313,7 @@ FLAT_FIELDS: dict[str, tuple[str, str]] = {
     "transfer_width": ("transfer", "width"), "sinkhorn_tol": ("transfer", "tol"),
     "sinkhorn_max_iter": ("transfer", "max_iter"), "relaxation": ("transfer", "relaxation"),
     "max_pixels": ("transfer", "max_pixels"),
+    "mode": ("map", "builder"), "natural": ("map", "natural"),
     "map_size": ("map", "size"), "smoothness": ("map", "smoothness"),
     "stiffness": ("map", "stiffness"), "monotone": ("map", "monotone"),
     "preserve_luminance": ("map", "preserve_luminance"), "strength": ("map", "strength"),
@@ -365,7 +377,6 @@ class GradeOptions:
         out = {key: getattr(getattr(self, group), name)
                for key, (group, name) in FLAT_FIELDS.items()}
         out["floor"] = self.fit.floor
-        out["map_builder"] = self.map.builder
         if out["weights"] is not None:
             out["weights"] = list(out["weights"])
         return out

@@ -1,7 +1,8 @@
-"""The transport map builder: fitted palette -> (unbalanced) Sinkhorn -> smooth map (§5.1).
+"""The transport map: fitted palette -> (unbalanced) Sinkhorn -> smooth map (§5.1).
 
-The default way a grade builds its colour map (``map.builder = "transport"``,
-:func:`transport_map`, registered in :mod:`wbcgrade.color.grading`):
+What the "palette" map builder (``map.builder = "palette"``,
+:func:`wbcgrade.color.grading.palette_map`) does once the weights are
+fitted (:func:`transport_map`):
 
 1. the palette: the styles' barycenter with the fitted weights, on the
    transfer grid (:func:`palette_barycenter`);
@@ -126,28 +127,41 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
 
 
 
-def transport_map(request) -> tuple[np.ndarray, np.ndarray, dict, dict]:
-    """The transport builder: palette, plan, smooth map (see the module docstring).
+def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
+                  options: GradeOptions,
+                  stage: Callable[[str], None] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, dict, dict]:
+    """The colour map moving a photo's colours onto the styles' palette at ``weights``.
 
-    ``request`` is a :class:`wbcgrade.color.grading.MapRequest` (the photo's
-    transfer histogram, the styles in the working space, the fit, the
-    options). Returns ``(color_map (m, m, m, 3) float32 in [0, 1], palette
-    (n, n, n), info, timings)``; the raw projection on the transfer grid is
-    the map when ``map.smoothness`` and ``map.stiffness`` are 0.
+    The palette, the plan and the smooth map (see the module docstring); the
+    "palette" map builder (:func:`wbcgrade.color.grading.palette_map`) after
+    the weight fit.
+
+    Parameters
+    ----------
+    photo : (n, n, n) the photo's histogram on the transfer grid.
+    styles : the styles, in the working space.
+    weights : (S,) on the simplex.
+
+    Returns
+    -------
+    ``(color_map (m, m, m, 3) float32 in [0, 1], palette (n, n, n), info,
+    timings)``; the raw projection on the transfer grid is the map when
+    ``map.smoothness`` and ``map.stiffness`` are 0.
     """
     from wbcgrade.core import GridGeometry
 
-    options, say = request.options, request.stage
+    say = stage or (lambda name: None)
     transfer, shape = options.transfer, options.map
     timings: dict[str, float] = {}
     say("barycenter")
     start = time.perf_counter()
-    palette, palette_info = palette_barycenter(request.styles, request.fit.weights, options)
+    palette, palette_info = palette_barycenter(styles, weights, options)
     timings["barycenter"] = time.perf_counter() - start
     say("transfer")
     start = time.perf_counter()
     width = transfer.width_bins
-    raw, result = color_transfer_map(request.photo, palette, width, transfer.tol,
+    raw, result = color_transfer_map(photo, palette, width, transfer.tol,
                                      transfer.max_iter, transfer.floor,
                                      relaxation=transfer.relaxation)
     info = {"palette": palette_info,
@@ -157,7 +171,7 @@ def transport_map(request) -> tuple[np.ndarray, np.ndarray, dict, dict]:
                                                                 width).gamma),
                          "width_bins": width, "relaxation": transfer.relaxation}}
     if shape.smoothed:
-        color_map = fit_smooth_map(raw, request.photo, shape.size, shape.smoothness,
+        color_map = fit_smooth_map(raw, photo, shape.size, shape.smoothness,
                                    shape.stiffness)
         info["map"] = {"size": shape.size, "smoothness": shape.smoothness,
                        "stiffness": shape.stiffness}
