@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from wbcgrade.shape.defaults import LOSS_NAMES
+from wbcgrade.shape.defaults import DEFAULT_COMPLETION_LOSS, DEFAULT_LOSS, LOSS_NAMES
 
 _LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
 
@@ -105,8 +105,9 @@ def shape() -> None:
 @shape.command()
 @click.argument("partial", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default="kl_reverse", show_default=True,
-              help="kl_reverse = KL(input|barycenter); kl = the paper's KL(barycenter|input).")
+@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_COMPLETION_LOSS, show_default=True,
+              help="kl_observed = KL(input|barycenter) on the input's voxels only; "
+                   "kl_reverse = on all voxels; kl = the paper's KL(barycenter|input).")
 @click.option("--align", is_flag=True,
               help="Align every mesh on its principal axes first, picking the axes' signs "
                    "that overlap the input most (for databases of unaligned meshes).")
@@ -161,7 +162,7 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
 @shape.command()
 @click.argument("volume", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default="kl_reverse", show_default=True,
+@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_LOSS, show_default=True,
               help="Loss between the barycenter and the input (the paper's MRIs: quadratic).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Fitted volume (.npy, .nii, .nii.gz); default VOLUME_projected.npy.")

@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import (
+    DEFAULT_COMPLETION_LOSS,
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
@@ -114,7 +115,7 @@ def _voxelise(path: Path, settings: _Voxelising) -> tuple[VoxelShape, list[str]]
     """One database mesh, voxelised; -> the shape and its repair messages."""
     messages: list[str] = []
     shape = load_shape(path, settings.resolution, align=settings.align,
-                       reference=settings.reference, warn=messages.append)
+                       reference=settings.reference, warn=messages.append, keep_mesh=True)
     return shape, messages
 
 
@@ -127,7 +128,7 @@ def complete_mesh_file(
     png_path: str | os.PathLike | None = None,
     resolution: int = DEFAULT_RESOLUTION,
     missing: float | None = None,
-    loss: str = DEFAULT_LOSS,
+    loss: str = DEFAULT_COMPLETION_LOSS,
     euclidean: bool = False,
     width: float | None = None,
     n_iter: int = DEFAULT_N_ITER,
@@ -203,11 +204,11 @@ def complete_mesh_file(
 
     if on_mesh is not None:
         on_mesh(0, len(paths) + 1, partial)
-    reference = load_shape(partial, resolution, align=align, warn=warn)
+    reference = load_shape(partial, resolution, align=align, warn=warn, keep_mesh=True)
     if on_mesh is not None:
         on_mesh(1, len(paths) + 1, partial)
     loaded: dict[Path, VoxelShape] = {}
-    settings = _Voxelising(resolution, align, reference if align else None)
+    settings = _Voxelising(resolution, align, replace(reference, mesh=None) if align else None)
     with Executor(settings, jobs=min(jobs, len(paths))) as executor:
         for path, (shape, messages) in executor.map_unordered(_voxelise, paths):
             loaded[path] = shape
@@ -219,12 +220,13 @@ def complete_mesh_file(
     completion = complete_shape(
         shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean, width=width,
         n_iter=n_iter, max_iter=max_iter, callback=callback, coarse_to_fine=coarse_to_fine,
+        rotate=align,
     )
-    surface = completion_surface(completion, smooth_iterations=smooth)
+    surface = completion_surface(completion, smooth_iterations=smooth, n_iter=n_iter)
     remove_stale_beside(output, volume_path, png_path)  # what killed runs left
     write_mesh(surface, output)
-    write_volume(volume_path, completion.projection.barycenter)
-    write_png(png_path, completion_sheet(completion, top=top))
+    write_volume(volume_path, completion.fitted)
+    write_png(png_path, completion_sheet(completion, top=top, surface=surface))
     return ShapeResult(completion.projection, {
         "input": str(partial),
         "resolution": resolution,
