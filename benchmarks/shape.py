@@ -89,9 +89,9 @@ def run_case(path: Path, database: list[Path], cut: tuple[str, float, bool], arg
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--resolution", "-n", type=int, default=48)
-    parser.add_argument("--iterations", type=int, default=60, help="barycenter iterations L")
-    parser.add_argument("--max-iter", type=int, default=15, help="optimiser iterations")
+    parser.add_argument("--resolution", "-n", type=int, default=40)
+    parser.add_argument("--iterations", type=int, default=40, help="barycenter iterations L")
+    parser.add_argument("--max-iter", type=int, default=8, help="optimiser iterations")
     parser.add_argument("--cuts", nargs="+", type=parse_cut,
                         default=[parse_cut(c) for c in DEFAULT_CUTS])
     parser.add_argument("--meshes", nargs="+", default=None,

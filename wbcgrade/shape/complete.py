@@ -842,15 +842,13 @@ def _drawn_at(
     heavy = np.nonzero(projection.weights > 1e-3)[0]
     if any(database[i].mesh is None for i in heavy):
         return None
-    n = database[0].occupancy.shape[0]
     weights = projection.weights[heavy] / projection.weights[heavy].sum()
     occupancies = [_voxelised_at(database[i], resolution) for i in heavy]
     densities = np.stack([density_from_volume(o, eps) for o in occupancies])
     if projection.method == "euclidean":
         density = np.tensordot(weights, densities, axes=1)
     else:
-        width = projection.width * (resolution - 1) / (n - 1)
-        geometry = GridGeometry.with_width((resolution,) * 3, width)
+        geometry = GridGeometry.with_width((resolution,) * 3, default_width(resolution))
         density = debiased_barycenter(densities, weights, geometry, n_iter)
     level = iso_level(density, float(np.dot(weights, [o.sum() for o in occupancies])))
     return fitted_occupancy(density, level)
@@ -865,9 +863,11 @@ def fitted_occupancy_at(
     When every database shape of weight above 1e-3 kept its mesh
     (``load_shape(keep_mesh=True)``), they are voxelised on that grid and
     their debiased barycenter (or mixture) is drawn there with the fit's
-    weights and kernel (the same width in the unit frame): parts too thin
-    for the fit's grid survive. Otherwise the fit's own fitted shape is
-    interpolated.
+    weights and the kernel a fit on that grid would use
+    (:func:`default_width`): parts too thin for the fit's grid survive
+    (a cow's legs, fitted at 32^3 and drawn at 97^3: with the fit's kernel,
+    3.1 voxels there, only the hooves come back; with 1.5 voxels, the legs).
+    Otherwise the fit's own fitted shape is interpolated.
     """
     n = completion.shape.shape[0]
     if resolution != n:
