@@ -15,8 +15,15 @@ import numpy as np
 import pytest
 import trimesh
 
+from wbcgrade.shape.complete import (
+    ADDED_COLOR,
+    complete_shape,
+    completion_sheet,
+    completion_surface,
+    load_shape,
+)
 from wbcgrade.shape.evaluate import cut_mesh, restoration
-from wbcgrade.shape.mesh import read_mesh
+from wbcgrade.shape.mesh import read_mesh, voxelize_together
 from wbcgrade.shape.workflow import complete_mesh_file
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples" / "shapes"
@@ -61,8 +68,43 @@ def test_plane_cut_is_restored_in_the_input_frame(tmp_path, name, fraction, from
     measured = restoration(whole, partial, completed)
     assert measured.restored >= 0.6, measured
     assert measured.iou_completed > measured.iou_partial, measured
+    # The observed part is kept where it was; the added part goes past the cut.
+    (observed, done), _ = voxelize_together([partial, completed], 64)
+    assert np.count_nonzero((observed > 0.5) & (done > 0.5)) >= 0.99 * np.count_nonzero(
+        observed > 0.5)
+    axis = int(np.argmax(whole.extents))
+    side = 1 if from_top else 0
+    beyond = completed.bounds[side, axis] - partial.bounds[side, axis]
+    assert abs(beyond) > 0.5 * abs(whole.bounds[side, axis] - partial.bounds[side, axis])
+    assert np.sign(beyond) == (1 if from_top else -1)
     projection = result.projection
     assert projection.names[int(np.argmax(projection.weights))] == Path(name).stem
     # The missing fraction was estimated where the input sits on the database.
     truth = 1.0 - partial.volume / whole.volume
     assert projection.missing == pytest.approx(truth, abs=0.15)
+
+
+def _is_added_colour(image: np.ndarray) -> np.ndarray:
+    """Pixels of the added part's hue (blue), whatever their shading."""
+    rgb = np.asarray(ADDED_COLOR)
+    norm = image / np.maximum(image.max(axis=-1, keepdims=True), 1e-6)
+    return (image.max(axis=-1) > 0.15) & (np.abs(norm - rgb / rgb.max()).max(axis=-1) < 0.12)
+
+
+def test_sheet_draws_the_input_and_the_added_part_in_the_input_frame(tmp_path):
+    whole = read_mesh(SAMPLES / "cow.off")
+    partial = cut_mesh(whole, 1, 0.3, from_top=False)  # the legs
+    path = tmp_path / "legless.ply"
+    partial.export(path)
+    shape = load_shape(path, 20, keep_mesh=True)
+    database = [load_shape(p, 20, keep_mesh=True) for p in DATABASE]
+    completion = complete_shape(shape, database, n_iter=30, max_iter=3)
+    surface = completion_surface(completion, n_iter=30)
+    sheet = completion_sheet(completion, top=1, tile=120, surface=surface)
+    columns = [sheet[:, 4 + c * 124: 4 + c * 124 + 120] for c in range(3)]
+    added = [np.count_nonzero(_is_added_colour(column)) for column in columns]
+    assert added[0] == 0 and added[2] == 0  # the input; the database shape
+    assert added[1] > 200  # the legs, drawn below the input's body
+    rows = np.nonzero(_is_added_colour(columns[1][:22 + 124]).any(axis=1))[0]
+    body = np.nonzero((columns[0][:22 + 124].max(axis=-1) > 0.15).any(axis=1))[0]
+    assert rows.max() > body.max()

@@ -996,7 +996,7 @@ def completion_sheet(
         added = completion.added
     panels = [
         Panel(observed, f"input {completion.partial.name}", 0.5, INPUT_COLOR),
-        Panel(completed, f"{title}: added", 0.5, INPUT_COLOR, highlight=added,
+        Panel(completed, f"{title} (blue: new)", 0.5, INPUT_COLOR, highlight=added,
               highlight_color=ADDED_COLOR),
     ]
     for index in projection.order()[: max(0, top)]:

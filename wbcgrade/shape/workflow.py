@@ -3,7 +3,9 @@
 - :func:`complete_mesh_file`: voxelise a partial mesh and a database of
   meshes (optionally aligned on their principal axes; the database in
   ``jobs`` worker processes through :class:`wbcgrade._executor.Executor`),
-  fit, and write the completed surface, the barycenter volume and a picture.
+  place the partial on the database, fit, and write the completed surface
+  (the input united with the added part, in the input's own coordinates),
+  the fitted density and a picture.
 - :func:`project_volume_file`: read a volume and a database of volumes,
   shrink them to the working resolution, fit, and write the fitted volume
   rescaled to the input's total intensity, and a picture.
@@ -144,6 +146,11 @@ def complete_mesh_file(
 ) -> ShapeResult:
     """Infer the missing geometry of the mesh ``partial`` from a database of meshes.
 
+    See :func:`wbcgrade.shape.complete.complete_shape` (placing, fitting,
+    drawing) and :func:`~wbcgrade.shape.complete.completion_surface` (the
+    written mesh: the input itself, united with what the database adds,
+    in the input's coordinates).
+
     Parameters
     ----------
     partial : path-like
@@ -153,7 +160,10 @@ def complete_mesh_file(
     output : path-like, optional
         Completed mesh (a mesh suffix); default ``./<stem>_completed.obj``.
     volume_path, png_path : path-like, optional
-        Barycenter volume (.npy) and picture; default beside ``output``.
+        Fitted density (.npy: the debiased barycenter on the fit's grid, in
+        the database's unit frame) and picture (input and completion in the
+        input's frame, the added part in blue; the heaviest database
+        shapes); default beside ``output``.
     resolution : int
         Voxels along each axis of the unit frame: volumes (n, n, n).
     missing : float, optional
@@ -161,7 +171,8 @@ def complete_mesh_file(
     loss, euclidean, width, n_iter, max_iter, coarse_to_fine :
         See :func:`wbcgrade.shape.complete.project` (``width`` in voxels).
     align : bool
-        Rotate every mesh onto its principal axes, signs chosen to overlap the input most.
+        Rotate every mesh onto its principal axes, signs chosen to overlap the
+        input most, and fit a rotation when placing the input.
     smooth : int
         Taubin smoothing passes on the surface.
     top : int
@@ -180,7 +191,9 @@ def complete_mesh_file(
     Returns
     -------
     ShapeResult
-        ``details``: input, resolution, missing_estimated, watertight,
+        ``details``: input, resolution, missing_estimated, placed_on (the
+        database shape the input was placed on), placement_scale (of the
+        input's own normalisation), placements (1 or 2), watertight,
         mesh_file, volume_file, png_file.
 
     Raises
@@ -231,6 +244,9 @@ def complete_mesh_file(
         "input": str(partial),
         "resolution": resolution,
         "missing_estimated": missing is None,
+        "placed_on": completion.database[completion.placement.reference].name,
+        "placement_scale": round(completion.placement.scale, 4),
+        "placements": completion.n_placements,
         "watertight": bool(surface.is_watertight),
         "mesh_file": str(output),
         "volume_file": str(volume_path),
