@@ -101,9 +101,28 @@ def _with_common(function):
     return function
 
 
+#: What ``wbcgrade shape`` needs beyond the base install (the ``shape`` extra).
+SHAPE_EXTRA = ("trimesh", "skimage")
+
+
+def _check_shape_extra() -> None:
+    """One line, not a traceback, when the ``shape`` extra is not installed."""
+    import importlib.util
+
+    missing = [name for name in SHAPE_EXTRA if importlib.util.find_spec(name) is None]
+    if missing:
+        names = ", ".join("scikit-image" if name == "skimage" else name for name in missing)
+        raise click.ClickException(f"wbcgrade shape needs {names}: "
+                                   "pip install 'wbcgrade[shape]'")
+
+
 @click.group()
 def shape() -> None:
-    """Complete shapes and project volumes with Wasserstein barycenters."""
+    """Complete shapes and project volumes with Wasserstein barycenters.
+
+    Needs the ``shape`` extra: pip install 'wbcgrade[shape]' (trimesh, scikit-image).
+    """
+    _check_shape_extra()
 
 
 @shape.command()
