@@ -1,0 +1,34 @@
+"""Fixtures for the explore tests: a small photo and a running studio (server + job worker)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import pytest
+
+from tests.color.conftest import SAMPLES, small_copy
+from wbcgrade.explore.app import start_studio
+
+#: The preset the tests explore (three styles on 32^3: the cheapest exact maps).
+PRESET = "warm"
+
+
+@pytest.fixture(scope="module")
+def photo(tmp_path_factory) -> Path:
+    """A 160 x 106 PNG copy of a sample photo (lossless, so 8-bit outputs compare exactly)."""
+    return small_copy(SAMPLES / "chelsea.jpg", tmp_path_factory.mktemp("explore") / "cat.png",
+                      width=160)
+
+
+@pytest.fixture(scope="module")
+def server(photo):
+    """A studio on the photo with the preset, served from a thread; closed afterwards."""
+    server = start_studio(str(photo), preset=PRESET)
+    thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
+                              daemon=True)
+    thread.start()
+    yield server
+    server.shutdown()
+    server.close()
+    thread.join(5)

@@ -1,0 +1,467 @@
+"""The explore page's one door into the colour library.
+
+Everything ``wbcgrade explore`` asks of :mod:`wbcgrade.color` goes through
+this module (the server, the job worker and the command import nothing
+else of it), so that following a change of the colour library's options or
+grade path means changing this file only. It offers:
+
+- :func:`load_session`: the photo and its styles, read once, as ``apply``
+  reads them (colour spaces, histograms on the fit, preview and transfer
+  grids), a preview-size copy and a thumbnail per style;
+- :meth:`Session.fit`: the weights ``apply`` would fit (never worse than the
+  best single style);
+- :meth:`Session.fast_map`: a colour map in well under a second for the
+  live preview (palette, plan and smooth map on small grids, see below);
+- :class:`ExactGrader` (run in the job worker, :mod:`wbcgrade.explore.jobs`):
+  the colour map exactly as ``apply --weights W --no-regrain`` computes it,
+  and the fit's loss at any weights (the landscape);
+- :meth:`Session.export` (``.cube`` or CLF, any size) and
+  :meth:`Session.command_line` (the ``apply`` command that reproduces it).
+
+The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
+64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
+drag. The preview computes the same steps with the same kernel in colour
+units (sigma = 1/31 of the cube) on 32^3 grids and a 9^3 smooth map, the
+plan warm-started from the previous move, then adds the difference between
+the exact and the fast map at the nearest weights whose exact map is known
+(a control variate): at those weights the preview *is* the exact map, and
+nearby it follows the fast map's change. ``benchmarks/explore.py`` measures
+both the time and the distance to the exact map.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.explore.settings import Settings, format_number, weights_text
+
+__all__ = ["Session", "FitResult", "ExactGrader", "load_session", "serve_jobs",
+           "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
+
+#: Bins per axis of the preview's palette, plan and photo histogram.
+PREVIEW_BINS = 32
+#: Nodes per axis of the preview's smooth map (upsampled to the exact map's lattice).
+PREVIEW_MAP_SIZE = 9
+#: The preview plan's Sinkhorn tolerance (L1 marginal error; ``apply``: 3e-3). Its
+#: map is within 0.1-0.3/255 on average (p99 < 1/255) of a converged plan's, in
+#: half the iterations (measured on two sample photos).
+PREVIEW_SINKHORN_TOL = 1e-2
+#: Iterations of a warm-started preview plan before it starts again cold.
+PREVIEW_WARM_ITER = 300
+#: Long side of the preview picture the browser grades, in pixels.
+PREVIEW_SIDE = 1024
+#: LUT sizes and formats the page exports.
+EXPORT_SIZES = (33, 65)
+EXPORT_FORMATS = ("cube", "clf")
+#: Side of a style's thumbnail, in pixels.
+THUMBNAIL_SIDE = 96
+
+
+def _base_options():
+    """``apply``'s defaults with ``--no-regrain``: what a LUT can hold."""
+    from wbcgrade.color.transfer import GradeOptions
+
+    return GradeOptions(regrain=False)
+
+
+def _options(base, settings: Settings):
+    """The grade options of ``settings`` (its map: the strength is applied afterwards)."""
+    return replace(base, relaxation=settings.relaxation,
+                   preserve_luminance=settings.keep_lightness)
+
+
+def _apply_weights(settings: Settings) -> np.ndarray:
+    """The weights ``apply --weights TEXT`` grades with, normalised as it does.
+
+    ``parse_weights`` reads the text; the vertex check normalises the vector
+    and the grade normalises it again (``color.grading.fit_with_vertex_check``,
+    ``color.transfer.grade_image``): the same float operations here.
+    """
+    from wbcgrade.color.weights import parse_weights
+
+    weights = np.asarray(parse_weights(weights_text(settings.weights)), dtype=np.float64)
+    weights = weights / weights.sum()
+    return weights / weights.sum()
+
+
+@dataclass
+class FitResult:
+    """The fitted weights and how they compare (fit grid, the fit's loss).
+
+    Attributes
+    ----------
+    weights : (S,) fitted weights.
+    loss : the fit's loss at ``weights``.
+    vertex_losses : (S,) the loss of each style alone.
+    start : "uniform", "vertex-refit" or "vertex" (see ``color.grading.FitSummary``).
+    converged : whether L-BFGS stopped at its tolerance.
+    evaluations : loss evaluations spent.
+    time_s : wall time of the fit.
+    """
+
+    weights: tuple[float, ...]
+    loss: float
+    vertex_losses: tuple[float, ...]
+    start: str
+    converged: bool
+    evaluations: int
+    time_s: float
+
+    def as_json(self, names: list[str]) -> dict:
+        best = int(np.argmin(self.vertex_losses))
+        return {"weights": list(self.weights), "loss": self.loss,
+                "vertex_losses": list(self.vertex_losses), "start": self.start,
+                "converged": self.converged, "evaluations": self.evaluations,
+                "time_s": round(self.time_s, 3), "best_single": names[best],
+                "best_single_loss": self.vertex_losses[best]}
+
+
+class _FastGrader:
+    """Colour maps on small grids for the live preview (module docstring).
+
+    Thread-safe: the plan's warm start is the only state, swapped under a lock.
+    """
+
+    def __init__(self, styles, photo_hist: np.ndarray, base) -> None:
+        from wbcgrade.color.transfer import transfer_width_bins
+        from wbcgrade.core import GridGeometry
+
+        self.styles = styles
+        self.photo_hist = photo_hist
+        self.base = replace(base, bins=PREVIEW_BINS, palette_bins=PREVIEW_BINS,
+                            map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL)
+        styles.at_bins(PREVIEW_BINS)  # re-binned once, not on every move
+        sigma = transfer_width_bins(self.base) / (PREVIEW_BINS - 1)  # colour units, as apply
+        self.geometry = GridGeometry((PREVIEW_BINS,) * 3, 2.0 * sigma ** 2)
+        self._lock = threading.Lock()
+        self._log_b: np.ndarray | None = None
+
+    def _mixed(self, hist: np.ndarray) -> np.ndarray:
+        """``(1 - floor) h / sum h + floor / N``, as the multiscale solve mixes its marginals."""
+        hist = hist / hist.sum()
+        return (1.0 - self.base.floor) * hist + self.base.floor / hist.size
+
+    def _plan(self, target: np.ndarray, opts):
+        from wbcgrade.core import multiscale_sinkhorn, sinkhorn
+
+        with self._lock:
+            start = self._log_b
+        result = None
+        if start is not None:  # one level, plain iterations from the last move's potentials
+            result = sinkhorn(self._mixed(self.photo_hist), self._mixed(target), self.geometry,
+                              tol=opts.sinkhorn_tol, max_iter=PREVIEW_WARM_ITER,
+                              init_log_b=start, relaxation=opts.relaxation, check_every=2,
+                              warn=False)
+            if not (result.converged and np.all(np.isfinite(result.log_b))):
+                result = None
+        if result is None:  # cold: epsilon scaling on the preview grid
+            result = multiscale_sinkhorn(self.photo_hist, target, self.geometry,
+                                         coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
+                                         max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
+                                         relaxation=opts.relaxation, warn=False)
+        with self._lock:
+            self._log_b = result.log_b
+        return result
+
+    def color_map(self, settings: Settings, weights: np.ndarray | None = None) -> np.ndarray:
+        """(9, 9, 9, 3) float32 map of ``settings`` on the preview grids."""
+        from wbcgrade.color.remap import keep_lightness, monotone_lightness
+        from wbcgrade.color.smooth_map import fit_smooth_map
+        from wbcgrade.color.transfer import palette_barycenter
+        from wbcgrade.core import barycentric_projection
+        from wbcgrade.errors import NumericalError
+
+        opts = _options(self.base, settings)
+        weights = _apply_weights(settings) if weights is None else weights
+        target, _ = palette_barycenter(self.styles, weights, opts)
+        result = self._plan(target, opts)
+        raw = barycentric_projection(result, self.geometry)
+        if not np.all(np.isfinite(raw)):
+            raise NumericalError("the preview's colour map is not finite")
+        raw = np.clip(raw, 0.0, 1.0).astype(np.float32)
+        color_map = fit_smooth_map(raw, self.photo_hist, opts.map_size, opts.smoothness,
+                                   opts.stiffness)
+        if opts.monotone and not opts.preserve_luminance:
+            color_map = monotone_lightness(color_map)
+        if opts.preserve_luminance:
+            color_map = keep_lightness(color_map)
+        return color_map
+
+
+def upsample_map(color_map: np.ndarray, size: int) -> np.ndarray:
+    """A colour map sampled on a ``size``^3 lattice (its trilinear interpolation)."""
+    from wbcgrade.color.remap import apply_color_map, identity_map
+
+    if color_map.shape[0] == size:
+        return np.asarray(color_map, dtype=np.float32)
+    return apply_color_map(identity_map(size), color_map)
+
+
+@dataclass
+class Session:
+    """A photo and its styles, loaded once for exploring (nothing is ever written to them).
+
+    Attributes
+    ----------
+    photo : the photo's path as given (the command line repeats it).
+    style_dir, preset : where the styles came from, as given (one is None).
+    names : S style names.
+    styles : the style set in the photo's working space.
+    spaces : the photo's colour spaces (``color.colorspace.Spaces``).
+    hists : {bins: (bins, bins, bins)} photo histograms on the fit, preview
+        and transfer grids, as ``apply`` bins them.
+    preview : (h, w, 3) uint8 preview picture (working-space colours: the
+        values the LUT takes).
+    thumbnails : one (h, w, 3) float32 display picture per style.
+    """
+
+    photo: str
+    style_dir: str | None
+    preset: str | None
+    names: list[str]
+    styles: object
+    spaces: object
+    hists: dict
+    preview: np.ndarray
+    thumbnails: list[np.ndarray]
+    base: object
+    lut_size: int
+
+    def __post_init__(self) -> None:
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base)
+
+    @property
+    def n_styles(self) -> int:
+        return len(self.names)
+
+    def fit(self, callback: Callable[[int, np.ndarray, float], None] | None = None
+            ) -> FitResult:
+        """Fit the weights as ``apply`` does (vertex-checked, on the fit grid)."""
+        from wbcgrade.color.grading import fit_with_vertex_check
+
+        summary = fit_with_vertex_check(self.hists[self.base.fit_bins],
+                                        self.styles.at_bins(self.base.fit_bins), self.base,
+                                        callback)
+        return FitResult(weights=tuple(float(w) for w in summary.weights),
+                         loss=float(summary.loss),
+                         vertex_losses=tuple(float(v) for v in summary.vertex_losses),
+                         start=summary.start, converged=bool(summary.info.get("converged", True)),
+                         evaluations=int(summary.info.get("evaluations", 0)),
+                         time_s=summary.time_s)
+
+    def fast_map(self, settings: Settings) -> np.ndarray:
+        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32)."""
+        return self._fast.color_map(settings)
+
+    def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
+        """The LUT the browser applies: the fast map on the exact map's lattice plus
+        ``offset`` (exact minus fast map at the nearest known weights), clipped."""
+        lut = upsample_map(fast_map, self.lut_size)
+        if offset is not None:
+            lut = np.clip(lut + offset, 0.0, 1.0)
+        return np.ascontiguousarray(lut, dtype=np.float32)
+
+    def grader_state(self) -> dict:
+        """What the job worker needs to build an :class:`ExactGrader` (picklable)."""
+        from wbcgrade.color.presets import StyleSet
+
+        styles = self.styles
+        clean = StyleSet(list(styles.names), styles.histograms, styles.source, styles.width,
+                         styles.description, dict(styles.meta))
+        return {"styles": clean, "hists": self.hists, "base": self.base,
+                "lut_size": self.lut_size}
+
+    def command_line(self, settings: Settings) -> str:
+        """The ``wbcgrade apply`` command that grades the full-size photo as shown."""
+        parts = ["wbcgrade", "apply", self.photo]
+        parts += ["--style", self.style_dir] if self.style_dir is not None \
+            else ["--preset", self.preset]
+        parts += ["--weights", weights_text(settings.weights), "--no-regrain"]
+        if settings.strength != 1.0:
+            parts += ["--strength", format_number(settings.strength, 3)]
+        if settings.relaxation is not None:
+            parts += ["--relax", format(settings.relaxation, ".3g")]
+        if settings.keep_lightness:
+            parts += ["--preserve-luminance"]
+        return " ".join(shlex.quote(p) for p in parts)
+
+    def export(self, color_map: np.ndarray, settings: Settings, lut_format: str,
+               size: int) -> tuple[str, bytes]:
+        """The LUT file of ``color_map`` at ``settings.strength`` -> (file name, bytes).
+
+        Written by the colour library's LUT writer (the header names the
+        spaces and the weights) into a private temporary folder, read back
+        and removed; nothing is written beside the photo.
+        """
+        from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
+
+        stem = Path(self.photo).stem
+        name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
+        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
+            zip(self.names, settings.weights), key=lambda item: -item[1]))
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
+            path = Path(folder) / name
+            write_grade_lut(path, color_map, self.spaces, size, settings.strength, lut_format,
+                            title=f"wbcgrade {stem}",
+                            comments=[f"wbcgrade explore grade of {Path(self.photo).name}: "
+                                      f"{ranked}", f"reproduce: {self.command_line(settings)}"])
+            return name, path.read_bytes()
+
+    def png(self, pixels: np.ndarray) -> bytes:
+        """An (h, w, 3) picture (uint8, or floats in [0, 1]) as PNG bytes."""
+        from wbcgrade._publish import write_png
+
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
+            path = Path(folder) / "picture.png"
+            write_png(path, pixels)
+            return path.read_bytes()
+
+
+def clf_available() -> bool:
+    """Whether CLF LUTs can be written (the ``opencolorio`` package is installed)."""
+    from wbcgrade.color.lut import check_clf_support
+    from wbcgrade.errors import InputError
+
+    try:
+        check_clf_support()
+    except InputError:
+        return False
+    return True
+
+
+def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
+                 preview_side: int = PREVIEW_SIDE,
+                 warn: Callable[[str], None] | None = None,
+                 progress: Callable[[int, int, str], None] | None = None) -> Session:
+    """Read the photo and the styles as ``apply`` does; nothing is written.
+
+    ``style_dir`` photos' histograms come from (and go to) the histogram
+    cache, as with ``apply``. Raises InputError on a missing or unreadable
+    photo or style source (one line).
+    """
+    from wbcgrade.color.colorspace import plan_spaces, to_working
+    from wbcgrade.color.histogram import HistogramCache, image_histogram
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.lut import DEFAULT_LUT_SIZE
+    from wbcgrade.color.pipeline import load_styles
+    from wbcgrade.color.presets import styles_in_space
+    from wbcgrade.color.report import style_pictures
+    from wbcgrade.color.sheet import thumbnail
+    from wbcgrade.errors import InputError
+
+    if not Path(photo).is_file():
+        raise InputError(f"{photo}: no such file")
+    base = _base_options()
+    image = read_image(photo)
+    spaces = plan_spaces(image, base.input_space, base.working_space)
+    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
+    alpha = image.alpha()
+    hists = {bins: image_histogram(encoded, bins, alpha, base.max_pixels)
+             for bins in (base.fit_bins, PREVIEW_BINS, base.bins)}
+    styles = load_styles(style_dir, preset, base.bins, cache=HistogramCache(), warn=warn,
+                         progress=progress, working_space=base.working_space)
+    styles = styles_in_space(styles, spaces.working)
+    height, width = encoded.shape[:2]
+    side = min(preview_side, max(height, width))
+    small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
+    preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
+    pictures = style_pictures(styles, THUMBNAIL_SIDE)
+    if base.map_size != DEFAULT_LUT_SIZE:  # the browser's LUT is the exact map's lattice
+        raise InputError("the colour map's lattice differs from the LUT size")
+    return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
+                   preset=preset, names=list(styles.names), styles=styles, spaces=spaces,
+                   hists=hists, preview=preview,
+                   thumbnails=[pictures[name] for name in styles.names], base=base,
+                   lut_size=base.map_size)
+
+
+class ExactGrader:
+    """The exact colour maps and the fit's losses (built in the job worker).
+
+    Parameters
+    ----------
+    state : :meth:`Session.grader_state`.
+    """
+
+    def __init__(self, state: dict) -> None:
+        self.styles = state["styles"]
+        self.hists = state["hists"]
+        self.base = state["base"]
+        self.lut_size = state["lut_size"]
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base)
+        self._loss_problem = None
+
+    def color_map(self, settings: Settings) -> np.ndarray:
+        """The colour map ``apply --weights W --no-regrain`` grades with (33^3, float32).
+
+        The steps of ``color.transfer.grade_image`` with fixed weights: the
+        palette (``palette_barycenter``) and the smooth map
+        (``grade_color_map``) from the photo's transfer-grid histogram.
+        """
+        from wbcgrade.color.transfer import grade_color_map, palette_barycenter
+
+        opts = _options(self.base, settings)
+        target, _ = palette_barycenter(self.styles, _apply_weights(settings), opts)
+        color_map, _ = grade_color_map(self.hists[opts.bins], target, opts)
+        return np.ascontiguousarray(color_map, dtype=np.float32)
+
+    def reference(self, settings: Settings) -> dict:
+        """The exact map of ``settings`` and its offset from the fast map there."""
+        exact = self.color_map(settings)
+        fast = upsample_map(self._fast.color_map(settings), self.lut_size)
+        return {"exact": exact, "offset": (exact - fast).astype(np.float32)}
+
+    def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
+        """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
+        from wbcgrade.color.grading import _fit_problem, _loss_at
+
+        if self._loss_problem is None:
+            bins = self.base.fit_bins
+            self._loss_problem = _fit_problem(self.hists[bins], self.styles.at_bins(bins),
+                                              self.base)
+        target, hists, geometry = self._loss_problem
+        out = []
+        for row in rows:
+            weights = np.asarray(row, dtype=np.float64)
+            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), self.base))
+        return out
+
+
+def serve_jobs(connection) -> None:
+    """The job worker's loop: build an :class:`ExactGrader`, answer jobs until EOF.
+
+    Messages: ``(kind, payload)`` with kind "reference" (payload: Settings)
+    or "losses" (payload: rows of weights); answers ``("ok", result,
+    seconds)`` or ``("error", one line, seconds)``.
+    """
+    grader = ExactGrader(connection.recv())
+    connection.send(("ready", os.getpid(), 0.0))
+    while True:
+        try:
+            kind, payload = connection.recv()
+        except (EOFError, OSError):
+            return
+        start = time.perf_counter()
+        try:
+            if kind == "reference":
+                answer = ("ok", grader.reference(payload))
+            elif kind == "losses":
+                answer = ("ok", grader.losses(payload))
+            else:
+                answer = ("error", f"unknown job {kind!r}")
+        except Exception as exc:  # reported to the page as one line, the worker lives on
+            text = str(exc).strip().splitlines()
+            answer = ("error", text[0] if text else type(exc).__name__)
+        try:
+            connection.send((*answer, time.perf_counter() - start))
+        except (EOFError, OSError):
+            return
