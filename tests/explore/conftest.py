@@ -14,14 +14,14 @@ from wbcgrade.explore.app import start_studio
 PRESET = "warm"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def photo(tmp_path_factory) -> Path:
     """A 160 x 106 PNG copy of a sample photo (lossless, so 8-bit outputs compare exactly)."""
     return small_copy(SAMPLES / "chelsea.jpg", tmp_path_factory.mktemp("explore") / "cat.png",
                       width=160)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def server(photo):
     """A studio on the photo with the preset, served from a thread; closed afterwards."""
     server = start_studio(str(photo), preset=PRESET)

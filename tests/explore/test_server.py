@@ -15,8 +15,7 @@ import pytest
 from tests.explore.conftest import PRESET
 from wbcgrade.color.lut import color_map_to_lut, read_cube
 from wbcgrade.color.presets import resolve_preset
-from wbcgrade.explore.jobs import JobWorker, Superseded
-from wbcgrade.explore.settings import settings_from_json
+from wbcgrade.explore.jobs import Superseded
 
 LUT_BYTES = 33 ** 3 * 3 * 4
 
@@ -151,11 +150,6 @@ def test_exact_lut_and_exports_are_the_library_grade(server, tmp_path):
     assert meta["kind"] == "exact" and meta["weights_text"] == "0.25,0.25,0.5"
     assert "--weights 0.25,0.25,0.5 --no-regrain --strength 0.8" in meta["command"]
     exact = np.frombuffer(payload, "<f4").reshape(33, 33, 33, 3)
-    # the same map as a fresh ExactGrader's (the worker computes what apply computes)
-    from wbcgrade.explore.engine import ExactGrader
-
-    settings = settings_from_json(body, 3)
-    assert np.array_equal(exact, ExactGrader(studio.session.grader_state()).color_map(settings))
     # a preview at those weights now is that exact map
     status, headers, payload = api(server, "preview", {**body, "client": "x", "seq": 1})
     assert json.loads(headers["X-Explore-Meta"])["kind"] == "exact"
@@ -198,38 +192,32 @@ def test_photo_and_styles_are_never_written(server, photo):
     preset = resolve_preset(PRESET)
     before = {p: _digest(p) for p in (photo, preset)}
     listing = sorted(p.name for p in photo.parent.iterdir())
-    assert api(server, "export", {"weights": [0.1, 0.2, 0.7], "format": "cube",
+    assert api(server, "export", {**server.studio.fitted.as_json(), "format": "cube",
                                   "size": 33})[0] == 200
     assert {p: _digest(p) for p in (photo, preset)} == before
     assert sorted(p.name for p in photo.parent.iterdir()) == listing
 
 
-def test_a_newer_view_job_replaces_one_still_waiting(server):
-    worker = JobWorker(server.studio.session.grader_state()).start()
-    try:
-        import threading
+def test_a_newer_job_replaces_one_still_waiting(server):
+    """Coalescing: while one job runs, a newer job of its kind replaces the one waiting."""
+    import threading
 
-        worker.losses([(1.0, 0.0, 0.0)], 600)  # the worker has started: jobs run at once
+    worker = server.studio.worker
+    worker.losses([(1.0, 0.0, 0.0)], 600)  # started: the next job runs at once
+    outcomes = {}
+    slow = [tuple(np.random.default_rng(0).dirichlet(np.ones(3))) for _ in range(120)]
 
-        outcomes = {}
+    def ask(name, rows):
+        try:
+            outcomes[name] = len(worker.losses(rows, 600))
+        except Superseded:
+            outcomes[name] = "superseded"
 
-        def ask(name, weights):
-            try:
-                outcomes[name] = worker.reference(settings_from_json(
-                    {"weights": weights}, 3), "view", 600).settings.weights
-            except Superseded:
-                outcomes[name] = "superseded"
-
-        threads = [threading.Thread(target=ask, args=(name, weights)) for name, weights in
-                   (("first", [0.6, 0.2, 0.2]), ("second", [0.2, 0.6, 0.2]),
-                    ("third", [0.2, 0.2, 0.6]))]
-        for thread in threads:
-            thread.start()
-            time.sleep(0.3)
-        for thread in threads:
-            thread.join(600)
-        assert outcomes["first"] == (0.6, 0.2, 0.2)  # it was running: it finishes
-        assert outcomes["second"] == "superseded"
-        assert outcomes["third"] == (0.2, 0.2, 0.6)
-    finally:
-        worker.close()
+    threads = [threading.Thread(target=ask, args=job) for job in
+               (("first", slow), ("second", [(0.2, 0.6, 0.2)]), ("third", [(0.2, 0.2, 0.6)]))]
+    for thread in threads:
+        thread.start()
+        time.sleep(0.2)
+    for thread in threads:
+        thread.join(600)
+    assert outcomes == {"first": 120, "second": "superseded", "third": 1}
