@@ -33,6 +33,12 @@ def test_preview_near_a_known_exact_map_follows_the_exact_grade(server):
     assert corrected < 1.5  # measured 0.7-1.2 (the plan's warm start moves it a little)
     assert corrected < error(session.preview_lut(fast, None))
     assert corrected < error(reference["exact"])
+    # the page's instant step: the exact map at w0 plus the fast map's slopes times the move
+    slopes = grader.slopes(w0)
+    assert slopes.shape == (3, 33, 33, 33, 3)
+    move = np.subtract(w1.weights, w0.weights)
+    extrapolated = np.clip(reference["exact"] + np.tensordot(move, slopes, 1), 0, 1)
+    assert error(extrapolated) < min(1.5, error(reference["exact"]))
     # at w0 itself the preview is the exact map, up to the preview plan's tolerance (its
     # warm start differs from the worker's cold one): within 1/255 at every node
     at_w0 = session.preview_lut(session.fast_map(w0), reference["offset"])

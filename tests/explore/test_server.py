@@ -172,6 +172,17 @@ def test_exact_lut_and_exports_are_the_library_grade(server, tmp_path):
     assert status == 400 and "size must be one of" in error_of(payload)
 
 
+def test_slopes_come_with_the_exact_map_they_start_from(server):
+    fitted = server.studio.fitted.as_json()
+    status, headers, payload = api(server, "slopes", fitted)
+    assert status == 200 and len(payload) == 4 * LUT_BYTES  # the exact map and 3 slopes
+    meta = json.loads(headers["X-Explore-Meta"])
+    assert meta["styles"] == 3 and meta["weights"] == fitted["weights"]
+    stack = np.frombuffer(payload, "<f4").reshape(4, 33, 33, 33, 3)
+    assert np.array_equal(stack[0], server.studio.worker.reference(server.studio.fitted).exact)
+    assert np.abs(stack[1:]).max() > 0.01  # moving towards a style changes the map
+
+
 def test_landscape_gives_the_fit_loss_at_each_mix(server):
     status, _, payload = api(server, "landscape",
                              {"rows": [[1, 0, 0], [0, 1, 0], [0, 0, 1], list(

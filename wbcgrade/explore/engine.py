@@ -57,6 +57,8 @@ PREVIEW_MAP_SIZE = 9
 PREVIEW_SINKHORN_TOL = 1e-2
 #: Iterations of a warm-started preview plan before it starts again cold.
 PREVIEW_WARM_ITER = 300
+#: Weight step of the slopes the page extrapolates from (:meth:`ExactGrader.slopes`).
+SLOPE_STEP = 0.05
 #: Long side of the preview picture the browser grades, in pixels.
 PREVIEW_SIDE = 1024
 #: LUT sizes and formats the page exports.
@@ -150,30 +152,28 @@ class _FastGrader:
         hist = hist / hist.sum()
         return (1.0 - self.base.floor) * hist + self.base.floor / hist.size
 
-    def _plan(self, target: np.ndarray, opts):
+    def _plan(self, target: np.ndarray, opts, start: np.ndarray | None):
+        """The plan to ``target``: from ``start`` (log b) when given, else cold."""
         from wbcgrade.core import multiscale_sinkhorn, sinkhorn
 
-        with self._lock:
-            start = self._log_b
-        result = None
-        if start is not None:  # one level, plain iterations from the last move's potentials
+        if start is not None:  # one level, plain iterations from the given potentials
             result = sinkhorn(self._mixed(self.photo_hist), self._mixed(target), self.geometry,
                               tol=opts.sinkhorn_tol, max_iter=PREVIEW_WARM_ITER,
                               init_log_b=start, relaxation=opts.relaxation, check_every=2,
                               warn=False)
-            if not (result.converged and np.all(np.isfinite(result.log_b))):
-                result = None
-        if result is None:  # cold: epsilon scaling on the preview grid
-            result = multiscale_sinkhorn(self.photo_hist, target, self.geometry,
-                                         coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
-                                         max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
-                                         relaxation=opts.relaxation, warn=False)
-        with self._lock:
-            self._log_b = result.log_b
-        return result
+            if result.converged and np.all(np.isfinite(result.log_b)):
+                return result
+        # cold: epsilon scaling on the preview grid
+        return multiscale_sinkhorn(self.photo_hist, target, self.geometry,
+                                   coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
+                                   max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
+                                   relaxation=opts.relaxation, warn=False)
 
-    def color_map(self, settings: Settings, weights: np.ndarray | None = None) -> np.ndarray:
-        """(9, 9, 9, 3) float32 map of ``settings`` on the preview grids."""
+    def solve(self, settings: Settings, weights: np.ndarray, start: np.ndarray | None = None,
+              tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(9, 9, 9, 3) map at ``weights`` (with ``settings``' other options) and the
+        plan's log b; the plan starts from ``start`` (cold when None), stops at ``tol``
+        (default :data:`PREVIEW_SINKHORN_TOL`)."""
         from wbcgrade.color.remap import keep_lightness, monotone_lightness
         from wbcgrade.color.smooth_map import fit_smooth_map
         from wbcgrade.color.transfer import palette_barycenter
@@ -181,9 +181,10 @@ class _FastGrader:
         from wbcgrade.errors import NumericalError
 
         opts = _options(self.base, settings)
-        weights = _apply_weights(settings) if weights is None else weights
+        if tol is not None:
+            opts = replace(opts, sinkhorn_tol=tol)
         target, _ = palette_barycenter(self.styles, weights, opts)
-        result = self._plan(target, opts)
+        result = self._plan(target, opts, start)
         raw = barycentric_projection(result, self.geometry)
         if not np.all(np.isfinite(raw)):
             raise NumericalError("the preview's colour map is not finite")
@@ -194,6 +195,15 @@ class _FastGrader:
             color_map = monotone_lightness(color_map)
         if opts.preserve_luminance:
             color_map = keep_lightness(color_map)
+        return color_map, result.log_b
+
+    def color_map(self, settings: Settings) -> np.ndarray:
+        """(9, 9, 9, 3) float32 map of ``settings``, the plan warm-started from the last one."""
+        with self._lock:
+            start = self._log_b
+        color_map, log_b = self.solve(settings, _apply_weights(settings), start)
+        with self._lock:
+            self._log_b = log_b
         return color_map
 
 
@@ -417,8 +427,29 @@ class ExactGrader:
     def reference(self, settings: Settings) -> dict:
         """The exact map of ``settings`` and its offset from the fast map there."""
         exact = self.color_map(settings)
-        fast = upsample_map(self._fast.color_map(settings), self.lut_size)
-        return {"exact": exact, "offset": (exact - fast).astype(np.float32)}
+        fast, _ = self._fast.solve(settings, _apply_weights(settings))
+        return {"exact": exact,
+                "offset": (exact - upsample_map(fast, self.lut_size)).astype(np.float32)}
+
+    def slopes(self, settings: Settings, step: float = SLOPE_STEP) -> np.ndarray:
+        """How the fast map changes towards each style, at ``settings``' weights w.
+
+        Returns (S, n, n, n, 3) float32 (n: the LUT size): slope s is
+        ``(F((1 - h) w + h e_s) - F(w)) / h`` with F the fast map (its plan at
+        ``apply``'s tolerance, every one from the plan at w) and h = ``step``.
+        A move dw (summing to 0) changes the map by about ``sum_s dw_s slope_s``
+        (dw = sum_s dw_s (e_s - w)): the page's instant preview.
+        """
+        weights = _apply_weights(settings)
+        tol = self.base.sinkhorn_tol
+        centre, start = self._fast.solve(settings, weights, None, tol)
+        centre = upsample_map(centre, self.lut_size)
+        out = np.empty((len(weights), *centre.shape), dtype=np.float32)
+        for s in range(len(weights)):
+            towards = (1.0 - step) * weights + step * np.eye(len(weights))[s]
+            moved, _ = self._fast.solve(settings, towards, start, tol)
+            out[s] = (upsample_map(moved, self.lut_size) - centre) / step
+        return out
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
@@ -439,9 +470,9 @@ class ExactGrader:
 def serve_jobs(connection) -> None:
     """The job worker's loop: build an :class:`ExactGrader`, answer jobs until EOF.
 
-    Messages: ``(kind, payload)`` with kind "reference" (payload: Settings)
-    or "losses" (payload: rows of weights); answers ``("ok", result,
-    seconds)`` or ``("error", one line, seconds)``.
+    Messages: ``(kind, payload)`` with kind "reference" or "slopes" (payload:
+    Settings) or "losses" (payload: rows of weights); answers ``("ok",
+    result, seconds)`` or ``("error", one line, seconds)``.
     """
     grader = ExactGrader(connection.recv())
     connection.send(("ready", os.getpid(), 0.0))
@@ -454,6 +485,8 @@ def serve_jobs(connection) -> None:
         try:
             if kind == "reference":
                 answer = ("ok", grader.reference(payload))
+            elif kind == "slopes":
+                answer = ("ok", grader.slopes(payload))
             elif kind == "losses":
                 answer = ("ok", grader.losses(payload))
             else:

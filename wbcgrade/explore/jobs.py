@@ -14,10 +14,12 @@ the worker reads the end of its socket and exits.
 
 Jobs are coalesced: a new "view" job (the exact map of what the page shows
 after a move) replaces the view job still waiting, whose callers get
-:class:`Superseded`; so does a new "landscape" job. "export" jobs are never
+:class:`Superseded`; so do new "slopes" (the fast map's derivatives the
+page extrapolates from) and "landscape" jobs. "export" jobs are never
 replaced and go first. Exact maps are kept (least recently used, a few
 dozen) with their offset from the fast map, for the preview's correction
-and for repeated exports. The worker is started again if it dies.
+and for repeated exports, and the last few slope sets. The worker is
+started again if it dies.
 """
 
 from __future__ import annotations
@@ -75,7 +77,9 @@ class _Job:
         self.done.set()
 
 
-_ORDER = ("export", "view", "landscape")
+_ORDER = ("export", "view", "slopes", "landscape")
+#: Slope sets kept (each S LUTs: about 3 MB for seven styles).
+SLOPES_CACHE_SIZE = 4
 
 
 class JobWorker:
@@ -118,6 +122,19 @@ class JobWorker:
                 self._cache.move_to_end(key)
                 return cached
         return self._wait(self._submit("reference", group, key, settings), timeout)
+
+    def slopes(self, settings: Settings, timeout: float | None = None):
+        """The fast map's slopes towards each style at ``settings`` (a "slopes" job; waits).
+
+        Returns (S, n, n, n, 3) float32 (:meth:`wbcgrade.explore.engine.ExactGrader.slopes`).
+        """
+        key = ("slopes", settings.map_key)
+        with self._cond:
+            cached = self._cache.get(key)
+            if cached is not None:
+                self._cache.move_to_end(key)
+                return cached
+        return self._wait(self._submit("slopes", "slopes", key, settings), timeout)
 
     def losses(self, rows: list[tuple[float, ...]], timeout: float | None = None) -> list[float]:
         """The fit's loss at each row of weights (a "landscape" job; waits)."""
@@ -176,6 +193,13 @@ class JobWorker:
                         return self._running
                 self._cond.wait()
             return None
+
+    def _trim(self) -> None:
+        """Drop the least recently used results beyond the caches' sizes (lock held)."""
+        for kind, size in (("reference", CACHE_SIZE), ("slopes", SLOPES_CACHE_SIZE)):
+            keys = [key for key in self._cache if key[0] == kind]
+            for key in keys[:max(0, len(keys) - size)]:
+                del self._cache[key]
 
     def _start_process(self) -> None:
         process, connection = _spawn()
@@ -244,12 +268,12 @@ class JobWorker:
             if status != "ok":
                 job.finish(error=JobError(result))
                 continue
-            if job.kind == "reference":
-                result = Reference(job.payload, result["exact"], result["offset"], seconds)
+            if job.kind in ("reference", "slopes"):
+                if job.kind == "reference":
+                    result = Reference(job.payload, result["exact"], result["offset"], seconds)
                 with self._cond:
                     self._cache[job.key] = result
-                    while len(self._cache) > CACHE_SIZE:
-                        self._cache.popitem(last=False)
+                    self._trim()
             job.finish(result)
 
 

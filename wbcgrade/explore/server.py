@@ -41,6 +41,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from urllib.parse import quote, urlsplit
 
+import numpy as np
+
 from wbcgrade.explore.jobs import JobError, JobWorker, Superseded
 from wbcgrade.explore.settings import (
     RequestError,
@@ -125,6 +127,7 @@ class Studio:
     def _meta(self, settings: Settings, kind: str, started: float, **extra) -> dict:
         return {"kind": kind, "ms": round(1000 * (time.perf_counter() - started), 1),
                 "weights": list(settings.weights), "weights_text": weights_text(settings.weights),
+                "relaxation": settings.relaxation, "keep_lightness": settings.keep_lightness,
                 "command": self.session.command_line(settings), **extra}
 
     def preview(self, settings: Settings, client: str, seq: int):
@@ -169,6 +172,15 @@ class Studio:
             raise RequestError(f"size must be one of {', '.join(map(str, self.sizes))}")
         color_map, _ = self.exact(settings, "export")
         return self.session.export(color_map, settings, lut_format, size)
+
+    def slopes(self, settings: Settings):
+        """The exact map at ``settings`` and the fast map's slopes there ->
+        ((S + 1) x 33^3 x 3 float32, meta): what the page extrapolates moves from."""
+        started = time.perf_counter()
+        reference = self.worker.reference(settings, "view", EXACT_TIMEOUT_S)
+        slopes = self.worker.slopes(settings, EXACT_TIMEOUT_S)
+        return np.concatenate([reference.exact[None], slopes]), self._meta(
+            settings, "slopes", started, styles=len(slopes))
 
     def landscape(self, rows: list[tuple[float, ...]]) -> dict:
         """The fit's loss at each row of weights, and at the fitted weights."""
@@ -231,6 +243,12 @@ class _Handler(BaseHTTPRequestHandler):
     def log_message(self, format, *args) -> None:  # noqa: A002 - the base class's name
         pass  # quiet: the terminal shows the address and errors only
 
+    def handle(self) -> None:
+        try:
+            super().handle()
+        except (BrokenPipeError, ConnectionResetError):
+            pass  # the page went away (closed, reloaded) before its answer
+
     # -- answers -------------------------------------------------------------------
     def _send(self, status: int, body: bytes, content_type: str,
               headers: dict[str, str] | None = None) -> None:
@@ -253,9 +271,10 @@ class _Handler(BaseHTTPRequestHandler):
                    "application/json", {"Connection": "close"})
 
     def _lut(self, lut, meta: dict) -> None:
+        """LUTs (one (n, n, n, 3) or a stack of them) as little-endian float32, C order."""
         body = lut.astype("<f4", copy=False).tobytes()
         self._send(200, body, "application/octet-stream",
-                   {"X-Explore-Meta": json.dumps({**meta, "size": int(lut.shape[0])})})
+                   {"X-Explore-Meta": json.dumps({**meta, "size": int(lut.shape[-2])})})
 
     # -- checks ------------------------------------------------------------------------
     def _route(self) -> str | None:
@@ -354,6 +373,8 @@ class _Handler(BaseHTTPRequestHandler):
                 self._lut(*studio.preview(settings, client, seq))
             elif route == "api/exact":
                 self._lut(*studio.exact(settings))
+            elif route == "api/slopes":
+                self._lut(*studio.slopes(settings))
             elif route == "api/export":
                 name, body = studio.export(settings, data.get("format", "cube"),
                                            data.get("size", studio.sizes[0]))
@@ -372,6 +393,8 @@ class _Handler(BaseHTTPRequestHandler):
             self._error(409, "superseded by a newer request", stale=True)
         except (JobError, TimeoutError) as exc:
             self._error(503, f"the grade could not be computed: {exc}")
+        except (BrokenPipeError, ConnectionResetError):
+            raise  # the page went away: nothing to answer
         except Exception as exc:  # the page shows one line; the server keeps serving
             traceback.print_exc()
             text = str(exc).strip().splitlines()

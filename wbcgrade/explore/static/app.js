@@ -1,10 +1,14 @@
 // wbcgrade explore: the page. Plain JavaScript, no build step, no outside resource.
 //
 // The server computes colour maps (3-D LUTs); this page applies them to the
-// preview picture itself (trilinear, as wbcgrade's remap does), so a move
-// costs one small request. While the point moves, previews are requested one
-// at a time (the newest settings go next; stale answers are dropped); once it
-// rests, the exact map is asked for, which is what the export holds.
+// preview picture itself (trilinear, as wbcgrade's remap does). A move is
+// shown in three steps, each replacing the one before:
+//   1. at once, extrapolated here from the last exact map and the slopes of
+//      the fast map there (a sum of LUTs: no request);
+//   2. the server's fast map, corrected by the nearest exact map (one small
+//      request; while the point moves they go one at a time, the newest
+//      settings next, stale answers dropped);
+//   3. once the point rests, the exact map: what the export holds.
 (() => {
   'use strict';
 
@@ -33,12 +37,15 @@
     seq: 0,
     idle: 0,
     exactAsked: -1,
+    model: null,                // {family, weights, exact, slopes}: for step 1
+    slopesAsked: '',
     client: Math.random().toString(36).slice(2, 12),
     changedAt: new Map(),       // version -> when it was asked for (ms)
   };
   // What a test or benchmark reads: move-to-pixels latencies (ms) and the renders done.
-  const probe = {latencies: [], renders: 0, shown: () => ({...state.shown}),
-                 current: () => state.version, weights: () => state.look.weights.slice()};
+  const probe = {latencies: [], renders: 0, seen: new Set(), shown: () => ({...state.shown}),
+                 current: () => state.version, weights: () => state.look.weights.slice(),
+                 extrapolates: () => Boolean(state.model && state.model.family === family())};
   window.wbcgradeExplore = probe;
 
   // ---------------------------------------------------------------- server
@@ -104,18 +111,29 @@
     $('after').getContext('2d').putImageData(state.after, 0, 0);
   }
 
-  function showLut(buffer, meta, version, kind) {
+  const RANK = {extrapolated: 0, preview: 1, exact: 2};
+
+  function showLut(lut, meta, version, kind) {
     const shown = state.shown;
     if (version < shown.version) return;
-    if (version === shown.version && shown.kind === 'exact' && kind !== 'exact') return;
-    state.lut = new Float32Array(buffer);
+    if (version === shown.version && RANK[kind] < RANK[shown.kind]) return;
+    state.lut = lut;
     state.lutSize = meta.size;
     state.shown = {version, kind, weights: meta.weights, weightsText: meta.weights_text};
     render();
     probe.renders += 1;
-    if (state.changedAt.has(version)) {
-      probe.latencies.push(performance.now() - state.changedAt.get(version));
-      state.changedAt.delete(version);
+    if (kind === 'exact') {  // moves from here can be shown at once: fetch the slopes
+      const settings = {weights: meta.weights, relaxation: meta.relaxation,
+                        keep_lightness: meta.keep_lightness};
+      const key = meta.weights_text + JSON.stringify([meta.relaxation, meta.keep_lightness]);
+      if (!state.model || state.model.key !== key) requestSlopes(settings, key);
+    }
+    const asked = state.changedAt.get(version);
+    if (asked !== undefined) {
+      const first = !probe.seen.has(version);
+      probe.seen.add(version);
+      if (probe.seen.size > 500) probe.seen.clear();
+      probe.latencies.push({ms: performance.now() - asked, kind, first});
     }
     status(kind, meta);
     updateCommand();
@@ -126,6 +144,9 @@
     if (kind === 'exact') {
       badge.textContent = 'exact grade: what the export holds';
       badge.className = 'badge exact';
+    } else if (kind === 'extrapolated') {
+      badge.textContent = 'live preview; exact in a moment';
+      badge.className = 'badge preview';
     } else {
       badge.textContent = `live preview (${Math.round(meta.ms)} ms); exact in a moment`;
       badge.className = 'badge preview';
@@ -147,7 +168,7 @@
                                   {...body(), client: state.client, seq: ++state.seq});
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
-        showLut(await response.arrayBuffer(), meta, version, meta.kind);
+        showLut(new Float32Array(await response.arrayBuffer()), meta, version, meta.kind);
       } else if (response.status !== 409) {
         say(await failure(response), true);
       }
@@ -167,7 +188,7 @@
       const response = await post('api/exact', body());
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
-        showLut(await response.arrayBuffer(), meta, version, 'exact');
+        showLut(new Float32Array(await response.arrayBuffer()), meta, version, 'exact');
       } else if (response.status !== 409) {
         say(await failure(response), true);
       }
@@ -176,10 +197,56 @@
     }
   }
 
+  function family() {
+    return JSON.stringify([state.look.relaxation, state.look.keep_lightness]);
+  }
+
+  // The exact map and the fast map's slopes at the exact map's weights: moves near
+  // them are shown at once (step 1), before any answer from the server.
+  async function requestSlopes(settings, key) {
+    if (state.slopesAsked === key) return;
+    state.slopesAsked = key;
+    try {
+      const response = await post('api/slopes', settings);
+      if (!response.ok) return;  // superseded, or the page moved on
+      const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
+      const data = new Float32Array(await response.arrayBuffer());
+      const size = 3 * meta.size ** 3;
+      const slopes = [];
+      for (let s = 0; s < meta.styles; s++) {
+        slopes.push(data.subarray((s + 1) * size, (s + 2) * size));
+      }
+      state.model = {key, family: JSON.stringify([settings.relaxation, settings.keep_lightness]),
+                     weights: meta.weights, size: meta.size, exact: data.subarray(0, size),
+                     slopes};
+    } catch (e) {
+      // step 1 waits for the next exact map
+    }
+  }
+
+  function extrapolate() {
+    const model = state.model;
+    if (!model || model.family !== family()) return false;
+    const dw = state.look.weights.map((w, s) => w - model.weights[s]);
+    const sum = dw.reduce((a, b) => a + b, 0);
+    const lut = Float32Array.from(model.exact);
+    dw.forEach((d, s) => {
+      const change = d - sum * model.weights[s];  // the move within the simplex
+      if (change === 0) return;
+      const slope = model.slopes[s];
+      for (let q = 0; q < lut.length; q++) lut[q] += change * slope[q];
+    });
+    for (let q = 0; q < lut.length; q++) lut[q] = Math.min(1, Math.max(0, lut[q]));
+    showLut(lut, {size: model.size, ms: 0, weights: null, weights_text: ''}, state.version,
+            'extrapolated');
+    return true;
+  }
+
   function changed() {
     state.version += 1;
     state.changedAt.set(state.version, performance.now());
     if (state.changedAt.size > 200) state.changedAt.delete(state.changedAt.keys().next().value);
+    extrapolate();
     requestPreview();
     clearTimeout(state.idle);
     state.idle = setTimeout(requestExact, IDLE_MS);
