@@ -197,10 +197,12 @@ class _FastGrader:
             color_map = keep_lightness(color_map)
         return color_map, result.log_b
 
-    def color_map(self, settings: Settings) -> np.ndarray:
-        """(9, 9, 9, 3) float32 map of ``settings``, the plan warm-started from the last one."""
-        with self._lock:
-            start = self._log_b
+    def color_map(self, settings: Settings, start: np.ndarray | None = None) -> np.ndarray:
+        """(9, 9, 9, 3) float32 map of ``settings``; the plan starts from ``start`` (log b),
+        else from the last plan."""
+        if start is None:
+            with self._lock:
+                start = self._log_b
         color_map, log_b = self.solve(settings, _apply_weights(settings), start)
         with self._lock:
             self._log_b = log_b
@@ -268,9 +270,14 @@ class Session:
                          evaluations=int(summary.info.get("evaluations", 0)),
                          time_s=summary.time_s)
 
-    def fast_map(self, settings: Settings) -> np.ndarray:
-        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32)."""
-        return self._fast.color_map(settings)
+    def fast_map(self, settings: Settings, start: np.ndarray | None = None) -> np.ndarray:
+        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32).
+
+        ``start``: the plan's potentials to start from (a reference's ``plan``: the
+        fast map there is then the one its offset was measured against); default
+        the last plan.
+        """
+        return self._fast.color_map(settings, start)
 
     def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
         """The LUT the browser applies: the fast map on the exact map's lattice plus
@@ -425,10 +432,11 @@ class ExactGrader:
         return np.ascontiguousarray(color_map, dtype=np.float32)
 
     def reference(self, settings: Settings) -> dict:
-        """The exact map of ``settings`` and its offset from the fast map there."""
+        """The exact map of ``settings``, its offset from the fast map there, and the
+        fast map's plan (log b: where the server's fast maps near it start from)."""
         exact = self.color_map(settings)
-        fast, _ = self._fast.solve(settings, _apply_weights(settings))
-        return {"exact": exact,
+        fast, plan = self._fast.solve(settings, _apply_weights(settings))
+        return {"exact": exact, "plan": plan,
                 "offset": (exact - upsample_map(fast, self.lut_size)).astype(np.float32)}
 
     def slopes(self, settings: Settings, step: float = SLOPE_STEP) -> np.ndarray:

@@ -54,11 +54,13 @@ class JobError(RuntimeError):
 
 @dataclass
 class Reference:
-    """An exact map and its offset from the fast map at the same settings."""
+    """An exact map, its offset from the fast map at the same settings, and the fast
+    map's plan there (log b)."""
 
     settings: Settings
     exact: object
     offset: object
+    plan: object
     seconds: float
 
 
@@ -270,7 +272,8 @@ class JobWorker:
                 continue
             if job.kind in ("reference", "slopes"):
                 if job.kind == "reference":
-                    result = Reference(job.payload, result["exact"], result["offset"], seconds)
+                    result = Reference(job.payload, result["exact"], result["offset"],
+                                       result["plan"], seconds)
                 with self._cond:
                     self._cache[job.key] = result
                     self._trim()

@@ -148,13 +148,18 @@ class Studio:
                      if r.settings.weights == settings.weights]
             if known:
                 return known[0].exact, self._meta(settings, "exact", started)
-            fast = self.session.fast_map(settings)
-            references = self.worker.references(settings.family)
-            nearest = min(references, default=None, key=lambda r: sum(
-                abs(a - b) for a, b in zip(r.settings.weights, settings.weights)))
-            lut = self.session.preview_lut(fast, None if nearest is None else nearest.offset)
-            distance = None if nearest is None else round(sum(
-                abs(a - b) for a, b in zip(nearest.settings.weights, settings.weights)), 4)
+            nearest, distance = None, None
+            for reference in self.worker.references(settings.family):
+                gap = sum(abs(a - b) for a, b in zip(reference.settings.weights,
+                                                     settings.weights))
+                if distance is None or gap < distance:
+                    nearest, distance = reference, gap
+            if nearest is None:
+                lut = self.session.preview_lut(self.session.fast_map(settings), None)
+            else:  # the plan starts from the reference's: its offset stays consistent
+                fast = self.session.fast_map(settings, nearest.plan)
+                lut = self.session.preview_lut(fast, nearest.offset)
+                distance = round(distance, 4)
             return lut, self._meta(settings, "preview", started, reference_distance=distance)
 
     def exact(self, settings: Settings, group: str = "view"):

@@ -617,7 +617,7 @@
     const stage = $('stage');
     const {width, height} = state.meta.preview;
     const room = [viewer.clientWidth - 24, viewer.clientHeight - 60];
-    const scale = Math.min(room[0] / width, room[1] / height, 1.5);
+    const scale = Math.min(room[0] / width, room[1] / height, 2.5);  // small photos enlarged
     stage.style.width = `${Math.max(80, Math.floor(width * scale))}px`;
   }
 
@@ -684,7 +684,7 @@
   }
 
   async function exportLut(format, button) {
-    const size = Number(document.querySelector('input[name=size]:checked').value);
+    const size = Number($('size').value);
     // exactly what is shown: the weights of the picture on screen
     const request = {...body(), format, size};
     if (state.shown.weights) request.weights = state.shown.weights.slice();
