@@ -21,12 +21,16 @@ grade path means changing this file only. It offers:
 The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
 64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
 drag. The preview computes the same steps with the same kernel in colour
-units (sigma = 1/31 of the cube) on 32^3 grids and a 9^3 smooth map, the
-plan warm-started from the previous move, then adds the difference between
-the exact and the fast map at the nearest weights whose exact map is known
-(a control variate): at those weights the preview *is* the exact map, and
-nearby it follows the fast map's change. ``benchmarks/explore.py`` measures
-both the time and the distance to the exact map.
+units (sigma = 1/31 of the cube) on 32^3 grids and a 9^3 smooth map (the
+plan to a looser tolerance), then adds the difference between the exact and
+the fast map at the nearest weights whose exact map is known (a control
+variate): at those weights the preview *is* the exact map, and nearby it
+follows the fast map's change. The fast map is solved from scratch each
+time, so that the difference is measured against the same map (a plan
+warm-started from the previous move lags towards it). Before that answer
+arrives, the page extrapolates from the last exact map with the fast map's
+slopes there (:meth:`ExactGrader.slopes`). ``benchmarks/explore.py``
+measures the times and the distances to the exact map.
 """
 
 from __future__ import annotations
@@ -34,7 +38,6 @@ from __future__ import annotations
 import os
 import shlex
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -55,8 +58,6 @@ PREVIEW_MAP_SIZE = 9
 #: map is within 0.1-0.3/255 on average (p99 < 1/255) of a converged plan's, in
 #: half the iterations (measured on two sample photos).
 PREVIEW_SINKHORN_TOL = 1e-2
-#: Iterations of a warm-started preview plan before it starts again cold.
-PREVIEW_WARM_ITER = 300
 #: Weight step of the slopes the page extrapolates from (:meth:`ExactGrader.slopes`).
 SLOPE_STEP = 0.05
 #: Long side of the preview picture the browser grades, in pixels.
@@ -128,10 +129,7 @@ class FitResult:
 
 
 class _FastGrader:
-    """Colour maps on small grids for the live preview (module docstring).
-
-    Thread-safe: the plan's warm start is the only state, swapped under a lock.
-    """
+    """Colour maps on small grids for the live preview (module docstring); no state."""
 
     def __init__(self, styles, photo_hist: np.ndarray, base) -> None:
         from wbcgrade.color.transfer import transfer_width_bins
@@ -144,47 +142,26 @@ class _FastGrader:
         styles.at_bins(PREVIEW_BINS)  # re-binned once, not on every move
         sigma = transfer_width_bins(self.base) / (PREVIEW_BINS - 1)  # colour units, as apply
         self.geometry = GridGeometry((PREVIEW_BINS,) * 3, 2.0 * sigma ** 2)
-        self._lock = threading.Lock()
-        self._log_b: np.ndarray | None = None
 
-    def _mixed(self, hist: np.ndarray) -> np.ndarray:
-        """``(1 - floor) h / sum h + floor / N``, as the multiscale solve mixes its marginals."""
-        hist = hist / hist.sum()
-        return (1.0 - self.base.floor) * hist + self.base.floor / hist.size
-
-    def _plan(self, target: np.ndarray, opts, start: np.ndarray | None):
-        """The plan to ``target``: from ``start`` (log b) when given, else cold."""
-        from wbcgrade.core import multiscale_sinkhorn, sinkhorn
-
-        if start is not None:  # one level, plain iterations from the given potentials
-            result = sinkhorn(self._mixed(self.photo_hist), self._mixed(target), self.geometry,
-                              tol=opts.sinkhorn_tol, max_iter=PREVIEW_WARM_ITER,
-                              init_log_b=start, relaxation=opts.relaxation, check_every=2,
-                              warn=False)
-            if result.converged and np.all(np.isfinite(result.log_b)):
-                return result
-        # cold: epsilon scaling on the preview grid
-        return multiscale_sinkhorn(self.photo_hist, target, self.geometry,
-                                   coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
-                                   max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
-                                   relaxation=opts.relaxation, warn=False)
-
-    def solve(self, settings: Settings, weights: np.ndarray, start: np.ndarray | None = None,
-              tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(9, 9, 9, 3) map at ``weights`` (with ``settings``' other options) and the
-        plan's log b; the plan starts from ``start`` (cold when None), stops at ``tol``
+    def solve(self, settings: Settings, weights: np.ndarray,
+              tol: float | None = None) -> np.ndarray:
+        """(9, 9, 9, 3) map at ``weights`` with ``settings``' other options; the plan
+        solved cold (deterministic: the same weights give the same map) to ``tol``
         (default :data:`PREVIEW_SINKHORN_TOL`)."""
         from wbcgrade.color.remap import keep_lightness, monotone_lightness
         from wbcgrade.color.smooth_map import fit_smooth_map
         from wbcgrade.color.transfer import palette_barycenter
-        from wbcgrade.core import barycentric_projection
+        from wbcgrade.core import barycentric_projection, multiscale_sinkhorn
         from wbcgrade.errors import NumericalError
 
         opts = _options(self.base, settings)
         if tol is not None:
             opts = replace(opts, sinkhorn_tol=tol)
         target, _ = palette_barycenter(self.styles, weights, opts)
-        result = self._plan(target, opts, start)
+        result = multiscale_sinkhorn(self.photo_hist, target, self.geometry,
+                                     coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
+                                     max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
+                                     relaxation=opts.relaxation, warn=False)
         raw = barycentric_projection(result, self.geometry)
         if not np.all(np.isfinite(raw)):
             raise NumericalError("the preview's colour map is not finite")
@@ -195,17 +172,6 @@ class _FastGrader:
             color_map = monotone_lightness(color_map)
         if opts.preserve_luminance:
             color_map = keep_lightness(color_map)
-        return color_map, result.log_b
-
-    def color_map(self, settings: Settings, start: np.ndarray | None = None) -> np.ndarray:
-        """(9, 9, 9, 3) float32 map of ``settings``; the plan starts from ``start`` (log b),
-        else from the last plan."""
-        if start is None:
-            with self._lock:
-                start = self._log_b
-        color_map, log_b = self.solve(settings, _apply_weights(settings), start)
-        with self._lock:
-            self._log_b = log_b
         return color_map
 
 
@@ -270,14 +236,9 @@ class Session:
                          evaluations=int(summary.info.get("evaluations", 0)),
                          time_s=summary.time_s)
 
-    def fast_map(self, settings: Settings, start: np.ndarray | None = None) -> np.ndarray:
-        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32).
-
-        ``start``: the plan's potentials to start from (a reference's ``plan``: the
-        fast map there is then the one its offset was measured against); default
-        the last plan.
-        """
-        return self._fast.color_map(settings, start)
+    def fast_map(self, settings: Settings) -> np.ndarray:
+        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32)."""
+        return self._fast.solve(settings, _apply_weights(settings))
 
     def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
         """The LUT the browser applies: the fast map on the exact map's lattice plus
@@ -432,11 +393,10 @@ class ExactGrader:
         return np.ascontiguousarray(color_map, dtype=np.float32)
 
     def reference(self, settings: Settings) -> dict:
-        """The exact map of ``settings``, its offset from the fast map there, and the
-        fast map's plan (log b: where the server's fast maps near it start from)."""
+        """The exact map of ``settings`` and its offset from the fast map there."""
         exact = self.color_map(settings)
-        fast, plan = self._fast.solve(settings, _apply_weights(settings))
-        return {"exact": exact, "plan": plan,
+        fast = self._fast.solve(settings, _apply_weights(settings))
+        return {"exact": exact,
                 "offset": (exact - upsample_map(fast, self.lut_size)).astype(np.float32)}
 
     def slopes(self, settings: Settings, step: float = SLOPE_STEP) -> np.ndarray:
@@ -450,12 +410,11 @@ class ExactGrader:
         """
         weights = _apply_weights(settings)
         tol = self.base.sinkhorn_tol
-        centre, start = self._fast.solve(settings, weights, None, tol)
-        centre = upsample_map(centre, self.lut_size)
+        centre = upsample_map(self._fast.solve(settings, weights, tol), self.lut_size)
         out = np.empty((len(weights), *centre.shape), dtype=np.float32)
         for s in range(len(weights)):
             towards = (1.0 - step) * weights + step * np.eye(len(weights))[s]
-            moved, _ = self._fast.solve(settings, towards, start, tol)
+            moved = self._fast.solve(settings, towards, tol)
             out[s] = (upsample_map(moved, self.lut_size) - centre) / step
         return out
 

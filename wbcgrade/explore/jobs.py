@@ -54,13 +54,11 @@ class JobError(RuntimeError):
 
 @dataclass
 class Reference:
-    """An exact map, its offset from the fast map at the same settings, and the fast
-    map's plan there (log b)."""
+    """An exact map and its offset from the fast map at the same settings."""
 
     settings: Settings
     exact: object
     offset: object
-    plan: object
     seconds: float
 
 
@@ -272,8 +270,7 @@ class JobWorker:
                 continue
             if job.kind in ("reference", "slopes"):
                 if job.kind == "reference":
-                    result = Reference(job.payload, result["exact"], result["offset"],
-                                       result["plan"], seconds)
+                    result = Reference(job.payload, result["exact"], result["offset"], seconds)
                 with self._cond:
                     self._cache[job.key] = result
                     self._trim()

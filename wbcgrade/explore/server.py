@@ -154,11 +154,9 @@ class Studio:
                                                      settings.weights))
                 if distance is None or gap < distance:
                     nearest, distance = reference, gap
-            if nearest is None:
-                lut = self.session.preview_lut(self.session.fast_map(settings), None)
-            else:  # the plan starts from the reference's: its offset stays consistent
-                fast = self.session.fast_map(settings, nearest.plan)
-                lut = self.session.preview_lut(fast, nearest.offset)
+            lut = self.session.preview_lut(self.session.fast_map(settings),
+                                           None if nearest is None else nearest.offset)
+            if distance is not None:
                 distance = round(distance, 4)
             return lut, self._meta(settings, "preview", started, reference_distance=distance)
 
