@@ -17,7 +17,7 @@ import click
 def _options() -> list:
     """The grading options (click decorators), in the order ``--help`` shows them."""
     from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS
-    from wbcgrade.color.transfer import LOSSES, GradeOptions
+    from wbcgrade.color.transfer import LOSSES, MODES, GradeOptions
 
     _DEFAULTS = GradeOptions()
     _OPTIONS = [
@@ -26,6 +26,15 @@ def _options() -> list:
         click.option("--preset", default=None, metavar="NAME_OR_FILE",
                      help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz "
                           "file."),
+        click.option("--mode", type=click.Choice(MODES), default=_DEFAULTS.mode,
+                     show_default=True,
+                     help="look: apply the look the styles share (and their own scene's, when "
+                          "one of them shows the photo's scene); palette: move the photo's "
+                          "colours onto the closest blend of the style palettes."),
+        click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
+                     metavar="PRESET",
+                     help="Preset (.npz) of ungraded photos, the look's content model "
+                          "[default: the shipped one]."),
         click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
                      help="Bins per axis of the photo's histogram and the transport plan (the "
                           "paper's 128; 64 or 32 are faster and coarser)."),
@@ -125,7 +134,8 @@ def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int
 #: Options that are GradeOptions fields of the same name.
 _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "n_iter",
                "max_iter", "strength", "relaxation", "map_size", "smoothness", "stiffness",
-               "monotone", "regrain", "regrain_radius", "regrain_eps", "preserve_luminance")
+               "monotone", "regrain", "regrain_radius", "regrain_eps", "preserve_luminance",
+               "mode", "natural")
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
 #: Options of :data:`space_options` (GradeOptions fields of the same name).
 _SPACE_KEYS = ("input_space", "working_space")

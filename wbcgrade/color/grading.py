@@ -359,6 +359,8 @@ def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     """
     say = stage or (lambda name: None)
     opts.validate(len(styles.names))
+    if opts.mode == "look" and opts.weights is None:
+        return _look_grade(encoded, styles, opts, alpha, say)
     say("fit")
     photo_fit = image_histogram(encoded, opts.fit_bins, alpha, opts.max_pixels)
     summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
@@ -368,6 +370,69 @@ def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
     grade.info["fit"] = summary.info
     grade.timings = {"fit": summary.time_s,
                      **{k: v for k, v in grade.timings.items() if k != "fit"}}
+    return grade, summary
+
+
+def _look_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
+                alpha: np.ndarray | None, say: Callable[[str], None]) -> tuple[Grade, FitSummary]:
+    """The grade of ``mode="look"``: the set's look, corrected towards the photo's scene.
+
+    The colour map is the set's look (:func:`wbcgrade.color.look.look_color_map`)
+    moved towards the palette grade of the photo (KL fit, relaxed transport)
+    by how sure it is that a style shows the photo's own scene.
+    """
+    from wbcgrade.color.look import (
+        MAP_BINS,
+        SCENE_LOSS,
+        SCENE_RELAXATION,
+        look_color_map,
+        natural_palettes,
+    )
+    from wbcgrade.color.presets import load_preset
+    from wbcgrade.color.remap import keep_lightness, monotone_lightness
+
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    say("histograms")
+    photo_hist = image_histogram(encoded, MAP_BINS, alpha, opts.max_pixels)
+    timings["histograms"] = time.perf_counter() - start
+    say("look")
+    start = time.perf_counter()
+    naturals = load_preset(opts.natural) if opts.natural else natural_palettes()
+    naturals = styles_in_space(naturals, styles.working_space)
+    base, photo, info = look_color_map(photo_hist, styles, naturals)
+    timings["look"] = time.perf_counter() - start
+    n_styles = len(styles.names)
+    confidence = photo.confidence
+    weights = np.full(n_styles, 1.0 / n_styles)
+    color_map = base.lattice(opts.map_size)
+    fit_info: dict = {"start": "look", "match": info["look"]["match"],
+                      "confidence": confidence}
+    if confidence > 0:
+        scene_opts = replace(opts, mode="palette", loss=SCENE_LOSS,
+                             relaxation=opts.relaxation or SCENE_RELAXATION)
+        scene, summary = fit_grade(encoded, styles, scene_opts, alpha, None,
+                                   lambda name: say(f"scene {name}"))
+        for name, seconds in scene.timings.items():
+            timings[f"scene {name}"] = seconds
+        base_map = base.lattice(scene.color_map.shape[0])
+        color_map = (base_map + confidence * (scene.color_map - base_map)).astype(np.float32)
+        weights = confidence * np.asarray(summary.weights) + (1.0 - confidence) * weights
+        fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
+                                 "loss": summary.loss}
+        info.update({k: v for k, v in scene.info.items() if k != "fit"})
+    if opts.monotone and not opts.preserve_luminance:
+        color_map = monotone_lightness(color_map)
+    if opts.preserve_luminance:
+        color_map = keep_lightness(color_map)
+    info["map"] = {"size": int(color_map.shape[0]), "monotone": opts.monotone,
+                   "preserve_luminance": opts.preserve_luminance}
+    info["fit"] = fit_info
+    grade = Grade(names=list(styles.names), weights=weights, loss=None,
+                  color_map=color_map, strength=opts.strength, timings=timings, info=info,
+                  barycenter=None, regrain=regrain_settings(opts))
+    summary = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals,
+                         "look", fit_info, sum(timings.values()))
     return grade, summary
 
 

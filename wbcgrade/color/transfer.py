@@ -57,6 +57,8 @@ __all__ = ["GradeOptions", "Grade", "fit_weights", "color_transfer_map", "grade_
            "grade_image", "parse_weights"]
 
 LOSSES = ("quadratic", "l1", "kl", "wasserstein")
+#: How a grade's colour map is built (``GradeOptions.mode``).
+MODES = ("look", "palette")
 
 
 @dataclass
@@ -112,6 +114,12 @@ class GradeOptions:
     input_space, working_space : colour space names (OpenColorIO config;
         :mod:`wbcgrade.color.colorspace`); None: what the file says, and
         sRGB-encoded Rec.709.
+    mode : "look": apply the look the style set shares, corrected towards the
+        photo's own scene when a style is one (:mod:`wbcgrade.color.look`);
+        "palette": move the photo's palette onto the closest barycenter of
+        the style palettes (the paper's colour transfer).
+    natural : preset file (.npz, ``wbcgrade preset build``) of ungraded
+        photos, the content model of look extraction; None: the shipped one.
     """
 
     bins: int = 128
@@ -141,9 +149,13 @@ class GradeOptions:
     monotone: bool = True
     input_space: str | None = None
     working_space: str | None = None
+    mode: str = "palette"
+    natural: str | None = None
 
     def validate(self, n_styles: int | None = None) -> None:
         """Raise InputError on an option out of range."""
+        if self.mode not in MODES:
+            raise InputError(f"--mode must be one of {', '.join(MODES)}")
         if not 4 <= self.bins <= 256:
             raise InputError("--bins must be between 4 and 256")
         if not 4 <= self.fit_bins <= 256:

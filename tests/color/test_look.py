@@ -1,0 +1,121 @@
+"""Looks: a known look applied to synthetic scenes is found again (wbcgrade.color.look)."""
+
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.look import (
+    LookMap,
+    extract_look,
+    fit_look_map,
+    fit_pair,
+    photo_look,
+    relaxed_correspondences,
+)
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
+
+
+def warm_look(rgb):
+    """An ASC CDL grade followed by saturation: warm, lifted blacks, less saturated."""
+    out = np.clip(rgb * [1.08, 1.0, 0.86] + [0.03, 0.01, 0.0], 0.0, None) ** [0.95, 1.0, 1.08]
+    luma = (out @ LUMA)[..., None]
+    return np.clip(luma + 0.85 * (out - luma), 0.0, 1.0)
+
+
+def scene(seed, size=48, regions=5):
+    """A synthetic photo: vertical bands of colours around two of its own, grain, a gradient."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0.15, 0.85, (2, 3))  # the scene's character, shared by its framings
+    colors = np.clip(centres[np.arange(regions) % 2] + rng.normal(0, 0.07, (regions, 3)), 0, 1)
+    labels = np.broadcast_to(np.arange(size) * regions // size, (size, size))
+    image = colors[labels] * np.linspace(0.85, 1.1, size)[:, None, None]
+    return np.clip(image + rng.normal(0, 0.02, image.shape), 0.0, 1.0)
+
+
+def halves(image):
+    """Left and right 62 % framings of an image."""
+    width = image.shape[1]
+    k = int(round(0.62 * width))
+    return image[:, :k], image[:, width - k:]
+
+
+def error(look, truth, image):
+    return float(np.mean(np.abs(look(image) - truth(image))))
+
+
+def test_the_map_family_holds_a_cdl_grade_with_saturation():
+    rng = np.random.default_rng(0)
+    colors = rng.random((4000, 3))
+    fitted = fit_look_map(colors, warm_look(colors), np.ones(len(colors)), ridge=1e-6,
+                          smoothness=1e-6)
+    assert np.mean(np.abs(fitted(colors) - warm_look(colors))) < 0.01
+    assert LookMap.identity().amplitude() == 0.0
+    assert fitted.lattice(5).shape == (5, 5, 5, 3)
+
+
+def test_a_pair_of_framings_of_one_scene_gives_back_the_look():
+    image = scene(1)
+    left, right = halves(image)
+    photo, style = image_histogram(right, 32), image_histogram(warm_look(left), 32)
+    pair = fit_pair(photo, style)
+    identity = error(LookMap.identity(), warm_look, right)
+    assert error(pair.look, warm_look, right) < 0.35 * identity
+
+
+def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
+    contents = [scene(s) for s in range(10, 16)]
+    others = [scene(s) for s in range(20, 24)]
+    styles = {b: np.stack([image_histogram(warm_look(c), b) for c in contents]) for b in (16, 32)}
+    naturals = {b: np.stack([image_histogram(c, b) for c in contents + others]) for b in (16, 32)}
+    result = extract_look(styles, naturals)
+    test = scene(99)
+    identity = error(LookMap.identity(), warm_look, test)
+    assert error(result.look, warm_look, test) < 0.75 * identity
+    # each style's content is found among the natural palettes: its own scene weighs most
+    assert np.sum(np.argmax(result.weights, axis=1) == np.arange(6)) >= 4
+
+
+def sample(name, width=96):
+    """A shipped sample photo, small: (H, W, 3) sRGB in [0, 1]."""
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(str(SAMPLES / f"{name}.jpg"))
+    spec = buf.spec()
+    height = max(1, round(spec.height * width / spec.width))
+    small = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, 3))
+    return np.asarray(small.get_pixels(oiio.FLOAT))[..., :3].astype(np.float64)
+
+
+def test_the_photo_is_matched_with_its_own_scene_and_weighs_most():
+    images = [sample(n) for n in ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")]
+    styles = np.stack([image_histogram(warm_look(halves(i)[0]), 32) for i in images])
+    for index, image in enumerate(images):
+        found = photo_look(image_histogram(halves(image)[1], 32), styles)
+        assert found.match == index
+        assert np.argmax(found.weights) == index
+        assert found.confidence > 0.0
+
+
+def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
+    image = scene(41, regions=8)
+    left, right = halves(image)
+    styled = warm_look(left).copy()
+    yellow = np.array([0.95, 0.85, 0.05])
+    styled[: styled.shape[0] // 4] = yellow  # a quarter of the style is a yellow the photo lacks
+    photo, style = image_histogram(right, 32), image_histogram(styled, 32)
+
+    def share_sent_to_yellow(relaxation):
+        projection, _ = relaxed_correspondences(photo, style, 1.0, relaxation)
+        return photo[np.linalg.norm(projection - yellow, axis=-1) < 0.2].sum()
+
+    relaxed, balanced = share_sent_to_yellow(0.01), share_sent_to_yellow(100.0)
+    assert balanced > 0.1  # balanced transport forces the yellow onto the photo
+    assert relaxed < 0.3 * balanced
+    graded = fit_pair(photo, style).look(right).reshape(-1, 3)
+    truth = warm_look(right).reshape(-1, 3)
+    # no photo colour is pulled towards the yellow further than the look itself takes it
+    pulled = np.linalg.norm(truth - yellow, axis=1) - np.linalg.norm(graded - yellow, axis=1)
+    assert np.quantile(pulled, 0.99) < 0.05

@@ -1,0 +1,82 @@
+"""``wbcgrade look``: the look a folder of graded photos shares, as a LUT."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options, lut_format_option
+
+
+@click.group("look")
+def look() -> None:
+    """Looks: the colour grade a set of style photos shares, apart from their scenes."""
+
+
+@look.command("extract", cls=LazyOptionsCommand)
+@click.argument("style_dir", required=False, type=click.Path(path_type=str))
+@click.option("--preset", default=None, metavar="NAME_OR_FILE",
+              help="A shipped preset name or preset file instead of STYLE_DIR.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
+              help="LUT file to write (.cube, or .clf with --lut-format clf).")
+@click.option("--lut-size", type=click.IntRange(2, 129), default=33, show_default=True,
+              help="Nodes per axis of the LUT.")
+@lazy_options(lut_format_option)
+@click.option("--strength", type=click.FloatRange(0.0, 2.0), default=None,
+              help="Scale of the extracted look [default: what `apply --mode look` uses "
+                   "where no style shows the photo's scene].")
+@click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
+              metavar="PRESET", help="Preset (.npz) of ungraded photos, the content model "
+                                     "[default: the shipped one].")
+@click.option("--working-space", default=None, metavar="NAME",
+              help="Colour space the look is extracted and the LUT applied in "
+                   "[default: sRGB-encoded Rec.709].")
+@click.option("--overwrite", is_flag=True, help="Replace an existing LUT file.")
+@click.option("--json", "as_json", is_flag=True, help="Print what was found as JSON.")
+@click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
+def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, working_space,
+            overwrite, as_json, no_cache):
+    """Extract the look the photos in STYLE_DIR share and write it as a 3-D LUT.
+
+    Each style photo is explained as a blend of ungraded palettes (its
+    content) moved through one smooth colour map (the look: tone curves and
+    a colour matrix); the map is fitted to all style photos at once.
+    """
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.colorspace import spaces_for
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.look import SET_LOOK_STRENGTH, natural_palettes, set_look_map
+    from wbcgrade.color.lut import check_lut_path, write_grade_lut
+    from wbcgrade.color.pipeline import load_styles
+    from wbcgrade.color.presets import load_preset, styles_in_space
+    from wbcgrade.errors import OptionError
+
+    if (style_dir is None) == (preset is None):
+        raise OptionError("give either STYLE_DIR or --preset")
+    check_lut_path(output, lut_format)
+    spaces = spaces_for(None, working_space, is_float=False)
+    with style_progress() as progress:
+        styles = load_styles(style_dir, preset, 32, cache=HistogramCache(enabled=not no_cache),
+                             warn=lambda m: click.echo(f"Warning: {m}", err=True),
+                             progress=progress, working_space=working_space)
+    naturals = load_preset(natural) if natural else natural_palettes()
+    naturals = styles_in_space(naturals, styles.working_space)
+    strength = SET_LOOK_STRENGTH if strength is None else strength
+    from tqdm import tqdm
+
+    with tqdm(total=len(styles.names), desc="look", unit="style", leave=False) as bar:
+        def advance(done: int, total: int) -> None:
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+        lattice, info = set_look_map(styles, naturals, strength, lut_size, advance)
+    path = write_grade_lut(output, lattice, spaces, lut_size, 1.0, lut_format,
+                           title="wbcgrade look", overwrite=overwrite,
+                           comments=[f"look of {len(styles.names)} style photos"])
+    if as_json:
+        click.echo(json.dumps({"lut": str(path), "styles": styles.names, **info}, indent=2))
+    else:
+        click.echo(f"wrote {path}: the look of {len(styles.names)} style photos "
+                   f"(mean colour shift {info['amplitude_applied']:.3f} of the cube)")

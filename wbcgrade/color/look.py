@@ -1,0 +1,652 @@
+"""Looks: the global colour map a set of graded photos share, apart from their content.
+
+A folder of style photos is usually one look ``T`` applied to various scenes.
+Each style palette is modelled as ``s_m ~ T # P_N(w_m)``: a Wasserstein
+barycenter of *natural* (ungraded) palettes ``n_1..n_K`` pushed through one
+low-complexity map ``T``. Starting from ``T = identity``, :func:`extract_look`
+alternates
+
+1. coordinates: ``w_m`` minimising ``KL(P(T # n; w_m), s_m)`` (the core's
+   barycentric coordinates against the pushed natural palettes);
+2. correspondences: the content ``c_m = P_N(w_m)``, pushed through ``T``,
+   transported to ``s_m`` with both marginals relaxed (unbalanced Sinkhorn:
+   colours either side lacks are left out, not forced), the plan's
+   barycentric projection read at ``T(x)`` for every content colour ``x``;
+3. the map: ``T`` refitted to all styles' correspondences at once, weighted
+   by the mass each moved (:func:`fit_look_map`).
+
+Content differs from style to style and averages out in the pool; what the
+styles share is the look.
+
+The map family (:class:`LookMap`) is what a colourist's look is made of:
+each output channel is the input channel plus a sum of smooth 1-D curves of
+R, G, B and luma (``T_o(x) = x_o + sum_c f_oc(x_c) + g_o(Y)``). It holds
+per-channel tone curves, any 3x3 matrix (saturation, white balance), an
+ASC CDL grade followed by saturation exactly, and split toning by lightness
+closely; it cannot repaint one hue into an unrelated one, so a look fitted
+to a few style photos stays a look.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
+
+__all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
+           "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
+           "PhotoLook", "photo_look"]
+
+#: Rec.709 luma weights (on encoded values: a lightness proxy, as colourists' luma).
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+#: Knots of each 1-D curve, evenly spaced on [0, 1].
+DEFAULT_KNOTS = 9
+
+#: Settings chosen on ``benchmarks/look.py``: plan kernel (bins of a 32^3 grid),
+#: KL relaxation of both marginals, curve smoothness and pull towards the prior.
+DEFAULT_WIDTH = 1.0
+DEFAULT_RELAXATION = 0.01
+DEFAULT_SMOOTHNESS = 0.03
+DEFAULT_RIDGE = 0.01
+
+
+def _hats(t: np.ndarray, knots: int) -> np.ndarray:
+    """(N,) values in [0, 1] -> (N, knots) piecewise-linear hat functions (a partition of 1)."""
+    pos = np.clip(t, 0.0, 1.0) * (knots - 1)
+    base = np.minimum(pos.astype(np.int64), knots - 2)
+    frac = pos - base
+    out = np.zeros((len(t), knots))
+    rows = np.arange(len(t))
+    out[rows, base] = 1.0 - frac
+    out[rows, base + 1] = frac
+    return out
+
+
+@dataclass(frozen=True)
+class LookMap:
+    """A smooth global colour map: identity plus curves of R, G, B and luma per channel.
+
+    ``T_o(x) = x_o + sum_j coefficients[o, j] * features_j(x)`` with the
+    features the hat functions of each of R, G, B and luma (``knots`` each).
+
+    Attributes
+    ----------
+    coefficients : (3, 4 * knots) float64; all zero is the identity.
+    knots : knots per curve.
+    """
+
+    coefficients: np.ndarray
+    knots: int = DEFAULT_KNOTS
+
+    @classmethod
+    def identity(cls, knots: int = DEFAULT_KNOTS) -> LookMap:
+        return cls(np.zeros((3, 4 * knots)), knots)
+
+    @staticmethod
+    def features(rgb: np.ndarray, knots: int = DEFAULT_KNOTS) -> np.ndarray:
+        """(N, 3) colours in [0, 1] -> (N, 4 * knots) feature matrix."""
+        rgb = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
+        luma = rgb @ LUMA
+        return np.concatenate([_hats(rgb[:, 0], knots), _hats(rgb[:, 1], knots),
+                               _hats(rgb[:, 2], knots), _hats(luma, knots)], axis=1)
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        rgb = np.asarray(rgb, dtype=np.float64)
+        flat = rgb.reshape(-1, 3)
+        out = flat + self.features(flat, self.knots) @ self.coefficients.T
+        return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
+
+    def lattice(self, size: int = 33) -> np.ndarray:
+        """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
+        return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
+
+    def amplitude(self, size: int = 17) -> float:
+        """Mean displacement |T(x) - x| over the colour cube (0 for the identity)."""
+        points = grid_points(size)
+        return float(np.mean(np.linalg.norm(self(points) - points, axis=1)))
+
+
+def _second_difference(knots: int) -> np.ndarray:
+    d = np.zeros((knots - 2, knots))
+    for i in range(knots - 2):
+        d[i, i:i + 3] = (1.0, -2.0, 1.0)
+    return d
+
+
+def fit_look_map(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                 prior: LookMap | None = None, smoothness: float = 3e-3,
+                 ridge: float = 1e-3, knots: int = DEFAULT_KNOTS) -> LookMap:
+    """The :class:`LookMap` that best moves ``sources`` onto ``targets`` (weighted least squares).
+
+    Minimises ``sum_i w_i |T(x_i) - y_i|^2 + ridge |theta - theta_prior|^2
+    + smoothness |D2 theta|^2`` (``D2``: second differences along each curve;
+    the weights are normalised to sum 1, so both penalties are in colour
+    units squared whatever the number of points).
+
+    Parameters
+    ----------
+    sources, targets : (N, 3) colours in [0, 1].
+    weights : (N,) non-negative.
+    prior : the map the ridge pulls towards (default the identity).
+    """
+    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
+    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    weights = np.asarray(weights, dtype=np.float64).ravel()
+    total = weights.sum()
+    if not total > 0:
+        return prior if prior is not None else LookMap.identity(knots)
+    weights = weights / total
+    if prior is None or prior.knots != knots:
+        prior = LookMap.identity(knots)
+    features = LookMap.features(sources, knots)
+    n_features = features.shape[1]
+    weighted = features * weights[:, None]
+    gram = features.T @ weighted
+    d2 = _second_difference(knots)
+    block = d2.T @ d2
+    penalty = np.zeros((n_features, n_features))
+    for g in range(4):
+        sl = slice(g * knots, (g + 1) * knots)
+        penalty[sl, sl] = smoothness * block
+    system = gram + penalty + ridge * np.eye(n_features)
+    rhs = weighted.T @ (targets - sources) + ridge * prior.coefficients.T
+    coefficients = np.linalg.solve(system, rhs).T
+    return LookMap(coefficients, knots)
+
+
+def push_histogram(hist: np.ndarray, look: LookMap, bins: int | None = None) -> np.ndarray:
+    """The histogram of the colours of ``hist`` moved through ``look`` (soft binning).
+
+    (n, n, n) -> (bins, bins, bins), default ``bins = n``; sums to 1.
+    """
+    n = hist.shape[0]
+    flat = hist.ravel()
+    keep = np.flatnonzero(flat > 0)
+    points = grid_points(n)[keep]
+    return soft_histogram(look(points), bins or n, flat[keep])
+
+
+def _trilinear(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """Interpolate (n, n, n, C) grid values at (N, 3) colours in [0, 1] -> (N, C)."""
+    from scipy.ndimage import map_coordinates
+
+    n = values.shape[0]
+    coords = (np.clip(colors, 0.0, 1.0) * (n - 1)).T
+    return np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
+                     for c in range(values.shape[-1])], axis=1)
+
+
+def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float = 1.5,
+                            relaxation: float = 0.01, n_iter: int = 300,
+                            floor: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Where each colour of ``source`` goes under unbalanced transport to ``target``.
+
+    Entropic transport on the (n, n, n) grid with both marginals relaxed by
+    ``relaxation * KL`` (scalings raised to ``rho / (rho + gamma)``; Chizat et
+    al. 2018), solved in the log domain.
+
+    Parameters
+    ----------
+    source, target : (n, n, n) histograms.
+    width : kernel standard deviation in bins.
+
+    Returns
+    -------
+    projection : (n, n, n, 3) barycentric projection ``(K (b x)) / (K b)`` of every bin.
+    kept : (n, n, n) share of each source bin's mass the plan moves (0..~1).
+    """
+    from wbcgrade.core import GridGeometry
+
+    n = source.shape[0]
+    geometry = GridGeometry.with_width((n,) * 3, width)
+    tau = relaxation / (relaxation + geometry.gamma)
+    log_p = np.log(add_floor(source / source.sum(), floor))
+    log_q = np.log(add_floor(target / target.sum(), floor))
+    f = np.zeros_like(log_p)
+    g = np.zeros_like(log_q)
+    for _ in range(n_iter):
+        f_new = tau * (log_p - geometry.log_apply(g))
+        g = tau * (log_q - geometry.log_apply(f_new))
+        change = np.max(np.abs(f_new - f))
+        f = f_new
+        if change < 1e-6:
+            break
+    log_kb = geometry.log_apply(g)
+    axis = np.linspace(0.0, 1.0, n)
+    shifted = [axis.reshape(shape) + 1.0 for shape in ((n, 1, 1), (1, n, 1), (1, 1, n))]
+    projection = np.stack(
+        [np.exp(geometry.log_apply(g + np.log(np.broadcast_to(s, g.shape))) - log_kb) - 1.0
+         for s in shifted], axis=-1)
+    kept = np.exp(f + log_kb - log_p)
+    return np.clip(projection, 0.0, 1.0), np.clip(kept, 0.0, 1.0)
+
+
+def _fit_geometry(bins: int):
+    from wbcgrade.core import GridGeometry
+
+    return GridGeometry((bins,) * 3, 2.0 * (1.5 / (bins - 1)) ** 2)
+
+
+def look_coordinates(target: np.ndarray, palettes: np.ndarray, floor: float = 1e-4,
+                     max_iter: int = 15) -> tuple[np.ndarray, float]:
+    """KL barycentric coordinates of ``target`` (m, m, m) over ``palettes`` (K, m, m, m).
+
+    Returns (weights (K,), loss).
+    """
+    from wbcgrade.core import barycentric_coordinates
+
+    bins = target.shape[0]
+    result = barycentric_coordinates(
+        add_floor(target, floor), np.stack([add_floor(h, floor) for h in palettes]),
+        _fit_geometry(bins), loss="kl", n_iter=30, max_iter=max_iter, tol=1e-5)
+    return np.asarray(result.weights, dtype=np.float64), float(result.loss)
+
+
+@dataclass
+class LookResult:
+    """An extracted look and how it was found.
+
+    Attributes
+    ----------
+    look : the map.
+    weights : (M, K) natural-palette coordinates of each style's content.
+    losses : (M,) KL loss of each style's fit at the last round.
+    info : diagnostics (JSON-friendly).
+    """
+
+    look: LookMap
+    weights: np.ndarray
+    losses: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
+                 rounds: int = 1, relaxation: float = DEFAULT_RELAXATION,
+                 width: float = DEFAULT_WIDTH, smoothness: float = DEFAULT_SMOOTHNESS,
+                 ridge: float = DEFAULT_RIDGE, knots: int = DEFAULT_KNOTS,
+                 fit_bins: int = 16, map_bins: int = 32, initial: LookMap | None = None,
+                 style_weights: np.ndarray | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> LookResult:
+    """The look shared by style palettes, with natural palettes as the content model.
+
+    Parameters
+    ----------
+    styles : {bins: (M, bins, bins, bins)} style histograms at ``fit_bins`` and ``map_bins``.
+    naturals : {bins: (K, bins, bins, bins)} natural (ungraded) histograms, same grids.
+    rounds : alternations of coordinates and map.
+    relaxation : KL relaxation of both marginals of each content-to-style plan.
+    width : plan kernel in bins of the ``map_bins`` grid.
+    initial : the map to start from (default the identity).
+    style_weights : (M,) how much each style's correspondences count (default equal).
+    progress : called as ``progress(done, total)`` after each style of each round.
+    """
+    from wbcgrade.core import barycenter
+
+    look = initial or LookMap.identity(knots)
+    n_styles = len(styles[fit_bins])
+    natural_map = naturals[map_bins]
+    style_weights = (np.ones(n_styles) if style_weights is None
+                     else np.asarray(style_weights, dtype=np.float64))
+    points = grid_points(map_bins)
+    geometry = _fit_geometry(map_bins)
+    all_weights = np.zeros((n_styles, len(natural_map)))
+    losses = np.zeros(n_styles)
+    for _ in range(rounds):
+        pushed = np.stack([push_histogram(h, look, fit_bins)
+                           for h in _resampled(naturals, fit_bins)])
+        sources, targets, masses = [], [], []
+        for m in range(n_styles):
+            weights, losses[m] = look_coordinates(styles[fit_bins][m], pushed)
+            all_weights[m] = weights
+            keep = np.flatnonzero(weights > 1e-3)
+            content = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map[keep]]),
+                                 weights[keep] / weights[keep].sum(), geometry, 60)
+            projection, kept = relaxed_correspondences(
+                push_histogram(content, look), styles[map_bins][m], width, relaxation)
+            flat = content.ravel()
+            used = np.flatnonzero(flat > 1e-7)
+            moved = look(points[used])
+            sources.append(points[used])
+            targets.append(_trilinear(projection, moved))
+            mass = flat[used] * _trilinear(kept[..., None], moved)[:, 0]
+            masses.append(style_weights[m] * mass / max(mass.sum(), 1e-300))
+            if progress is not None:
+                progress(len(masses) + _ * n_styles, rounds * n_styles)
+        look = fit_look_map(np.concatenate(sources), np.concatenate(targets),
+                            np.concatenate(masses), None, smoothness, ridge, knots)
+    info = {"rounds": rounds, "relaxation": relaxation, "width_bins": width,
+            "smoothness": smoothness, "ridge": ridge, "knots": knots,
+            "fit_bins": fit_bins, "map_bins": map_bins, "amplitude": look.amplitude()}
+    return LookResult(look, all_weights, losses, info)
+
+
+def _resampled(hists: dict[int, np.ndarray], bins: int) -> np.ndarray:
+    return hists[bins]
+
+
+def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width: float,
+                     relaxation: float):
+    """Colours of ``photo`` (n^3 grid), where ``look`` then the relaxed plan to ``style`` send
+    them, and the mass each moved: (points (N, 3), targets (N, 3), mass (N,), moved (N, 3))."""
+    n = photo.shape[0]
+    flat = photo.ravel()
+    used = np.flatnonzero(flat > 1e-7)
+    points = grid_points(n)[used]
+    moved = look(points)
+    projection, kept = relaxed_correspondences(push_histogram(photo, look), style, width,
+                                               relaxation)
+    mass = flat[used] * _trilinear(kept[..., None], moved)[:, 0]
+    return points, _trilinear(projection, moved), mass, moved
+
+
+@dataclass(frozen=True)
+class PairFit:
+    """The look that moves one photo's palette onto one style's.
+
+    Attributes
+    ----------
+    look : the fitted map.
+    residual : mean squared distance (colour units) still left between the
+        photo's colours after the map and where the relaxed plan sends them:
+        small when the style is the photo's own scene in some look.
+    kept : share of the photo's mass the relaxed plan moved.
+    overlap : shared mass of the mapped photo's histogram and the style's
+        (each blurred by half a bin; 1 = the same palette): high when the
+        style shows the photo's own scene.
+    """
+
+    look: LookMap
+    residual: float
+    kept: float
+    overlap: float = 0.0
+
+
+def fit_pair(photo: np.ndarray, style: np.ndarray, prior: LookMap | None = None,
+             rounds: int = 2, width: float = DEFAULT_WIDTH,
+             relaxation: float = DEFAULT_RELAXATION, smoothness: float = DEFAULT_SMOOTHNESS,
+             ridge: float = DEFAULT_RIDGE) -> PairFit:
+    """Fit the look taking a photo's palette to a style palette (same (n, n, n) grid).
+
+    Starts at ``prior`` (default identity) and alternates ``rounds`` times a
+    relaxed plan from the mapped palette to the style and a refit of the map
+    (pulled towards ``prior`` by ``ridge``).
+    """
+    prior = prior or LookMap.identity()
+    look = prior
+    for _ in range(rounds):
+        points, targets, mass, _ = _correspondences(photo, style, look, width, relaxation)
+        look = fit_look_map(points, targets, mass, prior, smoothness, ridge, prior.knots)
+    _, targets, mass, moved = _correspondences(photo, style, look, width, relaxation)
+    total = max(float(mass.sum()), 1e-300)
+    residual = float(np.sum(mass * np.sum((targets - moved) ** 2, axis=1)) / total)
+    return PairFit(look, residual, float(mass.sum() / photo.sum()),
+                   _overlap(push_histogram(photo, look), style))
+
+
+def _overlap(first: np.ndarray, second: np.ndarray, blur: float = 0.5) -> float:
+    """Shared mass of two histograms, each blurred by ``blur`` bins and normalised."""
+    from scipy.ndimage import gaussian_filter
+
+    a = gaussian_filter(first / first.sum(), blur, mode="constant")
+    b = gaussian_filter(second / second.sum(), blur, mode="constant")
+    return float(np.minimum(a / a.sum(), b / b.sum()).sum())
+
+
+@dataclass(frozen=True)
+class PhotoLook:
+    """The look for one photo: the set's look, corrected towards its own scene when found.
+
+    Attributes
+    ----------
+    look : the map to apply.
+    match : index of the style whose scene fits the photo best.
+    confidence : in [0, 1], how far the correction towards that style was taken.
+    residuals : (S,) :attr:`PairFit.residual` of every style.
+    overlap : :attr:`PairFit.overlap` of the match.
+    """
+
+    look: LookMap
+    match: int
+    confidence: float
+    residuals: np.ndarray
+    overlap: float = 0.0
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(S,) weight of each style in the grade: ``confidence`` on the match, rest shared."""
+        n = len(self.residuals)
+        weights = np.full(n, (1.0 - self.confidence) / n)
+        weights[self.match] += self.confidence
+        return weights
+
+
+#: Match ratio (best residual over the median of the others) at or above which
+#: no style counts as the photo's own scene, and at or below which one surely does.
+UNSURE_RATIO = 0.75
+SURE_RATIO = 0.35
+#: Overlap of the mapped photo's palette with the match's at or below which the
+#: match is not the photo's scene, and at or above which it surely is
+#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
+UNSURE_OVERLAP = 0.55
+SURE_OVERLAP = 0.65
+
+
+def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None = None,
+               **fit_options) -> PhotoLook:
+    """The look to apply to a photo graded towards a style set.
+
+    Every style gets a :func:`fit_pair` from the photo starting at the set's
+    look; the style left with the smallest residual is the photo's scene
+    candidate. How sure that is: the product of two ramps, one on its
+    residual against the others' (ratio to their median: ``SURE_RATIO`` or
+    less is sure, ``UNSURE_RATIO`` or more is not) and one on how much of
+    the mapped palette it shares (``UNSURE_OVERLAP`` .. ``SURE_OVERLAP``). A
+    wrong match repaints the photo, so both must agree. The map moves from
+    the set's look towards that pair's look by the confidence (coefficients
+    blended: the family is linear).
+
+    Parameters
+    ----------
+    photo : (n, n, n) the photo's histogram.
+    styles : (S, n, n, n) the style histograms on the same grid.
+    set_look : the set's look (:func:`extract_look`; default identity).
+    """
+    set_look = set_look or LookMap.identity()
+    fits = [fit_pair(photo, style, set_look, **fit_options) for style in styles]
+    residuals = np.array([fit.residual for fit in fits])
+    match = int(np.argmin(residuals))
+    if len(fits) > 1:
+        ratio = residuals[match] / max(float(np.median(np.delete(residuals, match))), 1e-300)
+        sure_of_ratio = np.clip((UNSURE_RATIO - ratio) / (UNSURE_RATIO - SURE_RATIO), 0.0, 1.0)
+    else:
+        sure_of_ratio = 1.0
+    overlap = fits[match].overlap
+    sure_of_overlap = np.clip((overlap - UNSURE_OVERLAP) / (SURE_OVERLAP - UNSURE_OVERLAP),
+                              0.0, 1.0)
+    confidence = float(sure_of_ratio * sure_of_overlap)
+    chosen = fits[match].look
+    coefficients = set_look.coefficients + confidence * (chosen.coefficients
+                                                         - set_look.coefficients)
+    return PhotoLook(LookMap(coefficients, set_look.knots), match, confidence, residuals,
+                     overlap)
+
+
+# --------------------------------------------------------------------------- grading with looks
+
+#: Strength of the set's own look where no style is the photo's scene: the
+#: look extracted across scenes is half believed (measured: full strength
+#: lands more of the look on average and damages a few photos).
+SET_LOOK_STRENGTH = 0.5
+
+#: The per-photo correction towards the photo's own scene (when a style shows
+#: it): the palette grade with this loss and relaxation (benchmarks/look.py,
+#: shot matching: KL with rho = 0.01 recovers +0.33 against -0.05 for the
+#: quadratic, balanced fit).
+SCENE_LOSS = "kl"
+SCENE_RELAXATION = 0.01
+
+#: Grids of the look fits: coordinates on 16^3, plans and maps on 32^3.
+FIT_BINS = 16
+MAP_BINS = 32
+
+
+def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
+    """The shipped palettes of ungraded photos (a :class:`~wbcgrade.color.presets.StyleSet`).
+
+    Built by ``python -m wbcgrade.color.natural`` from photos whose licences
+    allow it (``wbcgrade/color/data/NATURAL.md`` names them); ``exclude``
+    leaves photos out by name (a benchmark holds out the photos it grades).
+    """
+    from wbcgrade.color.presets import StyleSet, load_preset
+
+    styles = load_preset(_natural_path())
+    keep = [i for i, name in enumerate(styles.names) if name not in exclude]
+    if len(keep) == len(styles.names):
+        return styles
+    return StyleSet([styles.names[i] for i in keep], styles.histograms[keep], styles.source,
+                    styles.width, styles.description, dict(styles.meta))
+
+
+def _natural_path():
+    from pathlib import Path
+
+    return Path(__file__).with_name("data") / "natural.npz"
+
+
+_SET_LOOKS: dict[tuple, LookResult] = {}
+
+
+def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None = None,
+             cache: bool = True) -> LookResult:
+    """The look a style set shares (:func:`extract_look`), computed once per set.
+
+    Kept in memory for the process and, with ``cache``, on disk beside the
+    style histogram cache (``looks/`` in :func:`~wbcgrade.color.histogram.default_cache_dir`),
+    keyed by the histograms themselves.
+
+    Parameters
+    ----------
+    styles : StyleSet of the graded photos.
+    naturals : StyleSet of ungraded photos (default :func:`natural_palettes`),
+        in the same working space as ``styles``.
+    """
+    import hashlib
+
+    naturals = naturals if naturals is not None else natural_palettes()
+    digest = hashlib.sha1()
+    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS)):
+        digest.update(np.ascontiguousarray(hists, dtype=np.float64).tobytes())
+    digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS)).encode())
+    key = (digest.hexdigest(),)
+    if key not in _SET_LOOKS:
+        found = _read_cached_look(key[0]) if cache else None
+        if found is None:
+            found = extract_look(
+                {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                fit_bins=FIT_BINS, map_bins=MAP_BINS, progress=progress)
+            if cache:
+                _write_cached_look(key[0], found)
+        _SET_LOOKS[key] = found
+    return _SET_LOOKS[key]
+
+
+#: Bumped when extraction changes, so cached looks of an older version are not used.
+LOOK_VERSION = 1
+
+
+def _look_cache_path(key: str):
+    from wbcgrade.color.histogram import default_cache_dir
+
+    return default_cache_dir() / "looks" / f"{key}.npz"
+
+
+def _read_cached_look(key: str) -> LookResult | None:
+    import json
+
+    path = _look_cache_path(key)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            look = LookMap(np.array(data["coefficients"]), int(data["knots"]))
+            return LookResult(look, np.array(data["weights"]), np.array(data["losses"]),
+                              json.loads(str(data["info"])))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _write_cached_look(key: str, result: LookResult) -> None:
+    """Best effort: a cache that cannot be written is skipped."""
+    import json
+    import os
+    import tempfile
+
+    path = _look_cache_path(key)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
+        with os.fdopen(handle, "wb") as out:
+            np.savez(out, coefficients=result.look.coefficients, knots=result.look.knots,
+                     weights=result.weights, losses=result.losses,
+                     info=json.dumps(result.info))
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            os.unlink(tmp)
+        except (OSError, UnboundLocalError):
+            pass
+
+
+def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
+                   set_strength: float = SET_LOOK_STRENGTH) -> tuple[LookMap, PhotoLook, dict]:
+    """The set's look and how sure it is that a style shows the photo's own scene.
+
+    Parameters
+    ----------
+    photo_hist : (n, n, n) the photo's histogram (any grid; re-binned to 32^3).
+    styles : StyleSet.
+    naturals : StyleSet of ungraded palettes (default the shipped ones).
+
+    Returns
+    -------
+    base : the set's look at ``set_strength`` (what a photo of another scene gets).
+    photo : the :class:`PhotoLook` (match, confidence, residuals).
+    info : JSON-friendly diagnostics.
+    """
+    from wbcgrade.color.histogram import resample_histogram
+
+    extracted = set_look(styles, naturals)
+    base = LookMap(set_strength * extracted.look.coefficients, extracted.look.knots)
+    photo = photo_look(resample_histogram(photo_hist, MAP_BINS), styles.at_bins(MAP_BINS), base)
+    info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                     "set_strength": set_strength,
+                     "match": styles.names[photo.match],
+                     "confidence": photo.confidence,
+                     "overlap": photo.overlap,
+                     "residuals": [float(r) for r in photo.residuals],
+                     **extracted.info}}
+    return base, photo, info
+
+
+def set_look_map(styles, naturals=None, strength: float = SET_LOOK_STRENGTH,
+                 map_size: int = 33,
+                 progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
+    """The look a style set shares, as a lattice LUT (what ``wbcgrade look extract`` writes).
+
+    ``strength`` scales the extracted map's displacement (the grade applies
+    :data:`SET_LOOK_STRENGTH` of it where no style shows the photo's scene).
+
+    Returns ((map_size,) * 3 + (3,) float32 lattice, JSON-friendly info).
+    """
+    extracted = set_look(styles, naturals, progress)
+    look = LookMap(strength * extracted.look.coefficients, extracted.look.knots)
+    names = (naturals if naturals is not None else natural_palettes()).names
+    content = {style: {names[k]: round(float(w), 3) for k, w in enumerate(row) if w >= 0.05}
+               for style, row in zip(styles.names, extracted.weights)}
+    info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
+            "content": content}
+    return look.lattice(map_size), info
