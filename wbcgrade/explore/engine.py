@@ -329,7 +329,6 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     from wbcgrade.color.colorspace import plan_spaces, to_working
     from wbcgrade.color.histogram import HistogramCache, image_histogram
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.lut import DEFAULT_LUT_SIZE
     from wbcgrade.color.pipeline import load_styles
     from wbcgrade.color.presets import styles_in_space
     from wbcgrade.color.report import style_pictures
@@ -353,8 +352,6 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
     preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
     pictures = style_pictures(styles, THUMBNAIL_SIDE)
-    if base.map_size != DEFAULT_LUT_SIZE:  # the browser's LUT is the exact map's lattice
-        raise InputError("the colour map's lattice differs from the LUT size")
     return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
                    preset=preset, names=list(styles.names), styles=styles, spaces=spaces,
                    hists=hists, preview=preview,

@@ -115,26 +115,14 @@ class JobWorker:
         Raises Superseded (a newer "view" job replaced this one), JobError,
         or TimeoutError.
         """
-        key = ("reference", settings.map_key)
-        with self._cond:
-            cached = self._cache.get(key)
-            if cached is not None:
-                self._cache.move_to_end(key)
-                return cached
-        return self._wait(self._submit("reference", group, key, settings), timeout)
+        return self._cached_or_run("reference", group, settings, timeout)
 
     def slopes(self, settings: Settings, timeout: float | None = None):
         """The fast map's slopes towards each style at ``settings`` (a "slopes" job; waits).
 
         Returns (S, n, n, n, 3) float32 (:meth:`wbcgrade.explore.engine.ExactGrader.slopes`).
         """
-        key = ("slopes", settings.map_key)
-        with self._cond:
-            cached = self._cache.get(key)
-            if cached is not None:
-                self._cache.move_to_end(key)
-                return cached
-        return self._wait(self._submit("slopes", "slopes", key, settings), timeout)
+        return self._cached_or_run("slopes", "slopes", settings, timeout)
 
     def losses(self, rows: list[tuple[float, ...]], timeout: float | None = None) -> list[float]:
         """The fit's loss at each row of weights (a "landscape" job; waits)."""
@@ -160,6 +148,17 @@ class JobWorker:
         self._stop_process()
 
     # -- inside ------------------------------------------------------------------------
+    def _cached_or_run(self, kind: str, group: str, settings: Settings,
+                       timeout: float | None):
+        """The cached result of a job on ``settings``' map, else the job's (waits)."""
+        key = (kind, settings.map_key)
+        with self._cond:
+            cached = self._cache.get(key)
+            if cached is not None:
+                self._cache.move_to_end(key)
+                return cached
+        return self._wait(self._submit(kind, group, key, settings), timeout)
+
     def _submit(self, kind: str, group: str, key, payload) -> _Job:
         with self._cond:
             if self._closed:

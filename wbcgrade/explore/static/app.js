@@ -368,6 +368,9 @@
     const clip = el('clipPath', {id: 'shape'}, defs);
     if (V.length >= 3) {
       el('polygon', {points: V.map((v) => v.join(',')).join(' ')}, clip);
+    } else if (V.length === 2) {  // a band along the segment
+      el('rect', {x: V[0][0], y: CENTER[1] - 8, width: V[1][0] - V[0][0], height: 16,
+                  rx: 4}, clip);
     }
     el('image', {id: 'landscape', 'clip-path': 'url(#shape)', preserveAspectRatio: 'none'},
        svg);
@@ -457,7 +460,11 @@
   // ---------------------------------------------------------------- the loss landscape
   async function landscape() {
     const V = state.vertices;
-    if (V.length < 2) return;
+    if (V.length < 2) {
+      $('space-hint').textContent = '';
+      $('sure').textContent = `${fitSentence()} Strength and the options below still apply.`;
+      return;
+    }
     const xs = V.map((v) => v[0]), ys = V.map((v) => v[1]);
     let box = [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
     if (V.length === 2) box = [box[0], CENTER[1] - 8, box[2], CENTER[1] + 8];
