@@ -100,19 +100,21 @@ def read_8bit(path: Path) -> np.ndarray:
 
 def energy_problem(photo: Path, styles: Path, bins: int):
     """(target, style histograms, fit geometry at ``bins``, opts) of the apply pipeline."""
+    from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.histogram import add_floor, image_histogram
-    from wbcgrade.color.imageio import encode_for_grading, read_image
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.options import FitOptions, TransferOptions
     from wbcgrade.color.presets import load_style_folder
-    from wbcgrade.color.transfer import GradeOptions, _fit_geometry
     from wbcgrade.core import GridGeometry
 
-    opts = GradeOptions()
+    opts, transfer = FitOptions(), TransferOptions()
     image = read_image(photo)
-    encoded, _ = encode_for_grading(image.rgb(), image.is_float)
-    target = add_floor(image_histogram(encoded, bins, image.alpha(), opts.max_pixels), opts.floor)
+    encoded, _ = ColorEncoding.for_image(image).encode(image.rgb(), image.is_float)
+    target = add_floor(image_histogram(encoded, bins, image.alpha(), transfer.max_pixels),
+                       opts.floor)
     style_set = load_style_folder(styles, bins)
     hists = np.stack([add_floor(h, opts.floor) for h in style_set.histograms])
-    gamma = _fit_geometry(opts).gamma  # the fit's kernel, fixed in colour units
+    gamma = opts.kernel_gamma  # the fit's kernel, fixed in colour units
     return target, hists, GridGeometry((bins,) * 3, gamma, np.float32), opts, style_set.names
 
 

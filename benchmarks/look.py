@@ -232,25 +232,28 @@ def wbcgrade_grade(photo: np.ndarray, styles: list[np.ndarray], style_names: lis
                    memo: dict | None = None, **options) -> tuple[np.ndarray, dict[str, float]]:
     """Grade ``photo`` towards ``styles`` with wbcgrade; the benchmark's only call into it.
 
-    ``options``: :class:`wbcgrade.color.transfer.GradeOptions` fields. The
-    style set is built from the arrays (one histogram per style image at
-    ``opts.bins``, as ``load_style_folder`` builds it from files), once per
-    ``memo`` (the case's memo: the same styles for all its photos).
+    ``options``: grade settings by their flat names
+    (:data:`wbcgrade.color.options.FLAT_FIELDS`, e.g. ``relaxation=0.05``;
+    or whole groups, ``map=MapOptions(...)``). The style set is built from
+    the arrays (one histogram per style image on the transfer grid, as
+    ``load_style_folder`` builds it from files), once per ``memo`` (the
+    case's memo: the same styles for all its photos).
 
     Returns (graded (H, W, 3) float in [0, 1], {style name: weight}).
     """
     from wbcgrade.color.colorspace import default_working_space
     from wbcgrade.color.grading import grade_array
     from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import StyleSet
-    from wbcgrade.color.transfer import GradeOptions
 
     opts = GradeOptions(**options)
+    bins, max_pixels = opts.transfer.bins, opts.transfer.max_pixels
     memo = {} if memo is None else memo
-    key = ("wbcgrade-styles", tuple(style_names), opts.bins, opts.max_pixels)
+    key = ("wbcgrade-styles", tuple(style_names), bins, max_pixels)
     if key not in memo:
-        hists = np.stack([image_histogram(np.asarray(s, np.float32), opts.bins, None,
-                                          opts.max_pixels) for s in styles])
+        hists = np.stack([image_histogram(np.asarray(s, np.float32), bins, None, max_pixels)
+                          for s in styles])
         memo[key] = StyleSet(names=list(style_names), histograms=hists, source="look benchmark",
                              meta={"working_space": default_working_space()})
     graded, grade = grade_array(np.asarray(photo, np.float32), memo[key], opts)
@@ -323,7 +326,8 @@ def natural_preset(context: Context) -> str:
 
 
 def wbcgrade_method(**options) -> Method:
-    """A method grading with wbcgrade at these GradeOptions (look mode: held-out naturals)."""
+    """A method grading with wbcgrade with these grade settings (flat names or groups; look
+    mode: held-out naturals)."""
 
     def method(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
         extra = {"natural": natural_preset(context)} if options.get("mode") == "look" else {}

@@ -219,9 +219,9 @@ def load_set(photos: Path, names: list[str], bins: int):
 def grade_wbcgrade(path: Path, styles, opts, lut_dir: Path):
     """(graded 8-bit pixels, LUT-applied and map-applied 8-bit pixels, grade) for one photo."""
     from wbcgrade.color._colour import colour
-    from wbcgrade.color.grading import grade_photo
     from wbcgrade.color.lut import color_map_to_lut, write_cube
     from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.workflow import grade_photo
 
     graded = grade_photo(path, styles, opts)
     out = to_8bit(graded.pixels[..., :3])
@@ -236,11 +236,9 @@ def grade_wbcgrade(path: Path, styles, opts, lut_dir: Path):
 
 
 def parse_options(pairs: list[str]):
-    from dataclasses import fields
+    from wbcgrade.color.options import FLAT_FIELDS, GradeOptions
 
-    from wbcgrade.color.transfer import GradeOptions
-
-    types = {f.name: f.type for f in fields(GradeOptions)}
+    types = {**FLAT_FIELDS, "floor": None}
     values = {}
     for pair in pairs:
         key, _, text = pair.partition("=")
@@ -270,7 +268,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "quality")
     parser.add_argument("--no-peers", action="store_true", help="wbcgrade only")
     parser.add_argument("--set", dest="options", action="append", default=[],
-                        metavar="KEY=VALUE", help="a GradeOptions field (repeatable)")
+                        metavar="KEY=VALUE",
+                        help="a grade option by its flat name, e.g. relaxation=0.05 (repeatable)")
     args = parser.parse_args(argv)
 
     opts = parse_options(args.options)
@@ -287,7 +286,7 @@ def main(argv: list[str] | None = None) -> None:
     for set_name in sets:
         names = STYLE_SETS[set_name]
         style_pixels = [read_rgb(args.photo_dir / f"{n}.jpg") for n in names]
-        styles = load_set(args.photo_dir, names, opts.bins)
+        styles = load_set(args.photo_dir, names, opts.transfer.bins)
         for photo in photos:
             path = args.photo_dir / f"{photo}.jpg"
             inp = to_8bit(read_rgb(path))

@@ -53,8 +53,8 @@ def main() -> None:
     parser.add_argument("--per-shot", action="store_true")
     args = parser.parse_args()
 
+    from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import load_preset, resolve_preset
-    from wbcgrade.color.transfer import GradeOptions
     from wbcgrade.video.ffmpeg import ffmpeg_exe, probe
     from wbcgrade.video.workflow import VideoSettings, grade_video
 

@@ -19,14 +19,34 @@ former.
 - :func:`publish_bytes`: write a ``bytes`` object atomically.
 - :func:`write_png`: the PNG writer (8-bit, OpenImageIO) of the BRDF and shape code.
 - :func:`check_regular_target`: refuse to replace a device, pipe, socket or folder.
-- :func:`check_output_path`: all the checks an output can get before any work.
+- :func:`check_output_path`: all the checks an output gets before any work,
+  the only place outputs are checked; :func:`plan_outputs`: every output of
+  a run at once (resolved, never an input, never two outputs in one file).
 - :func:`remove_stale_temporaries`, :func:`remove_stale_beside`: remove what
   killed runs left (unlocked temporaries only).
 - :func:`lock_folder`: one run's exclusive use of an output folder (``batch``).
 
-With ``overwrite=False`` an existing target is never replaced, even one that
+One rule for every command: a run never replaces a file it did not write
+unless it was asked to (``overwrite``). It is checked before any work
+(:func:`check_output_path`) and again when publishing: with
+``overwrite=False`` an existing target is never replaced, even one that
 appears while the file is being written (published by a hard link, which
-fails if the name exists). See ``docs/architecture.md`` (files and safety).
+fails if the name exists). Outputs are resolved (``realpath``) before they
+are checked, so a link cannot lead an output onto an input, and an output
+meant to go under a folder (``root``: batch's output tree, a report
+folder) must stay under it: a link inside the folder that leads out of it
+is refused. See ``docs/architecture.md`` (files and safety).
+
+>>> import os, tempfile
+>>> from wbcgrade._publish import check_output_path, publish_bytes
+>>> folder = tempfile.mkdtemp()
+>>> target = publish_bytes(os.path.join(folder, "a.txt"), b"first")
+>>> check_output_path(target)
+Traceback (most recent call last):
+...
+wbcgrade.errors.InputError: ...a.txt: file exists (use --overwrite to replace it)
+>>> check_output_path(target, overwrite=True) == target.resolve()
+True
 """
 
 from __future__ import annotations
@@ -44,11 +64,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, first_line
 
 __all__ = ["TEMP_MARK", "LOCK_FILE", "atomic_path", "publish_bytes", "write_png",
-           "check_regular_target", "check_folder", "check_output_path", "is_unlocked",
-           "remove_stale_temporaries", "remove_stale_beside", "lock_folder"]
+           "check_regular_target", "check_folder", "check_output_path", "plan_outputs",
+           "is_unlocked", "remove_stale_temporaries", "remove_stale_beside", "lock_folder"]
 
 #: Marks the project's temporary files: ``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``.
 TEMP_MARK = ".wbcgrade-tmp-"
@@ -96,30 +116,81 @@ def check_folder(target: str | os.PathLike) -> Path:
 
 def _same_file(a: Path, b: Path) -> bool:
     try:
-        return a.resolve() == b.resolve() or (b.exists() and os.path.samefile(a, b))
+        return os.path.realpath(a) == os.path.realpath(b) or (
+            a.exists() and b.exists() and os.path.samefile(a, b))
     except OSError:
         return False
 
 
-def check_output_path(target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (),
-                      overwrite: bool = True) -> Path:
-    """Check that ``target`` may be written, before any long computation. -> ``Path(target)``.
+def _inside(path: str, folder: str) -> bool:
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
 
-    Raises InputError when ``target`` is one of ``inputs`` (never allowed), a
-    folder, exists and is not a regular file, exists and ``overwrite`` is
-    False, or its folder is missing or not writable.
+
+def check_output_path(target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (),
+                      overwrite: bool = False, root: str | os.PathLike | None = None,
+                      make_folders: bool = False) -> Path:
+    """Check that ``target`` may be written, before any work. -> the resolved target.
+
+    The one output checker. ``target`` is resolved (``os.path.realpath``:
+    links followed) and refused (InputError) when it is one of ``inputs``
+    (never allowed, ``overwrite`` or not), a folder, an existing file that is
+    not a regular one (a device, pipe or socket), an existing file and
+    ``overwrite`` is False (a run never replaces what it did not write unless
+    asked), or its folder is missing (unless ``make_folders``: then the
+    nearest existing one) or not writable. With ``root`` (the folder the
+    output belongs under: a batch's output tree, a report folder), the
+    resolved target must lie under the resolved ``root``: a link that leads
+    out of it is refused.
     """
-    target = Path(target)
+    given = Path(target)
+    resolved = Path(os.path.realpath(given))
     for source in inputs:
-        if source is not None and _same_file(Path(source), target):
-            raise InputError(f"{target}: refusing to overwrite the input file")
-    check_regular_target(target)
-    if target.exists() and not overwrite:
-        raise InputError(f"{target}: file exists (use --overwrite to replace it)")
-    folder = check_folder(target)
+        if source is not None and _same_file(Path(source), given):
+            raise InputError(f"{given}: refusing to overwrite the input file")
+    if root is not None and not _inside(str(resolved), os.path.realpath(root)):
+        raise InputError(f"{given}: leads out of the output folder {root} through a link "
+                         f"(to {resolved}); refusing to write there")
+    check_regular_target(resolved)
+    if resolved.exists() and not overwrite:
+        raise InputError(f"{given}: file exists (use --overwrite to replace it)")
+    folder = resolved.parent
+    if make_folders:
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"{check_folder(given)}: output folder does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{folder}: output folder is not writable")
-    return target
+        raise InputError(f"{given.parent if str(given.parent) else Path('.')}: output folder "
+                         "is not writable")
+    return resolved
+
+
+def plan_outputs(targets: Iterable[str | os.PathLike | None],
+                 inputs: Iterable[str | os.PathLike] = (), overwrite: bool = False,
+                 root: str | os.PathLike | None = None,
+                 make_folders: bool = False) -> list[Path | None]:
+    """Every output of a run checked at once (:func:`check_output_path`), before any work.
+
+    Returns the resolved targets in the same order (None stays None). Two
+    targets that resolve to the same file are refused: one run never writes
+    a file twice. Temporary files that killed runs left beside them are
+    removed (:func:`remove_stale_beside`).
+    """
+    inputs = [source for source in inputs if source is not None]
+    planned: list[Path | None] = []
+    seen: dict[Path, Path] = {}
+    for target in targets:
+        if target is None:
+            planned.append(None)
+            continue
+        resolved = check_output_path(target, inputs, overwrite, root, make_folders)
+        if resolved in seen:
+            raise InputError(f"{target}: the same file as {seen[resolved]}; every output "
+                             "must be a different file")
+        seen[resolved] = Path(target)
+        planned.append(resolved)
+    remove_stale_beside(*(p for p in planned if p is not None and p.parent.is_dir()))
+    return planned
 
 
 def _fsync_path(path: str | os.PathLike, directory: bool = False) -> None:
@@ -247,19 +318,14 @@ def write_png(target: str | os.PathLike, image: np.ndarray, overwrite: bool = Tr
     with atomic_path(target, suffix=".png", overwrite=overwrite) as tmp:
         output = oiio.ImageOutput.create(tmp)
         if output is None:
-            raise OSError(f"{target}: cannot create a PNG writer ({_first_line(oiio.geterror())})")
+            raise OSError(f"{target}: cannot create a PNG writer ({first_line(oiio.geterror())})")
         spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
         ok = output.open(tmp, spec) and output.write_image(pixels)
         error = output.geterror()
         output.close()
         if not ok:
-            raise OSError(f"{target}: cannot write the PNG ({_first_line(error)})")
+            raise OSError(f"{target}: cannot write the PNG ({first_line(error)})")
     return target
-
-
-def _first_line(text: str) -> str:
-    lines = str(text).strip().splitlines()
-    return lines[0] if lines else "unknown error"
 
 
 # --------------------------------------------------------------------- stale files, locks

@@ -1,7 +1,7 @@
 """Exceptions shared by every layer.
 
 Library code raises these (or ``ValueError``/``OSError``); the CLI turns them
-into one-line messages.
+into one-line messages (:func:`first_line`).
 """
 
 
@@ -35,3 +35,15 @@ class ConvergenceWarning(UserWarning):
     The result is still returned (its ``converged`` flag is False); raise the
     limit, loosen the tolerance, or silence this with ``warn=False``.
     """
+
+
+def first_line(text: object, default: str = "unknown error") -> str:
+    """The first non-empty line of a message (an exception, a library's error text).
+
+    >>> first_line("disk full\\n  at write()"), first_line("", "no reason")
+    ('disk full', 'no reason')
+    """
+    if isinstance(text, BaseException) and not str(text).strip():
+        return type(text).__name__
+    lines = [line.strip() for line in str(text).strip().splitlines() if line.strip()]
+    return lines[0] if lines else default

@@ -15,9 +15,9 @@ from click.testing import CliRunner
 
 from wbcgrade.cli import main
 from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
-from wbcgrade.color.grading import fit_with_vertex_check
+from wbcgrade.color.fit import fit_weights
+from wbcgrade.color.options import FitOptions, GradeOptions
 from wbcgrade.color.presets import load_style_folder
-from wbcgrade.color.transfer import GradeOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 FAST = ["--bins", "8", "--fit-bins", "6", "--max-iter", "3", "--iterations", "10", "--no-cache"]
@@ -102,13 +102,17 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     assert "other settings" not in result.output
     result = _batch(photos, styles, out, "--strength", "0.5")
     assert "graded 0, skipped 3" in result.output and "other settings (strength)" in result.output
-    # A partial/foreign output of another size is redone; --force redoes all.
+    # A file this run did not write (of another size: not a finished output) is not
+    # replaced: that photo fails, the file is kept (tests/io/test_output_plan.py).
     small_copy(SAMPLES / "coffee.jpg", out / "chelsea.jpg", 20)
+    foreign = (out / "chelsea.jpg").read_bytes()
     result = _batch(photos, styles, out)
-    assert "graded 1, skipped 2, failed 1" in result.output
-    assert _pixels(out / "chelsea.jpg").shape == _pixels(photos / "chelsea.jpg").shape
+    assert "graded 0, skipped 2, failed 2" in result.output
+    assert "chelsea.jpg: file exists (use --overwrite" in result.output
+    assert (out / "chelsea.jpg").read_bytes() == foreign
     # The library says overwrite= as the command says --overwrite; force= still works, warned.
-    assert len(plan_batch(photos, out, recursive=True).done) == 3
+    plan = plan_batch(photos, out, recursive=True)
+    assert len(plan.done) == 2 and [t.relative for t, _ in plan.refused] == ["chelsea.jpg"]
     assert not plan_batch(photos, out, recursive=True, overwrite=True).done
     with pytest.warns(DeprecationWarning, match="overwrite="):
         assert not plan_batch(photos, out, recursive=True, force=True).done
@@ -250,29 +254,32 @@ def test_fit_is_never_worse_than_the_best_single_style():
     styles = rng.random((3, 6, 6, 6)) ** 8
     styles /= styles.sum(axis=(1, 2, 3), keepdims=True)
     photo = styles[1] * 0.97 + styles[0] * 0.03
-    opts = GradeOptions(fit_bins=6, max_iter=1, n_iter=10)
-    fit = fit_with_vertex_check(photo, styles, opts)
+    fit = fit_weights(photo, styles, FitOptions(bins=6, max_iter=1, n_iter=10))
     assert fit.loss <= fit.vertex_losses.min() * (1 + 1e-12)
     assert fit.weights.argmax() == 1
 
 
 def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
-    import wbcgrade.color.batch.task as batch
+    import contextlib
+
+    import wbcgrade.color.workflow as workflow
 
     photos, styles = folders
     out = tmp_path / "out"
     plan = plan_batch(photos, out, recursive=True)
-    real_write = batch.write_image
+    real_stage = workflow.stage_image
     calls = []
 
+    @contextlib.contextmanager
     def write_then_interrupt(path, *args, **kwargs):
         calls.append(path)
         if len(calls) == 2:  # as if killed while writing: a temporary file is left
             (Path(path).parent / f".{Path(path).stem}.x1y2z3{Path(path).suffix}").write_text("")
             raise KeyboardInterrupt
-        return real_write(path, *args, **kwargs)
+        with real_stage(path, *args, **kwargs) as written:
+            yield written
 
-    monkeypatch.setattr(batch, "write_image", write_then_interrupt)
+    monkeypatch.setattr(workflow, "stage_image", write_then_interrupt)
     context = BatchContext(load_style_folder(styles, 8),
                            GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10))
     with pytest.raises(KeyboardInterrupt):
@@ -283,13 +290,13 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
 
 
 def test_report_hook_for_apply(folders, tmp_path):
-    from wbcgrade.color.pipeline import grade_file
     from wbcgrade.color.report import report_from_grade
+    from wbcgrade.color.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10)
     style_set = load_style_folder(styles, 8)
-    graded = grade_file(photos / "chelsea.jpg", style_set, opts, output=tmp_path / "c.jpg")
+    graded = grade_file(plan_photo(photos / "chelsea.jpg", tmp_path / "c.jpg"), style_set, opts)
     path = report_from_grade(tmp_path / "report", graded, style_set, opts)
     entry = json.loads(path.read_text())["photos"][0]
     assert entry["photo"] == "chelsea.jpg" and len(entry["weights"]) == 3
@@ -306,26 +313,29 @@ def test_report_hook_for_apply(folders, tmp_path):
 def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatch, start):
     """Vertex refits and given weights were labelled "uniform", and every vertex loss was
     evaluated a second time for the report."""
+    from dataclasses import replace
+
+    import wbcgrade.color.fit as fit_module
     import wbcgrade.color.grading as grading
-    from wbcgrade.color.pipeline import grade_file
     from wbcgrade.color.report import report_from_grade
+    from wbcgrade.color.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10,
                         weights=[1.0, 1.0, 0.0] if start == "given" else None)
     style_set = load_style_folder(styles, 8)
-    fit = grading.fit_with_vertex_check
+    fit = grading.fit_weights
 
     def labelled(*args, **kwargs):
         summary = fit(*args, **kwargs)
         if start != "given":
-            summary.start = summary.info["start"] = start
+            summary = replace(summary, start=start, info={**summary.info, "start": start})
         return summary
 
-    monkeypatch.setattr(grading, "fit_with_vertex_check", labelled)
-    graded = grade_file(photos / "chelsea.jpg", style_set, opts, output=tmp_path / "c.jpg")
+    monkeypatch.setattr(grading, "fit_weights", labelled)
+    graded = grade_file(plan_photo(photos / "chelsea.jpg", tmp_path / "c.jpg"), style_set, opts)
     calls = []
-    monkeypatch.setattr(grading, "vertex_losses", lambda *a: calls.append(a))
+    monkeypatch.setattr(fit_module, "vertex_losses", lambda *a: calls.append(a))
     path = report_from_grade(tmp_path / "report", graded, style_set, opts)
     entry = json.loads(path.read_text())["photos"][0]
     assert entry["fit_start"] == start and calls == []
@@ -340,13 +350,16 @@ def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
     palette = sheet.histogram_palette(soft_histogram(colours, 16), k=4)
     assert palette.shares[:2] == pytest.approx([0.75, 0.25], abs=0.02)
     np.testing.assert_allclose(palette.colors[0], [0.9, 0.1, 0.1], atol=0.04)
-    monkeypatch.setattr(sheet, "USE_FONTS", False)
     picture = np.full((12, 16, 3), 0.5, dtype=np.float32)
     content = sheet.SheetContent("title", "loss 0.1", picture, picture,
                                  [sheet.StyleTile("a", 1.0, picture)], [("input", palette)])
+    labelled = sheet.compose_sheet(content, width=400)  # OpenImageIO's own fonts
+    assert np.any(np.all(np.abs(labelled - 0.12) < 0.02, axis=2))  # ink
+    monkeypatch.setattr(sheet, "USE_FONTS", False)  # as without fonts: a sheet, no labels
     pixels = sheet.compose_sheet(content, width=400)
-    assert pixels.shape[1] == 400
-    assert np.any(np.all(np.abs(pixels - 0.12) < 1e-6, axis=2))  # ink drawn by the bitmap font
+    assert pixels.shape == labelled.shape and pixels.shape[1] == 400
+    assert not np.any(np.all(np.abs(pixels - 0.12) < 0.02, axis=2))
+    assert np.any(np.all(np.abs(pixels - 0.5) < 1e-6, axis=2))  # the pictures are there
 
 
 def test_apply_report_option_writes_a_report(folders, tmp_path):

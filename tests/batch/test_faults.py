@@ -185,7 +185,7 @@ def test_outputs_are_checked_before_any_work(shoot, tmp_path, monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")
 
-    monkeypatch.setattr(batch, "grade_photo", forbidden)
+    monkeypatch.setattr(batch, "grade_file", forbidden)
     photos, styles = shoot
     result = _batch(photos, styles, tmp_path / "out", "--consistent", "--lut",
                     str(tmp_path / "nodir" / "series.cube"))

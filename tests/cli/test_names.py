@@ -42,7 +42,7 @@ def test_every_loss_the_cli_offers_is_the_core_registrys():
     command's --loss choices are its domain's list, and every name is a loss of the
     core's registry."""
     from wbcgrade.brdf.defaults import BRDF_LOSSES
-    from wbcgrade.color.transfer import LOSSES as COLOR_LOSSES
+    from wbcgrade.color.options import LOSSES as COLOR_LOSSES
     from wbcgrade.core import get_loss
     from wbcgrade.shape.defaults import LOSS_NAMES
 

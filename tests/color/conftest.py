@@ -8,7 +8,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.color.options import GradeOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 STYLE_PHOTOS = ("aitzgorri", "coffee", "flower", "seeding")
@@ -63,3 +63,11 @@ def fast_options() -> GradeOptions:
 
 FAST_ARGS = ["--bins", "16", "--fit-bins", "8", "--max-iter", "10", "--iterations", "30",
              "--no-cache"]
+
+
+def grade_of(rgb, styles, options):
+    """The grade of sRGB-encoded pixels (H, W, 3) in the default working space."""
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.grading import grade_encoded
+
+    return grade_encoded(np.asarray(rgb, np.float32), styles, options, ColorEncoding.of())[0]

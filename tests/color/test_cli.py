@@ -188,3 +188,29 @@ def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, mes
     assert len(errors) == 1 and message in errors[0], result.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     assert (tmp_path / "existing.jpg").read_bytes() == b"keep me"
+
+
+def test_options_are_validated_once_per_run(tmp_path, styles, monkeypatch):
+    """The options of a run are made and checked once (the CLI made them, then the
+    pipeline validated them again three times), each error naming its flag."""
+    from wbcgrade.color import options
+
+    counts = {}
+    for group in (options.FitOptions, options.TransferOptions, options.MapOptions,
+                  options.RegrainOptions, options.SpaceOptions):
+        check = group.__post_init__
+
+        def counting(self, check=check, name=group.__name__):
+            counts[name] = counts.get(name, 0) + 1
+            check(self)
+
+        monkeypatch.setattr(group, "__post_init__", counting)
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.jpg")
+    result = run("apply", photo, "--style", styles, "--lut", tmp_path / "g.cube",
+                 "--report", tmp_path / "report", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    assert counts == {"FitOptions": 1, "TransferOptions": 1, "MapOptions": 1,
+                      "RegrainOptions": 1, "SpaceOptions": 1}
+    result = run("apply", photo, "--style", styles, "--map-size", 1, *FAST_ARGS)
+    assert result.exit_code == 1
+    assert result.stderr.strip() == "Error: --map-size must be between 2 and 129"

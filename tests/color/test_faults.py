@@ -165,12 +165,12 @@ def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo):
 @pytest.fixture
 def no_grading(monkeypatch):
     """Fail the test if a photo is graded."""
-    import wbcgrade.color.grading as grading
+    import wbcgrade.color.workflow as workflow
 
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")
 
-    monkeypatch.setattr(grading, "grade_photo", forbidden)
+    monkeypatch.setattr(workflow, "grade_photo", forbidden)
 
 
 def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_grading):
@@ -181,12 +181,12 @@ def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_gr
 
 
 def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch):
-    import wbcgrade.color.pipeline as pipeline
+    import wbcgrade.color.lut as lut_module
 
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(pipeline, "write_cube", full_disk)
+    monkeypatch.setattr(lut_module, "write_cube", full_disk)
     out, lut = tmp_path / "graded.jpg", tmp_path / "grade.cube"
     result = CliRunner().invoke(main, [*_apply_args(photo, out), "--lut", str(lut)])
     assert result.exit_code == 1

@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-import wbcgrade.color.grading as grading
-from wbcgrade.color.transfer import GradeOptions
+import wbcgrade.color.fit as fitting
+from wbcgrade.color.options import FitOptions
 
 
 def _problem(kind: str):
@@ -18,17 +18,17 @@ def _problem(kind: str):
     styles = rng.random((3, 6, 6, 6)) ** 8
     styles /= styles.sum(axis=(1, 2, 3), keepdims=True)
     if kind == "vertex":  # one L-BFGS step from uniform weights cannot beat style 1 alone
-        photo, opts = styles[1] * 0.97 + styles[0] * 0.03, GradeOptions(fit_bins=6, max_iter=1,
-                                                                         n_iter=10)
+        photo, opts = styles[1] * 0.97 + styles[0] * 0.03, FitOptions(bins=6, max_iter=1,
+                                                                       n_iter=10)
     else:  # a blend: the fit from uniform weights wins, the refit is not needed
-        photo, opts = styles.mean(axis=0), GradeOptions(fit_bins=6, max_iter=5, n_iter=10)
+        photo, opts = styles.mean(axis=0), FitOptions(bins=6, max_iter=5, n_iter=10)
     return photo, styles, opts
 
 
 def _run(monkeypatch, photo, styles, opts, ahead: bool):
-    monkeypatch.setattr(grading, "_speculate", lambda: ahead)
+    monkeypatch.setattr(fitting, "_speculate", lambda: ahead)
     calls = []
-    summary = grading.fit_with_vertex_check(
+    summary = fitting.fit_weights(
         photo, styles, opts, lambda n, w, v: calls.append((n, w.copy(), v)))
     return summary, calls
 

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from tests.color.conftest import SAMPLES, small_copy, write_array
-from wbcgrade.color.grading import grade_array, grade_photo
+from wbcgrade.color.grading import grade_array
 from wbcgrade.color.imageio import read_image
+from wbcgrade.color.options import FitOptions, GradeOptions, MapOptions, TransferOptions
 from wbcgrade.color.presets import load_style_folder
-from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.color.workflow import grade_photo
 from wbcgrade.errors import InputError
 
 
@@ -20,7 +21,7 @@ def scene(style_dir, tmp_path_factory):
     pixels = np.round(read_image(path).rgb() * 255).astype(np.uint8)
     png = write_array(folder / "chelsea.png", pixels / 255.0, "uint8")
     opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
-    return pixels, png, load_style_folder(style_dir, opts.bins), opts
+    return pixels, png, load_style_folder(style_dir, opts.transfer.bins), opts
 
 
 def test_an_array_is_graded_as_apply_grades_its_file(scene):
@@ -32,7 +33,7 @@ def test_an_array_is_graded_as_apply_grades_its_file(scene):
     # differ from k / 255 in the last bit)
     np.testing.assert_allclose(grade.weights, from_file.grade.weights, atol=1e-5)
     np.testing.assert_allclose(graded, from_file.pixels, atol=1e-4)
-    # The vertex check: never worse than the best single style (grade_image has none).
+    # The vertex check: never worse than the best single style.
     assert grade.loss <= min(from_file.fit.vertex_losses) + 1e-12
     assert grade.info["fit"]["start"] in ("uniform", "vertex-refit", "vertex")
 
@@ -53,3 +54,20 @@ def test_bad_arrays_are_refused(scene, bad, message):
     _, _, styles, opts = scene
     with pytest.raises(InputError, match=message):
         grade_array(bad, styles, opts)
+
+
+def test_grouped_options_and_the_former_flat_ones_are_the_same(scene):
+    """grade_array(rgb, styles, options) takes the grouped options; the former flat
+    settings still work, as GradeOptions(...) or as keywords."""
+    pixels, _, styles, opts = scene
+    grouped = GradeOptions(fit=FitOptions(bins=8, max_iter=10, n_iter=30),
+                           transfer=TransferOptions(bins=16, relaxation=0.05),
+                           map=MapOptions(size=9))
+    flat = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30, relaxation=0.05,
+                        map_size=9)
+    assert grouped == flat
+    a, grade = grade_array(pixels, styles, grouped)
+    b, _ = grade_array(pixels, styles, opts, relaxation=0.05, map_size=9)
+    np.testing.assert_array_equal(a, b)
+    assert grade.color_map.shape == (9, 9, 9, 3)
+    assert grade.info["sinkhorn"]["relaxation"] == 0.05

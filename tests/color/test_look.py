@@ -119,3 +119,29 @@ def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     # no photo colour is pulled towards the yellow further than the look itself takes it
     pulled = np.linalg.norm(truth - yellow, axis=1) - np.linalg.norm(graded - yellow, axis=1)
     assert np.quantile(pulled, 0.99) < 0.05
+
+
+def test_look_mode_and_look_extract_through_the_commands(tmp_path):
+    """``apply --mode look`` takes the grade path's "look" map builder; ``look extract``
+    writes the set's look as a LUT and, like every command, refuses an existing file."""
+    import json
+
+    from click.testing import CliRunner
+
+    from tests.color.conftest import FAST_ARGS, small_copy
+    from wbcgrade.cli import main
+    from wbcgrade.color.lut import read_cube
+
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
+    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--mode", "look",
+                                       "-o", str(tmp_path / "o.png"), "--json", *FAST_ARGS])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["map"]["builder"] == "look" and report["fit_start"] == "look"
+    assert abs(sum(w["weight"] for w in report["weights"]) - 1) < 1e-5  # rounded to 6 digits
+    lut = tmp_path / "look.cube"
+    args = ["look", "extract", "--preset", "warm", "-o", str(lut), "--lut-size", "9"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert read_cube(lut).size == 9
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1 and "file exists (use --overwrite" in result.output

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from tests.color.conftest import SAMPLES, small_copy, write_array
+from tests.color.conftest import SAMPLES, grade_of, small_copy, write_array
 from wbcgrade.color._colour import colour
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grading import Grade
 from wbcgrade.color.histogram import grid_points, image_histogram
 from wbcgrade.color.imageio import read_image, write_image
+from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, load_style_folder
 from wbcgrade.color.remap import identity_map
-from wbcgrade.color.render import render
-from wbcgrade.color.transfer import Grade, GradeOptions, grade_image, parse_weights
+from wbcgrade.color.weights import parse_weights
+from wbcgrade.color.workflow import graded_pixels
 from wbcgrade.errors import InputError
 
 
@@ -53,30 +58,31 @@ def scene(style_dir, tmp_path_factory):
 
 def test_graded_photo_is_closer_to_the_barycenter(scene, fast_options):
     rgb, style_dir = scene
-    styles = load_style_folder(style_dir, fast_options.bins)
-    grade = grade_image(rgb, styles, fast_options)
+    styles = load_style_folder(style_dir, fast_options.transfer.bins)
+    grade = grade_of(rgb, styles, fast_options)
     assert grade.weights.sum() == pytest.approx(1.0) and grade.loss is not None
     graded = grade.apply(rgb)
-    points, mass = grid_points(fast_options.bins), grade.barycenter.ravel()
+    points, mass = grid_points(fast_options.transfer.bins), grade.barycenter.ravel()
     pixels, ones = rgb.reshape(-1, 3), np.ones(rgb.shape[0] * rgb.shape[1])
     before = sliced_wasserstein_lab(pixels, ones, points, mass)
     after = sliced_wasserstein_lab(graded.reshape(-1, 3), ones, points, mass)
     assert after < 0.6 * before
     # strength 0 is the identity, strength 1/2 lies half-way (on the colour map itself;
     # the regrain step clips to [0, 1], which is not linear)
-    grade.regrain = None
+    grade = replace(grade, regrain=None)
     graded = grade.apply(rgb)
-    grade.strength = 0.0
-    np.testing.assert_allclose(grade.apply(rgb), rgb, atol=1e-6)
-    grade.strength = 0.5
-    np.testing.assert_allclose(grade.apply(rgb), 0.5 * (rgb + graded), atol=1e-5)
+    np.testing.assert_allclose(replace(grade, strength=0.0).apply(rgb), rgb, atol=1e-6)
+    np.testing.assert_allclose(replace(grade, strength=0.5).apply(rgb), 0.5 * (rgb + graded),
+                               atol=1e-5)
+    with pytest.raises(AttributeError):  # a grade is frozen
+        grade.strength = 0.0
 
 
 def test_grading_against_its_own_palette_changes_little(scene):
     rgb, _ = scene
     opts = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30)
     own = StyleSet(names=["self"], histograms=image_histogram(rgb, 24)[None])
-    graded = grade_image(rgb, own, opts).apply(rgb)
+    graded = grade_of(rgb, own, opts).apply(rgb)
     assert np.abs(graded - rgb).mean() < 1 / 255
 
 
@@ -85,12 +91,12 @@ def test_default_transfer_kernel_keeps_colourfulness(scene):
     rgb, style_dir = scene
     styles = load_style_folder(style_dir, 24)
     sharp = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30)
-    fit_sigma_in_bins = sharp.width / (sharp.fit_bins - 1) * (sharp.bins - 1)  # ~5 bins
+    fit_sigma_in_bins = sharp.fit.width / (sharp.fit.bins - 1) * (sharp.transfer.bins - 1)
     blurred = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30,
-                           transfer_width=fit_sigma_in_bins)
-    grade = grade_image(rgb, styles, sharp)
+                           transfer_width=fit_sigma_in_bins)  # ~5 bins
+    grade = grade_of(rgb, styles, sharp)
     chroma_sharp = _chroma(grade.apply(rgb))
-    chroma_blurred = _chroma(grade_image(rgb, styles, blurred).apply(rgb))
+    chroma_blurred = _chroma(grade_of(rgb, styles, blurred).apply(rgb))
     chroma_target = _chroma(grid_points(24), grade.barycenter.ravel())
     assert chroma_sharp >= 0.85 * chroma_target
     assert chroma_sharp > 1.2 * chroma_blurred
@@ -98,14 +104,16 @@ def test_default_transfer_kernel_keeps_colourfulness(scene):
 
 def test_given_weights_skip_the_fit(scene, fast_options):
     rgb, style_dir = scene
-    styles = load_style_folder(style_dir, fast_options.bins)
-    fast_options.weights = parse_weights("0,1,0,1")
-    grade = grade_image(rgb, styles, fast_options)
-    assert grade.loss is None and "fit" not in grade.timings
+    from wbcgrade.color.grading import grade_encoded
+
+    styles = load_style_folder(style_dir, fast_options.transfer.bins)
+    given = GradeOptions(fast_options.fit, fast_options.transfer, weights=parse_weights("0,1,0,1"))
+    grade, fit = grade_encoded(rgb, styles, given, ColorEncoding.of())
+    assert fit.start == "given" and "evaluations" not in grade.info["fit"]
+    assert grade.loss == pytest.approx(fit.loss) and fit.loss > 0  # the given weights' loss
     np.testing.assert_allclose(grade.weights, [0, 0.5, 0, 0.5])
-    fast_options.weights = [0.5, 0.5]
     with pytest.raises(InputError, match="2 numbers for 4 styles"):
-        grade_image(rgb, styles, fast_options)
+        grade_of(rgb, styles, GradeOptions(fast_options.fit, weights=[0.5, 0.5]))
 
 
 @pytest.mark.parametrize("text", ["a,b", "", "-1,2", "0,0"])
@@ -116,7 +124,12 @@ def test_bad_weights(text):
 
 def test_render_grey_and_alpha(tmp_path, rng):
     warm = identity_map(9) * np.array([1.0, 0.8, 0.6], np.float32)
-    grade = Grade(names=["w"], weights=np.ones(1), loss=None, color_map=warm)
+    grade = Grade(names=("w",), weights=np.ones(1), color_map=warm)
+    srgb = ColorEncoding.of()
+
+    def render(image, grade):
+        return graded_pixels(image, grade, srgb)
+
     grey_alpha = rng.random((5, 6, 2)).astype(np.float32)
     image = read_image(write_array(tmp_path / "ga.png", grey_alpha, "uint16"))
     pixels, alpha = render(image, grade)

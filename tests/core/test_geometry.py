@@ -144,7 +144,7 @@ def test_shifted_log_apply_matches_the_per_entry_log_sum_exp(shape, width, rng):
 
 def test_every_pass_of_the_shifted_product_is_exact(rng):
     """A line with one huge value at one end: pass 2 (per block) and pass 3 (per entry) run."""
-    import wbcgrade.core.geometry as geometry_module
+    import wbcgrade.core.geometry.logsum as geometry_module
 
     geom = GridGeometry.with_width(64, 0.5)
     f = np.full((2, 64), -np.inf)
@@ -173,7 +173,7 @@ def test_signed_log_apply_matches_both_parts(rng):
     f = _steep_log_values(shape, rng)
     signs = rng.choice([-1.0, 1.0], f.shape)
     signs[f == -np.inf] = 0.0
-    log_abs, sign = geom._signed_log_apply(f, signs)
+    log_abs, sign = geom.signed_log_apply(f, signs)
     pos = geom._log_apply_direct(np.where(signs > 0, f, -np.inf))
     neg = geom._log_apply_direct(np.where(signs < 0, f, -np.inf))
     top = np.maximum(pos, neg)
@@ -186,28 +186,54 @@ def test_signed_log_apply_matches_both_parts(rng):
 
 
 @pytest.mark.parametrize("shape, width", [((200,), 0.4), ((9, 10), 0.5), ((14, 13, 12), 0.5)])
-def test_shifted_log_apply_in_place_equals_out_of_place(shape, width, rng):
+def test_log_apply_in_place_equals_out_of_place(shape, width, rng):
     """Written over its input (as the log-domain barycenter does), signed or not."""
     geom = GridGeometry.with_width(shape, width)
     f = _steep_log_values(shape, rng)
     signs = rng.choice([-1.0, 1.0], f.shape)
     signs[f == -np.inf] = 0.0
-    expected, _ = geom._shifted_log_apply(f, None)
+    expected = geom.log_apply(f)
     if geom.ndim == 1:  # one axis: the passes that re-read the input ran
         assert geom.last_log_repairs > 0
-    expected_abs, expected_signs = geom._shifted_log_apply(f, signs)
+    expected_abs, expected_signs = geom.signed_log_apply(f, signs)
 
     x = f.copy()
-    got, _ = geom._shifted_log_apply(x, None, out=x)
+    got = geom.log_apply_into(x, x)
     assert got is x
     np.testing.assert_array_equal(got, expected)
     x, s = f.copy(), signs.copy()
-    got_abs, got_signs = geom._shifted_log_apply(x, s, out=x, out_signs=s)
+    got_abs, got_signs = geom.signed_log_apply(x, s, out=x, out_signs=s)
     assert got_abs is x and got_signs is s
     np.testing.assert_array_equal(got_abs, expected_abs)
     np.testing.assert_array_equal(got_signs, expected_signs)
     with pytest.raises(ValueError, match="out must be"):
-        geom._shifted_log_apply(f, None, out=np.empty(f.shape, np.float32))
+        geom.log_apply_into(f, np.empty(f.shape, np.float32))
+
+
+def test_default_capabilities_of_a_dense_geometry_agree_with_the_grid(rng):
+    """The base class's defaults (signed product from two parts, one histogram at a
+    time, into an array) give a grid's exact answers on the same kernel."""
+    grid = GridGeometry.with_width((7, 6), 0.8)
+    dense = DenseGeometry(grid.cost_matrix(), grid.gamma)
+    assert not dense.log_per_histogram and dense.log_apply_rate is None
+    assert dense.separable_factors() is None and not dense.is_grid
+    with pytest.raises(TypeError, match="not a regular grid"):
+        dense.with_grid((4,), 0.1)
+    f = _steep_log_values(grid.shape, rng)
+    signs = rng.choice([-1.0, 1.0], f.shape)
+    signs[f == -np.inf] = 0.0
+    flat, flat_signs = f.reshape(len(f), -1), signs.reshape(len(f), -1)
+    got_abs, got_signs = dense.signed_log_apply(flat, flat_signs)
+    ref_abs, ref_signs = grid.signed_log_apply(f, signs)
+    live = np.isfinite(ref_abs.reshape(flat.shape))
+    np.testing.assert_allclose(got_abs[live], ref_abs.reshape(flat.shape)[live], rtol=1e-10)
+    np.testing.assert_array_equal(got_signs[live], ref_signs.reshape(flat.shape)[live])
+    out = np.empty(dense.shape)
+    assert dense.log_apply_one(flat[0], out) == 0
+    np.testing.assert_allclose(out, grid.log_apply(f[0]).ravel(), rtol=1e-12)
+    assert grid.with_grid((4, 5), 0.1).shape == (4, 5)
+    kernels = grid.separable_factors()
+    assert [k.shape for k, _ in kernels] == [(7, 7), (6, 6)]
 
 
 @pytest.mark.parametrize("shape", [(200,), (14, 13, 12)])
@@ -217,7 +243,7 @@ def test_a_product_needed_on_a_subset_is_exact_there_and_repairs_less(shape, rng
     for f in _steep_log_values(shape, rng):
         needed = rng.random(shape) < 0.2
         full, part = np.empty(shape), np.empty(shape)
-        all_repairs += geom._log_apply_one(f, full)
-        some_repairs += geom._log_apply_one(f, part, needed=needed)
+        all_repairs += geom.log_apply_one(f, full)
+        some_repairs += geom.log_apply_one(f, part, needed=needed)
         np.testing.assert_allclose(part[needed], full[needed], rtol=1e-14)  # to rounding
     assert all_repairs > 0 and some_repairs < all_repairs

@@ -43,7 +43,7 @@ def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     record = json.loads(result.stdout)
     assert set(record["weights"]) == {"box", "sphere", "torus"}
     assert sum(record["weights"].values()) == pytest.approx(1.0)
-    assert record["loss"] == "kl_reverse" and record["watertight"]
+    assert record["loss"] == "kl_observed" and record["watertight"]
     mesh = trimesh.load(out, force="mesh")
     assert mesh.is_watertight
     assert np.load(tmp_path / "done.npy").shape == (12, 12, 12)
@@ -127,3 +127,16 @@ def test_output_never_overwrites_an_input(tmp_path, database, partial):
     target = database / "box.off"
     result = _run(["complete", str(partial), "-d", str(database), "-o", str(target), *FAST])
     _assert_one_line_error(result, "overwrite")
+
+
+def test_without_the_shape_extra_a_one_line_hint(monkeypatch, tmp_path):
+    """trimesh and scikit-image are the ``shape`` extra: a base install says how to add
+    them instead of failing with an ImportError traceback."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "trimesh", None)  # as if not installed
+    result = CliRunner().invoke(main, ["shape", "project", str(tmp_path / "v.npy"),
+                                       str(tmp_path)])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert result.output.strip() == ("Error: wbcgrade shape needs trimesh: "
+                                     "pip install 'wbcgrade[shape]'")

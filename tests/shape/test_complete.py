@@ -72,16 +72,17 @@ def test_slab_cut_from_a_barycenter_is_completed():
     occupancy[cut:] = 0.0
     partial = VoxelShape("partial", occupancy, np.eye(4), 0.0)
 
-    completion = complete_shape(partial, database, n_iter=n_iter, max_iter=10)
-    completed = completion.projection.barycenter > completion.level
+    # The partial is in the database's frame already: no placement.
+    completion = complete_shape(partial, database, n_iter=n_iter, max_iter=10, place=False)
+    completed = completion.shape > 0.5
     iou_partial = intersection_over_union(occupancy > 0.5, full)
     iou_completed = intersection_over_union(completed, full)
     assert iou_completed > iou_partial + 0.05, (iou_partial, iou_completed)
     assert completion.projection.weights.sum() == pytest.approx(1.0)
     assert 0.0 < completion.projection.missing <= 0.9  # estimated from the volumes
 
-    euclidean = complete_shape(partial, database, euclidean=True, max_iter=10)
-    mixed = euclidean.projection.barycenter > euclidean.level
+    euclidean = complete_shape(partial, database, euclidean=True, max_iter=10, place=False)
+    mixed = euclidean.shape > 0.5
     assert euclidean.projection.weights.min() >= 0
     assert euclidean.projection.weights.sum() == pytest.approx(1.0)
     assert iou_completed > intersection_over_union(mixed, full)

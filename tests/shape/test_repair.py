@@ -38,7 +38,7 @@ def cow_with_holes(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def database():
-    return [load_shape(SAMPLES / name, 20) for name in DATABASE]
+    return [load_shape(SAMPLES / name, 20, keep_mesh=True) for name in DATABASE]
 
 
 def test_winding_numbers_tree_matches_exact_sum_and_closes_holes():
@@ -88,7 +88,7 @@ def test_cut_and_capped_mesh_is_voxelised(database):
 @pytest.mark.parametrize("source", ["holes", "cut"])
 def test_completion_ranks_the_source_shape_first(source, cow_with_holes, database):
     path, expected = (cow_with_holes, "cow") if source == "holes" else (CUT, "elephant")
-    partial = load_shape(path, 20, warn=lambda message: None)
+    partial = load_shape(path, 20, warn=lambda message: None, keep_mesh=True)
     completion = complete_shape(partial, database, n_iter=30, max_iter=5)
     projection = completion.projection
     assert projection.names[projection.order()[0]] == expected, dict(

@@ -33,6 +33,7 @@ def test_complete_mesh_file_reports_progress_and_files(tmp_path):
     assert sorted(result.projection.names) == ["box", "sphere", "torus"]
     record = result.as_dict()
     assert record["mesh_file"] == str(tmp_path / "done.obj") and not record["missing_estimated"]
+    assert record["missing"] == 0.1  # given explicitly: not estimated, even after placing
     assert all((tmp_path / name).exists() for name in ("done.obj", "done.npy", "done.png"))
     with pytest.raises(InputError, match="would overwrite an input"):
         complete_mesh_file(partial, [folder], output=tmp_path / "x.obj",

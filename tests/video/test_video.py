@@ -230,29 +230,31 @@ def _json(result) -> dict:
     return json.loads(result.output[result.output.index("{"):])
 
 
-def test_default_spaces_run_the_code_of_before_colour_management(clips, tmp_path):
-    from wbcgrade.color.grading import PaletteSum, series_grade
-    from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import encode_for_grading
+def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
+    """A shot's grade is the one grade path of photos on its frames' pooled palette, and its
+    LUT the map sampled at the LUT's nodes (sRGB footage graded in sRGB)."""
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.grading import PhotoHistograms, grade_histograms, photo_histograms
+    from wbcgrade.color.histogram import PaletteSum
     from wbcgrade.color.lut import color_map_to_lut
+    from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import load_preset, resolve_preset
-    from wbcgrade.color.transfer import GradeOptions
     from wbcgrade.video.workflow import VideoSettings, grade_video
 
     styles = load_preset(resolve_preset("warm"))
     opts = GradeOptions(bins=32, weights=[0.5, 0.3, 0.2], regrain=False)
     result = grade_video(clips["rgb"], tmp_path / "graded.mkv", styles, opts,
                          VideoSettings(codec="ffv1"))
-    assert result.spaces.legacy and result.as_dict()["color"]["default_path"]
-    assert result.spaces.input == result.spaces.working == "sRGB Encoded Rec.709 (sRGB)"
-    # the grade and LUT of before: sRGB-encoded samples, the map sampled at the LUT's nodes
+    encoding = result.encoding
+    assert encoding.input == encoding.working == "sRGB Encoded Rec.709 (sRGB)"
     shot = result.shots[0]
     pool_fit, pool = PaletteSum(), PaletteSum()
     for n in shot.samples:
-        encoded, _ = encode_for_grading(result.samples.frames[n].astype(np.float32) / 255, False)
-        pool_fit.add(image_histogram(encoded, opts.fit_bins, None, opts.max_pixels))
-        pool.add(image_histogram(encoded, opts.bins, None, opts.max_pixels))
-    before, _ = series_grade(pool_fit.result(), pool.result(), styles, opts)
+        hists = photo_histograms(result.samples.frames[n].astype(np.float32) / 255, opts)
+        pool_fit.add(hists.fit)
+        pool.add(hists.transfer)
+    before, _ = grade_histograms(PhotoHistograms(pool_fit.result(), pool.result()), styles,
+                                 opts, ColorEncoding.of())
     assert np.array_equal(shot.grade.color_map, before.color_map)
     assert np.array_equal(shot.table, color_map_to_lut(before.color_map, 33).astype(np.float32))
 
@@ -264,7 +266,7 @@ def test_explicit_srgb_spaces_equal_the_default(clips, tmp_path):
         out, lut = tmp_path / f"{name}.mkv", tmp_path / f"{name}.cube"
         document = _json(run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS,
                              "--lut", lut, "--json", *spaces))
-        assert document["color"]["default_path"] is True
+        assert document["color"]["input_space"] == document["color"]["working_space"]
         outputs[name] = frames(out), read_cube(lut).table
     assert np.array_equal(outputs["default"][0], outputs["srgb"][0])
     assert np.array_equal(outputs["default"][1], outputs["srgb"][1])
@@ -284,7 +286,7 @@ def test_acescct_working_space_bakes_the_lut_in_the_clips_encoding(clips, acescc
     out, lut, color = acescct["output"], acescct["lut"], acescct["json"]["color"]
     assert (color["input_space"], color["working_space"]) == ("sRGB Encoded Rec.709 (sRGB)",
                                                               "ACEScct")
-    assert color["default_path"] is False and color["styles_space"] == "ACEScct"
+    assert color["styles_space"] == "ACEScct"
     assert color["ocio_config"] and color["ocio_version"]
     header = [ln for ln in lut.read_text().splitlines() if ln.startswith("#")]
     assert any("input space: sRGB Encoded Rec.709" in ln for ln in header)
@@ -301,24 +303,30 @@ def test_acescct_working_space_bakes_the_lut_in_the_clips_encoding(clips, acescc
     assert np.abs(after - before).mean() > 5 / 255  # that did grade
 
 
-def test_bake_lut_is_the_grade_through_the_working_space_and_back():
-    from wbcgrade.color.colorspace import from_working, to_working
+def test_a_grades_lut_in_the_clips_encoding_goes_through_the_working_space_and_back():
+    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.options import SpaceOptions
     from wbcgrade.color.remap import identity_map
     from wbcgrade.video.ffmpeg import VideoInfo
-    from wbcgrade.video.spaces import bake_lut, plan_clip_spaces
+    from wbcgrade.video.spaces import clip_encoding
 
     info = VideoInfo(Path("pq.mkv"), 64, 48, 25.0, "gbrp10le", "pc", "gbr", "bt2020",
                      "smpte2084", 12, 0.48)
-    spaces = plan_clip_spaces(info, None, "acescct")
-    assert (spaces.input, spaces.source) == ("Rec.2100-PQ - Display", "tags smpte2084/bt2020")
+    encoding = clip_encoding(info, SpaceOptions(working="acescct"))
+    assert (encoding.input, encoding.source) == ("Rec.2100-PQ - Display",
+                                                 "tags smpte2084/bt2020")
+
+    def grade(color_map):
+        return Grade(("a",), np.ones(1), color_map, working=encoding.working)
+
     identity = identity_map(9)
-    assert np.array_equal(bake_lut(identity, spaces, 17), identity_map(17))  # exactly
+    assert np.array_equal(grade(identity).lut(17, encoding), identity_map(17))  # exactly
     # a grade in ACEScct: a little less contrast, warmer
     warm = 0.5 + (identity_map(9) - 0.5) * np.float32(0.9) + np.float32([0.02, 0.0, -0.02])
-    table = bake_lut(warm, spaces, 33)
+    table = grade(warm).lut(33, encoding)
     x = np.random.default_rng(1).random((5000, 3)).astype(np.float32) * 0.8  # to 4000 cd/m²
-    working, state = to_working(x, spaces, False)
-    exact = np.clip(from_working(apply_color_map(working, warm), state), 0, 1)
+    working, state = encoding.encode(x)
+    exact = np.clip(encoding.decode(apply_color_map(working, warm), state), 0, 1)
     error = np.abs(apply_color_map(x, table) - exact)  # the 33³ LUT's interpolation
     assert error.max() < 8e-3 and error.mean() < 3e-4, (error.max(), error.mean())  # 5e-3, 1.4e-4
     middle = np.all((x > 0.2) & (x < 0.75), axis=1)  # no channel near PQ's steep toe

@@ -17,13 +17,12 @@ import warnings
 import click
 
 from wbcgrade import __version__
-from wbcgrade.errors import WbcgradeError
+from wbcgrade.errors import OptionError, WbcgradeError, first_line
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Library warnings (e.g. a solve stopping above its tolerance) as one line each."""
-    text = str(message).strip().splitlines()[0] if str(message).strip() else category.__name__
-    click.echo(f"Warning: {text}", err=True)
+    click.echo(f"Warning: {first_line(message, category.__name__)}", err=True)
 
 
 class _Group(click.Group):
@@ -39,8 +38,11 @@ class _Group(click.Group):
             click.echo("Interrupted.", err=True)
             sys.exit(130)
         except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
-            message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            click.echo(f"Error: {message}", err=True)
+            if isinstance(exc, OptionError):  # a library field -> the flag that sets it
+                from wbcgrade.cli.grading_options import flag_error
+
+                exc = flag_error(exc)
+            click.echo(f"Error: {first_line(exc)}", err=True)
             sys.exit(1)
 
 

@@ -1,10 +1,9 @@
-"""Progress bars shared by the commands, and loading styles under one."""
+"""Progress bars shared by the commands (tqdm), handed to the library as callbacks."""
 
 from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
-from typing import Any
 
 from tqdm import tqdm
 
@@ -23,15 +22,23 @@ def style_progress() -> Iterator[Callable[[int, int, str], None]]:
         yield progress
 
 
-def load_styles_with_bar(opts: Any, style_args: dict, warn: Callable[[str], None]) -> Any:
-    """The style set named by a command's options, with a bar over style photos.
+def bar_callbacks(bar: tqdm) -> dict:
+    """``styles``, ``fit`` and ``stage`` callbacks drawing on one bar: style photos read,
+    then the fit's evaluations and each stage's name."""
+    def on_styles(done: int, total: int, name: str) -> None:
+        bar.set_description("style photos")
+        bar.total = total
+        bar.n = done
+        bar.set_postfix_str(name)
+        bar.refresh()
 
-    ``opts`` is the command's GradeOptions (bins, working space), ``style_args``
-    what :func:`wbcgrade.cli.grading_options.take_grading_options` returned.
-    """
-    from wbcgrade.color.pipeline import load_styles
+    def on_fit(n_eval, weights, value) -> None:
+        bar.update(1)
+        bar.set_postfix(loss=f"{value:.4g}")
 
-    with style_progress() as progress:
-        return load_styles(style_args["style_dir"], style_args["preset"], opts.bins,
-                           cache=style_args["cache"], warn=warn, progress=progress,
-                           working_space=opts.working_space)
+    def on_stage(name: str) -> None:
+        if name in ("read", "fit"):
+            bar.reset(total=None)
+        bar.set_description(name)
+
+    return {"styles": on_styles, "fit": on_fit, "stage": on_stage}

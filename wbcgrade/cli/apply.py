@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import click
 
@@ -35,9 +34,7 @@ def _print_report(report, as_json: bool) -> None:
         click.echo(f"{name:<{width}}  {weight:6.3f}")
     fit = grade.info.get("fit", {})
     start = report.fit_start
-    if grade.loss is None:
-        click.echo("loss: - (weights given with --weights)")
-    elif start == "given":
+    if start == "given":
         click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
     else:
         how = {"uniform": "fitted from uniform weights",
@@ -84,36 +81,17 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     """
     from tqdm import tqdm
 
-    from wbcgrade.cli._progress import load_styles_with_bar
-    from wbcgrade.color.pipeline import check_outputs, grade_file
+    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.color.apply import apply_photo
+    from wbcgrade.color.workflow import Progress
 
-    opts, style_args = take_grading_options(kwargs)
-    if opts.fit_bins > 32:
-        _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes (default 16)")
-    check_outputs(photo, output, lut, lut_size, overwrite, lut_format)
-    if lut is not None and lut_format == "clf":
-        from wbcgrade.color.lut import check_clf_support
-
-        check_clf_support()  # before any work
-    start = time.perf_counter()
-    styles = load_styles_with_bar(opts, style_args, _warn)
-    timings = {"styles": time.perf_counter() - start}
-
-    with tqdm(desc="fit", unit="eval", disable=None, leave=False) as bar:
-        def on_fit(n_eval, weights, value):
-            bar.update(1)
-            bar.set_postfix(loss=f"{value:.4g}")
-
-        def on_stage(name):
-            bar.set_description(name)
-
-        report = grade_file(photo, styles, opts, output=output, lut=lut, lut_size=lut_size,
-                            overwrite=overwrite, fit_callback=on_fit, stage=on_stage,
-                            timings=timings, lut_format=lut_format)
+    options, source = take_grading_options(kwargs)
+    if options.fit.bins > 32:
+        _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
+    with tqdm(desc="styles", disable=None, leave=False) as bar:
+        progress = Progress(warn=_warn, **bar_callbacks(bar))
+        report = apply_photo(photo, source, options, output, lut, lut_size, lut_format,
+                             overwrite, report_dir, progress)
     _print_report(report, as_json)
-    if report_dir is not None:
-        from wbcgrade.color.report import report_from_grade
-
-        written = report_from_grade(report_dir, report, styles, opts)
-        if not as_json:
-            click.echo(f"report: {written}")
+    if report.report is not None and not as_json:
+        click.echo(f"report: {report.report}")

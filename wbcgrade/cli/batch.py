@@ -1,9 +1,9 @@
-"""``wbcgrade batch``: grade every photo of a folder (and the runner ``report`` shares)."""
+"""``wbcgrade batch``: grade every photo of a folder (and the progress bars ``report`` shares)."""
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
+import contextlib
+from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import click
@@ -17,52 +17,27 @@ from wbcgrade.cli.grading_options import (
     space_options,
     take_grading_options,
 )
-from wbcgrade.errors import InputError
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
-    from wbcgrade.color.batch import BatchPlan, BatchResult
-    from wbcgrade.color.presets import StyleSet
-    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.color.batch import BatchProgress, BatchResult
+    from wbcgrade.color.options import GradeOptions
 
 
 def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
 
 
-def load_styles_with_progress(opts: GradeOptions, style_args: dict) -> StyleSet:
-    """Load the style set with a progress bar over style photos."""
-    from wbcgrade.cli._progress import load_styles_with_bar
-
-    if opts.fit_bins > 32:
-        _warn(f"--fit-bins {opts.fit_bins}: fits on large grids take minutes per photo "
-              "(default 16)")
-    styles = load_styles_with_bar(opts, style_args, _warn)
-    opts.validate(len(styles.names))
-    return styles
-
-
-def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
-                      consistent: bool, jobs: int, scheduler: str | None,
-                      report_dir: str | None, write_outputs: bool) -> BatchResult:
-    """Run a batch with a tqdm bar over files (and one over the fit stages in-process)."""
+@contextlib.contextmanager
+def batch_progress() -> Iterator[BatchProgress]:
+    """Two tqdm bars: photos (with the failures counted), and the fit stages of the work
+    done in this process (or the series' palettes being read)."""
     from tqdm import tqdm
 
-    from wbcgrade.color.batch import BatchContext, run_batch
+    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.color.batch import BatchProgress
 
-    if jobs < 1:
-        raise InputError("--jobs must be at least 1")
-    context = BatchContext(styles=styles, opts=opts,
-                           sheet_dir=None if report_dir is None else Path(report_dir),
-                           write_outputs=write_outputs)
-    if report_dir is not None:
-        from wbcgrade.color.report import style_pictures
-
-        Path(report_dir).mkdir(parents=True, exist_ok=True)
-        context.style_pictures = style_pictures(styles)
-    total = len(plan.tasks) + len(plan.done)
-    local = scheduler is None and jobs == 1
-    with tqdm(total=total, desc="photos", unit="photo", disable=None, position=0) as files, \
-            tqdm(desc="fit", unit="eval", disable=None, leave=False, position=1) as fit_bar:
+    with tqdm(desc="photos", unit="photo", disable=None, position=0) as files, \
+            tqdm(desc="styles", disable=None, leave=False, position=1) as bar:
         failed = []
 
         def on_result(result):
@@ -71,26 +46,24 @@ def run_with_progress(plan: BatchPlan, styles: StyleSet, opts: GradeOptions, *,
                 files.set_postfix(failed=len(failed), refresh=False)
             files.update(1)
 
-        def on_fit(n_eval, weights, value):
-            fit_bar.update(1)
-            fit_bar.set_postfix(loss=f"{value:.4g}")
+        def on_planned(total):
+            files.total = total
+            files.refresh()
 
         def on_read(done, total):
-            fit_bar.set_description("palettes")
-            fit_bar.total = total
-            fit_bar.n = done
-            fit_bar.refresh()
+            bar.set_description("palettes")
+            bar.total = total
+            bar.n = done
+            bar.refresh()
 
-        def on_stage(name):
-            if name in ("read", "fit"):
-                fit_bar.reset()
-            fit_bar.set_description(name)
+        yield BatchProgress(warn=_warn, planned=on_planned, result=on_result, read=on_read,
+                            **bar_callbacks(bar))
 
-        return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
-                         on_result=on_result,
-                         fit_callback=on_fit if local or consistent else None,
-                         stage=on_stage if local or consistent else None,
-                         on_read=on_read)
+
+def warn_fit_bins(options: GradeOptions) -> None:
+    if options.fit.bins > 32:
+        _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes per photo "
+              "(default 16)")
 
 
 def print_summary(result: BatchResult, verb: str = "graded") -> None:
@@ -151,79 +124,25 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     and failed writes (e.g. a full disk) are reported and make the exit
     status 1.
     """
-    from wbcgrade._publish import lock_folder
-    from wbcgrade.color.batch import (
-        batch_settings,
-        plan_batch,
-        recheck_plan,
-        settings_changed,
-        write_settings,
-    )
-    from wbcgrade.color.imageio import check_output_path
-    from wbcgrade.color.lut import check_clf_support, check_lut_path, write_grade_lut
+    from wbcgrade.color.batch import grade_folder
 
     if force_alias:
         _warn("--force is deprecated; use --overwrite")
-    overwrite = overwrite or force_alias
-    opts, style_args = take_grading_options(kwargs)
+    options, source = take_grading_options(kwargs)
+    warn_fit_bins(options)
+    with batch_progress() as progress:
+        result = grade_folder(in_dir, out_dir, source, options, recursive=recursive,
+                              consistent=consistent, overwrite=overwrite or force_alias,
+                              jobs=jobs, scheduler=scheduler, report_dir=report_dir, lut=lut,
+                              lut_size=lut_size, lut_format=lut_format, progress=progress)
+    if result.report is not None:
+        click.echo(f"report: {result.report.parent / 'index.html'}")
+    print_summary(result)
     if lut is not None:
-        if not consistent:
-            raise InputError("--lut needs --consistent (one grade for the series); per-photo "
-                             "LUTs come from `wbcgrade apply --lut`")
-        check_lut_path(lut, lut_format)
-        if lut_format == "clf":
-            check_clf_support()
-        if Path(lut).exists() and not overwrite:
-            raise InputError(f"{lut}: file exists (use --overwrite to replace it)")
-        check_output_path(lut, overwrite=True)  # folder, writability, a regular file
-        if not 2 <= lut_size <= 256:
-            raise InputError("--lut-size must be between 2 and 256")
-    plan = plan_batch(in_dir, out_dir, recursive=recursive, overwrite=overwrite,
-                      exclude=[report_dir] if report_dir else [])
-    if not plan.tasks and not plan.done:
-        raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
-                                                         " (use --recursive for sub-folders)"))
-    try:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
-    with lock_folder(out_dir, "batch"):  # one run at a time per output folder
-        plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
-        start = time.perf_counter()
-        styles = load_styles_with_progress(opts, style_args)
-        settings = batch_settings(styles, opts, consistent)
-        changed = settings_changed(out_dir, settings)
-        if changed and plan.done:
-            _warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
-                  f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite to redo "
-                  "them")
-        result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
-                                   scheduler=scheduler, report_dir=report_dir,
-                                   write_outputs=True)
-        if result.count("graded"):
-            write_settings(out_dir, settings)
-        result.time_s = time.perf_counter() - start
-        if report_dir is not None:
-            from wbcgrade.color.report import write_report
-
-            path = write_report(report_dir, result, styles, opts,
-                                "consistent" if consistent else "per-photo")
-            click.echo(f"report: {path.parent / 'index.html'}")
-        print_summary(result)
-        if lut is not None:
-            grade = result.series_grade
-            if grade is None:
-                click.echo("LUT not written: no photo was graded (use --overwrite to redo the "
-                           "series)")
-            else:
-                from wbcgrade.color.colorspace import spaces_for
-
-                ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-                write_grade_lut(lut, grade.color_map, spaces_for(None, opts.working_space),
-                                lut_size, grade.strength, lut_format,
-                                title=f"wbcgrade series {Path(in_dir).name}",
-                                comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
-                                overwrite=True)
-                click.echo(f"wrote {lut}")
+        if result.lut is None:
+            click.echo("LUT not written: no photo was graded (use --overwrite to redo the "
+                       "series)")
+        else:
+            click.echo(f"wrote {lut}")
     if result.count("failed"):
         ctx.exit(1)

@@ -1,12 +1,15 @@
 """Click options shared by the commands that grade photos (``apply``, ``batch``, ``report``).
 
-One list of options, names, defaults and help for ``apply``, ``batch`` and
-``report``. Their defaults come from the colour library (``GradeOptions``),
-whose import pulls in the core and numba; so that ``wbcgrade --help`` imports
-neither, the options are built the first time a command needs its parameters
-(its own ``--help``, or a run): :func:`grading_options` leaves a placeholder
-that :class:`LazyOptionsCommand` expands (:func:`lazy_options` does the same
-for any option with a heavy default).
+One list of options, names, defaults and help for ``apply``, ``batch``,
+``report`` and ``video``. Each maps to one field of the colour library's
+option groups (:data:`FLAGS`: ``--bins`` is ``transfer.bins``, ``--relax``
+``transfer.relaxation``, ...); their defaults are read from the groups'
+fields (``wbcgrade.color.options``, light: no numpy), and the options are
+made and validated once, by :func:`take_grading_options`, whose errors name
+the flag. Options whose defaults live in heavy modules are built the first
+time a command needs its parameters (its own ``--help``, or a run):
+:func:`grading_options` leaves a placeholder that :class:`LazyOptionsCommand`
+expands (:func:`lazy_options` does the same for any option).
 """
 
 from __future__ import annotations
@@ -16,10 +19,12 @@ import click
 
 def _options() -> list:
     """The grading options (click decorators), in the order ``--help`` shows them."""
-    from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS
-    from wbcgrade.color.transfer import LOSSES, MODES, GradeOptions
+    from types import SimpleNamespace
 
-    _DEFAULTS = GradeOptions()
+    from wbcgrade.color.imageio import DEFAULT_MAX_IMAGE_PIXELS
+    from wbcgrade.color.options import LOSSES, MODES, flat_defaults
+
+    _DEFAULTS = SimpleNamespace(**flat_defaults())
     _OPTIONS = [
         click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
                      help="Folder of style photos (non-images are skipped)."),
@@ -131,14 +136,39 @@ def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int
     return value
 
 
-#: Options that are GradeOptions fields of the same name.
+#: Options whose parameter is the flat name of an option field (wbcgrade.color.options).
 _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "n_iter",
                "max_iter", "strength", "relaxation", "map_size", "smoothness", "stiffness",
                "monotone", "regrain", "regrain_radius", "regrain_eps", "preserve_luminance",
                "mode", "natural")
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
-#: Options of :data:`space_options` (GradeOptions fields of the same name).
+#: Options of :data:`space_options` (fields ``spaces.input`` and ``spaces.working``).
 _SPACE_KEYS = ("input_space", "working_space")
+
+#: Option field (``group.field``) or library setting -> the flag that sets it.
+FLAGS = {
+    "fit.bins": "--fit-bins", "fit.loss": "--loss", "fit.width": "--width",
+    "fit.gamma": "--gamma", "fit.n_iter": "--iterations", "fit.max_iter": "--max-iter",
+    "fit.weights": "--weights", "transfer.bins": "--bins", "transfer.width": "--transfer-width",
+    "transfer.relaxation": "--relax", "map.size": "--map-size", "map.smoothness": "--smoothness",
+    "map.stiffness": "--stiffness", "map.strength": "--strength", "map.builder": "--mode",
+    "map.natural": "--natural",
+    "regrain.radius": "--regrain-radius", "regrain.eps": "--regrain-eps",
+    "spaces.input": "--input-space", "spaces.working": "--working-space",
+    "lut_size": "--lut-size", "jobs": "--jobs", "codec": "--codec", "crf": "--crf",
+    "blend": "--blend-frames", "sample_every": "--sample-every",
+    "cut_threshold": "--cut-threshold",
+}
+
+
+def flag_error(error):
+    """An OptionError naming a library field -> the same error naming its flag."""
+    from wbcgrade.errors import OptionError
+
+    flag = FLAGS.get(getattr(error, "option", None))
+    if flag is None:
+        return error
+    return OptionError(str(error).replace(error.option, flag, 1), flag)
 
 
 class _Deferred:
@@ -226,16 +256,19 @@ def lut_size_option() -> list:
 
 
 def take_grading_options(kwargs: dict) -> tuple:
-    """Pop the grading options from a command's kwargs -> (GradeOptions, style arguments).
+    """Pop the grading options from a command's kwargs -> (GradeOptions, StyleSource).
 
-    The style arguments are ``style_dir``, ``preset`` and ``cache`` (a HistogramCache).
-    ``--input-space``/``--working-space`` (:data:`space_options`) are taken
-    when the command has them and resolved here (an unknown name is an
-    OptionError naming the valid ones, before any work).
+    The options are made (and validated) here, once for the run; an option
+    out of range is an OptionError naming its flag. ``--input-space`` and
+    ``--working-space`` (:data:`space_options`) are taken when the command
+    has them and resolved here (an unknown name is an OptionError naming the
+    valid ones, before any work).
     """
     from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.color.options import GradeOptions
+    from wbcgrade.color.presets import StyleSource
     from wbcgrade.color.weights import parse_weights
+    from wbcgrade.errors import OptionError
 
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
     spaces = {key: kwargs.pop(key, None) for key in _SPACE_KEYS}
@@ -245,8 +278,10 @@ def take_grading_options(kwargs: dict) -> tuple:
         spaces = {key: resolve_space(value, "--" + key.replace("_", "-")) if value else None
                   for key, value in spaces.items()}
     text = values["weights_text"]
-    opts = GradeOptions(**{key: values[key] for key in _PLAIN_KEYS},
-                        weights=parse_weights(text) if text else None, **spaces)
-    opts.validate()
+    try:
+        options = GradeOptions(**{key: values[key] for key in _PLAIN_KEYS},
+                               weights=parse_weights(text) if text else None, **spaces)
+    except OptionError as exc:
+        raise flag_error(exc) from None
     cache = HistogramCache(values["cache_dir"], enabled=not values["no_cache"])
-    return opts, {"style_dir": values["style_dir"], "preset": values["preset"], "cache": cache}
+    return options, StyleSource(values["style_dir"], values["preset"], cache)

@@ -43,23 +43,27 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
     content) moved through one smooth colour map (the look: tone curves and
     a colour matrix); the map is fitted to all style photos at once.
     """
+    import numpy as np
+
+    from wbcgrade._publish import plan_outputs
     from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.colorspace import spaces_for
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.grading import Grade
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.look import SET_LOOK_STRENGTH, natural_palettes, set_look_map
     from wbcgrade.color.lut import check_lut_path, write_grade_lut
-    from wbcgrade.color.pipeline import load_styles
-    from wbcgrade.color.presets import load_preset, styles_in_space
+    from wbcgrade.color.presets import StyleSource, load_preset, load_styles, styles_in_space
     from wbcgrade.errors import OptionError
 
     if (style_dir is None) == (preset is None):
-        raise OptionError("give either STYLE_DIR or --preset")
+        raise OptionError("give either STYLE_DIR or --preset", "--preset")
     check_lut_path(output, lut_format)
-    spaces = spaces_for(None, working_space, is_float=False)
+    output = plan_outputs([output], [], overwrite)[0]  # before any work
+    encoding = ColorEncoding.of(None, working_space).within_working()
+    source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
     with style_progress() as progress:
-        styles = load_styles(style_dir, preset, 32, cache=HistogramCache(enabled=not no_cache),
-                             warn=lambda m: click.echo(f"Warning: {m}", err=True),
-                             progress=progress, working_space=working_space)
+        styles = load_styles(source, 32, working_space,
+                             lambda m: click.echo(f"Warning: {m}", err=True), progress)
     naturals = load_preset(natural) if natural else natural_palettes()
     naturals = styles_in_space(naturals, styles.working_space)
     strength = SET_LOOK_STRENGTH if strength is None else strength
@@ -72,7 +76,9 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
             bar.refresh()
 
         lattice, info = set_look_map(styles, naturals, strength, lut_size, advance)
-    path = write_grade_lut(output, lattice, spaces, lut_size, 1.0, lut_format,
+    grade = Grade(tuple(styles.names), np.full(len(styles.names), 1.0 / len(styles.names)),
+                  lattice, working=encoding.working)
+    path = write_grade_lut(output, grade, encoding, lut_size, lut_format,
                            title="wbcgrade look", overwrite=overwrite,
                            comments=[f"look of {len(styles.names)} style photos"])
     if as_json:

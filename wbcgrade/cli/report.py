@@ -2,24 +2,15 @@
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import click
 
-from wbcgrade.cli.batch import load_styles_with_progress, print_summary, run_with_progress
+from wbcgrade.cli.batch import batch_progress, print_summary, warn_fit_bins
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     space_options,
     take_grading_options,
 )
-from wbcgrade.errors import InputError
-
-
-def _default_report_dir(target: Path) -> Path:
-    target = target.resolve()
-    return target.with_name(f"{target.stem if target.is_file() else target.name}_report")
 
 
 @click.command("report", cls=LazyOptionsCommand)
@@ -37,8 +28,11 @@ def _default_report_dir(target: Path) -> Path:
               help="Fit photos in N local processes.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Send the photos to a Dask distributed scheduler (needs wbcgrade[dask]).")
+@click.option("--overwrite", is_flag=True,
+              help="Replace the files of an existing report in the report folder.")
 @click.pass_context
-def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, **kwargs):
+def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, overwrite,
+           **kwargs):
     """Palette weight report of a photo or a folder of photos.
 
     Writes REPORT_DIR/report.json (per photo: the weights sorted with style
@@ -46,26 +40,15 @@ def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, **kw
     of weights >= 0.001, the time), weights.csv (one row a photo, one column a
     style), a PNG sheet per photo in sheets/ and index.html.
     """
-    from wbcgrade.color.batch import plan_batch
-    from wbcgrade.color.report import write_report
+    from wbcgrade.color.batch import report_folder
 
-    opts, style_args = take_grading_options(kwargs)
-    target_path = Path(target)
-    out = Path(report_dir) if report_dir else _default_report_dir(target_path)
-    plan = plan_batch(target_path, None, recursive=recursive, exclude=[out])
-    if not plan.tasks:
-        if target_path.is_file():
-            raise InputError(f"{target}: not an image file (by its extension)")
-        raise InputError(f"{target}: no photos found")
-    start = time.perf_counter()
-    styles = load_styles_with_progress(opts, style_args)
-    out.mkdir(parents=True, exist_ok=True)  # only once the styles are known to load
-    result = run_with_progress(plan, styles, opts, consistent=consistent, jobs=jobs,
-                               scheduler=scheduler, report_dir=str(out),
-                               write_outputs=False)
-    result.time_s = time.perf_counter() - start
-    path = write_report(out, result, styles, opts, "consistent" if consistent else "per-photo")
+    options, source = take_grading_options(kwargs)
+    warn_fit_bins(options)
+    with batch_progress() as progress:
+        result = report_folder(target, report_dir, source, options, recursive=recursive,
+                               consistent=consistent, overwrite=overwrite, jobs=jobs,
+                               scheduler=scheduler, progress=progress)
     print_summary(result, verb="reported")
-    click.echo(f"report: {path.parent / 'index.html'}")
+    click.echo(f"report: {result.report.parent / 'index.html'}")
     if result.count("failed"):
         ctx.exit(1)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from wbcgrade.shape.defaults import LOSS_NAMES
+from wbcgrade.shape.defaults import DEFAULT_COMPLETION_LOSS, DEFAULT_LOSS, LOSS_NAMES
 
 _LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
 
@@ -58,7 +58,11 @@ def _print_result(result, as_json: bool) -> None:
            if projection.n_coarse_evaluations else "")
         + f", {projection.time_s:.1f} s, "
         f"missing fraction {projection.missing:.3f}"
+        + (" (estimated)" if result.details.get("missing_estimated") else "")
     )
+    if "placed_on" in result.details:
+        click.echo(f"input placed on {result.details['placed_on']} "
+                   f"(scale {result.details['placement_scale']:.3f} of its own frame)")
     for key, value in result.details.items():
         if key.endswith("_file"):
             click.echo(f"wrote {value}")
@@ -71,7 +75,7 @@ _common_options = [
                  help="Voxels along the largest axis."),
     click.option("--missing", type=click.FloatRange(0.0, 0.95), default=None,
                  help="Fraction of the input's volume that is missing "
-                 "(complete: estimated when not given; project: 0)."),
+                 "(complete: estimated where the input is placed when not given; project: 0)."),
     click.option("--euclidean", is_flag=True,
                  help="Fit a linear mixture of the database instead (for comparison)."),
     click.option("--width", type=click.FloatRange(min=0.5), default=None,
@@ -97,23 +101,44 @@ def _with_common(function):
     return function
 
 
+#: What ``wbcgrade shape`` needs beyond the base install (the ``shape`` extra).
+SHAPE_EXTRA = ("trimesh", "skimage")
+
+
+def _check_shape_extra() -> None:
+    """One line, not a traceback, when the ``shape`` extra is not installed."""
+    import importlib.util
+
+    missing = [name for name in SHAPE_EXTRA if importlib.util.find_spec(name) is None]
+    if missing:
+        names = ", ".join("scikit-image" if name == "skimage" else name for name in missing)
+        raise click.ClickException(f"wbcgrade shape needs {names}: "
+                                   "pip install 'wbcgrade[shape]'")
+
+
 @click.group()
 def shape() -> None:
-    """Complete shapes and project volumes with Wasserstein barycenters."""
+    """Complete shapes and project volumes with Wasserstein barycenters.
+
+    Needs the ``shape`` extra: pip install 'wbcgrade[shape]' (trimesh, scikit-image).
+    """
+    _check_shape_extra()
 
 
 @shape.command()
 @click.argument("partial", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default="kl_reverse", show_default=True,
-              help="kl_reverse = KL(input|barycenter); kl = the paper's KL(barycenter|input).")
+@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_COMPLETION_LOSS, show_default=True,
+              help="kl_observed = KL(input|barycenter) on the input's voxels only; "
+                   "kl_reverse = on all voxels; kl = the paper's KL(barycenter|input).")
 @click.option("--align", is_flag=True,
               help="Align every mesh on its principal axes first, picking the axes' signs "
-                   "that overlap the input most (for databases of unaligned meshes).")
+                   "that overlap the input most, and fit a rotation when placing the input "
+                   "(for databases of unaligned meshes).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Completed mesh (.obj, .ply, .stl, .off); default PARTIAL_completed.obj.")
 @click.option("--volume", "volume_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Barycenter volume (.npy; default beside -o).")
+              default=None, help="Fitted density (.npy; default beside -o).")
 @click.option("--smooth", type=click.IntRange(min=0), default=10, show_default=True,
               help="Taubin smoothing passes on the surface.")
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
@@ -123,8 +148,12 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
              smooth, jobs) -> None:
     """Infer the missing geometry of the mesh PARTIAL from a database of meshes.
 
-    Writes the completed surface (-o), the barycenter volume (.npy) and a PNG
-    with views of the input, the completion and the heaviest database shapes.
+    PARTIAL is placed where it overlaps a database shape best (scale and
+    shift; rotation too with --align), the weights are fitted there, and the
+    completed surface (-o) is PARTIAL itself united with what the fitted
+    shape adds, in PARTIAL's own coordinates. Also writes the fitted density
+    (.npy) and a PNG: input and completion (added part in blue) and the
+    heaviest database shapes.
     """
     from tqdm import tqdm
 
@@ -161,7 +190,7 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
 @shape.command()
 @click.argument("volume", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default="kl_reverse", show_default=True,
+@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_LOSS, show_default=True,
               help="Loss between the barycenter and the input (the paper's MRIs: quadratic).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Fitted volume (.npy, .nii, .nii.gz); default VOLUME_projected.npy.")

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
-from pathlib import Path
 
 import click
 
@@ -25,15 +23,6 @@ def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
 
 
-def _default_output(source: str, codec: str) -> str:
-    from wbcgrade.video.workflow import CODECS
-
-    path = Path(source)
-    containers = CODECS[codec][1]
-    suffix = path.suffix.lower() if path.suffix.lower() in containers else containers[0]
-    return str(path.with_name(f"{path.stem}_graded{suffix}"))
-
-
 def _print_result(result, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(result.as_dict(), indent=2, default=float))
@@ -41,9 +30,12 @@ def _print_result(result, as_json: bool) -> None:
     info = result.info
     click.echo(f"{info.path.name}: {info.width}x{info.height}, {info.fps:.3f} fps, "
                f"{info.frames} frames, {info.pix_fmt}, {len(info.streams)} stream(s)")
-    spaces = result.spaces
-    if spaces is not None and not spaces.legacy:
-        click.echo(f"colour: {spaces.input} ({spaces.source}), graded in {spaces.working}")
+    encoding = result.encoding
+    from wbcgrade.color.colorspace import default_working_space
+
+    if encoding is not None and (encoding.input != encoding.working
+                                 or encoding.working != default_working_space()):
+        click.echo(f"colour: {encoding.input} ({encoding.source}), graded in {encoding.working}")
     for number, shot in enumerate(result.shots, start=1):
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked()[:6])
         where = (f"shot {number} (frames {shot.first}-{shot.last})" if len(result.shots) > 1
@@ -115,35 +107,22 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
     """
     from tqdm import tqdm
 
-    from wbcgrade.cli._progress import load_styles_with_bar
-    from wbcgrade.color.transfer import GradeOptions
-    from wbcgrade.video.workflow import VideoSettings, check_video_outputs, grade_video
+    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.color.options import flat_defaults
+    from wbcgrade.video.command import grade_clip
+    from wbcgrade.video.workflow import VideoProgress, VideoSettings
 
-    defaults = GradeOptions()
-    kwargs.update(regrain=False, regrain_radius=defaults.regrain_radius,
-                  regrain_eps=defaults.regrain_eps)
-    opts, style_args = take_grading_options(kwargs)
+    defaults = flat_defaults()  # a LUT has no regrain
+    kwargs.update(regrain=False, regrain_radius=defaults["regrain_radius"],
+                  regrain_eps=defaults["regrain_eps"])
+    options, source = take_grading_options(kwargs)
     settings = VideoSettings(per_shot=per_shot, sample_every=sample_every,
                              cut_threshold=cut_threshold, blend=blend_frames, codec=codec,
                              crf=crf, lut_size=lut_size)
-    output = output or _default_output(clip, codec)
-    check_video_outputs(clip, output, lut, settings, overwrite)  # before any work
-    if report_dir is not None:
-        from wbcgrade.errors import InputError
-
-        try:
-            Path(report_dir).mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise InputError(f"{report_dir}: cannot create the report folder "
-                             f"({exc.strerror})") from None
-    start = time.perf_counter()
-    styles = load_styles_with_bar(opts, style_args, _warn)
-    timings = {"styles": time.perf_counter() - start}
-
-    with tqdm(desc="scan", unit="frame", disable=None, leave=False) as bar:
+    with tqdm(desc="styles", disable=None, leave=False) as bar:
         current = {"pass": None}
 
-        def on_progress(name, done, total):  # one bar over frames, per ffmpeg pass
+        def on_frames(name, done, total):  # one bar over frames, per ffmpeg pass
             if current["pass"] != name:
                 current["pass"] = name
                 bar.reset(total=total)
@@ -151,21 +130,16 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
             bar.total = max(total, done)
             bar.update(done - bar.n)
 
-        def on_fit(n_eval, weights, value):
-            bar.set_postfix(loss=f"{value:.4g}", refresh=True)
+        callbacks = bar_callbacks(bar)
+        stage = callbacks.pop("stage")
 
         def on_stage(name):
             if name not in ("scan", "encode"):
-                bar.set_description(name)
-                bar.refresh()
+                stage(name)
 
-        result = grade_video(clip, output, styles, opts, settings, lut=lut, overwrite=overwrite,
-                             fit_callback=on_fit, stage=on_stage, progress=on_progress,
-                             timings=timings)
+        progress = VideoProgress(warn=_warn, frames=on_frames, stage=on_stage, **callbacks)
+        result = grade_clip(clip, output, source, options, settings, lut, overwrite,
+                            report_dir, progress)
     _print_result(result, as_json)
-    if report_dir is not None:
-        from wbcgrade.video.report import write_video_report
-
-        path = write_video_report(report_dir, result, styles)
-        if not as_json:
-            click.echo(f"report: {path}")
+    if result.report is not None and not as_json:
+        click.echo(f"report: {result.report}")

@@ -1,35 +1,57 @@
-"""Colour spaces: which space a photo is in, and the working space the grade lives in.
+"""Colour spaces: names, what a file says, the one conversion engine, and the encoding
+of a grade (:class:`ColorEncoding`).
 
 Everything goes through OpenImageIO's built-in OpenColorIO
-(``ImageBufAlgo.colorconvert``) with the config named by ``$OCIO``, else the
-library's built-in ``ocio://default`` (the ACES "CG" config). Space names
-are resolved through the config's own names, aliases and roles, and through
-a few short aliases of ours (``srgb``, ``display-p3``, ``adobe-rgb``,
-``acescg``, ``acescct``, ``linear-rec709``, ...), case-insensitively, so
-that the code does not depend on one release's spelling.
+(``ImageBufAlgo.colorconvert``, :func:`convert`) with the config named by
+``$OCIO``, else the library's built-in ``ocio://default`` (the ACES "CG"
+config). Space names are resolved through the config's own names, aliases
+and roles, and through a few short aliases of ours (``srgb``,
+``display-p3``, ``adobe-rgb``, ``acescg``, ``acescct``, ``linear-rec709``,
+...), case-insensitively, so that the code does not depend on one release's
+spelling.
 
-The grade's histograms live on the unit cube of the *working space*
-(docs/architecture.md, "Data flow"). A photo goes there and back as follows
-(:func:`to_working`, :func:`from_working`):
+A :class:`ColorEncoding` names the space of the pixels (``input``) and the
+space whose unit cube the histograms, the transport and the colour map live
+in (``working``); every conversion goes through one engine,
+OpenColorIO (:func:`convert`). The default pair
+(an sRGB photo graded in sRGB-encoded Rec.709, or a Linear Rec.709 EXR
+graded there) is one instance like any other.
 
-1. the default pair (an sRGB 8/16-bit file, or a Linear Rec.709 float file,
-   graded in sRGB-encoded Rec.709) runs today's code unchanged
-   (:func:`wbcgrade.color.imageio.encode_for_grading`): outputs are byte for
-   byte what they were before colour management;
-2. otherwise the pixels are converted by OpenColorIO from the input space
-   into the working space's *linear partner* (ACEScg for ACEScct/ACEScc,
-   Linear P3-D65 for sRGB-encoded P3, ...). Float pixels whose largest
-   channel m exceeds the partner's *peak* (the linear value the working
-   space encodes as 1: 1.0 for sRGB, ~222.9 for ACEScct) are divided by
-   m / peak, as today's exposure rule does for sRGB, and multiplied back
-   after grading: highlights keep their intensity, only their colour is
-   graded;
-3. what is still outside [0, 1] in the working space (out-of-gamut colours,
-   e.g. saturated P3 reds in sRGB, or negative values) is carried as a
-   residual: the grade sees the clipped colour and the residual is added
-   back to its result, so an identity grade returns every pixel unchanged;
-4. after grading the same steps run backwards, into the *input* space: the
+A photo goes there and back as follows (:meth:`ColorEncoding.encode`,
+:meth:`ColorEncoding.decode`):
+
+1. float pixels (EXR, float TIFF) are converted into the working space's
+   *linear partner* (Linear Rec.709 for sRGB, ACEScg for ACEScct/ACEScc,
+   Linear P3-D65 for sRGB-encoded P3, ...); a pixel whose largest channel m
+   exceeds the partner's *peak* (the linear value the working space encodes
+   as 1: 1.0 for sRGB, ~222.9 for ACEScct) is divided by m / peak and
+   multiplied back after grading: highlights keep their intensity, only
+   their colour is graded. Integer pixels are converted directly;
+2. what is still outside [0, 1] in the working space (out-of-gamut colours,
+   negative values) is carried as a residual: the grade sees the clipped
+   colour and the residual is added back to its result, so an identity
+   grade returns every pixel unchanged;
+3. after grading the same steps run backwards, into the *input* space: the
    written file keeps its space, its ICC profile and its metadata.
+
+The encoding also says what lightness means in the working space, for the
+map's finishing steps: :meth:`~ColorEncoding.to_oklab` (Oklab through the
+working space's own decoding and primaries, D65) and
+:attr:`~ColorEncoding.luma_weights` (the working encoding's luma).
+
+>>> import numpy as np
+>>> from wbcgrade.color.colorspace import ColorEncoding
+>>> srgb = ColorEncoding.of()                     # sRGB pixels in sRGB-encoded Rec.709
+>>> encoded, state = srgb.encode(np.array([[[0.2, 0.5, 0.9]]], np.float32))
+>>> np.allclose(srgb.decode(encoded, state), [[[0.2, 0.5, 0.9]]])
+True
+>>> cct = ColorEncoding.of("acescg", "acescct")   # linear ACEScg pixels, graded in ACEScct
+>>> hot = np.array([[[4.0, 2.0, 1.0]]], np.float32)
+>>> encoded, state = cct.encode(hot, float_values=True)
+>>> bool(np.all((encoded > 0) & (encoded < 1)))     # 4.0 is inside ACEScct's cube
+True
+>>> np.allclose(cct.decode(encoded, state), hot, rtol=1e-4)
+True
 """
 
 from __future__ import annotations
@@ -46,8 +68,6 @@ from wbcgrade.errors import InputError, OptionError
 __all__ = [
     "DEFAULT_CONFIG",
     "SHORT_ALIASES",
-    "Spaces",
-    "WorkingState",
     "config_path",
     "config_info",
     "space_names",
@@ -55,15 +75,13 @@ __all__ = [
     "canonical",
     "default_working_space",
     "detect_input_space",
-    "plan_spaces",
-    "spaces_for",
     "convert",
     "linear_partner",
     "is_logarithmic",
-    "to_working",
-    "from_working",
-    "icc_description",
-    "to_display",
+    "peak",
+    "ColorEncoding",
+    "WorkingState",
+    "SYCC_LUMA",
 ]
 
 #: The config used when ``$OCIO`` is not set: OpenColorIO's built-in default.
@@ -270,44 +288,29 @@ def convert(rgb: np.ndarray, source: str, target: str) -> np.ndarray:
     return np.asarray(out.get_pixels(oiio.FLOAT), dtype=np.float32).reshape(shape)
 
 
+def peak(linear: str, working: str) -> float:
+    """The largest grey value of ``linear`` that ``working`` encodes at or below 1
+    (1.0 for sRGB; about 222.9 for ACEScct over ACEScg)."""
+    return _peak(linear, working, config_path())
+
+
 @functools.lru_cache(maxsize=32)
 def _peak(linear: str, working: str, path: str) -> float:
-    """The largest grey value of ``linear`` that ``working`` encodes at or below 1."""
-    low, high = 1e-3, 1e5
-    for _ in range(2):  # a coarse ramp, then a fine one between its two samples around 1
-        ramp = np.geomspace(low, high, 4097)
-        grey = np.repeat(ramp[:, None], 3, axis=1)
-        encoded = convert(grey, linear, working).max(axis=1)
-        inside = np.flatnonzero(encoded <= 1.0 + 1e-6)
-        if len(inside) == 0:
-            return 1.0
-        if inside[-1] == len(ramp) - 1:
-            return float(ramp[-1])
-        low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
+    def encodes_inside(values: np.ndarray) -> np.ndarray:
+        grey = np.repeat(np.asarray(values, dtype=np.float64)[:, None], 3, axis=1)
+        return convert(grey, linear, working).max(axis=1) <= 1.0 + 1e-6
+
+    ramp = np.geomspace(1e-3, 1e5, 4097)  # a coarse ramp, then bisection between two samples
+    inside = np.flatnonzero(encodes_inside(ramp))
+    if len(inside) == 0:
+        return 1.0
+    if inside[-1] == len(ramp) - 1:
+        return float(ramp[-1])
+    low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
+    for _ in range(40):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if encodes_inside(np.array([middle]))[0] else (low, middle)
     return low
-
-
-def icc_description(profile: bytes) -> str:
-    """The description ('desc' tag, ICC v2 text or v4 'mluc') of an ICC profile, or ''."""
-    data = bytes(profile)
-    if len(data) < 132:
-        return ""
-    count = int.from_bytes(data[128:132], "big")
-    for i in range(min(count, 200)):
-        entry = data[132 + 12 * i:144 + 12 * i]
-        if len(entry) < 12 or entry[:4] != b"desc":
-            continue
-        offset, size = int.from_bytes(entry[4:8], "big"), int.from_bytes(entry[8:12], "big")
-        tag = data[offset:offset + size]
-        if tag[:4] == b"desc" and len(tag) >= 12:
-            length = int.from_bytes(tag[8:12], "big")
-            return tag[12:12 + length].split(b"\0")[0].decode("latin-1").strip()
-        if tag[:4] == b"mluc" and len(tag) >= 28:
-            rec_length = int.from_bytes(tag[20:24], "big")
-            rec_offset = int.from_bytes(tag[24:28], "big")
-            text = tag[rec_offset:rec_offset + rec_length]
-            return text.decode("utf-16-be", "replace").split("\0")[0].strip()
-    return ""
 
 
 def detect_input_space(image) -> tuple[str, str]:
@@ -323,9 +326,9 @@ def detect_input_space(image) -> tuple[str, str]:
     spec = image.spec
     table = _lookup(config_path())
     if not image.is_float:
-        attrib = spec.getattribute("ICCProfile")
-        if attrib is not None:
-            text = icc_description(np.asarray(attrib, dtype=np.uint8).tobytes())
+        # OpenImageIO decodes the profile's description tag (ICC v2 'desc', v4 'mluc').
+        text = spec.get_string_attribute("ICCProfile:profile_description", "").strip()
+        if spec.getattribute("ICCProfile") is not None:
             for key, short in _ICC_DESCRIPTIONS:
                 if key in text.lower() and canonical(short):
                     return canonical(short), f"ICC profile {text!r}"
@@ -344,70 +347,6 @@ def detect_input_space(image) -> tuple[str, str]:
             return table[_squash(value)], f"{name} {value!r}"
     return canonical("linear-rec709") or default_working_space(), \
         "float file without colour metadata: Linear Rec.709"
-
-
-@dataclass(frozen=True)
-class Spaces:
-    """The colour spaces of one photo's grade.
-
-    Attributes
-    ----------
-    input : the photo's space (pixels read and written in it).
-    working : where histograms, transport and the colour map live.
-    linear : the working space's linear partner (where the exposure rule divides).
-    peak : the largest grey value of ``linear`` that ``working`` encodes <= 1.
-    legacy : True for the default pair (sRGB 8/16-bit or Linear Rec.709 float
-        in sRGB-encoded Rec.709): today's code runs, byte for byte.
-    source : where ``input`` came from ("--input-space", "ICC profile ...").
-    config : the OpenColorIO config.
-    """
-
-    input: str
-    working: str
-    linear: str
-    peak: float
-    legacy: bool
-    source: str
-    config: str
-
-    def as_dict(self) -> dict:
-        """JSON-friendly description (config, OpenColorIO version, spaces)."""
-        return {**config_info(), "input_space": self.input, "input_space_from": self.source,
-                "working_space": self.working, "linear_space": self.linear,
-                "peak": round(self.peak, 4), "default_path": self.legacy}
-
-
-def plan_spaces(image, input_space: str | None = None,
-                working_space: str | None = None) -> Spaces:
-    """The :class:`Spaces` of a decoded photo (``input_space`` None: what the file says)."""
-    if input_space:
-        source_space, source = resolve_space(input_space, "--input-space"), "--input-space"
-    else:
-        source_space, source = detect_input_space(image)
-    return _plan(source_space, source, working_space, image.is_float)
-
-
-def spaces_for(input_space: str | None, working_space: str | None,
-               is_float: bool = False) -> Spaces:
-    """:class:`Spaces` without a file: ``input_space`` None means sRGB (integer
-    values) or Linear Rec.709 (``is_float``)."""
-    if input_space:
-        source_space, source = resolve_space(input_space, "--input-space"), "--input-space"
-    elif is_float:
-        source_space, source = canonical("linear-rec709") or default_working_space(), "default"
-    else:
-        source_space, source = default_working_space(), "default"
-    return _plan(source_space, source, working_space, is_float)
-
-
-def _plan(source_space: str, source: str, working_space: str | None, is_float: bool) -> Spaces:
-    working = (resolve_space(working_space, "--working-space") if working_space
-               else default_working_space())
-    srgb, linear709 = default_working_space(), canonical("linear-rec709")
-    legacy = working == srgb and (source_space == (linear709 if is_float else srgb))
-    linear = linear_partner(working)
-    peak = 1.0 if legacy else _peak(linear, working, config_path())
-    return Spaces(source_space, working, linear, peak, legacy, source, config_path())
 
 
 def config_info() -> dict:
@@ -441,88 +380,205 @@ def _config_name(path: str, version: str) -> str:
         return path
 
 
+# ------------------------------------------------------------------ the encoding of a grade
+#: Luma of sRGB-encoded values: sYCC's (IEC 61966-2-1), BT.601's weights, as
+#: 8-bit JPEG files store their Y'CbCr.
+SYCC_LUMA = (0.299, 0.587, 0.114)
+
+
 @dataclass
 class WorkingState:
-    """What :func:`from_working` needs to undo :func:`to_working` for one image.
+    """What :meth:`ColorEncoding.decode` needs to undo one :meth:`ColorEncoding.encode`.
 
-    ``scale`` (H, W, 1) is the exposure factor (>= 1) or None; ``residual``
-    (H, W, 3) the part of the working-space colours outside [0, 1], or None.
+    ``scale`` (H, W, 1): the exposure factor (>= 1) of float pixels above the
+    peak, or None; ``residual`` (H, W, 3): the working-space colours outside
+    [0, 1], or None.
     """
 
-    spaces: Spaces
-    is_float: bool
     scale: np.ndarray | None = None
     residual: np.ndarray | None = None
 
-    def decode(self, graded: np.ndarray) -> np.ndarray:
-        """Graded working-space colours -> pixel values in the input space."""
-        return from_working(graded, self)
 
+@dataclass(frozen=True)
+class ColorEncoding:
+    """Pixels of one colour space (``input``) graded in another's unit cube (``working``).
 
-def to_working(rgb: np.ndarray, spaces: Spaces, is_float: bool) -> tuple[np.ndarray, object]:
-    """Pixels of the input space -> colours in the working space's unit cube.
-
-    Parameters
+    Attributes
     ----------
-    rgb : (H, W, 3) float32 pixel values (integer files scaled to [0, 1]).
-    spaces : from :func:`plan_spaces`.
-    is_float : whether the file holds float pixels (exposure rule above the peak).
-
-    Returns
-    -------
-    encoded : (H, W, 3) float32 in [0, 1]
-    state : for :func:`wbcgrade.color.imageio.decode_from_grading` (the default
-        pair: its per-pixel scale or None, as before; else a :class:`WorkingState`).
+    input : config name of the pixels' space.
+    working : config name of the working space.
+    linear : the working space's linear partner (where the exposure rule divides).
+    peak : the largest grey value of ``linear`` that ``working`` encodes at or below 1.
+    source : where ``input`` came from ("--input-space", "ICC profile ...", "default").
+    config : the OpenColorIO config.
     """
-    from wbcgrade.color.imageio import encode_for_grading
 
-    if spaces.legacy:
-        return encode_for_grading(rgb, is_float)
-    scale = None
-    if is_float:
-        linear = convert(rgb, spaces.input, spaces.linear)
-        top = linear.max(axis=-1, keepdims=True) / np.float32(spaces.peak)
-        if np.any(top > 1.0):
-            scale = np.maximum(top, 1.0).astype(np.float32)
-            linear /= scale
-        working = convert(linear, spaces.linear, spaces.working)
-    else:
-        working = convert(rgb, spaces.input, spaces.working)
-    encoded = np.clip(working, 0.0, 1.0)
-    residual = working - encoded
-    if not np.any(residual):
-        residual = None
-    return encoded.astype(np.float32, copy=False), WorkingState(spaces, is_float, scale, residual)
+    input: str
+    working: str
+    linear: str
+    peak: float
+    source: str = "given"
+    config: str = ""
+
+    # ------------------------------------------------------------------ making one
+
+    @classmethod
+    def of(cls, input_space: str | None = None, working_space: str | None = None,
+           float_values: bool = False, source: str | None = None) -> ColorEncoding:
+        """The encoding of named spaces (names, aliases or roles; OptionError if unknown).
+
+        ``input_space`` None: sRGB, or Linear Rec.709 with ``float_values``;
+        ``working_space`` None: sRGB-encoded Rec.709.
+        """
+        if input_space:
+            space, where = resolve_space(input_space, "--input-space"), "--input-space"
+        elif float_values:
+            space, where = canonical("linear-rec709") or default_working_space(), "default"
+        else:
+            space, where = default_working_space(), "default"
+        return cls._make(space, source or where, working_space)
+
+    @classmethod
+    def for_image(cls, image, input_space: str | None = None,
+                  working_space: str | None = None) -> ColorEncoding:
+        """The encoding of a decoded photo (``input_space`` None: what the file says)."""
+        if input_space:
+            return cls.of(input_space, working_space)
+        space, where = detect_input_space(image)
+        return cls._make(space, where, working_space)
+
+    @classmethod
+    def _make(cls, input_space: str, source: str, working_space: str | None) -> ColorEncoding:
+        working = (resolve_space(working_space, "--working-space") if working_space
+                   else default_working_space())
+        linear = linear_partner(working)
+        return cls(input_space, working, linear, peak(linear, working), source, config_path())
+
+    def within_working(self) -> ColorEncoding:
+        """The encoding whose pixels are already working-space colours (a LUT's own domain)."""
+        return ColorEncoding(self.working, self.working, self.linear, self.peak,
+                             "working space", self.config)
+
+    # -------------------------------------------------------------- there and back
+
+    def encode(self, rgb: np.ndarray,
+               float_values: bool = False) -> tuple[np.ndarray, WorkingState]:
+        """Pixel values of the input space -> colours in the working space's unit cube.
+
+        Parameters
+        ----------
+        rgb : (..., 3) float pixel values (integer files scaled to [0, 1]).
+        float_values : the pixels are scene-linear floats (the exposure rule
+            applies above the peak).
+
+        Returns
+        -------
+        encoded : (..., 3) float32 in [0, 1]
+        state : for :meth:`decode`.
+        """
+        rgb = np.asarray(rgb, dtype=np.float32)
+        scale = None
+        if float_values:
+            linear = convert(rgb, self.input, self.linear)
+            top = linear.max(axis=-1, keepdims=True) / np.float32(self.peak)
+            if np.any(top > 1.0):
+                scale = np.maximum(top, 1.0).astype(np.float32)
+                linear /= scale
+            working = convert(linear, self.linear, self.working)
+        else:
+            working = convert(rgb, self.input, self.working)
+        encoded = np.clip(working, 0.0, 1.0)
+        residual = working - encoded
+        if not np.any(residual):
+            residual = None
+        return encoded.astype(np.float32, copy=False), WorkingState(scale, residual)
+
+    def decode(self, graded: np.ndarray, state: WorkingState) -> np.ndarray:
+        """Inverse of :meth:`encode`: graded working colours -> input-space pixel values.
+
+        Float outputs keep values above 1 (the exposure factor is multiplied
+        back in the linear partner); integer outputs are clipped by the writer.
+        """
+        working = np.asarray(graded, dtype=np.float32)
+        if state.residual is not None:
+            working = working + state.residual
+        if state.scale is None:
+            return convert(working, self.working, self.input)
+        linear = convert(working, self.working, self.linear) * state.scale
+        return convert(linear, self.linear, self.input)
+
+    def to_display(self, rgb: np.ndarray, working: bool = False) -> np.ndarray:
+        """Colours for a picture on screen: sRGB-encoded Rec.709, clipped to [0, 1].
+
+        ``rgb`` (..., 3) in the input space, or with ``working`` in the
+        working space (e.g. a palette of the grade's histograms).
+        """
+        source = self.working if working else self.input
+        return np.clip(convert(rgb, source, default_working_space()), 0.0, 1.0)
+
+    # --------------------------------------------------- lightness in working terms
+
+    @property
+    def logarithmic(self) -> bool:
+        """Whether the working space is a logarithmic encoding (ACEScct, ACEScc)."""
+        return is_logarithmic(self.working)
+
+    @property
+    def luma_weights(self) -> np.ndarray:
+        """(3,) weights of the working encoding's luma ``Y' = w . rgb``.
+
+        sRGB-encoded Rec.709: sYCC's (BT.601, :data:`SYCC_LUMA`); any other
+        working space: the luminance of its own primaries (the Y row of its
+        linear partner's RGB -> XYZ matrix), applied to its encoded values.
+        """
+        return np.array(_luma_weights(self.working, self.linear, self.config))
+
+    def to_oklab(self, colors: np.ndarray) -> np.ndarray:
+        """Working-space colours (..., 3) -> Oklab (L, a, b), float64.
+
+        Decoded into the linear partner, then to CIE XYZ (D65) through Linear
+        Rec.709 (OpenColorIO's chromatic adaptation for other white points).
+        """
+        from wbcgrade.color._colour import colour
+
+        linear = convert(np.clip(colors, 0.0, 1.0), self.working, self.linear)
+        xyz = np.asarray(linear, dtype=np.float64) @ _to_xyz(self.linear, self.config).T
+        return colour.XYZ_to_Oklab(xyz)
+
+    def from_oklab(self, lab: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_oklab`, clipped to the working space's unit cube (float32)."""
+        from wbcgrade.color._colour import colour
+
+        xyz = colour.Oklab_to_XYZ(np.asarray(lab, dtype=np.float64))
+        linear = xyz @ np.linalg.inv(_to_xyz(self.linear, self.config)).T
+        working = convert(linear, self.linear, self.working)
+        return np.clip(working, 0.0, 1.0).astype(np.float32)
+
+    def as_dict(self) -> dict:
+        """JSON-friendly description (config, OpenColorIO version, spaces)."""
+        return {**config_info(), "input_space": self.input, "input_space_from": self.source,
+                "working_space": self.working, "linear_space": self.linear,
+                "peak": round(self.peak, 4)}
 
 
-def from_working(graded: np.ndarray, state: WorkingState) -> np.ndarray:
-    """Inverse of :func:`to_working`: (H, W, 3) graded working colours -> input-space pixels.
+@functools.lru_cache(maxsize=16)
+def _to_xyz(linear: str, config: str) -> np.ndarray:
+    """(3, 3) matrix: colours of the linear space ``linear`` -> CIE XYZ (D65)."""
+    from wbcgrade.color._colour import colour
 
-    Float outputs keep values above 1 (the exposure factor is multiplied
-    back in the linear partner); integer outputs are clipped by the writer.
-    """
-    spaces = state.spaces
-    working = np.asarray(graded, dtype=np.float32)
-    if state.residual is not None:
-        working = working + state.residual
-    if state.scale is None:
-        return convert(working, spaces.working, spaces.input)
-    linear = convert(working, spaces.working, spaces.linear) * state.scale
-    return convert(linear, spaces.linear, spaces.input)
+    rec709 = canonical("linear-rec709")
+    if rec709 is None:
+        raise InputError(f"OpenColorIO config {config} has no Linear Rec.709 space: lightness "
+                         "cannot be computed in the working space's terms")
+    to_rec709 = convert(np.eye(3), linear, rec709).astype(np.float64).T  # columns: primaries
+    return colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ @ to_rec709
 
 
-def to_display(rgb: np.ndarray, spaces: Spaces, working: bool = False) -> np.ndarray:
-    """Colours for a picture on screen: sRGB-encoded Rec.709 in [0, 1].
-
-    Parameters
-    ----------
-    rgb : (..., 3) colours of the photo's input space, or with ``working``
-        of the working space (e.g. a palette of the grade's histograms).
-    spaces : the photo's :class:`Spaces`.
-
-    Returns
-    -------
-    (..., 3) float32, clipped to [0, 1] (highlights above 1 clip).
-    """
-    source = spaces.working if working else spaces.input
-    return np.clip(convert(rgb, source, default_working_space()), 0.0, 1.0)
+@functools.lru_cache(maxsize=16)
+def _luma_weights(working: str, linear: str, config: str) -> tuple[float, float, float]:
+    if working == default_working_space():
+        return SYCC_LUMA
+    if canonical("linear-rec709") is None:
+        return SYCC_LUMA  # no way to read the primaries: the sRGB convention
+    row = _to_xyz(linear, config)[1]
+    return tuple(float(v) for v in row / row.sum())

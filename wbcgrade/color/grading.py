@@ -1,385 +1,235 @@
-"""Per-photo and series grades with a guarantee: never worse than one style alone.
+"""The grade path: fit the weights, build the colour map, a frozen :class:`Grade`.
 
-The colour pipeline (:mod:`wbcgrade.color.transfer`) fits barycentric
-coordinates from uniform weights. The energy is not convex, so a fit can end
-above the loss of a single style image (a vertex of the simplex). This module
-evaluates every vertex with the same core loss on the same histograms; when
-the fit is worse than the best vertex it refits from that vertex and keeps
-whichever of the two is better (the vertex itself if the refit does not beat
-it). It also builds the one grade of a series (``--consistent``): one fit on
-the pooled palette of all photos and one colour map for all of them.
+One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`):
+
+1. the photo's histograms (:func:`photo_histograms`), on the fit grid and
+   the transfer grid, of colours in the working space's unit cube;
+2. the colour map, built by the *map builder* that ``options.map.builder``
+   names (:data:`MAP_BUILDERS`):
+
+   - "palette" (:func:`palette_map`): the weights
+     (:func:`wbcgrade.color.fit.fit_weights`: barycentric coordinates never
+     worse than the best single style), then the fitted palette, Sinkhorn
+     and the smooth map (:func:`wbcgrade.color.transfer.transport_map`);
+   - "look" (:func:`look_map`): the look the style set shares
+     (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
+     photo by how sure it is that a style shows the photo's own scene;
+
+3. the map finished in the working space's own terms (monotone in its
+   luma, or keeping each colour's Oklab lightness; :func:`finish_map`);
+4. a frozen :class:`Grade`: ``grade.apply(encoded)`` grades pixels (colour
+   map and regrain), ``grade.lut(size, encoding)`` is the grade as a LUT
+   table in any encoding of its working space.
+
+A series (``batch --consistent``, a video shot) takes the same path with a
+pooled histogram (:class:`wbcgrade.color.histogram.PaletteSum`).
+
+Other ways of building the map plug in with :func:`register_map_builder`:
+a builder takes a :class:`MapRequest` (the photo's histograms, the styles
+in the working space, the options, the encoding, progress callbacks) and
+returns a :class:`BuiltMap` (the map before finishing, the palette it aimed
+at, diagnostics, timings, and the weights with how sure it is of them).
+
+>>> import numpy as np
+>>> from wbcgrade.color.grading import grade_array
+>>> from wbcgrade.color.options import GradeOptions
+>>> from wbcgrade.color.presets import load_preset, resolve_preset
+>>> styles = load_preset(resolve_preset("warm"))
+>>> rgb = np.random.default_rng(0).random((24, 32, 3))
+>>> graded, grade = grade_array(rgb, styles, GradeOptions(bins=16, fit_bins=8, map_size=9,
+...                                                       n_iter=20, max_iter=5))
+>>> graded.shape, grade.color_map.shape, round(float(grade.weights.sum()), 6)
+((24, 32, 3), (9, 9, 9, 3), 1.0)
+>>> grade.lut(5).shape                            # the grade as a 5^3 LUT
+(5, 5, 5, 3)
 """
 
 from __future__ import annotations
 
-import concurrent.futures
-import os
-import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from wbcgrade.color.colorspace import Spaces, plan_spaces, spaces_for, to_working
-from wbcgrade.color.histogram import add_floor, image_histogram
-from wbcgrade.color.imageio import Image, read_image
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.fit import FitSummary, fit_weights
+from wbcgrade.color.histogram import image_histogram, resample_histogram
+from wbcgrade.color.lut import check_lut_size, color_map_to_lut
+from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.presets import StyleSet, styles_in_space
-from wbcgrade.color.render import render
-from wbcgrade.color.transfer import (
-    Grade,
-    GradeOptions,
-    _fit_geometry,
-    fit_weights,
-    grade_color_map,
-    grade_image,
-    palette_barycenter,
-    regrain_settings,
-)
-from wbcgrade.errors import InputError
+from wbcgrade.color.regrain import regrain_map
+from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
+from wbcgrade.color.transfer import transport_map
+from wbcgrade.errors import InputError, OptionError
 
-__all__ = ["NONZERO_THRESHOLD", "FitSummary", "PhotoGrade", "fit_geometry", "vertex_losses",
-           "fit_with_vertex_check", "photo_histograms", "PaletteSum", "pooled_histogram",
-           "series_grade", "fit_grade", "grade_array", "grade_photo"]
-
-#: Weights at or above this count as "non-zero" (softmax weights are never exactly 0).
-NONZERO_THRESHOLD = 1e-3
+__all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
+           "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
+           "grade_histograms", "grade_encoded", "grade_array"]
 
 FitCallback = Callable[[int, np.ndarray, float], None]
 
 
-@dataclass
-class FitSummary:
-    """The weights of a grade and how they compare with single styles.
+def _quiet(name: str) -> None:
+    """A stage callback that says nothing."""
+
+
+@dataclass(frozen=True)
+class Grade:
+    """A fitted grade: weights and the colour map that is the grade.
 
     Attributes
     ----------
-    weights : (S,) weights on the simplex.
-    loss : loss of the barycenter at ``weights`` (fit grid, same loss as the fit).
-    vertex_losses : (S,) loss of each style alone (weight 1 on it).
-    start : "uniform" (the pipeline's fit was kept), "vertex-refit" (refit from
-        the best vertex won) or "vertex" (the best single style is the answer);
-        "given" when the weights were fixed by the user.
-    info : fit diagnostics (JSON-friendly).
-    time_s : wall time of the fit and the vertex checks.
-    """
-
-    weights: np.ndarray
-    loss: float
-    vertex_losses: np.ndarray
-    start: str = "uniform"
-    info: dict = field(default_factory=dict)
-    time_s: float = 0.0
-
-    @property
-    def best_vertex(self) -> int:
-        return int(np.argmin(self.vertex_losses))
-
-    @property
-    def n_nonzero(self) -> int:
-        return int(np.sum(self.weights >= NONZERO_THRESHOLD))
-
-
-def fit_geometry(opts: GradeOptions):
-    """The core grid geometry the weights are fitted on (as in the pipeline)."""
-    return _fit_geometry(opts)
-
-
-def _fit_problem(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions):
-    target = add_floor(photo_fit, opts.floor)
-    hists = np.stack([add_floor(h, opts.floor) for h in style_fit])
-    return target, hists, fit_geometry(opts)
-
-
-def _loss_at(target, hists, geometry, weights, opts) -> float:
-    from wbcgrade.core import barycenter, get_loss
-
-    keep = np.flatnonzero(weights > 0)
-    P = barycenter(hists[keep], weights[keep] / weights[keep].sum(), geometry, opts.n_iter)
-    value, _ = get_loss(opts.loss).value_and_grad(P, target, geometry)
-    return float(value)
-
-
-def vertex_losses(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions) -> np.ndarray:
-    """Loss of every single style against the photo, with the fit's loss and grid.
-
-    Parameters
-    ----------
-    photo_fit : (m, m, m) photo histogram on the fit grid (m = opts.fit_bins).
-    style_fit : (S, m, m, m) style histograms on the same grid.
-
-    Returns
-    -------
-    (S,) losses of ``P_L(e_s)`` (the barycenter with all weight on style s).
-    """
-    target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
-    return np.array([_loss_at(target, hists, geometry, np.eye(len(hists))[s], opts)
-                     for s in range(len(hists))])
-
-
-class _Cancelled(Exception):
-    """Stops a speculative refit whose answer is no longer needed."""
-
-
-class _HeldProgress:
-    """The progress callback of a fit run ahead of time, in another thread.
-
-    Its calls are held until the fit is known to be needed, then replayed in
-    order (the caller sees the same calls as from a sequential run); once
-    cancelled, the next call stops the fit.
-    """
-
-    def __init__(self) -> None:
-        self.calls: list[tuple[int, np.ndarray, float]] = []
-        self.cancelled = threading.Event()
-
-    def __call__(self, n_evaluations: int, weights: np.ndarray, value: float) -> None:
-        if self.cancelled.is_set():
-            raise _Cancelled
-        self.calls.append((n_evaluations, np.array(weights, copy=True), value))
-
-    def replay(self, callback: FitCallback | None) -> None:
-        if callback is not None:
-            for call in self.calls:
-                callback(*call)
-
-
-def _speculate() -> bool:
-    """Whether a second core is there for the refit from the best vertex."""
-    from wbcgrade.core._cpu import n_workers
-
-    return n_workers() >= 2
-
-
-def fit_with_vertex_check(photo_fit: np.ndarray, style_fit: np.ndarray, opts: GradeOptions,
-                          callback: FitCallback | None = None) -> FitSummary:
-    """Barycentric coordinates that are never worse than the best single style.
-
-    Runs the pipeline's fit (from uniform weights), evaluates every vertex;
-    if the best vertex has a lower loss, refits from it (95 % on that style)
-    and keeps the better of the refit and the vertex. With ``opts.weights``
-    set, only evaluates the losses of those weights and of the vertices.
-
-    With two cores or more the refit runs ahead of time, beside the fit from
-    uniform weights (the fit runs on one core: its products are too small to
-    share), and is kept only when the vertex beats that fit; otherwise it is
-    stopped. The answer and the callback's calls are those of running the two
-    one after the other (the refit's calls are held and replayed).
-
-    Parameters
-    ----------
-    photo_fit : (m, m, m) photo histogram on the fit grid.
-    style_fit : (S, m, m, m) style histograms on the fit grid.
-    """
-    from wbcgrade.core import barycentric_coordinates
-
-    start = time.perf_counter()
-    target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
-    n_styles = len(hists)
-    vertices = vertex_losses(photo_fit, style_fit, opts)
-    best = int(np.argmin(vertices))
-    if opts.weights is not None:
-        weights = np.asarray(opts.weights, dtype=np.float64)
-        weights = weights / weights.sum()
-        loss = _loss_at(target, hists, geometry, weights, opts)
-        return FitSummary(weights, loss, vertices, "given", {"start": "given"},
-                          time.perf_counter() - start)
-
-    def refit_from_best(progress: FitCallback | None):
-        init = np.full(n_styles, 0.05 / (n_styles - 1))
-        init[best] = 0.95
-        return barycentric_coordinates(target, hists, geometry, loss=opts.loss,
-                                       n_iter=opts.n_iter, init_weights=init,
-                                       max_iter=opts.max_iter, tol=opts.fit_tol,
-                                       callback=progress)
-
-    ahead: concurrent.futures.Future | None = None
-    held = _HeldProgress()
-    if n_styles > 1 and _speculate():
-        runner = concurrent.futures.ThreadPoolExecutor(1, "refit-ahead")
-        ahead = runner.submit(refit_from_best, held)
-        runner.shutdown(wait=False)
-    try:
-        fit = fit_weights(photo_fit, style_fit, opts, callback)
-        info = {"evaluations": fit.n_evaluations, "iterations": fit.n_iterations,
-                "converged": fit.converged, "initial_loss": float(fit.initial_loss),
-                "bins": opts.fit_bins, "gamma": float(geometry.gamma)}
-        weights, loss, how = np.asarray(fit.weights, dtype=np.float64), float(fit.loss), \
-            "uniform"
-        if vertices[best] < loss and n_styles > 1:
-            if ahead is not None:
-                refit = ahead.result()
-                held.replay(callback)
-            else:
-                refit = refit_from_best(callback)
-            info["uniform_start_loss"] = loss
-            info["evaluations"] += refit.n_evaluations
-            if refit.loss < vertices[best]:
-                weights, loss, how = np.asarray(refit.weights, dtype=np.float64), \
-                    float(refit.loss), "vertex-refit"
-                info["converged"] = refit.converged
-            else:
-                weights, loss, how = np.eye(n_styles)[best], float(vertices[best]), "vertex"
-    finally:
-        held.cancelled.set()  # a refit not needed (or not waited for) stops at its next step
-    info["start"] = how
-    return FitSummary(weights, loss, vertices, how, info, time.perf_counter() - start)
-
-
-def photo_histograms(path: str | os.PathLike, bins: tuple[int, ...],
-                     max_pixels: int, input_space: str | None = None,
-                     working_space: str | None = None) -> dict[int, np.ndarray]:
-    """Histograms of a photo file at several grid sizes -> {bins: (b, b, b)}.
-
-    The colours are those of the working space (``None``: sRGB-encoded
-    Rec.709); ``input_space`` None: what the file says.
-    """
-    image = read_image(path)
-    spaces = plan_spaces(image, input_space, working_space)
-    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
-    return {b: image_histogram(encoded, b, image.alpha(), max_pixels) for b in bins}
-
-
-class PaletteSum:
-    """Running sum of normalised histograms whose result does not depend on their order.
-
-    Each histogram is rounded to fixed point (2^-40 of its mass) and summed in
-    int64, so photos may arrive in any order (process pool, Dask) and the
-    pooled palette, hence the series grade, is bit-for-bit the same.
-    """
-
-    _ONE = float(2 ** 40)
-
-    def __init__(self) -> None:
-        self.total: np.ndarray | None = None
-        self.count = 0
-
-    def add(self, hist: np.ndarray) -> None:
-        """Add an (n, n, n) histogram (normalised here: every photo counts once)."""
-        fixed = np.rint(np.asarray(hist, dtype=np.float64) / hist.sum() * self._ONE)
-        fixed = fixed.astype(np.int64)
-        self.total = fixed if self.total is None else self.total + fixed
-        self.count += 1
-
-    def result(self) -> np.ndarray:
-        """The pooled (n, n, n) histogram, summing to 1."""
-        if self.total is None:
-            raise ValueError("no histograms to pool")
-        return self.total / self.total.sum()
-
-
-def pooled_histogram(histograms: list[np.ndarray]) -> np.ndarray:
-    """The palette of a series: the sum of the photos' (normalised) histograms, normalised.
-
-    Every photo counts once whatever its size. (n, n, n) list -> (n, n, n).
-    """
-    pool = PaletteSum()
-    for hist in histograms:
-        pool.add(hist)
-    return pool.result()
-
-
-def series_grade(pooled_fit: np.ndarray, pooled: np.ndarray, styles: StyleSet,
-                 opts: GradeOptions, callback: FitCallback | None = None,
-                 stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
-    """One grade for a whole series: one fit on the pooled palette, one colour map.
-
-    Parameters
-    ----------
-    pooled_fit : (m, m, m) pooled histogram on the fit grid (m = opts.fit_bins).
-    pooled : (n, n, n) pooled histogram on the transfer grid (n = opts.bins).
-
-    Costs one fit, one barycenter and one Sinkhorn, whatever the number of photos.
-    """
-    opts.validate(len(styles.names))
-    say = stage or (lambda name: None)
-    timings: dict[str, float] = {}
-    say("fit")
-    summary = fit_with_vertex_check(pooled_fit, styles.at_bins(opts.fit_bins), opts, callback)
-    timings["fit"] = summary.time_s
-    say("barycenter")
-    start = time.perf_counter()
-    target, palette_info = palette_barycenter(styles, summary.weights, opts)
-    timings["barycenter"] = time.perf_counter() - start
-    say("transfer")
-    start = time.perf_counter()
-    color_map, map_info = grade_color_map(pooled, target, opts)
-    timings["transfer"] = time.perf_counter() - start
-    info = {"fit": summary.info, "palette": palette_info, **map_info}
-    grade = Grade(names=list(styles.names), weights=summary.weights, loss=summary.loss,
-                  color_map=color_map, strength=opts.strength, timings=timings, info=info,
-                  barycenter=target, regrain=regrain_settings(opts))
-    return grade, summary
-
-
-@dataclass
-class PhotoGrade:
-    """A graded photo in memory.
-
-    Attributes
-    ----------
-    image : the decoded input.
-    pixels : (H, W, C') float32 graded pixels (the image's value convention).
-    alpha_channel : index of alpha in ``pixels`` or -1.
-    grade : the grade applied (weights, colour map, barycenter).
-    fit : weights and single-style comparison (None for a shared series grade
-        whose summary the caller holds).
+    names : S style names.
+    weights : (S,) barycentric weights.
+    color_map : (m, m, m, 3) float32, new working-space colour of each node of
+        the grade's lattice LUT (strength not applied).
+    working : the working space the map lives in (config name).
+    strength : the blend applied by :meth:`apply` and :meth:`lut`.
+    regrain : (radius, eps) of the regrain step applied to images, or None.
+    loss : fit loss at the weights.
+    barycenter : (n, n, n) the target palette on the transfer grid, or None.
+    info : fit, palette, Sinkhorn and map diagnostics (JSON-friendly).
     timings : seconds per stage.
-    spaces : the photo's input and working colour spaces.
     """
 
-    image: Image
-    pixels: np.ndarray
-    alpha_channel: int
-    grade: Grade
-    fit: FitSummary | None
-    timings: dict[str, float] = field(default_factory=dict)
-    spaces: Spaces | None = None
+    names: tuple[str, ...]
+    weights: np.ndarray
+    color_map: np.ndarray
+    working: str = ""
+    strength: float = 1.0
+    regrain: tuple[float, float] | None = None
+    loss: float | None = None
+    barycenter: np.ndarray | None = None
+    info: Mapping = field(default_factory=dict)
+    timings: Mapping = field(default_factory=dict)
+
+    def apply(self, encoded: np.ndarray) -> np.ndarray:
+        """Grade working-space colours in [0, 1] -> float32, same shape.
+
+        An (H, W, 3) image also goes through the regrain step when the grade
+        has one; other shapes (lists of colours) get the colour map only.
+        """
+        if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
+            return regrain_map(encoded, self.color_map, self.strength, *self.regrain)
+        return apply_color_map(encoded, self.color_map, self.strength)
+
+    def lut(self, size: int = 33, encoding: ColorEncoding | None = None) -> np.ndarray:
+        """The grade as a (size, size, size, 3) LUT table indexed [r, g, b], in [0, 1].
+
+        ``encoding`` None (or one whose pixels are working-space colours): the
+        map itself sampled at the lattice (trilinear, ``strength`` blended).
+        Otherwise the lattice holds ``encoding``'s input code values: point x
+        -> working space -> the map -> back to the input space, the table
+        holding ``x + (back(graded) - back(working))`` (an identity grade
+        gives exactly the identity), clipped to [0, 1].
+        """
+        if encoding is not None and self.working and encoding.working != self.working:
+            raise InputError(f"the grade lives in {self.working}, not {encoding.working}")
+        if encoding is None or encoding.input == encoding.working:
+            return color_map_to_lut(self.color_map, size, self.strength)
+        nodes = identity_map(check_lut_size(size))
+        working, state = encoding.encode(nodes)
+        graded = apply_color_map(working, self.color_map, self.strength)
+        moved = encoding.decode(graded, state) - encoding.decode(working, state)
+        return np.clip(nodes + moved, 0.0, 1.0)
+
+    def ranked(self) -> list[tuple[str, float]]:
+        """(name, weight) sorted by decreasing weight."""
+        order = np.argsort(-self.weights, kind="stable")
+        return [(self.names[i], float(self.weights[i])) for i in order]
 
 
-def fit_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
-              alpha: np.ndarray | None = None, callback: FitCallback | None = None,
-              stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
-    """The grade of encoded pixels: vertex-checked weights, palette and colour map.
+# ------------------------------------------------------------------------------ builders
 
-    The one per-photo pipeline (``apply``, ``batch`` without ``--consistent``,
-    :func:`grade_array`): fit never worse than the best single style, then the
-    palette and the smooth colour map of :func:`wbcgrade.color.transfer.grade_image`
-    with those weights.
 
-    Parameters
+@dataclass(frozen=True)
+class PhotoHistograms:
+    """A photo's (or a series') histograms: ``fit`` on the fit grid, ``transfer`` on the
+    transfer grid, both of working-space colours; :meth:`at` gives other grids."""
+
+    fit: np.ndarray
+    transfer: np.ndarray
+    pixels: tuple | None = field(default=None, repr=False, compare=False)
+
+    def at(self, bins: int) -> np.ndarray:
+        """The histogram on a ``bins``^3 grid: binned from the pixels when there are
+        some (a photo), else re-binned from the transfer grid's (a pooled series)."""
+        for hist in (self.transfer, self.fit):
+            if hist.shape[0] == bins:
+                return hist
+        if self.pixels is not None:
+            encoded, alpha, limit = self.pixels
+            return image_histogram(encoded, bins, alpha, limit)
+        return resample_histogram(self.transfer, bins)
+
+
+def photo_histograms(encoded: np.ndarray, options: GradeOptions,
+                     alpha: np.ndarray | None = None) -> PhotoHistograms:
+    """The histograms of working-space colours (H, W, 3) in [0, 1]; pixels with alpha 0
+    do not count; photos above ``transfer.max_pixels`` are subsampled."""
+    limit = options.transfer.max_pixels
+    return PhotoHistograms(image_histogram(encoded, options.fit.bins, alpha, limit),
+                           image_histogram(encoded, options.transfer.bins, alpha, limit),
+                           (encoded, alpha, limit))
+
+
+@dataclass(frozen=True)
+class MapRequest:
+    """What a map builder gets.
+
+    Attributes
     ----------
-    encoded : (H, W, 3) float32 encoded colours in [0, 1].
-    alpha : (H, W) optional; pixels with alpha 0 do not count.
-
-    Returns
-    -------
-    (grade, fit summary); ``grade.timings`` holds the stages.
+    photo : the photo's (or series') histograms.
+    styles : the style set, in the working space.
+    options : every setting of the grade.
+    encoding : the colour encoding (working space) of the grade.
+    callback : ``callback(n_evaluations, weights, loss)`` of a weight fit, or None.
+    stage : ``stage(name)`` as each stage starts (progress).
     """
-    say = stage or (lambda name: None)
-    opts.validate(len(styles.names))
-    if opts.mode == "look" and opts.weights is None:
-        return _look_grade(encoded, styles, opts, alpha, say)
-    say("fit")
-    photo_fit = image_histogram(encoded, opts.fit_bins, alpha, opts.max_pixels)
-    summary = fit_with_vertex_check(photo_fit, styles.at_bins(opts.fit_bins), opts, callback)
-    fixed = replace(opts, weights=[float(w) for w in summary.weights])
-    grade = grade_image(encoded, styles, fixed, alpha, None, stage)
-    grade.loss = summary.loss
-    grade.info["fit"] = summary.info
-    grade.timings = {"fit": summary.time_s,
-                     **{k: v for k, v in grade.timings.items() if k != "fit"}}
-    return grade, summary
+
+    photo: PhotoHistograms
+    styles: StyleSet
+    options: GradeOptions
+    encoding: ColorEncoding
+    callback: FitCallback | None = None
+    stage: Callable[[str], None] = _quiet
 
 
-def _look_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
-                alpha: np.ndarray | None, say: Callable[[str], None]) -> tuple[Grade, FitSummary]:
-    """The grade of ``mode="look"``: the set's look, corrected towards the photo's scene.
+class BuiltMap(NamedTuple):
+    """What a map builder returns: the map before finishing, the palette it aimed at
+    (or None), diagnostics, seconds per stage, and the weights with how sure the
+    builder is of them (a :class:`~wbcgrade.color.fit.FitSummary`)."""
 
-    The colour map is the set's look (:func:`wbcgrade.color.look.look_color_map`)
-    moved towards the palette grade of the photo (KL fit, relaxed transport)
-    by how sure it is that a style shows the photo's own scene.
+    color_map: np.ndarray
+    palette: np.ndarray | None
+    info: dict
+    timings: dict
+    fit: FitSummary
+
+
+def palette_map(request: MapRequest) -> BuiltMap:
+    """The "palette" builder: the weights (never worse than one style alone), then the
+    map onto their barycenter palette (:func:`wbcgrade.color.transfer.transport_map`)."""
+    options, styles = request.options, request.styles
+    request.stage("fit")
+    fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
+                      request.callback)
+    color_map, palette, info, timings = transport_map(request.photo.transfer, styles,
+                                                      fit.weights, options, request.stage)
+    return BuiltMap(color_map, palette, info, {"fit": fit.time_s, **timings}, fit)
+
+
+def look_map(request: MapRequest) -> BuiltMap:
+    """The "look" builder: the set's look, corrected towards the photo's scene.
+
+    The colour map is the look the style set shares
+    (:func:`wbcgrade.color.look.look_color_map`, content modelled by the
+    natural palettes of ``map.natural``), moved towards the photo's palette
+    grade (the "palette" builder with a KL fit and relaxed transport) by how
+    sure it is that a style shows the photo's own scene. Fixed weights
+    (``fit.weights``) give the palette grade.
     """
     from wbcgrade.color.look import (
         MAP_BINS,
@@ -389,30 +239,36 @@ def _look_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
         natural_palettes,
     )
     from wbcgrade.color.presets import load_preset
-    from wbcgrade.color.remap import keep_lightness, monotone_lightness
 
+    options, styles, say = request.options, request.styles, request.stage
+    if options.fit.weights is not None:
+        return palette_map(request)
     timings: dict[str, float] = {}
     start = time.perf_counter()
     say("histograms")
-    photo_hist = image_histogram(encoded, MAP_BINS, alpha, opts.max_pixels)
+    photo_hist = request.photo.at(MAP_BINS)
     timings["histograms"] = time.perf_counter() - start
     say("look")
     start = time.perf_counter()
-    naturals = load_preset(opts.natural) if opts.natural else natural_palettes()
+    naturals = load_preset(options.map.natural) if options.map.natural else natural_palettes()
     naturals = styles_in_space(naturals, styles.working_space)
     base, photo, info = look_color_map(photo_hist, styles, naturals)
     timings["look"] = time.perf_counter() - start
     n_styles = len(styles.names)
     confidence = photo.confidence
     weights = np.full(n_styles, 1.0 / n_styles)
-    color_map = base.lattice(opts.map_size)
+    color_map = base.lattice(options.map.size)
     fit_info: dict = {"start": "look", "match": info["look"]["match"],
                       "confidence": confidence}
     if confidence > 0:
-        scene_opts = replace(opts, mode="palette", loss=SCENE_LOSS,
-                             relaxation=opts.relaxation or SCENE_RELAXATION)
-        scene, summary = fit_grade(encoded, styles, scene_opts, alpha, None,
-                                   lambda name: say(f"scene {name}"))
+        scene_options = GradeOptions(
+            replace(options.fit, loss=SCENE_LOSS),
+            replace(options.transfer,
+                    relaxation=options.transfer.relaxation or SCENE_RELAXATION),
+            replace(options.map, builder="palette"), options.regrain, options.spaces)
+        scene, summary = grade_histograms(request.photo, styles, scene_options,
+                                          request.encoding, None,
+                                          lambda name: say(f"scene {name}"))
         for name, seconds in scene.timings.items():
             timings[f"scene {name}"] = seconds
         base_map = base.lattice(scene.color_map.shape[0])
@@ -421,44 +277,110 @@ def _look_grade(encoded: np.ndarray, styles: StyleSet, opts: GradeOptions,
         fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
                                  "loss": summary.loss}
         info.update({k: v for k, v in scene.info.items() if k != "fit"})
-    if opts.monotone and not opts.preserve_luminance:
-        color_map = monotone_lightness(color_map)
-    if opts.preserve_luminance:
-        color_map = keep_lightness(color_map)
-    info["map"] = {"size": int(color_map.shape[0]), "monotone": opts.monotone,
-                   "preserve_luminance": opts.preserve_luminance}
-    info["fit"] = fit_info
-    grade = Grade(names=list(styles.names), weights=weights, loss=None,
-                  color_map=color_map, strength=opts.strength, timings=timings, info=info,
-                  barycenter=None, regrain=regrain_settings(opts))
-    summary = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals,
-                         "look", fit_info, sum(timings.values()))
-    return grade, summary
+    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
+                     fit_info, sum(timings.values()))
+    return BuiltMap(color_map, None, info, timings, fit)
 
 
-def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = None,
-                alpha: np.ndarray | None = None) -> tuple[np.ndarray, Grade]:
+#: Map builders by name (``map.builder``): MapRequest -> BuiltMap.
+MAP_BUILDERS: dict[str, Callable[[MapRequest], BuiltMap]] = {"palette": palette_map,
+                                                              "look": look_map}
+
+
+def register_map_builder(name: str, builder: Callable[[MapRequest], BuiltMap]) -> None:
+    """Make ``builder`` the map builder that ``MapOptions(builder=name)`` selects."""
+    if not isinstance(name, str) or not name:
+        raise ValueError("a map builder needs a name")
+    MAP_BUILDERS[name] = builder
+
+
+def finish_map(color_map: np.ndarray, options: GradeOptions,
+               encoding: ColorEncoding) -> np.ndarray:
+    """The finishing steps of every map, in the working space's own terms.
+
+    ``map.preserve_luminance``: each colour keeps its Oklab lightness
+    (:func:`wbcgrade.color.remap.keep_lightness`, through the encoding);
+    otherwise ``map.monotone``: the map's luma, with the working encoding's
+    luma weights, made non-decreasing in each channel
+    (:func:`wbcgrade.color.remap.monotone_lightness`).
+    """
+    if options.map.preserve_luminance:
+        return keep_lightness(color_map, encoding)
+    if options.map.monotone:
+        return monotone_lightness(color_map, encoding.luma_weights)
+    return color_map
+
+
+# ------------------------------------------------------------------------------ the path
+
+
+def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOptions,
+                     encoding: ColorEncoding, callback: FitCallback | None = None,
+                     stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+    """The one grade path: the map builder (the fit inside), the finishing, a Grade.
+
+    ``styles`` must be in ``encoding.working`` (:func:`styles_in_space`).
+    ``callback`` receives a fit's progress ``(n_evaluations, weights, loss)``,
+    ``stage`` each stage's name as it starts. Returns the grade and how its
+    weights were found.
+    """
+    options.check_styles(len(styles.names))
+    name = options.map.builder
+    if name not in MAP_BUILDERS:
+        raise OptionError(f"map.builder must be one of {', '.join(MAP_BUILDERS)}",
+                          "map.builder")
+    built = MAP_BUILDERS[name](MapRequest(photo, styles, options, encoding, callback,
+                                          stage or _quiet))
+    start = time.perf_counter()
+    color_map = finish_map(built.color_map, options, encoding)
+    timings = {**built.timings, "finish": time.perf_counter() - start}
+    info = {"fit": built.fit.info, **built.info}
+    info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
+                   "preserve_luminance": options.map.preserve_luminance}
+    grade = Grade(names=tuple(styles.names),
+                  weights=np.asarray(built.fit.weights, dtype=np.float64),
+                  color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
+                  strength=options.map.strength, regrain=options.regrain.settings,
+                  loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
+    return grade, built.fit
+
+
+def grade_encoded(encoded: np.ndarray, styles: StyleSet, options: GradeOptions,
+                  encoding: ColorEncoding, alpha: np.ndarray | None = None,
+                  callback: FitCallback | None = None,
+                  stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
+    """:func:`grade_histograms` of working-space pixels (H, W, 3); the styles are converted
+    into the working space when they are in another."""
+    styles = styles_in_space(styles, encoding.working)
+    return grade_histograms(photo_histograms(encoded, options, alpha), styles, options,
+                            encoding, callback, stage)
+
+
+def grade_array(rgb: np.ndarray, styles: StyleSet, options: GradeOptions | None = None,
+                alpha: np.ndarray | None = None, **flat) -> tuple[np.ndarray, Grade]:
     """Grade an image held in memory: arrays in, arrays out (no files).
 
     Parameters
     ----------
-    rgb : (H, W, 3) encoded (e.g. sRGB) colours in [0, 1], any float or
-        integer dtype (integers are scaled by their maximum value); in
-        ``opts.input_space`` when given (default sRGB), graded in
-        ``opts.working_space`` (default sRGB-encoded Rec.709) and returned
+    rgb : (H, W, 3) display-encoded (e.g. sRGB) colours in [0, 1], any float
+        or integer dtype (integers are scaled by their maximum value), in
+        ``options.spaces.input`` (default sRGB); graded in
+        ``options.spaces.working`` (default sRGB-encoded Rec.709) and returned
         in the input space.
     styles : the style palettes (:func:`wbcgrade.color.presets.load_preset`,
         :func:`~wbcgrade.color.presets.load_style_folder`).
-    opts : grade settings (default :class:`GradeOptions`).
+    options : grade settings (default :class:`GradeOptions`); ``flat``
+        keywords (the former flat names, e.g. ``relaxation=0.05``) change it.
     alpha : (H, W) optional coverage; transparent pixels do not count.
 
     Returns
     -------
-    graded : (H, W, 3) float32 in [0, 1] (colour map and regrain applied;
-        colour-managed: in the input space, out-of-gamut values not clipped)
+    graded : (H, W, 3) float32 (colour map and regrain applied; in the input
+        space, values outside the working cube carried through unclipped)
     grade : the weights, colour map and diagnostics (``grade.apply`` grades
-        more pixels the same way; ``grade.color_map`` is the LUT).
+        more working-space pixels the same way; ``grade.lut(size)`` is the LUT).
     """
+    options = as_options(options, **flat)
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or min(rgb.shape[:2]) < 1:
         raise InputError(f"rgb must be an (H, W, 3) image, got shape {rgb.shape}")
@@ -466,45 +388,11 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, opts: GradeOptions | None = N
         rgb = rgb / np.float32(np.iinfo(rgb.dtype).max)
     if not np.all(np.isfinite(rgb)):
         raise InputError("rgb contains NaN or inf")
-    opts = opts or GradeOptions()
-    spaces = spaces_for(opts.input_space, opts.working_space, is_float=False)
-    encoded, state = to_working(np.asarray(rgb, dtype=np.float32), spaces, False)
+    encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+    encoded, state = encoding.encode(np.asarray(rgb, dtype=np.float32))
     if alpha is not None:
         alpha = np.asarray(alpha, dtype=np.float32)
         if alpha.shape != encoded.shape[:2]:
             raise InputError(f"alpha must have shape {encoded.shape[:2]}, got {alpha.shape}")
-    styles = styles_in_space(styles, spaces.working)
-    grade, _ = fit_grade(encoded, styles, opts, alpha)
-    graded = grade.apply(encoded)
-    return (graded if spaces.legacy else state.decode(graded)), grade
-
-
-def grade_photo(path: str | os.PathLike, styles: StyleSet, opts: GradeOptions,
-                shared: Grade | None = None, callback: FitCallback | None = None,
-                stage: Callable[[str], None] | None = None) -> PhotoGrade:
-    """Read and grade one photo (nothing is written).
-
-    With ``shared`` (a series grade), its colour map is applied as is;
-    otherwise the photo gets its own vertex-checked fit and colour map
-    (:func:`fit_grade`).
-    """
-    say = stage or (lambda name: None)
-    timings: dict[str, float] = {}
-    say("read")
-    start = time.perf_counter()
-    image = read_image(Path(path))
-    spaces = plan_spaces(image, opts.input_space, opts.working_space)
-    encoded, scale = to_working(image.rgb(), spaces, image.is_float)
-    timings["read"] = time.perf_counter() - start
-    summary = None
-    if shared is not None:
-        grade = shared
-    else:
-        styles = styles_in_space(styles, spaces.working)
-        grade, summary = fit_grade(encoded, styles, opts, image.alpha(), callback, stage)
-        timings.update(grade.timings)
-    say("remap")
-    start = time.perf_counter()
-    pixels, alpha_channel = render(image, grade, (encoded, scale))
-    timings["remap"] = time.perf_counter() - start
-    return PhotoGrade(image, pixels, alpha_channel, grade, summary, timings, spaces)
+    grade, _ = grade_encoded(encoded, styles, options, encoding, alpha)
+    return encoding.decode(grade.apply(encoded), state), grade

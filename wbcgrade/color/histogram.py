@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -28,20 +29,20 @@ __all__ = [
     "from_sparse",
     "HistogramCache",
     "default_cache_dir",
+    "PaletteSum",
+    "pooled_histogram",
     "DEFAULT_FLOOR",
     "DEFAULT_MAX_PIXELS",
 ]
 
 log = logging.getLogger(__name__)
 
-#: Fraction of the total mass spread uniformly over all bins before fitting.
-#: Real photo histograms are sparse; the KL loss needs a target > 0 everywhere and
-#: the Sinkhorn scalings stay in range when no bin is exactly empty. 1e-4 of the
-#: mass (the paper's floor for shapes) changes no visible colour.
-DEFAULT_FLOOR = 1e-4
-
-#: Photos larger than this are subsampled (regular stride) before binning.
-DEFAULT_MAX_PIXELS = 262_144
+#: DEFAULT_FLOOR: fraction of the total mass spread uniformly over all bins before
+#: fitting. Real photo histograms are sparse; the KL loss needs a target > 0
+#: everywhere and the Sinkhorn scalings stay in range when no bin is exactly empty.
+#: 1e-4 of the mass (the paper's floor for shapes) changes no visible colour.
+#: DEFAULT_MAX_PIXELS: photos larger than this are subsampled (regular stride)
+#: before binning. Both are the options' defaults (wbcgrade.color.options).
 
 
 def grid_points(bins: int) -> np.ndarray:
@@ -204,3 +205,47 @@ class HistogramCache:
             os.replace(tmp, target)
         except OSError as exc:
             log.warning("histogram cache not written (%s)", exc)
+
+
+class PaletteSum:
+    """Running sum of normalised histograms whose result does not depend on their order.
+
+    The palette of a series (``batch --consistent``, a video shot): every
+    photo counts once whatever its size. Each histogram is rounded to fixed
+    point (2^-40 of its mass) and summed in int64, so photos may arrive in
+    any order (process pool, Dask) and the pooled palette, hence the series
+    grade, is bit-for-bit the same.
+
+    >>> import numpy as np
+    >>> pool = PaletteSum()
+    >>> pool.add(np.array([3.0, 1.0])); pool.add(np.array([0.0, 5.0]))
+    >>> pool.result().tolist()
+    [0.375, 0.625]
+    """
+
+    _ONE = float(2 ** 40)
+
+    def __init__(self) -> None:
+        self.total: np.ndarray | None = None
+        self.count = 0
+
+    def add(self, hist: np.ndarray) -> None:
+        """Add a histogram (normalised here: every photo counts once)."""
+        fixed = np.rint(np.asarray(hist, dtype=np.float64) / hist.sum() * self._ONE)
+        fixed = fixed.astype(np.int64)
+        self.total = fixed if self.total is None else self.total + fixed
+        self.count += 1
+
+    def result(self) -> np.ndarray:
+        """The pooled histogram, summing to 1."""
+        if self.total is None:
+            raise ValueError("no histograms to pool")
+        return self.total / self.total.sum()
+
+
+def pooled_histogram(histograms: list[np.ndarray]) -> np.ndarray:
+    """The palette of a series: the photos' normalised histograms summed, normalised."""
+    pool = PaletteSum()
+    for hist in histograms:
+        pool.add(hist)
+    return pool.result()

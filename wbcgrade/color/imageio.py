@@ -11,13 +11,15 @@ temporary file in the output folder, checks them (every writer error, the size,
 the header read back) and only then renames the file into place; it never
 replaces the input or anything that is not a regular file.
 
-Pixel domains: integer images (8/16-bit JPEG, PNG, TIFF) are treated as
-display-encoded values in [0, 1]. Float images (EXR, float TIFF) are treated as
-scene-linear and graded in the sRGB-encoded domain (colour-science's sRGB
-encoding); see :func:`encode_for_grading` for what happens above 1. That is
-the default pair of colour spaces; other input and working spaces go through
-OpenColorIO (:mod:`wbcgrade.color.colorspace`), whose state
-:func:`decode_from_grading` also accepts.
+Pixel values: integer images (8/16-bit JPEG, PNG, TIFF) are read as
+display-encoded values in [0, 1], float images (EXR, float TIFF) as they
+are (scene-linear). Which colour space they are in and how they reach the
+working space is not this module's business
+(:mod:`wbcgrade.color.colorspace`). Orientation and alpha association use
+OpenImageIO's own ``ImageBufAlgo.reorient``, ``unpremult`` and ``premult``.
+Outputs are checked before any work by :func:`wbcgrade._publish.check_output_path`
+(the one output checker); the writers here publish atomically and never
+replace an existing file unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -33,21 +35,18 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wbcgrade._publish import atomic_path, check_regular_target
-from wbcgrade.errors import InputError
+from wbcgrade._publish import atomic_path, check_output_path
+from wbcgrade.errors import InputError, first_line
 
 __all__ = [
     "Image",
     "read_image",
     "write_image",
     "stage_image",
-    "check_output_path",
     "check_image_output",
     "max_image_pixels",
     "set_max_image_pixels",
     "DEFAULT_MAX_IMAGE_PIXELS",
-    "encode_for_grading",
-    "decode_from_grading",
     "orient",
 ]
 
@@ -124,19 +123,37 @@ class Image:
         return self.pixels[:, :, self.alpha_channel]
 
 
+#: OpenImageIO before 3.2 swaps EXIF orientations 5 and 7 in ``reorient``
+#: (OpenImageIO issue #4661, fixed by PR #5350).
+_REORIENT_SWAPS_5_7 = (oiio.VERSION_MAJOR, oiio.VERSION_MINOR) < (3, 2)
+
+
+def _buffer(pixels: np.ndarray, alpha_channel: int = -1) -> oiio.ImageBuf:
+    """An ImageBuf holding (H, W, C) float32 pixels (alpha channel marked)."""
+    buf = oiio.ImageBuf(np.ascontiguousarray(pixels, dtype=np.float32))
+    if alpha_channel >= 0:
+        buf.specmod().alpha_channel = int(alpha_channel)
+    return buf
+
+
+def _pixels(buf: oiio.ImageBuf, what: str) -> np.ndarray:
+    if buf.has_error:
+        raise InputError(f"{what} failed ({first_line(buf.geterror())})")
+    out = np.asarray(buf.get_pixels(oiio.FLOAT), dtype=np.float32)
+    return out.reshape(buf.spec().height, buf.spec().width, buf.spec().nchannels)
+
+
 def orient(pixels: np.ndarray, orientation: int) -> np.ndarray:
-    """Apply an EXIF orientation (1..8) to (H, W, C) stored pixels -> display pixels."""
-    ops = {
-        1: lambda a: a,
-        2: lambda a: a[:, ::-1],
-        3: lambda a: a[::-1, ::-1],
-        4: lambda a: a[::-1, :],
-        5: lambda a: a.transpose(1, 0, 2),
-        6: lambda a: np.rot90(a, k=-1),
-        7: lambda a: a[::-1, ::-1].transpose(1, 0, 2),
-        8: lambda a: np.rot90(a, k=1),
-    }
-    return ops.get(int(orientation), ops[1])(pixels)
+    """Apply an EXIF orientation (1..8) to (H, W, C) stored pixels -> display pixels
+    (OpenImageIO's ``ImageBufAlgo.reorient``, on the calling thread)."""
+    orientation = int(orientation) if 1 <= int(orientation) <= 8 else 1
+    if orientation == 1:
+        return pixels
+    if _REORIENT_SWAPS_5_7 and orientation in (5, 7):
+        orientation = 12 - orientation
+    buf = _buffer(pixels)
+    buf.specmod().attribute("Orientation", orientation)
+    return _pixels(oiio.ImageBufAlgo.reorient(buf, nthreads=1), "reorienting the image")
 
 
 def max_image_pixels() -> int:
@@ -204,9 +221,8 @@ def read_image(path: str | os.PathLike) -> Image:
     config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
     inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
-        reason = oiio.geterror().strip().splitlines()
-        detail = reason[0] if reason else "unknown format"
-        raise InputError(f"{path}: not a readable image ({detail})")
+        raise InputError(f"{path}: not a readable image "
+                         f"({first_line(oiio.geterror(), 'unknown format')})")
     try:
         spec = inp.spec()
         if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
@@ -216,9 +232,8 @@ def read_image(path: str | os.PathLike) -> Image:
             raise InputError(f"{path}: volume images are not supported")
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
         if pixels is None or inp.has_error:
-            message = inp.geterror().strip().splitlines()
-            detail = message[0] if message else "read failed"
-            raise InputError(f"{path}: corrupt or truncated image ({detail})")
+            raise InputError(f"{path}: corrupt or truncated image "
+                             f"({first_line(inp.geterror(), 'read failed')})")
         format_name = inp.format_name()
         spec = oiio.ImageSpec(spec)
     finally:
@@ -234,109 +249,11 @@ def read_image(path: str | os.PathLike) -> Image:
     ):
         alpha = spec.nchannels - 1  # grey+alpha or RGBA without an explicit alpha name
     if alpha >= 0 and not spec.get_int_attribute("oiio:UnassociatedAlpha", 0):
-        _unpremultiply(pixels, int(alpha))  # EXR and associated TIFF store colour * alpha
+        # EXR and associated TIFF store colour * alpha; in memory colour is unassociated.
+        pixels = _pixels(oiio.ImageBufAlgo.unpremult(_buffer(pixels, alpha), nthreads=1),
+                         f"{path}: dividing by alpha")
     return Image(pixels=pixels, spec=spec, path=path, alpha_channel=int(alpha),
                  format_name=format_name)
-
-
-def _colour_channels(nchannels: int, alpha: int) -> list[int]:
-    return [c for c in range(nchannels) if c != alpha]
-
-
-def _unpremultiply(pixels: np.ndarray, alpha: int) -> None:
-    """Colour / alpha where alpha > 0, in place: pixels hold unassociated colour."""
-    a = pixels[:, :, alpha]
-    safe = np.where(a > 0, a, 1.0)
-    for c in _colour_channels(pixels.shape[2], alpha):
-        pixels[:, :, c] /= safe
-
-
-def _premultiply(pixels: np.ndarray, alpha: int) -> np.ndarray:
-    out = pixels.copy()
-    for c in _colour_channels(pixels.shape[2], alpha):
-        out[:, :, c] *= pixels[:, :, alpha]
-    return out
-
-
-def encode_for_grading(rgb: np.ndarray, is_float: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """Map pixel values into the [0, 1] encoded cube the histograms live in.
-
-    Integer images are already encoded: values are clipped to [0, 1]. Float
-    (scene-linear) images go through colour-science's sRGB encoding. Values
-    above 1 are handled by exposure: each pixel whose largest channel m exceeds
-    1 is divided by m, graded like the in-range colour of the same hue, and
-    multiplied back by m in :func:`decode_from_grading`, so highlights keep
-    their intensity above 1 and only their colour is graded. Negative values
-    are clipped to 0.
-
-    Parameters
-    ----------
-    rgb : (H, W, 3) float32
-    is_float : whether the values are scene-linear floats.
-
-    Returns
-    -------
-    encoded : (H, W, 3) float32 in [0, 1]
-    scale : (H, W, 1) float32 per-pixel exposure factor (>= 1), or None.
-    """
-    if not is_float:
-        return np.clip(rgb, 0.0, 1.0, dtype=np.float32), None
-    from wbcgrade.color._colour import colour
-
-    linear = np.maximum(rgb, 0.0)
-    scale = np.maximum(linear.max(axis=2, keepdims=True), 1.0).astype(np.float32)
-    encoded = colour.cctf_encoding(linear / scale, function="sRGB")
-    return np.clip(encoded, 0.0, 1.0).astype(np.float32), scale
-
-
-def decode_from_grading(encoded: np.ndarray, scale) -> np.ndarray:
-    """Inverse of :func:`encode_for_grading` ((H, W, 3) float32 -> pixel values).
-
-    ``scale`` is the second value :func:`encode_for_grading` returned, or the
-    state of a colour-managed conversion
-    (:func:`wbcgrade.color.colorspace.to_working`), which converts back into
-    the photo's own colour space.
-    """
-    if hasattr(scale, "decode"):  # colorspace.WorkingState
-        return scale.decode(encoded)
-    if scale is None:
-        return encoded.astype(np.float32, copy=False)
-    from wbcgrade.color._colour import colour
-
-    linear = colour.cctf_decoding(np.clip(encoded, 0.0, 1.0), function="sRGB")
-    return (linear * scale).astype(np.float32)
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve() or (b.exists() and os.path.samefile(a, b))
-    except OSError:
-        return False
-
-
-def check_output_path(out: str | os.PathLike, inputs: list[str | os.PathLike] = (),
-                      overwrite: bool = False) -> Path:
-    """Check early that ``out`` may be written (before any long computation).
-
-    Raises InputError if ``out`` is one of ``inputs`` (never allowed), exists
-    and ``overwrite`` is False, exists and is not a regular file (a device such
-    as /dev/null, a pipe, a folder), or its folder is missing or not writable.
-    """
-    out = Path(out)
-    for src in inputs:
-        if src is not None and _same_file(Path(src), out):
-            raise InputError(f"{out}: refusing to overwrite the input file")
-    if out.is_dir():
-        raise InputError(f"{out}: is a folder")
-    check_regular_target(out)
-    if out.exists() and not overwrite:
-        raise InputError(f"{out}: file exists (use --overwrite to replace it)")
-    folder = out.parent if str(out.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError(f"{folder}: output folder does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{folder}: output folder is not writable")
-    return out
 
 
 def check_image_output(out: str | os.PathLike) -> str:
@@ -344,10 +261,9 @@ def check_image_output(out: str | os.PathLike) -> str:
     out = Path(out)
     writer = oiio.ImageOutput.create(str(out))
     if writer is None:
-        message = oiio.geterror().strip().splitlines()
-        detail = f" ({message[0]})" if message else ""
-        raise InputError(f"{out}: cannot write this file type{detail}; use e.g. .jpg, .png, "
-                         ".tif or .exr")
+        detail = first_line(oiio.geterror(), "")
+        raise InputError(f"{out}: cannot write this file type{f' ({detail})' if detail else ''}; "
+                         "use e.g. .jpg, .png, .tif or .exr")
     return writer.format_name()
 
 
@@ -398,11 +314,6 @@ def _output_spec(like: Image, height: int, width: int, nchannels: int,
 _EXITING_FORMATS = frozenset({"jpeg"})
 
 
-def _first_line(text: str, default: str) -> str:
-    lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
-    return lines[0] if lines else default
-
-
 #: Messages of writers that report a failed write only through ``geterror()``.
 _WRITE_ERROR = re.compile(r"write error|could only write|no space|file too large|"
                           r"disk full|short write", re.IGNORECASE)
@@ -421,23 +332,23 @@ def _encode_into(target: str, path: Path, spec: oiio.ImageSpec, data: np.ndarray
     out = oiio.ImageOutput.create(str(path))
     if out is None:
         raise InputError(f"{path}: cannot write this file type "
-                         f"({_first_line(oiio.geterror(), 'unknown format')})")
+                         f"({first_line(oiio.geterror(), 'unknown format')})")
     if not out.open(target, spec):
         raise OSError(f"{path}: cannot open for writing "
-                      f"({_first_line(out.geterror(), 'unknown error')})")
+                      f"({first_line(out.geterror(), 'unknown error')})")
     ok = out.write_image(data)
     error = out.geterror()
     failed = out.has_error
     closed = out.close()
     error = "\n".join(e for e in (error, out.geterror(), oiio.geterror()) if e.strip())
     if not ok or not closed or failed:
-        raise OSError(f"{path}: write failed ({_first_line(error, 'unknown error')}; "
+        raise OSError(f"{path}: write failed ({first_line(error, 'unknown error')}; "
                       "disk full or file size limit?)")
     if _WRITE_ERROR.search(error):
-        raise OSError(f"{path}: write failed ({_first_line(error, 'write error')}; "
+        raise OSError(f"{path}: write failed ({first_line(error, 'write error')}; "
                       "disk full or file size limit?)")
     if error.strip():
-        _verify_written(target, path, spec, decode=True, note=_first_line(error, ""))
+        _verify_written(target, path, spec, decode=True, note=first_line(error, ""))
 
 
 def _file_size_limit() -> int | None:
@@ -456,13 +367,19 @@ def _encode_in_child(fd: int, path: Path, spec: oiio.ImageSpec, data: np.ndarray
 
     Used for formats whose library exits the process on a write error, when a
     file size limit could be reached: the child dies instead of this process,
-    which reports an OSError.
+    which reports an OSError. OpenImageIO's thread pool is stopped while the
+    child is forked (``threads`` 1, then restored): the child's ``exit()``
+    would otherwise wait forever for pool threads that only the parent has.
     """
     import select
     import signal
 
     read_end, write_end = os.pipe()
+    threads = oiio.get_int_attribute("threads")
+    oiio.attribute("threads", 1)
     pid = os.fork()
+    if pid != 0:
+        oiio.attribute("threads", threads)
     if pid == 0:  # pragma: no cover - child process (coverage does not follow it)
         code = 0
         try:
@@ -493,7 +410,7 @@ def _encode_in_child(fd: int, path: Path, spec: oiio.ImageSpec, data: np.ndarray
     if status != 0:
         if message.startswith(f"{path}: "):
             raise OSError(message)
-        raise OSError(f"{path}: write failed ({_first_line(message, 'the encoder stopped')}; "
+        raise OSError(f"{path}: write failed ({first_line(message, 'the encoder stopped')}; "
                       "disk full or file size limit?)")
 
 
@@ -547,7 +464,7 @@ def _verify_written(tmp: str, path: Path, spec: oiio.ImageSpec, decode: bool = F
     inp = oiio.ImageInput.open(tmp)
     if inp is None:
         raise OSError(f"{path}: write failed, the file does not read back"
-                      f"{why or ' (' + _first_line(oiio.geterror(), 'unreadable') + ')'}")
+                      f"{why or ' (' + first_line(oiio.geterror(), 'unreadable') + ')'}")
     try:
         got = inp.spec()
         if (got.width, got.height, got.nchannels) != (spec.width, spec.height, spec.nchannels):
@@ -556,7 +473,7 @@ def _verify_written(tmp: str, path: Path, spec: oiio.ImageSpec, decode: bool = F
             pixels = inp.read_image(0, 0, 0, got.nchannels, got.format)
             if pixels is None or inp.has_error:
                 raise OSError(f"{path}: write failed, the file does not decode"
-                              f"{why or ' (' + _first_line(inp.geterror(), 'corrupt') + ')'}; "
+                              f"{why or ' (' + first_line(inp.geterror(), 'corrupt') + ')'}; "
                               "disk full or file size limit?")
     finally:
         inp.close()
@@ -573,7 +490,8 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image,
     if 0 <= alpha < nchannels:
         # In memory colour is unassociated; EXR stores it multiplied by alpha.
         if format_name == "openexr":
-            pixels = _premultiply(pixels, alpha)
+            pixels = _pixels(oiio.ImageBufAlgo.premult(_buffer(pixels, alpha), nthreads=1),
+                             f"{path}: multiplying by alpha")
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)
     if spec.format.basetype == oiio.UINT8:  # converted here on every core (OIIO's: one)
@@ -590,26 +508,34 @@ def stage_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
                 overwrite: bool = False, alpha_channel: int | None = None) -> Iterator[Path]:
     """Write the image to a temporary file; publish it when the ``with`` body succeeds.
 
-    Same arguments as :func:`write_image`. The file is complete and checked
-    when the body runs (write other outputs there: if the body raises, the
-    image is not published and its temporary file is removed).
+    Same arguments as :func:`write_image`; ``path`` was checked before any
+    work (:func:`wbcgrade._publish.plan_outputs`). The file is complete and
+    checked when the body runs (write other outputs there: if the body
+    raises, the image is not published and its temporary file is removed).
+    An existing file is replaced only with ``overwrite``.
     """
-    path = check_output_path(path, [like.path], overwrite)
+    path = Path(path)
     spec, data, format_name = _prepare(path, pixels, like, alpha_channel)
-    if not hasattr(os, "memfd_create"):  # pragma: no cover - not Linux
-        with atomic_path(path, overwrite=overwrite) as tmp:
-            _encode_into(tmp, path, spec, data)
-            _verify_written(tmp, path, spec)
-            yield path
-        return
-    fd = _encode(path, spec, data, format_name)
+    # encoded in memory first where the system can (Linux): see _encode
+    fd = _encode(path, spec, data, format_name) if hasattr(os, "memfd_create") else None
     try:
         with atomic_path(path, overwrite=overwrite) as tmp:
-            _copy_encoded(fd, tmp, path)
-            _verify_written(tmp, path, spec)
+            _write_encoded(fd, tmp, path, spec, data)
             yield path
     finally:
-        os.close(fd)
+        if fd is not None:
+            os.close(fd)
+
+
+def _write_encoded(fd: int | None, tmp: str, path: Path, spec: oiio.ImageSpec,
+                   data: np.ndarray) -> None:
+    """Fill the temporary file: the bytes encoded in ``fd``, or (no memory files) an
+    encoder writing it directly; then check what was written."""
+    if fd is None:  # pragma: no cover - not Linux
+        _encode_into(tmp, path, spec, data)
+    else:
+        _copy_encoded(fd, tmp, path)
+    _verify_written(tmp, path, spec)
 
 
 def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
@@ -625,10 +551,13 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     overwrite : replace an existing file (never the input).
     alpha_channel : index of alpha in ``pixels`` (default: ``like``'s).
 
-    The image is encoded in memory, copied to a temporary file in the same
-    folder, checked (size, header) and renamed into place; a full disk or a
-    file size limit raises OSError and leaves nothing behind.
+    ``path`` is checked first (:func:`wbcgrade._publish.check_output_path`:
+    never ``like``'s own file). The image is encoded in memory, copied to a
+    temporary file in the same folder, checked (size, header) and renamed
+    into place; a full disk or a file size limit raises OSError and leaves
+    nothing behind.
     """
+    path = check_output_path(path, [like.path], overwrite)
     with stage_image(path, pixels, like, overwrite, alpha_channel) as written:
         pass
     return written

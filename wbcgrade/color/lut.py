@@ -1,19 +1,34 @@
-"""Export a colour map as a 3-D LUT (.cube through colour-science, or CLF).
+"""A grade as a 3-D LUT file: ``.cube`` (through colour-science) or CLF.
 
-The written file is a standard Resolve/Adobe ``.cube`` (``LUT_3D_SIZE``,
-domain [0, 1], red varying fastest), read by colour-science's ``read_LUT``,
-DaVinci Resolve and ffmpeg's ``lut3d`` filter. Its input is the encoded
-colour the grade works in: the working space (default sRGB-encoded
-Rec.709: the pixel values of 8/16-bit sRGB photos; for float EXR input,
-sRGB-encoded values of the linear pixels clipped to [0, 1]), and so is its
-output. :func:`write_grade_lut` names both spaces and the OpenColorIO config
-in the header comments. When the working space is logarithmic (ACEScct,
-ACEScc) the ``.cube`` is Resolve's shaper form: a 1D shaper
-(``LUT_1D_INPUT_RANGE``) takes the linear partner (ACEScg) into the working
-space, then the 3D LUT grades; it expects linear ACEScg and produces
-ACEScct. The CLF (Academy/ASC Common LUT Format, written by the
-``opencolorio`` package: ``pip install 'wbcgrade[ocio]'``) holds the same
-operators, its shaper a half-float-domain 1D LUT (exact at every half value).
+:meth:`wbcgrade.color.grading.Grade.lut` makes the table; this module writes
+it. One ``.cube`` writer (:func:`write_cube`, colour-science's "Resolve
+Cube": ``LUT_3D_SIZE``, domain [0, 1], red varying fastest) serves every
+command: ``apply --lut``, ``batch --consistent --lut``, ``video --lut`` and
+the temporary LUTs ffmpeg's ``lut3d`` reads. :func:`write_grade_lut` writes
+a grade in a colour encoding and names its spaces in the header:
+
+- a LUT in the working space (``apply``, ``batch``): its input and output
+  are working-space colours (default sRGB-encoded Rec.709: the pixel values
+  of 8/16-bit sRGB photos); when the working space is logarithmic (ACEScct,
+  ACEScc) the ``.cube`` is Resolve's shaper form: a 1D shaper
+  (``LUT_1D_INPUT_RANGE``) takes the linear partner (ACEScg) into the
+  working space, then the 3D LUT grades: it expects linear ACEScg and
+  produces ACEScct;
+- a LUT baked in another encoding (``video``: the clip's code values): the
+  lattice is in the input space, no shaper.
+
+The CLF (Academy/ASC Common LUT Format, written by the ``opencolorio``
+package: ``pip install 'wbcgrade[ocio]'``) holds the same operators, its
+shaper a half-float-domain 1D LUT (exact at every half value).
+
+>>> import numpy as np, tempfile, os
+>>> from wbcgrade.color.lut import read_cube, write_cube
+>>> from wbcgrade.color.remap import identity_map
+>>> path = os.path.join(tempfile.mkdtemp(), "identity.cube")
+>>> _ = write_cube(path, identity_map(5), title="identity")
+>>> lut = read_cube(path)
+>>> lut.size, bool(np.allclose(lut.table, identity_map(5), atol=1e-6))
+(5, True)
 """
 
 from __future__ import annotations
@@ -24,13 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path
-from wbcgrade.color.imageio import check_output_path
 from wbcgrade.color.remap import apply_color_map, identity_map
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["color_map_to_lut", "write_cube", "read_cube", "write_grade_lut", "lut_header",
-           "shaper_table", "check_lut_path", "check_clf_support", "DEFAULT_LUT_SIZE", "LUT_FORMATS",
-           "SHAPER_SIZE"]
+           "shaper_table", "check_lut_path", "check_lut_size", "check_clf_support",
+           "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE"]
 
 DEFAULT_LUT_SIZE = 33
 #: ``--lut-format`` choices and the file name ending each needs.
@@ -48,26 +62,45 @@ def color_map_to_lut(color_map: np.ndarray, size: int = DEFAULT_LUT_SIZE,
     (blended with the identity by ``strength``), so applying the LUT with
     trilinear interpolation approximates the grade to the LUT's resolution.
     """
-    if not 2 <= size <= 256:
-        raise InputError("LUT size must be between 2 and 256")
-    nodes = identity_map(size)
+    nodes = identity_map(check_lut_size(size))
     return np.clip(apply_color_map(nodes, color_map, strength), 0.0, 1.0)
 
 
+def check_lut_size(size: int) -> int:
+    """``size`` when it is a usable LUT size (2 to 256 nodes per axis), else OptionError."""
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) \
+            or not 2 <= size <= 256:
+        raise OptionError("lut_size must be between 2 and 256", "lut_size")
+    return int(size)
+
+
 def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrade",
-               comments: list[str] | None = None, overwrite: bool = False) -> Path:
-    """Write a (size, size, size, 3) table, indexed [r, g, b], as a .cube file (atomically)."""
+               comments: list[str] | None = None, overwrite: bool = False,
+               shaper: tuple[np.ndarray, tuple[float, float]] | None = None) -> Path:
+    """Write a (size, size, size, 3) table, indexed [r, g, b], as a .cube file (atomically).
+
+    ``shaper``: ``(curve (k,), (low, high))``, a 1D shaper over ``[low, high]``
+    before the 3D table (Resolve's shaper form). Never replaces an existing
+    file unless ``overwrite``.
+    """
     from wbcgrade.color._colour import colour
 
     path = Path(path)
     if path.suffix.lower() != ".cube":
         raise InputError(f"{path}: LUT file name must end in .cube")
-    check_output_path(path, overwrite=overwrite)
-    lut = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
-                       domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
-                       size=table.shape[0], comments=comments or [])
+    grid = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
+                        domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
+                        size=table.shape[0], comments=list(comments or []))
+    lut, decimals = grid, 6
+    if shaper is not None:
+        curve, (low, high) = shaper
+        grid.name, grid.comments = "grade", []
+        lut, decimals = colour.LUTSequence(
+            colour.LUT3x1D(table=np.repeat(np.asarray(curve, np.float64)[:, None], 3, axis=1),
+                           name=title, domain=np.array([[low] * 3, [high] * 3]),
+                           comments=list(comments or [])), grid), 7
     with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
-        colour.write_LUT(lut, tmp, decimals=6, method="Resolve Cube")
+        colour.write_LUT(lut, tmp, decimals=decimals, method="Resolve Cube")
     return path
 
 
@@ -90,7 +123,7 @@ def check_lut_path(path: str | os.PathLike, lut_format: str = "cube") -> Path:
     return path
 
 
-def shaper_table(spaces, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[float, float]]:
+def shaper_table(encoding, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[float, float]]:
     """The 1D shaper of a logarithmic working space, sampled for a ``.cube``.
 
     Returns ``(table (size,) float64, (low, high))``: ``table[i]`` is the
@@ -101,68 +134,56 @@ def shaper_table(spaces, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[flo
     """
     from wbcgrade.color.colorspace import convert
 
-    high = float(spaces.peak)
+    high = float(encoding.peak)
     ramp = -np.geomspace(1e-6, 1.0, 2049)[::-1]  # the low end: the grey encoded as 0
-    enc = convert(np.repeat(ramp[:, None], 3, axis=1), spaces.linear, spaces.working)[:, 0]
+    enc = convert(np.repeat(ramp[:, None], 3, axis=1), encoding.linear, encoding.working)[:, 0]
     below = np.flatnonzero(enc <= 0.0)
     low = float(ramp[below[-1]]) if len(below) else float(ramp[0])
     grey = np.linspace(low, high, size)
-    table = convert(np.repeat(grey[:, None], 3, axis=1), spaces.linear, spaces.working)[:, 0]
+    table = convert(np.repeat(grey[:, None], 3, axis=1), encoding.linear, encoding.working)[:, 0]
     return np.clip(table.astype(np.float64), 0.0, 1.0), (low, high)
 
 
-def lut_header(spaces, shaper: bool) -> list[str]:
+def lut_header(encoding, shaper: bool = False) -> list[str]:
     """Comment lines naming the spaces a LUT expects and produces, and the config."""
     from wbcgrade.color.colorspace import config_info
 
     info = config_info()
-    expects = (f"{spaces.linear} (linear; the 1D shaper encodes it as {spaces.working})"
-               if shaper else f"{spaces.working} (values in [0, 1])")
-    return [f"input space: {expects}",
-            f"output space: {spaces.working}",
-            f"OpenColorIO config: {info['ocio_config']} (OpenColorIO {info['ocio_version']})"]
+    if encoding.input != encoding.working:  # baked in the input's code values
+        lines = [f"input space: {encoding.input} ({encoding.source})",
+                 f"output space: {encoding.input}",
+                 f"working space: {encoding.working} (where the grade was fitted)"]
+    else:
+        expects = (f"{encoding.linear} (linear; the 1D shaper encodes it as {encoding.working})"
+                   if shaper else f"{encoding.working} (values in [0, 1])")
+        lines = [f"input space: {expects}", f"output space: {encoding.working}"]
+    return lines + [f"OpenColorIO config: {info['ocio_config']} "
+                    f"(OpenColorIO {info['ocio_version']})"]
 
 
-def write_grade_lut(path: str | os.PathLike, color_map: np.ndarray, spaces,
-                    size: int = DEFAULT_LUT_SIZE, strength: float = 1.0,
+def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAULT_LUT_SIZE,
                     lut_format: str = "cube", title: str = "wbcgrade",
-                    comments: list[str] | None = None, overwrite: bool = False,
-                    cube_writer=None) -> Path:
-    """Write a grade's colour map as a LUT whose header names its spaces.
+                    comments: list[str] | None = None, overwrite: bool = False) -> Path:
+    """Write a :class:`~wbcgrade.color.grading.Grade` as a LUT whose header names its spaces.
 
     Parameters
     ----------
-    color_map : (m, m, m, 3) the grade's map (working-space colours).
-    spaces : :class:`wbcgrade.color.colorspace.Spaces` of the grade.
+    grade : the grade (its map lives in ``encoding.working``).
+    encoding : a :class:`~wbcgrade.color.colorspace.ColorEncoding`: its input
+        is what the LUT takes and gives (the working space itself: a LUT in
+        the working space, with a shaper when it is logarithmic; another
+        space: the grade baked in its code values, :meth:`Grade.lut`).
     lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package).
-    cube_writer : what writes a plain ``.cube`` (default :func:`write_cube`).
-
-    A logarithmic working space (ACEScct, ACEScc) gets a shaper: the LUT
-    expects the linear partner (ACEScg) and produces the working space.
     """
-    from wbcgrade.color.colorspace import is_logarithmic
-
     path = check_lut_path(path, lut_format)
-    check_output_path(path, overwrite=overwrite)
-    table = color_map_to_lut(color_map, size, strength)
-    shaper = is_logarithmic(spaces.working)
-    notes = list(comments or []) + lut_header(spaces, shaper)
+    baked = encoding.input != encoding.working
+    table = grade.lut(size, encoding if baked else None)
+    shaper = not baked and encoding.logarithmic
+    notes = list(comments or []) + lut_header(encoding, shaper)
     if lut_format == "clf":
-        return _write_clf(path, table, spaces, shaper, title, notes, overwrite)
-    if not shaper:
-        return (cube_writer or write_cube)(path, table, title=title, comments=notes,
-                                           overwrite=overwrite)
-    from wbcgrade.color._colour import colour
-
-    curve, (low, high) = shaper_table(spaces)
-    sequence = colour.LUTSequence(
-        colour.LUT3x1D(table=np.repeat(curve[:, None], 3, axis=1), name=title,
-                       domain=np.array([[low] * 3, [high] * 3]), comments=notes),
-        colour.LUT3D(table=np.asarray(table, dtype=np.float64), name="grade",
-                     domain=np.array([[0.0] * 3, [1.0] * 3]), size=table.shape[0]))
-    with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
-        colour.write_LUT(sequence, tmp, decimals=7, method="Resolve Cube")
-    return path
+        return _write_clf(path, table, encoding, shaper, title, notes, overwrite)
+    return write_cube(path, table, title=title, comments=notes, overwrite=overwrite,
+                      shaper=shaper_table(encoding) if shaper else None)
 
 
 def check_clf_support():
@@ -175,7 +196,7 @@ def check_clf_support():
     return ocio
 
 
-def _write_clf(path: Path, table: np.ndarray, spaces, shaper: bool, title: str,
+def _write_clf(path: Path, table: np.ndarray, encoding, shaper: bool, title: str,
                notes: list[str], overwrite: bool) -> Path:
     ocio = check_clf_support()
     from wbcgrade.color.colorspace import convert
@@ -190,8 +211,8 @@ def _write_clf(path: Path, table: np.ndarray, spaces, shaper: bool, title: str,
         halves = np.arange(65536, dtype=np.uint16).view(np.float16).astype(np.float32)
         finite = np.isfinite(halves)
         values = np.zeros(65536, dtype=np.float32)
-        values[finite] = convert(np.repeat(halves[finite, None], 3, axis=1), spaces.linear,
-                                 spaces.working)[:, 0]
+        values[finite] = convert(np.repeat(halves[finite, None], 3, axis=1), encoding.linear,
+                                 encoding.working)[:, 0]
         values[~finite & (halves > 0)] = values[finite].max()
         values[~finite & ~(halves > 0)] = values[finite].min()
         curve = ocio.Lut1DTransform()

@@ -33,14 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path
+from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.color.colorspace import (
+    ColorEncoding,
     config_path,
     convert,
     default_working_space,
-    plan_spaces,
     resolve_space,
-    to_working,
 )
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
@@ -50,11 +49,13 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import check_output_path, read_image
+from wbcgrade.color.imageio import read_image
 from wbcgrade.errors import InputError
 
 __all__ = [
     "StyleSet",
+    "StyleSource",
+    "load_styles",
     "load_style_folder",
     "save_preset",
     "load_preset",
@@ -131,8 +132,8 @@ class StyleSet:
 def _photo_histogram(path: Path, bins: int, max_pixels: int,
                      working_space: str | None = None) -> np.ndarray:
     image = read_image(path)
-    spaces = plan_spaces(image, None, working_space)  # each style photo in its own space
-    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
+    encoding = ColorEncoding.for_image(image, None, working_space)  # each in its own space
+    encoded, _ = encoding.encode(image.rgb(), image.is_float)
     try:
         return image_histogram(encoded, bins, image.alpha(), max_pixels)
     except InputError as exc:  # e.g. fully transparent: say which photo
@@ -376,3 +377,40 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
+
+
+@dataclass(frozen=True)
+class StyleSource:
+    """Where a command's styles come from: a folder of photos or a preset (exactly one).
+
+    ``cache``: the style histogram cache (a folder's histograms; None: none).
+    """
+
+    style_dir: str | None = None
+    preset: str | None = None
+    cache: HistogramCache | None = None
+
+    @property
+    def name(self) -> str:
+        return str(self.style_dir if self.style_dir is not None else self.preset)
+
+
+def load_styles(source: StyleSource, bins: int, working_space: str | None = None,
+                warn: Callable[[str], None] | None = None,
+                progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
+    """The styles a command names: a folder's histograms at ``bins`` (cached) or a preset.
+
+    The histograms are those of ``working_space`` (None: sRGB-encoded
+    Rec.709): style photos are converted from their own spaces before
+    binning; a preset built in another working space is converted
+    (:func:`styles_in_space`).
+    """
+    if (source.style_dir is None) == (source.preset is None):
+        raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
+    if source.preset is not None:
+        styles = load_preset(resolve_preset(source.preset))
+        if working_space is None and "working_space" not in styles.meta:
+            return styles  # sRGB-encoded Rec.709 on both sides
+        return styles_in_space(styles, working_space or default_working_space())
+    return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
+                             progress=progress, working_space=working_space)

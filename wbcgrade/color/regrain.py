@@ -29,16 +29,12 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
 from wbcgrade.core._jit import compiled
 
 __all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
 
-#: Window radius as a fraction of the image's long side (5 px at 1024 px).
-DEFAULT_REGRAIN_RADIUS = 1.0 / 200.0
-#: Regulariser in squared encoded units: input variations well below sqrt(eps) = 0.2
-#: (most grain, JPEG blocks, gentle gradients) keep their input amplitude.
-DEFAULT_REGRAIN_EPS = 0.2 ** 2
 #: Coefficients are solved on at most this many pixels and interpolated back.
 _MAX_SOLVE_PIXELS = 1_500_000
 

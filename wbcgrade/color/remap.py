@@ -131,61 +131,61 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
     return out.reshape(shape)
 
 
-def keep_lightness(color_map: np.ndarray) -> np.ndarray:
+def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:
     """A colour map that keeps each input colour's Oklab lightness (``--preserve-luminance``).
 
     Every node's output takes the hue and chroma (Oklab a, b) of the map and
-    the lightness L of the node's own colour; colours outside the sRGB gamut
-    are clipped. Encoded sRGB in and out (colour-science conversions).
+    the lightness L of the node's own colour, both computed in the working
+    space's own terms (``encoding.to_oklab``: its decoding and primaries);
+    colours outside the working space's unit cube are clipped onto it.
 
     Parameters
     ----------
-    color_map : (n, n, n, 3) encoded colours in [0, 1].
+    color_map : (n, n, n, 3) working-space colours in [0, 1].
+    encoding : the grade's :class:`wbcgrade.color.colorspace.ColorEncoding`.
 
     Returns
     -------
     (n, n, n, 3) float32 in [0, 1].
     """
-    from wbcgrade.color._colour import colour
-
-    def to_oklab(encoded):
-        linear = colour.cctf_decoding(np.clip(encoded, 0.0, 1.0), function="sRGB")
-        return colour.XYZ_to_Oklab(colour.RGB_to_XYZ(linear, "sRGB"))
-
-    source = to_oklab(identity_map(color_map.shape[0], np.float64))
-    mapped = to_oklab(np.asarray(color_map, dtype=np.float64))
+    source = encoding.to_oklab(identity_map(color_map.shape[0], np.float64))
+    mapped = encoding.to_oklab(np.asarray(color_map, dtype=np.float64))
     mapped[..., 0] = source[..., 0]
-    linear = colour.XYZ_to_RGB(colour.Oklab_to_XYZ(mapped), "sRGB")
-    encoded = colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB")
-    return np.clip(encoded, 0.0, 1.0).astype(np.float32)
+    return encoding.from_oklab(mapped)
 
 
-#: Luma of encoded RGB (Rec. 601 weights, as JPEG's Y'CbCr).
+#: Luma of sRGB-encoded RGB (sYCC: BT.601 weights, as JPEG's Y'CbCr); other working
+#: spaces have their own (``ColorEncoding.luma_weights``).
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114])
 
 
-def monotone_lightness(color_map: np.ndarray) -> np.ndarray:
+def monotone_lightness(color_map: np.ndarray,
+                       luma_weights: np.ndarray | None = None) -> np.ndarray:
     """A colour map whose output luma never decreases when an input channel increases.
 
     Where a transport map is not monotone in lightness, two neighbouring
     colours of a flat area swap their order of brightness after grading (the
     8x8 JPEG blocks of a sky turn into a checkerboard of reversed steps). The
-    output luma ``Y(x)`` of the lattice is replaced, along each axis in turn,
-    by the mean of its running maximum from below and its running minimum
-    from above (both non-decreasing, and each pass keeps the earlier axes'
-    order), and every node's colour is moved by the change along grey (the
-    hue and chroma differences between channels are kept), then clipped.
+    output luma ``Y(x) = w . T(x)`` of the lattice is replaced, along each
+    axis in turn, by the mean of its running maximum from below and its
+    running minimum from above (both non-decreasing, and each pass keeps the
+    earlier axes' order), and every node's colour is moved by the change
+    along grey (the hue and chroma differences between channels are kept),
+    then clipped.
 
     Parameters
     ----------
-    color_map : (n, n, n, 3) encoded colours in [0, 1].
+    color_map : (n, n, n, 3) working-space colours in [0, 1].
+    luma_weights : (3,) the working encoding's luma weights, summing to 1
+        (default :data:`LUMA_WEIGHTS`, sRGB's).
 
     Returns
     -------
     (n, n, n, 3) float32 in [0, 1].
     """
+    weights = LUMA_WEIGHTS if luma_weights is None else np.asarray(luma_weights, np.float64)
     table = np.asarray(color_map, dtype=np.float64)
-    luma = table @ LUMA_WEIGHTS
+    luma = table @ weights
     target = luma.copy()
     for axis in range(3):
         rising = np.maximum.accumulate(target, axis=axis)

@@ -9,7 +9,9 @@ Folder layout (REPORT_DIR)::
     index.html           self-contained page: the weight table and every sheet
                          (inline CSS, sheets referenced by relative paths)
 
-All files are written atomically.
+All files are written atomically. They are planned before any work
+(:func:`plan_report`, through :func:`wbcgrade._publish.plan_outputs`): a
+report never replaces a file it did not write unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -23,20 +25,53 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path
+from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.grading import NONZERO_THRESHOLD, PhotoGrade
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.fit import NONZERO_THRESHOLD
+from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.transfer import GradeOptions
+from wbcgrade.color.workflow import GradeReport, PhotoGrade
 
-__all__ = ["style_pictures", "write_report", "report_entries", "report_from_grade",
-           "sheet_content"]
+__all__ = ["style_pictures", "report_paths", "plan_report", "write_report", "report_entries",
+           "report_from_grade", "sheet_content", "sheet_path"]
+
+#: The files of a report folder besides the per-photo ones.
+INDEX_FILES = ("report.json", "weights.csv", "index.html")
 
 
-def _write_text(path: Path, text: str) -> None:
+def _write_text(path: Path, text: str, overwrite: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
+    with atomic_path(path, overwrite=overwrite) as tmp, \
+            open(tmp, "w", encoding="utf-8", newline="") as handle:
         handle.write(text)
+
+
+def sheet_path(relative: str) -> Path:
+    """A photo's sheet, relative to the report folder."""
+    return Path("sheets") / f"{relative}.png"
+
+
+def report_paths(report_dir: str | os.PathLike, relatives: list[str]) -> list[Path]:
+    """Every file a report of these photos (paths relative to the graded folder) writes."""
+    report_dir = Path(report_dir)
+    return ([report_dir / name for name in INDEX_FILES]
+            + [_record_path(report_dir, rel) for rel in relatives]
+            + [report_dir / sheet_path(rel) for rel in relatives])
+
+
+def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),
+                overwrite: bool = False) -> list[Path]:
+    """Check before any work that a report of these photos may be written into
+    ``report_dir`` (:func:`wbcgrade._publish.plan_outputs`; every file stays in the
+    folder, none is an input, none exists unless ``overwrite``)."""
+    report_dir = Path(report_dir)
+    if report_dir.exists() and not report_dir.is_dir():
+        from wbcgrade.errors import InputError
+
+        raise InputError(f"{report_dir}: the report folder is a file")
+    return plan_outputs(report_paths(report_dir, relatives), inputs, overwrite,
+                        root=report_dir, make_folders=True)
 
 
 def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
@@ -45,18 +80,13 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
 
     Returns {name: (h, w, 3) float32 in [0, 1]}.
     """
-    from wbcgrade.color.colorspace import (
-        default_working_space,
-        plan_spaces,
-        spaces_for,
-        to_display,
-        to_working,
-    )
+    from wbcgrade.color.colorspace import default_working_space
     from wbcgrade.color.imageio import read_image
     from wbcgrade.color.sheet import histogram_palette, thumbnail
 
     working = styles.working_space
-    palette_spaces = None if working == default_working_space() else spaces_for(None, working)
+    palette_spaces = (None if working == default_working_space()
+                      else ColorEncoding.of(None, working))
     folder = Path(styles.source) if styles.source else None
     pictures = {}
     files = {}
@@ -67,16 +97,14 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
         if name in files:
             try:
                 image = read_image(files[name])
-                spaces = plan_spaces(image)  # shown in sRGB, as the file says it looks
-                encoded = (to_working(image.rgb(), spaces, image.is_float)[0] if spaces.legacy
-                           else to_display(image.rgb(), spaces))
-                picture = thumbnail(encoded, size, size * 4 // 3)
+                shown = ColorEncoding.for_image(image).to_display(image.rgb())  # as it looks
+                picture = thumbnail(shown, size, size * 4 // 3)
             except (ValueError, OSError):
                 picture = None
         if picture is None:
             palette = histogram_palette(hist, k=6)
             if palette_spaces is not None:  # the styles' histograms are in another space
-                palette.colors = to_display(palette.colors, palette_spaces, working=True)
+                palette.colors = palette_spaces.to_display(palette.colors, working=True)
             picture = np.zeros((size, size * 4 // 3, 3), dtype=np.float32)
             edges = np.round(np.concatenate([[0], np.cumsum(palette.shares)]) * size).astype(int)
             for j, colour in enumerate(palette.colors):
@@ -89,21 +117,13 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
                   style_pictures: dict[str, np.ndarray] | None = None):
     """The SheetContent of a graded photo (pictures, style tiles, palettes, losses)."""
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import encode_for_grading
     from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
 
-    image = graded.image
+    image, encoding = graded.image, graded.encoding
     color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
-    spaces = getattr(graded, "spaces", None)
-    managed = spaces is not None and not spaces.legacy
-    if managed:  # pictures and palettes shown in sRGB, whatever the photo's space
-        from wbcgrade.color.colorspace import to_display
-
-        before = to_display(image.rgb(), spaces)
-        after = to_display(graded.pixels[:, :, color], spaces)
-    else:
-        before, _ = encode_for_grading(image.rgb(), image.is_float)
-        after, _ = encode_for_grading(graded.pixels[:, :, color], image.is_float)
+    # pictures and palettes shown in sRGB, whatever the photo's space
+    before = encoding.to_display(image.rgb())
+    after = encoding.to_display(graded.pixels[:, :, color])
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
@@ -113,8 +133,7 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
     bins = 16
     target = histogram_palette(graded.grade.barycenter)  # in the working space
-    if managed:
-        target.colors = to_display(target.colors, spaces, working=True)
+    target.colors = encoding.to_display(target.colors, working=True)
     palettes = [("input", histogram_palette(image_histogram(before, bins))),
                 ("barycenter", target),
                 ("output", histogram_palette(image_histogram(after, bins)))]
@@ -235,93 +254,63 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
 
 
 def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: StyleSet,
-                 opts: GradeOptions, mode: str = "per-photo") -> Path:
+                 options: GradeOptions, mode: str = "per-photo",
+                 overwrite: bool = False) -> Path:
     """Write report.json, weights.csv, index.html (and per-photo records) into ``report_dir``.
 
     Sheets are written by the tasks themselves (``BatchContext.sheet_dir``).
-    Returns the path of report.json.
+    Existing files are replaced only with ``overwrite`` (:func:`plan_report`
+    checked them before any work). Returns the path of report.json.
     """
+    from wbcgrade.color.colorspace import config_info, default_working_space
+
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
     entries = report_entries(report_dir, result)
     for item, entry in zip(result.results, entries):
         if item.status == "graded":
-            _write_text(_record_path(report_dir, item.relative), json.dumps(entry, indent=1))
+            _write_text(_record_path(report_dir, item.relative), json.dumps(entry, indent=1),
+                        overwrite)
     names = list(styles.names)
     meta = {"styles": styles.source, "mode": mode, "photos": len(entries),
             "graded": result.count("graded"), "skipped": result.count("skipped"),
             "failed": result.count("failed"), "time_s": round(result.time_s, 2)}
-    options = {k: v for k, v in vars(opts).items()}
-    from wbcgrade.color.colorspace import config_info, default_working_space
-
-    color = {**config_info(), "input_space": opts.input_space or "what each file says",
-             "working_space": opts.working_space or default_working_space()}
+    color = {**config_info(), "input_space": options.spaces.input or "what each file says",
+             "working_space": options.spaces.working or default_working_space()}
     document = {"format": "wbcgrade-report", "version": 1, **meta, "color": color,
                 "style_names": names, "nonzero_threshold": NONZERO_THRESHOLD,
-                "options": options, "ignored": result.ignored, "photos": entries}
+                "options": options.flat(), "ignored": result.ignored, "photos": entries}
     if result.series is not None:
         document["series_weights"] = dict(zip(names, map(float, result.series.weights)))
         document["series_loss"] = float(result.series.loss)
     path = report_dir / "report.json"
-    _write_text(path, json.dumps(document, indent=2, default=float))
-    _write_text(report_dir / "weights.csv", _csv_text(entries, names))
-    _write_text(report_dir / "index.html", _index_html(entries, names, meta))
+    _write_text(path, json.dumps(document, indent=2, default=float), overwrite)
+    _write_text(report_dir / "weights.csv", _csv_text(entries, names), overwrite)
+    _write_text(report_dir / "index.html", _index_html(entries, names, meta), overwrite)
     return path
 
 
-def report_from_grade(report_dir: str | os.PathLike, graded, styles: StyleSet,
-                      opts: GradeOptions) -> Path:
-    """Report of one photo graded by ``wbcgrade apply`` (a hook for ``apply --report``).
+def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles: StyleSet,
+                      options: GradeOptions, overwrite: bool = False) -> Path:
+    """The report of one photo graded by ``wbcgrade apply`` (``apply --report``).
 
-    ``graded`` is the :class:`wbcgrade.color.pipeline.GradeReport` that
-    ``grade_file`` returned; the photo and its written output are read back.
-    The weights' loss, the single-style losses and how the weights were found
-    ("uniform", "vertex-refit", "vertex" or "given") come from the report's
-    fit summary; only a report without one (a grade made elsewhere) has its
-    single-style losses evaluated here.
+    ``graded`` is what :func:`wbcgrade.color.workflow.grade_file` returned:
+    its fit summary gives the loss, the single-style losses and how the
+    weights were found, its pixels the sheet. Returns the path of report.json.
     """
-    import time
-
-    from wbcgrade.color.grading import _fit_problem, _loss_at, vertex_losses
-    from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import encode_for_grading, read_image
-
-    report_dir = Path(report_dir)
-    start = time.perf_counter()
-    image = read_image(graded.photo)
-    output = read_image(graded.output)
-    grade = graded.grade
-    weights = np.asarray(grade.weights, dtype=np.float64)
-    fit = getattr(graded, "fit", None)
-    if fit is not None:
-        vertices, loss, how = fit.vertex_losses, fit.loss, fit.start
-    else:
-        encoded, _ = encode_for_grading(image.rgb(), image.is_float)
-        photo_fit = image_histogram(encoded, opts.fit_bins, image.alpha(), opts.max_pixels)
-        style_fit = styles.at_bins(opts.fit_bins)
-        vertices = vertex_losses(photo_fit, style_fit, opts)
-        loss = grade.loss
-        if loss is None:
-            target, hists, geometry = _fit_problem(photo_fit, style_fit, opts)
-            loss = _loss_at(target, hists, geometry, weights / weights.sum(), opts)
-        how = graded.fit_start if hasattr(graded, "fit_start") else "uniform"
-        if how == "uniform" and loss > vertices.min():
-            how = "uniform, worse than a single style"
-    result = FileResult(graded.photo.name, str(graded.photo), str(graded.output), "graded",
-                        names=list(styles.names), weights=[float(w) for w in weights],
-                        loss=float(loss), vertex_losses=[float(v) for v in vertices],
-                        start=how, timings=dict(graded.timings),
-                        color=dict(getattr(graded, "color", {}) or {}))
-    from wbcgrade.color.colorspace import plan_spaces
-
-    photo = PhotoGrade(image, output.pixels, output.alpha_channel, grade, None,
-                       spaces=plan_spaces(image, opts.input_space, opts.working_space))
     from wbcgrade.color.sheet import write_sheet
 
-    sheet = Path("sheets") / f"{result.relative}.png"
-    write_sheet(report_dir / sheet,
-                sheet_content(result, photo, style_pictures(styles)))
+    report_dir = Path(report_dir)
+    fit = graded.fit
+    result = FileResult(graded.photo.name, str(graded.photo),
+                        None if graded.output is None else str(graded.output), "graded",
+                        names=list(styles.names),
+                        weights=[float(w) for w in graded.grade.weights],
+                        loss=float(fit.loss), vertex_losses=[float(v) for v in fit.vertex_losses],
+                        start=fit.start, timings=dict(graded.timings), color=graded.color)
+    sheet = sheet_path(result.relative)
+    write_sheet(report_dir / sheet, sheet_content(result, graded.graded, style_pictures(styles)),
+                overwrite=overwrite)
     result.sheet = sheet.as_posix()
-    batch = BatchResult([result], [], time.perf_counter() - start + graded.timings.get("total", 0))
-    return write_report(report_dir, batch, styles, opts, "apply")
-
+    batch = BatchResult([result], [], graded.timings.get("total", 0.0))
+    return write_report(report_dir, batch, styles, options, "apply", overwrite)

@@ -7,8 +7,9 @@ a bar; palette swatches of the input, the barycenter and the output.
 
 Composed with numpy and OpenImageIO only (no plotting library): pictures are
 resized with ``ImageBufAlgo.resize``, text is drawn with
-``ImageBufAlgo.render_text`` and the fonts OpenImageIO ships (when no font can
-be found, with a built-in 3x5 bitmap font). Palettes are the main colours of
+``ImageBufAlgo.render_text`` and the fonts OpenImageIO's package ships
+(Droid); an OpenImageIO without fonts gives sheets without labels (logged
+once), the report's HTML table still has every number. Palettes are the main colours of
 a histogram: its highest peaks (greedy, at least ``min_distance`` apart),
 refined by a few weighted k-means steps over the histogram's bins; each
 swatch is as wide as the share of mass nearest to it.
@@ -16,6 +17,8 @@ swatch is as wide as the share of mass nearest to it.
 
 from __future__ import annotations
 
+import functools
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,27 +36,9 @@ _BACKGROUND = (0.96, 0.96, 0.95)
 _INK = (0.12, 0.12, 0.12)
 _BAR = (0.20, 0.45, 0.75)
 _PAD = 12
-#: Draw labels with OpenImageIO's fonts when it has them (tests turn this off).
+#: Draw labels with OpenImageIO's fonts (tests turn this off: the sheet without labels).
 USE_FONTS = True
-
-#: A 3x5 bitmap font (rows top to bottom), used when OpenImageIO finds no font.
-_GLYPHS = {
-    '0': "111101101101111", '1': "010110010010111", '2': "111001111100111", '3': "111001111001111",
-    '4': "101101111001001", '5': "111100111001111", '6': "111100111101111", '7': "111001001010010",
-    '8': "111101111101111", '9': "111101111001111", 'A': "010101111101101", 'B': "110101110101110",
-    'C': "011100100100011", 'D': "110101101101110", 'E': "111100110100111", 'F': "111100110100100",
-    'G': "011100101101011", 'H': "101101111101101", 'I': "111010010010111", 'J': "001001001101010",
-    'K': "101101110101101", 'L': "100100100100111", 'M': "101111111101101", 'N': "110101101101101",
-    'O': "010101101101010", 'P': "110101110100100", 'Q': "010101101110011", 'R': "110101110101101",
-    'S': "011100010001110", 'T': "111010010010010", 'U': "101101101101111", 'V': "101101101101010",
-    'W': "101101111111101", 'X': "101101010101101", 'Y': "101101010010010", 'Z': "111001010100111",
-    ' ': "000000000000000", '.': "000000000000010", ',': "000000000010100", ':': "000010000010000",
-    ';': "000010000010100", '-': "000000111000000", '_': "000000000000111", '/': "001001010100100",
-    '|': "010010010010010", '(': "001010010010001", ')': "100010010010100", '=': "000111000111000",
-    '>': "100010001010100", '<': "001010100010001", '%': "101001010100101", '+': "000010111010000",
-    '~': "000011110000000", '!': "010010010000010", '?': "110001010000010", '#': "101111101111101",
-    '*': "000101010101000", '[': "011010010010011", ']': "110010010010110", "'": "010010000000000",
-}
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -167,34 +152,20 @@ class _Canvas:
         self.texts.append((x, baseline, text, size, colour))
 
     def render(self) -> np.ndarray:
-        if USE_FONTS:
-            buf = oiio.ImageBuf(np.ascontiguousarray(self.pixels))
-            if all(oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "", colour)
-                   for x, y, text, size, colour in self.texts):
-                return np.asarray(buf.get_pixels(oiio.FLOAT)).reshape(self.pixels.shape)
-            oiio.geterror()  # no font found: fall back to the bitmap font
-        out = self.pixels.copy()
-        for x, y, text, size, colour in self.texts:
-            _bitmap_text(out, x, y, text, size, colour)
-        return out
+        if not USE_FONTS:
+            return self.pixels.copy()
+        buf = oiio.ImageBuf(np.ascontiguousarray(self.pixels))
+        if all(oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "", colour)
+               for x, y, text, size, colour in self.texts):
+            return np.asarray(buf.get_pixels(oiio.FLOAT)).reshape(self.pixels.shape)
+        _no_fonts(oiio.geterror())
+        return self.pixels.copy()
 
 
-def _bitmap_text(pixels: np.ndarray, x: int, baseline: int, text: str, size: int,
-                 colour) -> None:
-    """Draw text with the 3x5 bitmap font, scaled to about ``size`` pixels high."""
-    scale = max(1, round(size / 7))
-    top = baseline - 5 * scale
-    for char in text.upper():
-        bits = _GLYPHS.get(char, _GLYPHS["?"])
-        glyph = np.array([int(b) for b in bits], dtype=bool).reshape(5, 3)
-        glyph = np.kron(glyph, np.ones((scale, scale), dtype=bool))
-        h, w = glyph.shape
-        y0, x0 = max(top, 0), max(x, 0)
-        y1, x1 = min(top + h, pixels.shape[0]), min(x + w, pixels.shape[1])
-        if y1 > y0 and x1 > x0:
-            region = pixels[y0:y1, x0:x1]
-            region[glyph[y0 - top:y1 - top, x0 - x:x1 - x]] = colour
-        x += 4 * scale
+@functools.lru_cache(maxsize=1)
+def _no_fonts(error: str) -> None:
+    log.warning("OpenImageIO found no font: report sheets have no labels (%s)",
+                error.strip() or "no font")
 
 
 def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
@@ -246,14 +217,16 @@ def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
     return canvas.render()
 
 
-def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960) -> Path:
-    """Compose a sheet and write it as an 8-bit sRGB PNG (atomically)."""
+def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960,
+                overwrite: bool = False) -> Path:
+    """Compose a sheet and write it as an 8-bit sRGB PNG (atomically; an existing file
+    is replaced only with ``overwrite``)."""
     path = Path(path)
     pixels = compose_sheet(content, width)
     path.parent.mkdir(parents=True, exist_ok=True)
     spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
-    with atomic_path(path) as tmp:
+    with atomic_path(path, overwrite=overwrite) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None or not out.open(tmp, spec):
             raise OSError(f"{path}: cannot write the sheet ({oiio.geterror().strip()})")

@@ -31,16 +31,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg
 
+from wbcgrade.color.options import DEFAULT_MAP_SIZE, DEFAULT_SMOOTHNESS, DEFAULT_STIFFNESS
 from wbcgrade.color.remap import identity_map
 
 __all__ = ["fit_smooth_map", "DEFAULT_MAP_SIZE", "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS"]
 
-#: Nodes per axis of the fitted map (and of the LUT that ``--lut`` writes by default).
-DEFAULT_MAP_SIZE = 33
-#: Weight of the curvature penalty (lattice units, data weights summing to 1).
-DEFAULT_SMOOTHNESS = 3e-3
-#: Weight of the first-difference penalty (pulls the local gain towards 1).
-DEFAULT_STIFFNESS = 1e-4
 #: Relative residual the coarser lattices are solved to (they give the next its start).
 _START_TOL = 1e-4
 #: Coarsest lattices up to this many nodes are solved directly (the multigrid's bottom).

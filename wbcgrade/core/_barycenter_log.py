@@ -32,7 +32,7 @@ class LogBackend:
         self.items = self.S * self.batch
         # Grids: each histogram's whole recursion (products and element-wise
         # work) runs in one thread, histograms spread over the core's threads.
-        self.per_item = callable(getattr(geometry, "_log_apply_one", None))
+        self.per_item = geometry.log_per_histogram
         # K b matters only where its histogram has mass (a = p / K b is 0 elsewhere):
         # there only are its products repaired to full precision.
         self.support = H > 0 if self.per_item else None
@@ -90,11 +90,8 @@ class LogBackend:
         return log_b
 
     def _apply_in_place(self, log_values: NDArray) -> NDArray:
-        """``log_apply`` written over its input where the geometry can (grids)."""
-        in_place = getattr(self.geometry, "_shifted_log_apply", None)
-        if in_place is None:
-            return self.geometry.log_apply(log_values)
-        return in_place(log_values, None, out=log_values)[0]
+        """``log_apply`` written over its input (in place where the geometry can: grids)."""
+        return self.geometry.log_apply_into(log_values, log_values)
 
     def step(self, log_b: NDArray, need_next: bool = True,
              keep: bool = True) -> tuple[NDArray, Iterate]:
@@ -115,10 +112,10 @@ class LogBackend:
             scratch = np.empty(geom.shape)
             for k in range(lo, hi):
                 kb = scratch if Kb_rows is None else Kb_rows[k]
-                geom._log_apply_one(b_rows[k], kb, needed=support[k])
+                geom.log_apply_one(b_rows[k], kb, needed=support[k])
                 np.copyto(kb, 0.0, where=~support[k])  # unspecified there: finite, unused
                 np.subtract(H_rows[k], kb, out=scratch)  # log a
-                geom._log_apply_one(scratch, phi_rows[k])
+                geom.log_apply_one(scratch, phi_rows[k])
 
         self._over_items(work)
         log_P, P = self._combine(log_phi)
@@ -219,14 +216,14 @@ class LogBackend:
                     np.log(part, out=part)
                     part -= phi_rows[k]
                     # times a = 0 off the support next: only the support must be exact
-                    geom._log_apply_one(part, part, signs, signs, needed=support[k])
+                    geom.log_apply_one(part, part, signs, signs, needed=support[k])
                     if a_rows is None:  # log a = log H - log K b, not kept
                         part += H_rows[k]
                         part -= Kb_rows[k]
                     else:
                         part += a_rows[k]
                     part -= Kb_rows[k]
-                    geom._log_apply_one(part, part, signs, signs)
+                    geom.log_apply_one(part, part, signs, signs)
                     part += b_rows[k]
                     np.exp(part, out=part)
                     part *= signs

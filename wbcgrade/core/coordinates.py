@@ -121,6 +121,21 @@ def barycentric_coordinates(
     ----------
     Bonneel, Peyré, Cuturi (2016), Wasserstein barycentric coordinates:
     histogram regression using optimal transport. ACM TOG 35(4).
+
+    Examples
+    --------
+    The weights of a barycenter are found again from the barycenter:
+
+    >>> import numpy as np
+    >>> from wbcgrade.core import GridGeometry, barycenter, barycentric_coordinates
+    >>> x = np.linspace(0, 1, 40)
+    >>> bumps = np.stack([np.exp(-(x - c) ** 2 / 0.003) for c in (0.2, 0.8)])
+    >>> bumps /= bumps.sum(axis=1, keepdims=True)
+    >>> geometry = GridGeometry.with_width(40, 1.0)
+    >>> target = barycenter(bumps, [0.7, 0.3], geometry, n_iter=30)
+    >>> fit = barycentric_coordinates(target, bumps, geometry, n_iter=30)
+    >>> np.round(fit.weights, 2).tolist()
+    [0.7, 0.3]
     """
     start = time.perf_counter()
     solver = BarycenterSolver(histograms, geometry, n_iter, checkpoint_bytes)

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _validation
-from wbcgrade.core.geometry import Geometry, GridGeometry, refine_grid, resample_grid
+from wbcgrade.core.geometry import Geometry, refine_grid, resample_grid
 from wbcgrade.core.sinkhorn import SinkhornLevel, SinkhornResult, sinkhorn
 from wbcgrade.errors import ConvergenceWarning
 
@@ -139,7 +139,7 @@ def multiscale_sinkhorn(
         ``geometry`` is not a :class:`~wbcgrade.core.GridGeometry` (coarser
         levels are built from its shape; use ``sinkhorn`` on other geometries).
     """
-    if not isinstance(geometry, GridGeometry):
+    if not geometry.is_grid:
         raise TypeError(
             "multiscale_sinkhorn needs a GridGeometry (its coarser grids are built from the "
             f"grid's shape), got {type(geometry).__name__}; use sinkhorn() on other geometries")
@@ -173,7 +173,7 @@ def multiscale_sinkhorn(
             if factor == 1.0 and finest:
                 level_geometry = geometry
             else:
-                level_geometry = GridGeometry(shape, geometry.gamma * factor ** 2, geometry.dtype)
+                level_geometry = geometry.with_grid(shape, geometry.gamma * factor ** 2)
             init = None
             if log_b is not None:
                 init = log_b * (gamma_prev / level_geometry.gamma)  # gamma log b carries over

@@ -453,6 +453,43 @@ def _parity_along_axis(triangles: np.ndarray, samples: np.ndarray, axis: int) ->
     return np.moveaxis(parity, [0, 1, 2], order)
 
 
+def box_transform(bounds: np.ndarray, margin: float = 0.02) -> np.ndarray:
+    """(4, 4) similarity taking the box ``bounds`` (2, 3) into the unit cube, centred.
+
+    The longest side spans ``1 - 2 margin``; the scale is the same on every axis.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64)
+    extent = float(np.max(bounds[1] - bounds[0]))
+    if not np.isfinite(extent) or extent <= 0.0:
+        raise InputError("the box has no extent")
+    scale = (1.0 - 2.0 * margin) / extent
+    transform = np.eye(4) * scale
+    transform[3, 3] = 1.0
+    transform[:3, 3] = 0.5 - scale * bounds.mean(axis=0)
+    return transform
+
+
+def voxelize_together(
+    meshes: list[trimesh.Trimesh], resolution: int, supersample: int = 1, margin: float = 0.02
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """Occupancies of meshes given in one frame, on one grid over their joint bounding box.
+
+    Returns
+    -------
+    occupancies : (n, n, n) arrays as from :func:`voxelize`, one per mesh.
+    transform : (4, 4) the meshes' frame -> the grid's unit frame (:func:`box_transform`).
+    """
+    bounds = np.array([np.min([m.bounds[0] for m in meshes], axis=0),
+                       np.max([m.bounds[1] for m in meshes], axis=0)])
+    transform = box_transform(bounds, margin)
+    occupancies = []
+    for mesh in meshes:
+        moved = mesh.copy()
+        moved.apply_transform(transform)
+        occupancies.append(voxelize(moved, resolution, supersample=supersample))
+    return occupancies, transform
+
+
 def surface_from_volume(
     volume: np.ndarray,
     level: float,

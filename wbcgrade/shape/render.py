@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,7 +35,9 @@ class Panel:
     label : text drawn above the column.
     level : iso-level for a surface render; None draws a maximum-intensity projection.
     color : RGB in [0, 1] of the lit surface.
-    highlight : optional (X, Y, Z) bool mask; surface points inside it are drawn in red.
+    highlight : optional (X, Y, Z) bool mask; surface points inside it are
+        drawn in ``highlight_color``.
+    highlight_color : RGB in [0, 1] of the highlighted surface (default red).
     """
 
     volume: np.ndarray
@@ -43,6 +45,7 @@ class Panel:
     level: float | None = None
     color: tuple[float, float, float] = (0.85, 0.85, 0.85)
     highlight: np.ndarray | None = None
+    highlight_color: tuple[float, float, float] = (0.95, 0.3, 0.25)
 
 
 def _view(volume: np.ndarray, axis: int) -> np.ndarray:
@@ -65,8 +68,10 @@ def render_surface(
     axis: int,
     color=(0.85, 0.85, 0.85),
     highlight: np.ndarray | None = None,
+    highlight_color=(0.95, 0.3, 0.25),
 ) -> np.ndarray:
-    """Shaded render of ``{volume > level}`` looking along ``axis``.
+    """Shaded render of ``{volume > level}`` looking along ``axis``; surface points
+    inside the ``highlight`` mask are drawn in ``highlight_color``.
 
     Returns
     -------
@@ -94,7 +99,7 @@ def render_surface(
     rgb = intensity[..., None] * np.asarray(color, dtype=np.float64)
     if highlight is not None:
         marked = _view(np.asarray(highlight, bool), axis)[first, rows, cols] & hit
-        rgb[marked] = intensity[marked, None] * np.array([0.95, 0.3, 0.25])
+        rgb[marked] = intensity[marked, None] * np.asarray(highlight_color, dtype=np.float64)
     return np.clip(rgb, 0, 1).astype(np.float32)
 
 
@@ -132,7 +137,8 @@ def contact_sheet(panels: list[Panel], tile: int = 160) -> np.ndarray:
                 image = render_projection(panel.volume, axis)
             else:
                 image = render_surface(
-                    panel.volume, panel.level, axis, panel.color, panel.highlight
+                    panel.volume, panel.level, axis, panel.color, panel.highlight,
+                    panel.highlight_color,
                 )
             scale = tile / max(image.shape[:2])
             shape = (max(1, round(image.shape[0] * scale)), max(1, round(image.shape[1] * scale)))
@@ -145,31 +151,33 @@ def contact_sheet(panels: list[Panel], tile: int = 160) -> np.ndarray:
 
 
 def _crop_to_content(panels: list[Panel], pad: int = 2) -> list[Panel]:
-    """Crop every panel to the union of their drawn content, so the views fill the tiles."""
-    shapes = {np.shape(p.volume) for p in panels}
-    if len(shapes) != 1:
-        return panels
-    lo = np.array(next(iter(shapes)))
-    hi = np.zeros(3, dtype=int)
-    for panel in panels:
-        volume = np.asarray(panel.volume)
-        threshold = panel.level if panel.level is not None else 0.02 * float(volume.max())
-        occupied = np.argwhere(volume > threshold)
-        if occupied.size:
-            lo = np.minimum(lo, occupied.min(axis=0))
-            hi = np.maximum(hi, occupied.max(axis=0) + 1)
-    if np.any(hi <= lo):
-        return panels
-    size = np.array(next(iter(shapes)))
-    lo, hi = np.maximum(lo - pad, 0), np.minimum(hi + pad, size)
-    box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
-    return [
-        Panel(
-            np.asarray(p.volume)[box], p.label, p.level, p.color,
-            None if p.highlight is None else np.asarray(p.highlight)[box],
-        )
-        for p in panels
-    ]
+    """Crop panels to the union of their drawn content, so the views fill the tiles.
+
+    Panels whose volumes have the same shape (one frame) are cropped to one
+    box, so they keep their relative size and position.
+    """
+    cropped = list(panels)
+    for shape in {np.shape(p.volume) for p in panels}:
+        group = [i for i, p in enumerate(panels) if np.shape(p.volume) == shape]
+        lo, hi = np.array(shape), np.zeros(3, dtype=int)
+        for i in group:
+            panel = panels[i]
+            volume = np.asarray(panel.volume)
+            threshold = panel.level if panel.level is not None else 0.02 * float(volume.max())
+            occupied = np.argwhere(volume > threshold)
+            if occupied.size:
+                lo = np.minimum(lo, occupied.min(axis=0))
+                hi = np.maximum(hi, occupied.max(axis=0) + 1)
+        if np.any(hi <= lo):
+            continue
+        lo, hi = np.maximum(lo - pad, 0), np.minimum(hi + pad, np.array(shape))
+        box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
+        for i in group:
+            p = panels[i]
+            cropped[i] = replace(
+                p, volume=np.asarray(p.volume)[box],
+                highlight=None if p.highlight is None else np.asarray(p.highlight)[box])
+    return cropped
 
 
 def _draw_labels(sheet: np.ndarray, labels: list[tuple[int, str]]) -> np.ndarray:

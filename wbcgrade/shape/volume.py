@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import publish_bytes
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, first_line
 
 VOLUME_SUFFIXES = (".npy", ".nii", ".nii.gz")
 """File suffixes read as volumes."""
@@ -54,13 +54,13 @@ def read_volume(path: str | os.PathLike) -> np.ndarray:
         try:
             data = np.load(path, allow_pickle=False)
         except Exception as exc:
-            raise InputError(f"{path}: unreadable .npy file ({_first_line(exc)})") from exc
+            raise InputError(f"{path}: unreadable .npy file ({first_line(exc)})") from exc
     elif suffix in (".nii", ".nii.gz"):
         nibabel = _import_nibabel()
         try:
             data = np.asarray(nibabel.load(str(path)).get_fdata(dtype=np.float64))
         except Exception as exc:
-            raise InputError(f"{path}: unreadable NIfTI file ({_first_line(exc)})") from exc
+            raise InputError(f"{path}: unreadable NIfTI file ({first_line(exc)})") from exc
     else:
         raise InputError(
             f"{path}: unsupported volume format; use one of {', '.join(VOLUME_SUFFIXES)}"
@@ -145,7 +145,3 @@ def _import_nibabel():
         ) from exc
     return nibabel
 
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__

@@ -3,7 +3,9 @@
 - :func:`complete_mesh_file`: voxelise a partial mesh and a database of
   meshes (optionally aligned on their principal axes; the database in
   ``jobs`` worker processes through :class:`wbcgrade._executor.Executor`),
-  fit, and write the completed surface, the barycenter volume and a picture.
+  place the partial on the database, fit, and write the completed surface
+  (the input united with the added part, in the input's own coordinates),
+  the fitted density and a picture.
 - :func:`project_volume_file`: read a volume and a database of volumes,
   shrink them to the working resolution, fit, and write the fitted volume
   rescaled to the input's total intensity, and a picture.
@@ -17,7 +19,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +28,7 @@ from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import (
+    DEFAULT_COMPLETION_LOSS,
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
@@ -114,7 +117,7 @@ def _voxelise(path: Path, settings: _Voxelising) -> tuple[VoxelShape, list[str]]
     """One database mesh, voxelised; -> the shape and its repair messages."""
     messages: list[str] = []
     shape = load_shape(path, settings.resolution, align=settings.align,
-                       reference=settings.reference, warn=messages.append)
+                       reference=settings.reference, warn=messages.append, keep_mesh=True)
     return shape, messages
 
 
@@ -127,7 +130,7 @@ def complete_mesh_file(
     png_path: str | os.PathLike | None = None,
     resolution: int = DEFAULT_RESOLUTION,
     missing: float | None = None,
-    loss: str = DEFAULT_LOSS,
+    loss: str = DEFAULT_COMPLETION_LOSS,
     euclidean: bool = False,
     width: float | None = None,
     n_iter: int = DEFAULT_N_ITER,
@@ -143,6 +146,11 @@ def complete_mesh_file(
 ) -> ShapeResult:
     """Infer the missing geometry of the mesh ``partial`` from a database of meshes.
 
+    See :func:`wbcgrade.shape.complete.complete_shape` (placing, fitting,
+    drawing) and :func:`~wbcgrade.shape.complete.completion_surface` (the
+    written mesh: the input itself, united with what the database adds,
+    in the input's coordinates).
+
     Parameters
     ----------
     partial : path-like
@@ -152,7 +160,10 @@ def complete_mesh_file(
     output : path-like, optional
         Completed mesh (a mesh suffix); default ``./<stem>_completed.obj``.
     volume_path, png_path : path-like, optional
-        Barycenter volume (.npy) and picture; default beside ``output``.
+        Fitted density (.npy: the debiased barycenter on the fit's grid, in
+        the database's unit frame) and picture (input and completion in the
+        input's frame, the added part in blue; the heaviest database
+        shapes); default beside ``output``.
     resolution : int
         Voxels along each axis of the unit frame: volumes (n, n, n).
     missing : float, optional
@@ -160,7 +171,8 @@ def complete_mesh_file(
     loss, euclidean, width, n_iter, max_iter, coarse_to_fine :
         See :func:`wbcgrade.shape.complete.project` (``width`` in voxels).
     align : bool
-        Rotate every mesh onto its principal axes, signs chosen to overlap the input most.
+        Rotate every mesh onto its principal axes, signs chosen to overlap the
+        input most, and fit a rotation when placing the input.
     smooth : int
         Taubin smoothing passes on the surface.
     top : int
@@ -179,7 +191,9 @@ def complete_mesh_file(
     Returns
     -------
     ShapeResult
-        ``details``: input, resolution, missing_estimated, watertight,
+        ``details``: input, resolution, missing_estimated, placed_on (the
+        database shape the input was placed on), placement_scale (of the
+        input's own normalisation), placements (1 or 2), watertight,
         mesh_file, volume_file, png_file.
 
     Raises
@@ -203,11 +217,11 @@ def complete_mesh_file(
 
     if on_mesh is not None:
         on_mesh(0, len(paths) + 1, partial)
-    reference = load_shape(partial, resolution, align=align, warn=warn)
+    reference = load_shape(partial, resolution, align=align, warn=warn, keep_mesh=True)
     if on_mesh is not None:
         on_mesh(1, len(paths) + 1, partial)
     loaded: dict[Path, VoxelShape] = {}
-    settings = _Voxelising(resolution, align, reference if align else None)
+    settings = _Voxelising(resolution, align, replace(reference, mesh=None) if align else None)
     with Executor(settings, jobs=min(jobs, len(paths))) as executor:
         for path, (shape, messages) in executor.map_unordered(_voxelise, paths):
             loaded[path] = shape
@@ -219,16 +233,20 @@ def complete_mesh_file(
     completion = complete_shape(
         shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean, width=width,
         n_iter=n_iter, max_iter=max_iter, callback=callback, coarse_to_fine=coarse_to_fine,
+        rotate=align,
     )
-    surface = completion_surface(completion, smooth_iterations=smooth)
+    surface = completion_surface(completion, smooth_iterations=smooth, n_iter=n_iter)
     remove_stale_beside(output, volume_path, png_path)  # what killed runs left
     write_mesh(surface, output)
-    write_volume(volume_path, completion.projection.barycenter)
-    write_png(png_path, completion_sheet(completion, top=top))
+    write_volume(volume_path, completion.fitted)
+    write_png(png_path, completion_sheet(completion, top=top, surface=surface))
     return ShapeResult(completion.projection, {
         "input": str(partial),
         "resolution": resolution,
         "missing_estimated": missing is None,
+        "placed_on": completion.database[completion.placement.reference].name,
+        "placement_scale": round(completion.placement.scale, 4),
+        "placements": completion.n_placements,
         "watertight": bool(surface.is_watertight),
         "mesh_file": str(output),
         "volume_file": str(volume_path),

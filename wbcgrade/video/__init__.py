@@ -6,15 +6,19 @@ Layers (each imports only those above it):
   to RGB with the clip's own matrix and range, running a pass with progress.
 - :mod:`wbcgrade.video.sampling`: one small decoding pass: sampled frames and cuts.
 - :mod:`wbcgrade.video.shots`: which LUT (or blend of two) each frame gets.
-- :mod:`wbcgrade.video.spaces`: the clip's colour space (``--input-space`` or its
-  tags) and the grade baked as a LUT in the clip's encoding.
+- :mod:`wbcgrade.video.spaces`: the clip's colour encoding (``--input-space`` or
+  its tags).
 - :mod:`wbcgrade.video.workflow`: :func:`grade_video`, probe to published file.
 - :mod:`wbcgrade.video.report`: contact sheets and ``report.json``.
+- :mod:`wbcgrade.video.command`: :func:`grade_clip`, the ``video`` command.
 
-The grading itself is the colour library's (``color.grading.series_grade``,
-``color.lut``); nothing here touches pixels of the full-size frames.
+The grading itself is the colour library's one grade path
+(``color.grading.grade_histograms``; ``Grade.lut`` bakes it in the clip's
+encoding; ``color.lut.write_cube`` writes every LUT); nothing here touches
+pixels of the full-size frames.
 """
 
+from wbcgrade.video.command import grade_clip
 from wbcgrade.video.workflow import VideoResult, VideoSettings, grade_video
 
-__all__ = ["VideoResult", "VideoSettings", "grade_video"]
+__all__ = ["VideoResult", "VideoSettings", "grade_video", "grade_clip"]

@@ -33,7 +33,7 @@ from wbcgrade.errors import InputError, WbcgradeError
 
 __all__ = ["FfmpegError", "VideoInfo", "ffmpeg_exe", "probe", "to_rgb_filter",
            "from_rgb_filter", "encoder_pixel_formats", "run_pass", "decode_frames",
-           "file_arg", "write_lut3d_file"]
+           "file_arg"]
 
 
 class FfmpegError(WbcgradeError):
@@ -231,7 +231,11 @@ def probe(path: str | os.PathLike) -> VideoInfo:
 
 
 def _count_frames(path: Path) -> tuple[int, float]:
-    """(frames, seconds) of the first video stream, by a stream copy (no decoding)."""
+    """(frames, seconds) of the first video stream, by a stream copy (no decoding).
+
+    Not ``imageio_ffmpeg.count_frames_and_secs``: that one decodes every frame
+    (``-vf null``: 2.3 s against 0.05 s for a 20 s 1080p clip here) and has
+    no timeout."""
     run = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", file_arg(path),
                           "-map", "0:v:0", "-c", "copy", "-f", "null", "-"],
                          capture_output=True, text=True, errors="replace", timeout=600)
@@ -268,22 +272,6 @@ def from_rgb_filter(info: VideoInfo, pix_fmt: str) -> str:
     convert = (f"scale=out_color_matrix={info.matrix}:out_range={info.range}"
                if not is_rgb else "scale")
     return f"{convert},format={pix_fmt}" + (f",setparams={tags}" if tags else "")
-
-
-def write_lut3d_file(path: str | os.PathLike, table: np.ndarray) -> None:
-    """A (m, m, m, 3) table indexed [r, g, b] as a plain ``.cube`` for ffmpeg's ``lut3d``.
-
-    For the pass's own temporary LUTs (one per shot and per blended frame):
-    a few milliseconds each, where the published ``--lut`` goes through
-    colour-science (:func:`wbcgrade.color.lut.write_cube`). Same numbers, red
-    varying fastest.
-    """
-    table = np.clip(np.asarray(table, dtype=np.float64), 0.0, 1.0)
-    size = table.shape[0]
-    rows = table.transpose(2, 1, 0, 3).reshape(-1, 3)
-    with open(path, "w", encoding="ascii") as handle:
-        handle.write(f"LUT_3D_SIZE {size}\n")
-        np.savetxt(handle, rows, fmt="%.6f")
 
 
 @lru_cache(maxsize=16)

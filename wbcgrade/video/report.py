@@ -15,9 +15,10 @@ The "after" pictures are the sampled frames through the shot's LUT
 within interpolation and rounding (tests/video checks the encoded frames
 against it). Footage in another space than sRGB (a PQ clip, say) is shown
 converted to sRGB, and the barycenter's palette from the working space
-(:func:`wbcgrade.video.spaces.frames_for_display`); ``report.json`` records
-the spaces and the OpenColorIO config (``color``). All files are written
-atomically.
+(the clip's :class:`~wbcgrade.color.colorspace.ColorEncoding`); ``report.json``
+records the spaces and the OpenColorIO config (``color``). All files are
+written atomically, and only into a folder whose files they do not replace
+(:func:`plan_video_report`) unless asked.
 """
 
 from __future__ import annotations
@@ -28,14 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path
-from wbcgrade.color.grading import NONZERO_THRESHOLD
+from wbcgrade._publish import atomic_path, plan_outputs
+from wbcgrade.color.fit import NONZERO_THRESHOLD
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.remap import apply_color_map
 from wbcgrade.color.report import style_pictures
 from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, write_sheet
-from wbcgrade.video.spaces import frames_for_display, palette_for_display
 from wbcgrade.video.workflow import ShotGrade, VideoResult
 
 __all__ = ["contact_grid", "write_video_report"]
@@ -70,14 +70,15 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     shown = _shown(shot.samples, FRAMES_PER_SHEET)
     before = [result.samples.frames[n].astype(np.float32) / 255 for n in shown]
     after = [apply_color_map(frame, shot.table) for frame in before]
-    before = frames_for_display(before, result.spaces)  # pictures in sRGB
-    after = frames_for_display(after, result.spaces)
+    encoding = result.encoding
+    before = [encoding.to_display(frame) for frame in before]  # pictures in sRGB
+    after = [encoding.to_display(frame) for frame in after]
     weights, names = shot.grade.weights, shot.grade.names
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]
     target = histogram_palette(shot.grade.barycenter)  # in the working space
-    target.colors = palette_for_display(target.colors, result.spaces)
+    target.colors = encoding.to_display(target.colors, working=True)
     palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
                 ("barycenter", target),
                 ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
@@ -94,9 +95,21 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
                         more_styles=len(names) - len(tiles))
 
 
+def plan_video_report(report_dir: str | os.PathLike, inputs=(),
+                      overwrite: bool = False) -> None:
+    """Check before any work that a video report may be written into ``report_dir``:
+    ``report.json`` and any shot sheet already there are refused unless ``overwrite``
+    (how many shots there will be is known only after the scan)."""
+    report_dir = Path(report_dir)
+    existing = sorted(report_dir.glob("shot-*.png")) if report_dir.is_dir() else []
+    plan_outputs([report_dir / "report.json", *existing], inputs, overwrite, root=report_dir,
+                 make_folders=True)
+
+
 def write_video_report(report_dir: str | os.PathLike, result: VideoResult,
-                       styles: StyleSet) -> Path:
-    """Write the sheets and ``report.json`` into ``report_dir`` -> the JSON's path."""
+                       styles: StyleSet, overwrite: bool = False) -> Path:
+    """Write the sheets and ``report.json`` into ``report_dir`` -> the JSON's path
+    (existing files replaced only with ``overwrite``)."""
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
     pictures = style_pictures(styles)
@@ -104,9 +117,11 @@ def write_video_report(report_dir: str | os.PathLike, result: VideoResult,
     document["styles"] = {"source": styles.source, "names": list(styles.names)}
     for number, shot in enumerate(result.shots, start=1):
         name = f"shot-{number:02d}.png"
-        write_sheet(report_dir / name, _sheet(result, number, shot, pictures))
+        write_sheet(report_dir / name, _sheet(result, number, shot, pictures),
+                    overwrite=overwrite)
         document["shots"][number - 1]["sheet"] = name
     path = report_dir / "report.json"
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+    with atomic_path(path, overwrite=overwrite) as tmp, \
+            open(tmp, "w", encoding="utf-8") as handle:
         json.dump(document, handle, indent=2, default=float)
     return path

@@ -19,40 +19,28 @@ values, whatever space the grade was fitted in:
   colour management.
 - The *working space* (``--working-space``; default sRGB-encoded Rec.709) is
   where the sampled frames' histograms, the styles and the colour map live,
-  exactly as for photos (:func:`wbcgrade.color.colorspace.to_working`).
-- The LUT is *baked in the input encoding* (:func:`bake_lut`): lattice point
-  x (input code values in [0, 1]) -> working space (outside its unit cube:
-  clipped for the map, the rest carried past it as a residual) -> the
-  grade's colour map -> back into the input space -> x'; only x' is clipped
-  to [0, 1], which the integer frames force anyway.
-
-The default pair (sRGB in sRGB) runs the code of before colour management
-(``Spaces.legacy``): the same samples, the same LUT, byte for byte.
+  exactly as for photos (one :class:`~wbcgrade.color.colorspace.ColorEncoding`,
+  :func:`clip_encoding`).
+- The LUT is *baked in the input encoding*
+  (:meth:`wbcgrade.color.grading.Grade.lut` with the clip's encoding):
+  lattice point x (input code values in [0, 1]) -> working space (outside
+  its unit cube: clipped for the map, the rest carried past it as a
+  residual) -> the grade's colour map -> back into the input space -> x';
+  only x' is clipped to [0, 1], which the integer frames force anyway. When
+  the input is the working space (sRGB footage graded in sRGB) the table is
+  the map sampled on the lattice.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import (
-    Spaces,
-    config_info,
-    convert,
-    default_working_space,
-    from_working,
-    resolve_space,
-    spaces_for,
-    to_display,
-    to_working,
-)
-from wbcgrade.color.imageio import encode_for_grading
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, color_map_to_lut
-from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.color.colorspace import ColorEncoding, config_info, resolve_space
+from wbcgrade.color.options import SpaceOptions
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import VideoInfo
 
-__all__ = ["HDR_TRANSFERS", "tagged_space", "plan_clip_spaces", "frame_to_working",
-           "bake_lut", "lut_comments", "frames_for_display", "palette_for_display"]
+__all__ = ["HDR_TRANSFERS", "tagged_space", "clip_encoding", "frame_to_working", "lut_comments"]
 
 #: ffmpeg's transfer tags of HDR footage -> what they are called in messages.
 HDR_TRANSFERS = {"smpte2084": "PQ", "arib-std-b67": "HLG"}
@@ -100,79 +88,31 @@ def tagged_space(info: VideoInfo) -> tuple[str | None, str]:
     return found, f"tags {tags}"
 
 
-def plan_clip_spaces(info: VideoInfo, input_space: str | None = None,
-                     working_space: str | None = None) -> Spaces:
-    """The :class:`~wbcgrade.color.colorspace.Spaces` of a clip's grade.
+def clip_encoding(info: VideoInfo, spaces: SpaceOptions | None = None) -> ColorEncoding:
+    """The :class:`~wbcgrade.color.colorspace.ColorEncoding` of a clip's grade.
 
-    ``input_space`` None: what the tags say (:func:`tagged_space`);
-    ``working_space`` None: sRGB-encoded Rec.709. Unknown names raise
-    OptionError (one line, listing the valid names), as for photos.
+    ``spaces.input`` None: what the tags say (:func:`tagged_space`), else
+    sRGB code values; ``spaces.working`` None: sRGB-encoded Rec.709.
+    Unknown names raise OptionError (one line, listing the valid names), as
+    for photos.
     """
-    if input_space:
-        return spaces_for(input_space, working_space)
+    spaces = spaces or SpaceOptions()
+    if spaces.input:
+        return ColorEncoding.of(spaces.input, spaces.working)
     found, source = tagged_space(info)
-    spaces = spaces_for(found, working_space)
-    return Spaces(spaces.input, spaces.working, spaces.linear, spaces.peak, spaces.legacy,
-                  source, spaces.config)
+    return ColorEncoding.of(found, spaces.working, source=source)
 
 
-def frame_to_working(frame: np.ndarray, spaces: Spaces | None) -> np.ndarray:
-    """An (h, w, 3) uint8 frame -> float32 colours in the working space's unit cube.
-
-    ``spaces`` None or the default pair: sRGB-encoded, as before colour management.
-    """
-    rgb = frame.astype(np.float32) / np.float32(255)
-    if spaces is None or spaces.legacy:
-        return encode_for_grading(rgb, False)[0]
-    return to_working(rgb, spaces, False)[0]
+def frame_to_working(frame: np.ndarray, encoding: ColorEncoding) -> np.ndarray:
+    """An (h, w, 3) uint8 frame -> float32 colours in the working space's unit cube."""
+    return encoding.encode(frame.astype(np.float32) / np.float32(255))[0]
 
 
-def bake_lut(color_map: np.ndarray, spaces: Spaces | None, size: int = DEFAULT_LUT_SIZE,
-             strength: float = 1.0) -> np.ndarray:
-    """The grade as a (size, size, size, 3) LUT indexed [r, g, b] in the input encoding.
-
-    Lattice point x -> working space -> ``color_map`` (blended with the
-    identity by ``strength``) -> input space -> x', clipped to [0, 1]. The
-    LUT holds ``x + (back(graded) - back(working))``, which is that value up
-    to OpenColorIO's float32 round trip, so an identity grade gives exactly
-    the identity (PQ's steep toe otherwise turns the round trip's 1e-7 into
-    up to 0.015 at saturated colours next to near-black channels). The
-    default pair (``spaces`` None or legacy) samples the map directly
-    (:func:`wbcgrade.color.lut.color_map_to_lut`), as before.
-    """
-    if spaces is None or spaces.legacy:
-        return color_map_to_lut(color_map, size, strength)
-    if not 2 <= size <= 256:
-        raise InputError("LUT size must be between 2 and 256")
-    nodes = identity_map(size)
-    working, state = to_working(nodes, spaces, False)
-    graded = apply_color_map(working, color_map, strength)
-    moved = from_working(graded, state) - from_working(working, state)
-    return np.clip(nodes + moved, 0.0, 1.0)
-
-
-def lut_comments(spaces: Spaces) -> list[str]:
+def lut_comments(encoding: ColorEncoding) -> list[str]:
     """``--lut`` header lines: the spaces the LUT expects and produces, the working space
     the grade was fitted in, and the config (as ``apply --lut`` names its spaces)."""
     info = config_info()
-    return [f"input space: {spaces.input} (the clip's code values; {spaces.source})",
-            f"output space: {spaces.input}",
-            f"working space: {spaces.working} (where the grade was fitted)",
+    return [f"input space: {encoding.input} (the clip's code values; {encoding.source})",
+            f"output space: {encoding.input}",
+            f"working space: {encoding.working} (where the grade was fitted)",
             f"OpenColorIO config: {info['ocio_config']} (OpenColorIO {info['ocio_version']})"]
-
-
-def frames_for_display(frames: list[np.ndarray], spaces: Spaces | None) -> list[np.ndarray]:
-    """Float frames of the input encoding -> sRGB pictures for a contact sheet.
-
-    The default pair's frames are shown as they are (sRGB code values).
-    """
-    if spaces is None or spaces.input == default_working_space():
-        return frames
-    return [to_display(frame, spaces) for frame in frames]
-
-
-def palette_for_display(colors: np.ndarray, spaces: Spaces | None) -> np.ndarray:
-    """Working-space palette colours -> sRGB-encoded Rec.709 in [0, 1]."""
-    if spaces is None or spaces.working == default_working_space():
-        return colors
-    return np.clip(convert(colors, spaces.working, default_working_space()), 0.0, 1.0)

@@ -1,14 +1,16 @@
 """Grade a clip end to end: probe, sample, fit one grade per clip (or shot), one ffmpeg pass.
 
-1. :func:`~wbcgrade.video.ffmpeg.probe` the input; check every output first.
+1. check every output first (:func:`plan_video`, through
+   :func:`wbcgrade._publish.plan_outputs`), then
+   :func:`~wbcgrade.video.ffmpeg.probe` the input.
 2. :func:`~wbcgrade.video.sampling.scan`: one small decoding pass keeps a
    frame every ``sample_every`` seconds (and finds the cuts with ``per_shot``).
 3. Per shot (the whole clip by default), the sampled frames' palettes are
    pooled as ``batch --consistent`` pools photos (every frame counts once;
-   :class:`~wbcgrade.color.grading.PaletteSum`) and graded once:
-   :func:`~wbcgrade.color.grading.series_grade` (vertex-checked fit, palette,
-   smooth colour map). The grade is its LUT: there is no regrain (a LUT sees
-   one pixel at a time; ffmpeg applies it).
+   :class:`~wbcgrade.color.histogram.PaletteSum`) and take the one grade
+   path of photos: :func:`~wbcgrade.color.grading.grade_histograms`
+   (vertex-checked fit, palette, smooth colour map). The grade is its LUT:
+   there is no regrain (a LUT sees one pixel at a time; ffmpeg applies it).
 4. The LUTs are written as ``.cube`` files and scheduled over the frames
    (:mod:`wbcgrade.video.shots`: blended over ``blend`` frames at each cut);
    one ffmpeg pass decodes, converts to RGB with the clip's matrix and range,
@@ -21,8 +23,10 @@ Colour spaces (:mod:`wbcgrade.video.spaces`): the sampled frames are
 converted from the clip's input space (``opts.input_space``, else its tags)
 into the working space (``opts.working_space``) before their histograms are
 taken, the styles are converted into the working space, and each shot's LUT
-is baked in the input encoding (what ``lut3d`` sees). The default pair runs
-the code of before colour management, byte for byte.
+is baked in the input encoding (what ``lut3d`` sees:
+:meth:`wbcgrade.color.grading.Grade.lut`). The ``video`` command's
+workflow (outputs planned, styles loaded, the clip graded, the report
+written) is :func:`wbcgrade.video.command.grade_clip`.
 """
 
 from __future__ import annotations
@@ -31,19 +35,21 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path, check_output_path, remove_stale_beside
-from wbcgrade.color.colorspace import Spaces
-from wbcgrade.color.grading import FitSummary, PaletteSum, series_grade
-from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, write_cube
+from wbcgrade._publish import atomic_path, plan_outputs
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
+from wbcgrade.color.histogram import PaletteSum
+from wbcgrade.color.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
+from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, styles_in_space
-from wbcgrade.color.transfer import Grade, GradeOptions
-from wbcgrade.errors import InputError
+from wbcgrade.color.workflow import Progress
+from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import (
     VideoInfo,
     encoder_pixel_formats,
@@ -52,7 +58,6 @@ from wbcgrade.video.ffmpeg import (
     probe,
     run_pass,
     to_rgb_filter,
-    write_lut3d_file,
 )
 from wbcgrade.video.sampling import (
     DEFAULT_CUT_THRESHOLD,
@@ -62,11 +67,11 @@ from wbcgrade.video.sampling import (
     scan,
 )
 from wbcgrade.video.shots import Segment, lut_schedule
-from wbcgrade.video.spaces import bake_lut, frame_to_working, lut_comments, plan_clip_spaces
+from wbcgrade.video.spaces import clip_encoding, frame_to_working, lut_comments
 
-__all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "ShotGrade",
-           "VideoResult", "check_video_outputs", "shot_lut_paths", "shot_grade", "grade_video",
-           "encode_args"]
+__all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "VideoProgress",
+           "ShotGrade", "VideoResult", "default_output", "plan_video", "shot_lut_paths",
+           "shot_grade", "grade_video", "encode_args"]
 
 #: --codec NAME -> (ffmpeg encoder, containers it may go in).
 CODECS = {
@@ -81,7 +86,7 @@ DEFAULT_CRF = 18
 DEFAULT_BLEND = 8
 
 
-@dataclass
+@dataclass(frozen=True)
 class VideoSettings:
     """How a clip is sampled, cut and encoded (the grade's own settings are GradeOptions)."""
 
@@ -94,19 +99,20 @@ class VideoSettings:
     crf: int = DEFAULT_CRF
     lut_size: int = DEFAULT_LUT_SIZE
 
-    def validate(self) -> None:
+    def __post_init__(self) -> None:
+        """Validated once, when made (OptionError naming the field)."""
         if self.codec not in CODECS:
-            raise InputError(f"--codec must be one of {', '.join(CODECS)}")
+            raise OptionError(f"codec must be one of {', '.join(CODECS)}", "codec")
         if not 0 <= self.crf <= 51:
-            raise InputError("--crf must be between 0 and 51")
-        if not 2 <= self.lut_size <= 256:
-            raise InputError("--lut-size must be between 2 and 256")
+            raise OptionError("crf must be between 0 and 51", "crf")
+        check_lut_size(self.lut_size)
         if self.blend < 0:
-            raise InputError("--blend-frames must be 0 or more")
+            raise OptionError("blend must be 0 or more", "blend")
         if not (np.isfinite(self.sample_every) and self.sample_every > 0):
-            raise InputError("--sample-every must be a positive number of seconds")
+            raise OptionError("sample_every must be a positive number of seconds",
+                              "sample_every")
         if not 0 < self.cut_threshold < 1:
-            raise InputError("--cut-threshold must be between 0 and 1")
+            raise OptionError("cut_threshold must be between 0 and 1", "cut_threshold")
 
 
 @dataclass
@@ -148,8 +154,9 @@ class VideoResult:
     timings: dict[str, float] = field(default_factory=dict)
     encoder: str = ""
     pix_fmt: str = ""
-    spaces: Spaces | None = None
+    encoding: ColorEncoding | None = None
     styles_space: str = ""
+    report: Path | None = None
 
     def as_dict(self) -> dict:
         info = self.info
@@ -170,37 +177,42 @@ class VideoResult:
             "blends": [{"frame": s.first, "shots": list(s.shots), "mix": s.mix}
                        for s in self.segments if len(s.shots) == 2],
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
-            **({} if self.spaces is None else
-               {"color": {**self.spaces.as_dict(), "styles_space": self.styles_space}}),
+            **({} if self.encoding is None else
+               {"color": {**self.encoding.as_dict(), "styles_space": self.styles_space}}),
         }
 
 
-def check_video_outputs(source: str | os.PathLike, output: str | os.PathLike,
-                        lut: str | os.PathLike | None, settings: VideoSettings,
-                        overwrite: bool = False) -> tuple[Path, Path | None]:
-    """Check, before any work, that the outputs may be written -> (output, lut).
+def default_output(source: str | os.PathLike, codec: str = "x264") -> Path:
+    """``<stem>_graded<ext>`` beside the clip, in a container the codec goes in."""
+    path = Path(source)
+    containers = CODECS[codec][1]
+    suffix = path.suffix.lower() if path.suffix.lower() in containers else containers[0]
+    return path.with_name(f"{path.stem}_graded{suffix}")
 
-    The output is never the input, is refused when it exists (unless
-    ``overwrite``) or is not a regular file, its folder must be writable,
-    and its container must hold the codec.
+
+def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
+               lut: str | os.PathLike | None, settings: VideoSettings,
+               overwrite: bool = False) -> tuple[Path, Path, Path | None]:
+    """Check, before any work, that the outputs may be written -> (source, output, lut).
+
+    The output (default :func:`default_output`) must be a container that
+    holds the codec; the LUT a ``.cube``; both then pass
+    :func:`wbcgrade._publish.plan_outputs` (never the input, never an
+    existing file unless ``overwrite``, a regular file in a writable folder,
+    two different files). Resolved paths are returned.
     """
-    settings.validate()
-    source, output = Path(source), Path(output)
+    source = Path(source)
     if not source.exists():
         raise InputError(f"{source}: no such file")
+    output = Path(output) if output is not None else default_output(source, settings.codec)
     encoder, containers = CODECS[settings.codec]
     if output.suffix.lower() not in containers:
         raise InputError(f"{output}: --codec {settings.codec} needs one of "
                          f"{', '.join(containers)} as the output's extension")
-    check_output_path(output, [source], overwrite)
-    if lut is not None:
-        lut = Path(lut)
-        if lut.suffix.lower() != ".cube":
-            raise InputError(f"{lut}: LUT file name must end in .cube")
-        if lut.absolute() == output.absolute():
-            raise InputError(f"{lut}: the LUT and the graded clip must be different files")
-        check_output_path(lut, [source, output], overwrite)
-    return output, lut
+    if lut is not None and Path(lut).suffix.lower() != ".cube":
+        raise InputError(f"{lut}: LUT file name must end in .cube")
+    output, lut = plan_outputs([output, lut], [source], overwrite)
+    return source, output, lut
 
 
 def shot_lut_paths(lut: str | os.PathLike, n_shots: int) -> list[Path]:
@@ -212,22 +224,23 @@ def shot_lut_paths(lut: str | os.PathLike, n_shots: int) -> list[Path]:
     return [lut.with_name(f"{lut.stem}_shot{k:02d}{lut.suffix}") for k in range(1, n_shots + 1)]
 
 
-def shot_grade(frames: list[np.ndarray], styles: StyleSet, opts: GradeOptions,
+def shot_grade(frames: list[np.ndarray], styles: StyleSet, options: GradeOptions,
+               encoding: ColorEncoding,
                callback: Callable[[int, np.ndarray, float], None] | None = None,
-               stage: Callable[[str], None] | None = None,
-               spaces: Spaces | None = None) -> tuple[Grade, FitSummary]:
+               stage: Callable[[str], None] | None = None) -> tuple[Grade, FitSummary]:
     """One grade for a list of (h, w, 3) uint8 frames: their pooled palette, one fit.
 
     Every frame counts once (as every photo of ``batch --consistent``). The
-    frames are in ``spaces.input`` and graded in ``spaces.working`` (the
-    styles must be there already); None: sRGB in sRGB.
+    frames are in ``encoding.input`` and graded in ``encoding.working`` (the
+    styles must be there already), through the photos' grade path.
     """
     pool_fit, pool = PaletteSum(), PaletteSum()
     for frame in frames:
-        encoded = frame_to_working(frame, spaces)
-        pool_fit.add(image_histogram(encoded, opts.fit_bins, None, opts.max_pixels))
-        pool.add(image_histogram(encoded, opts.bins, None, opts.max_pixels))
-    return series_grade(pool_fit.result(), pool.result(), styles, opts, callback, stage)
+        hists = photo_histograms(frame_to_working(frame, encoding), options)
+        pool_fit.add(hists.fit)
+        pool.add(hists.transfer)
+    return grade_histograms(PhotoHistograms(pool_fit.result(), pool.result()), styles, options,
+                            encoding, callback, stage)
 
 
 def _output_pix_fmt(info: VideoInfo, encoder: str) -> str:
@@ -296,80 +309,91 @@ def _lut_chain(segments: list[Segment], names: list[str]) -> str:
     return ",".join(filters)
 
 
+@dataclass(frozen=True)
+class VideoProgress(Progress):
+    """:class:`~wbcgrade.color.workflow.Progress` with ``frames(pass_name, done, total)``
+    during the decoding ("scan") and encoding ("encode") passes."""
+
+    frames: Callable[[str, int, int], None] | None = None
+
+
 def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: StyleSet,
-                opts: GradeOptions, settings: VideoSettings | None = None,
+                options: GradeOptions, settings: VideoSettings | None = None,
                 lut: str | os.PathLike | None = None, overwrite: bool = False,
-                fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
-                stage: Callable[[str], None] | None = None,
-                progress: Callable[[str, int, int], None] | None = None,
+                progress: VideoProgress | None = None,
                 timings: dict[str, float] | None = None) -> VideoResult:
     """Grade a clip and write it (and the LUT of its grade).
 
     Parameters
     ----------
     source, output : input clip and graded clip (never the same file).
-    styles, opts : as for photos; ``opts.regrain`` is ignored (a LUT has none).
+    styles, options : as for photos; ``options.regrain`` is not used (a LUT has none).
     settings : sampling, cuts and encoding (:class:`VideoSettings`).
-    opts.input_space, opts.working_space : colour spaces (None: the clip's tags,
-        else sRGB code values; sRGB-encoded Rec.709), :mod:`wbcgrade.video.spaces`.
+    options.spaces : colour spaces (None: the clip's tags, else sRGB code values;
+        sRGB-encoded Rec.709), :func:`wbcgrade.video.spaces.clip_encoding`.
         The styles are converted into the working space when they are elsewhere.
     lut : also write the clip's LUT here (with several shots, one file per shot:
         :func:`shot_lut_paths`).
-    progress : ``progress(pass_name, frames_done, frames_total)`` during the
-        decoding ("scan") and encoding ("encode") passes.
+    progress : fit, stage and frame progress.
 
-    The output is written to a temporary file beside it and renamed onto it
-    when ffmpeg succeeded; on any failure or Ctrl-C ffmpeg is killed and the
-    temporary file removed.
+    The outputs are checked first (:func:`plan_video`). The output is written
+    to a temporary file beside it and renamed onto it when ffmpeg succeeded;
+    on any failure or Ctrl-C ffmpeg is killed and the temporary file removed.
     """
     settings = settings or VideoSettings()
-    opts = replace(opts, regrain=False)
-    opts.validate(len(styles.names))
-    output, lut = check_video_outputs(source, output, lut, settings, overwrite)
-    remove_stale_beside(output, lut)
+    planned = plan_video(source, output, lut, settings, overwrite)
+    return grade_planned(*planned, styles, options, settings, overwrite,
+                          progress or VideoProgress(), timings)
+
+
+def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
+                   options: GradeOptions, settings: VideoSettings, overwrite: bool,
+                   progress: VideoProgress, timings: dict[str, float] | None) -> VideoResult:
+    """:func:`grade_video` once :func:`plan_video` checked the outputs (the outputs as
+    it returned them)."""
     timings = dict(timings or {})
-    say = stage or (lambda name: None)
     start = time.perf_counter()
     info = probe(source)
-    spaces = plan_clip_spaces(info, opts.input_space, opts.working_space)
-    styles = styles_in_space(styles, spaces.working)
+    encoding = clip_encoding(info, options.spaces)
+    styles = styles_in_space(styles, encoding.working)
+    options.check_styles(len(styles.names))
+    frames = progress.frames
 
-    say("scan")
+    progress.say("scan")
     t0 = time.perf_counter()
     samples = scan(source, info, settings.sample_every, cuts=settings.per_shot,
                    cut_threshold=settings.cut_threshold, min_shot=settings.min_shot,
-                   progress=None if progress is None else
-                   (lambda n: progress("scan", n, info.frames)))
+                   progress=None if frames is None else
+                   (lambda n: frames("scan", n, info.frames)))
     timings["scan"] = time.perf_counter() - t0
 
     shots = []
     t0 = time.perf_counter()
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
-        grade, fit = shot_grade([samples.frames[n] for n in indices], styles, opts,
-                                fit_callback, say, spaces)
-        table = bake_lut(grade.color_map, spaces, settings.lut_size, grade.strength)
+        grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options, encoding,
+                                progress.fit, progress.stage)
+        table = grade.lut(settings.lut_size, encoding)
         shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
     timings["grade"] = time.perf_counter() - t0
     segments = lut_schedule(samples.shots(), [s.table for s in shots], settings.blend)
     luts = [] if lut is None else shot_lut_paths(lut, len(shots))
-    for path in luts[1:]:  # the first was checked with the other outputs
-        check_output_path(path, [source, output], overwrite)
+    luts = luts[:1] + plan_outputs(luts[1:], [source, output], overwrite)  # the first: planned
 
-    say("encode")
+    progress.say("encode")
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="wbcgrade-video-") as folder:
         names = []
         for number, seg in enumerate(segments):
             name = f"lut{number:05d}.cube"
-            write_lut3d_file(Path(folder) / name, seg.table)
+            write_cube(Path(folder) / name, seg.table)
             names.append(name)
         chain = _lut_chain(segments, names)
         with atomic_path(output, overwrite=overwrite) as tmp:
             args, encoder, pix_fmt = encode_args(info, settings, Path(tmp), chain,
                                                   Path(folder))
-            run_pass(args, None if progress is None else
-                     (lambda n: progress("encode", n, info.frames)), cwd=folder)
+            run_pass(args, None if frames is None else
+                     (lambda n: frames("encode", n, info.frames)), cwd=folder)
     timings["encode"] = time.perf_counter() - t0
     for path, shot in zip(luts, shots):
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked())
@@ -377,8 +401,8 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
                    comments=[f"wbcgrade grade of {Path(source).name}, frames {shot.first}-"
                              f"{shot.last}: {ranked}",
                              "input: full-range RGB decoded with the clip's own matrix",
-                             *lut_comments(spaces)],
+                             *lut_comments(encoding)],
                    overwrite=overwrite)
     timings["total"] = time.perf_counter() - start
     return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
-                       timings, encoder, pix_fmt, spaces, styles.working_space)
+                       timings, encoder, pix_fmt, encoding, styles.working_space)

@@ -21,13 +21,16 @@ cluster are made absolute first (its workers run in another folder).
 
 Series mode (``consistent``): every photo's histogram is read first (also
 those already done, so a resumed series gets the same grade), the pooled
-palette gets one vertex-checked fit and one colour map
-(:func:`wbcgrade.color.grading.series_grade`), and each task only applies it.
+palette takes the one grade path once
+(:func:`wbcgrade.color.grading.grade_histograms`), and each task only applies it.
 
-Modules: ``plan`` (which photos, where their outputs go, stale temporaries),
-``settings`` (what the outputs depend on, recorded in the output folder),
-``results`` (``FileResult``, ``BatchResult``), ``task`` (one photo, in a
-worker), ``run`` (``run_batch``). Executors are :mod:`wbcgrade._executor`.
+Modules: ``plan`` (which photos, where their outputs go, checked;
+stale temporaries), ``settings`` (what the outputs depend on, recorded in
+the output folder), ``results`` (``FileResult``, ``BatchResult``), ``task``
+(one photo, in a worker: :func:`wbcgrade.color.workflow.grade_file`),
+``run`` (``run_batch``), ``workflow`` (the ``batch`` and ``report``
+commands: :func:`grade_folder`, :func:`report_folder`). Executors are
+:mod:`wbcgrade._executor`.
 """
 
 from wbcgrade.color.batch.plan import (
@@ -48,8 +51,9 @@ from wbcgrade.color.batch.settings import (
     write_settings,
 )
 from wbcgrade.color.batch.task import BatchContext, run_task
+from wbcgrade.color.batch.workflow import BatchProgress, grade_folder, report_folder
 
 __all__ = ["BatchTask", "BatchPlan", "BatchContext", "FileResult", "BatchResult",
            "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete",
            "batch_settings", "settings_changed", "write_settings", "remove_stale_outputs",
-           "recheck_plan", "SETTINGS_FILE"]
+           "recheck_plan", "SETTINGS_FILE", "BatchProgress", "grade_folder", "report_folder"]

@@ -1,9 +1,13 @@
 """Which photos a batch grades, where each graded copy goes, and cleaning up after killed runs.
 
 The input tree is mirrored under the output folder (file names and formats
-kept). An output that exists is complete (outputs are published atomically):
-it is skipped when it is newer than its photo and has the photo's pixel
-count, unless ``overwrite`` is set.
+kept). Every output is checked before any work by the one output checker
+(:func:`wbcgrade._publish.check_output_path`): resolved through links, it
+must stay inside the output folder and never be an input. An existing
+output that is complete (outputs are published atomically: newer than its
+photo, the photo's pixel count) is skipped; any other existing file is one
+this run did not write, so it is refused (the photo fails, the others go
+on) unless ``overwrite``, which redoes everything.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from pathlib import Path
 
 import OpenImageIO as oiio
 
-from wbcgrade._publish import is_unlocked, remove_stale_temporaries
+from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
 from wbcgrade.errors import InputError
 
 __all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
@@ -37,11 +41,13 @@ def image_extensions() -> set[str]:
 
 @dataclass(frozen=True)
 class BatchTask:
-    """One photo: its path, the output path, and the path relative to the input folder."""
+    """One photo: its path, the output path (as the user named it), the path relative to
+    the input folder, and the file the output resolves to (checked; what is written)."""
 
     source: Path
     output: Path | None
     relative: str
+    target: Path | None = None
 
 
 @dataclass
@@ -50,14 +56,18 @@ class BatchPlan:
 
     Attributes
     ----------
-    tasks : photos to grade.
+    tasks : photos to grade (their outputs resolved and checked).
     done : photos whose output is already complete (skipped unless ``overwrite``).
     ignored : relative paths of files that are not images (by extension).
+    refused : photos whose output may not be written, with the reason (an
+        existing file this run did not write, a link out of the output
+        folder, an input): they fail without being graded.
     """
 
     tasks: list[BatchTask]
     done: list[BatchTask] = field(default_factory=list)
     ignored: list[str] = field(default_factory=list)
+    refused: list[tuple[BatchTask, str]] = field(default_factory=list)
 
     @property
     def all_photos(self) -> list[BatchTask]:
@@ -110,7 +120,9 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
     ``out_dir`` None (a report only), nothing is written and nothing is
     skipped. Raises InputError when the folder is missing or the output
     folder is the input folder. ``overwrite`` plans every photo, finished
-    outputs included (``force`` is its former name, deprecated).
+    outputs included (``force`` is its former name, deprecated). Each
+    output is resolved and checked (see the module docstring); a photo whose
+    output may not be written is ``refused``.
     """
     overwrite = _overwrite(overwrite, force)
     in_path = Path(in_path)
@@ -141,10 +153,20 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             plan.ignored.append(rel.as_posix())
             continue
         task = BatchTask(path, None if out is None else out / rel, rel.as_posix())
-        if task.output is not None and not overwrite and output_is_complete(path, task.output):
-            plan.done.append(task)
-        else:
+        if task.output is None:
             plan.tasks.append(task)
+            continue
+        try:  # links and inputs first: a link into the input tree is never "complete"
+            check_output_path(task.output, [path], True, root=out, make_folders=True)
+            if not overwrite and output_is_complete(path, task.output):
+                plan.done.append(task)
+                continue
+            resolved = check_output_path(task.output, [path], overwrite, root=out,
+                                         make_folders=True)
+        except InputError as exc:
+            plan.refused.append((task, str(exc)))
+            continue
+        plan.tasks.append(BatchTask(path, task.output, task.relative, resolved))
     return plan
 
 
@@ -163,14 +185,15 @@ def recheck_plan(plan: BatchPlan, overwrite: bool = False, *,
             done.append(task)
         else:
             tasks.append(task)
-    return BatchPlan(tasks=tasks, done=done, ignored=list(plan.ignored))
+    return BatchPlan(tasks=tasks, done=done, ignored=list(plan.ignored),
+                     refused=list(plan.refused))
 
 
 def _output_folders(tasks: Iterable[BatchTask]) -> dict[Path, set[str]]:
     folders: dict[Path, set[str]] = {}
     for task in tasks:
-        if task.output is not None:
-            folders.setdefault(task.output.parent, set()).add(task.output.name)
+        for path in {task.output, task.target} - {None}:
+            folders.setdefault(path.parent, set()).add(path.name)
     return folders
 
 
@@ -200,10 +223,11 @@ def remove_temporaries(tasks: Iterable[BatchTask], since_ns: int) -> None:
     started go, unless a live writer still holds them locked.
     """
     for task in tasks:
-        if task.output is None or not task.output.parent.is_dir():
+        output = task.target or task.output
+        if output is None or not output.parent.is_dir():
             continue
-        for tmp in task.output.parent.glob(
-                f".{glob.escape(task.output.stem)}.*{glob.escape(task.output.suffix)}"):
+        for tmp in output.parent.glob(
+                f".{glob.escape(output.stem)}.*{glob.escape(output.suffix)}"):
             with contextlib.suppress(OSError):
                 if tmp.stat().st_mtime_ns >= since_ns and is_unlocked(tmp, 0.0):
                     tmp.unlink()

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.grading import NONZERO_THRESHOLD, FitSummary
-from wbcgrade.color.transfer import Grade
+from wbcgrade.color.fit import NONZERO_THRESHOLD, FitSummary
+from wbcgrade.color.grading import Grade
 
 __all__ = ["FileResult", "BatchResult"]
 
@@ -28,7 +29,7 @@ class FileResult:
     start: str = ""
     sheet: str | None = None
     timings: dict[str, float] = field(default_factory=dict)
-    color: dict = field(default_factory=dict)  # colour spaces and config (colorspace.Spaces)
+    color: dict = field(default_factory=dict)  # colour spaces and config (ColorEncoding)
 
     @property
     def n_nonzero(self) -> int:
@@ -66,7 +67,8 @@ class FileResult:
 @dataclass
 class BatchResult:
     """Outcome of a batch: one FileResult per photo (graded, skipped, failed), the time,
-    and for a series its weights (``series``) and grade (``series_grade``, colour map)."""
+    for a series its weights (``series``) and grade (``series_grade``, colour map), and
+    what else was written (``report``: report.json, ``lut``: the series LUT)."""
 
     results: list[FileResult]
     ignored: list[str]
@@ -74,6 +76,8 @@ class BatchResult:
     series: FitSummary | None = None
     style_names: list[str] = field(default_factory=list)
     series_grade: Grade | None = None
+    report: Path | None = None
+    lut: Path | None = None
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)

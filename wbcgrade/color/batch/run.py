@@ -5,8 +5,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-import numpy as np
-
 from wbcgrade._executor import Executor
 from wbcgrade.color.batch.plan import BatchPlan, remove_stale_outputs, remove_temporaries
 from wbcgrade.color.batch.results import BatchResult, FileResult
@@ -18,30 +16,34 @@ from wbcgrade.color.batch.task import (
     run_task,
     setup_worker,
 )
-from wbcgrade.color.grading import PaletteSum, series_grade
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grading import PhotoHistograms, grade_histograms
+from wbcgrade.color.histogram import PaletteSum
+from wbcgrade.color.workflow import Progress
 
 __all__ = ["run_batch"]
-
-Progress = Callable[[FileResult], None]
 
 
 def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
               jobs: int = 1, scheduler: str | None = None,
-              on_result: Progress | None = None,
-              fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
-              stage: Callable[[str], None] | None = None,
+              on_result: Callable[[FileResult], None] | None = None,
+              progress: Progress | None = None,
               on_read: Callable[[int, int], None] | None = None) -> BatchResult:
     """Grade the photos of a plan; returns every photo's result (skipped ones included).
 
     Parameters
     ----------
-    plan : from :func:`plan_batch`.
+    plan : from :func:`plan_batch` (its outputs checked; refused photos fail).
     context : styles, options, sheet folder, ...
-    consistent : one grade for the whole series (see the module docstring).
+    consistent : one grade for the whole series: every photo's histograms
+        (also those already done, so a resumed series gets the same grade)
+        pooled (:class:`wbcgrade.color.histogram.PaletteSum`), one pass of the
+        grade path (:func:`wbcgrade.color.grading.grade_histograms`), and each
+        task only applies the grade.
     jobs : local worker processes (1: in this process).
     scheduler : Dask scheduler address (overrides ``jobs``).
     on_result : called with each FileResult as it finishes (progress bars).
-    fit_callback, stage : progress of fits run in this process.
+    progress : fit and stage progress of the work done in this process.
     on_read : ``on_read(done, total)`` while a series reads its photos' histograms.
     """
     start = time.perf_counter()
@@ -51,6 +53,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
     results: list[FileResult] = [
         FileResult(t.relative, str(t.source), str(t.output), "skipped",
                    timings={"total": 0.0}) for t in plan.done]
+    results += [FileResult(t.relative, str(t.source), str(t.output), "failed", error=why,
+                           timings={"total": 0.0}) for t, why in plan.refused]
     for result in results:
         if on_result:
             on_result(result)
@@ -60,34 +64,36 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
                       to_remote=(absolute_task, absolute_context)) as executor:
             todo = list(plan.tasks)
             if consistent and todo:
-                opts = context.opts
-                bins = tuple(sorted({opts.fit_bins, opts.bins}))
+                options = context.options
                 fit_pool, pool = PaletteSum(), PaletteSum()
                 photos, pending, unreadable = plan.all_photos, set(todo), set()
                 for number, (task, value) in enumerate(
-                        executor.map_unordered(read_histograms, photos, bins)):
+                        executor.map_unordered(read_histograms, photos)):
                     if on_read:
                         on_read(number + 1, len(photos))
                     if isinstance(value, str):
-                        failed = FileResult(task.relative, str(task.source),
-                                            None if task.output is None else str(task.output),
-                                            "failed", error=value, timings={"total": 0.0})
                         if task in pending:
                             unreadable.add(task)
+                            failed = FileResult(
+                                task.relative, str(task.source),
+                                None if task.output is None else str(task.output), "failed",
+                                error=value, timings={"total": 0.0})
                             results.append(failed)
                             if on_result:
                                 on_result(failed)
                         continue
-                    fit_pool.add(value[opts.fit_bins])
-                    pool.add(value[opts.bins])
+                    fit_pool.add(value.fit)
+                    pool.add(value.transfer)
                 todo = [task for task in todo if task not in unreadable]
                 if todo:
-                    shared, series = series_grade(fit_pool.result(), pool.result(),
-                                                  context.styles, opts, fit_callback, stage)
+                    encoding = ColorEncoding.of(None, options.spaces.working)
+                    shared, series = grade_histograms(
+                        PhotoHistograms(fit_pool.result(), pool.result()), context.styles,
+                        options, encoding, progress.fit if progress else None,
+                        progress.stage if progress else None)
                     context.shared, context.shared_fit = shared, series
                     executor.set_context(context)
-            graded = executor.map_unordered(run_task, todo, local_kwargs={
-                "callback": fit_callback, "stage": stage})
+            graded = executor.map_unordered(run_task, todo, local_kwargs={"progress": progress})
             for task, result in graded:
                 # report the paths as the user gave them (Dask ran on absolute ones)
                 result.source = str(task.source)
@@ -101,4 +107,3 @@ def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
     results.sort(key=lambda r: r.relative)
     return BatchResult(results, list(plan.ignored), time.perf_counter() - start, series,
                        list(context.styles.names), shared)
-

@@ -11,8 +11,8 @@ import os
 from pathlib import Path
 
 from wbcgrade._publish import atomic_path
+from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.transfer import GradeOptions
 
 __all__ = ["SETTINGS_FILE", "batch_settings", "settings_changed", "write_settings"]
 
@@ -20,11 +20,11 @@ __all__ = ["SETTINGS_FILE", "batch_settings", "settings_changed", "write_setting
 SETTINGS_FILE = ".wbcgrade-batch.json"
 
 
-def batch_settings(styles: StyleSet, opts: GradeOptions, consistent: bool) -> dict:
-    """What determines the outputs of a batch (JSON-friendly)."""
-    options = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(opts).items()}
-    return {"styles": styles.source, "style_names": list(styles.names), "options": options,
-            "consistent": bool(consistent)}
+def batch_settings(styles: StyleSet, options: GradeOptions, consistent: bool) -> dict:
+    """What determines the outputs of a batch (JSON-friendly; the options by their flat
+    names, as earlier runs recorded them)."""
+    return {"styles": styles.source, "style_names": list(styles.names),
+            "options": options.flat(), "consistent": bool(consistent)}
 
 
 def settings_changed(out_dir: str | os.PathLike, settings: dict) -> list[str]:
@@ -43,7 +43,8 @@ def settings_changed(out_dir: str | os.PathLike, settings: dict) -> list[str]:
 
 
 def write_settings(out_dir: str | os.PathLike, settings: dict) -> None:
-    """Record the settings of this run in ``out_dir`` (atomically)."""
+    """Record the settings of this run in ``out_dir`` (atomically; the batch's own
+    record, replaced by every run that writes into the folder)."""
     path = Path(out_dir) / SETTINGS_FILE
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+    with atomic_path(path, overwrite=True) as tmp, open(tmp, "w", encoding="utf-8") as handle:
         json.dump(settings, handle, indent=1)

@@ -1,0 +1,302 @@
+"""One photo file graded end to end: plan the outputs, read, grade, write (``apply``, ``batch``).
+
+This is the library behind ``wbcgrade apply`` (:func:`wbcgrade.color.apply.apply_photo`)
+and behind every photo of ``wbcgrade batch`` (:func:`grade_file`); it knows
+files and colours but no command line (progress and messages go through the
+callbacks of :class:`Progress`). The data flow (docs/architecture.md):
+
+1. the outputs are planned and checked once, before any work
+   (:func:`plan_photo`, through :func:`wbcgrade._publish.plan_outputs`);
+2. the photo is read (:func:`wbcgrade.color.imageio.read_image`) and
+   encoded into the working space (:class:`~wbcgrade.color.colorspace.ColorEncoding`);
+3. the grade path fits and builds the grade
+   (:func:`wbcgrade.color.grading.grade_encoded`), or a series' shared
+   grade is used as it is;
+4. the pixels go through the grade and back into the photo's space
+   (:func:`grade_photo`);
+5. the photo and the LUT are published together (:func:`grade_file`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade._publish import plan_outputs
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.grading import Grade, grade_encoded
+from wbcgrade.color.imageio import Image, check_image_output, read_image, stage_image
+from wbcgrade.color.lut import (
+    DEFAULT_LUT_SIZE,
+    check_clf_support,
+    check_lut_path,
+    check_lut_size,
+    write_grade_lut,
+)
+from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.errors import InputError
+
+__all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
+           "plan_photo", "graded_pixels", "grade_photo", "grade_file"]
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What a command wants to hear while the library works (every callback optional).
+
+    Attributes
+    ----------
+    fit : ``fit(n_evaluations, weights, loss)`` after each evaluation of a fit.
+    stage : ``stage(name)`` as each stage starts ("read", "fit", "barycenter", ...).
+    styles : ``styles(done, total, name)`` while style photos are read.
+    warn : ``warn(message)`` for what the user should know (skipped files, ...).
+    """
+
+    fit: Callable[[int, np.ndarray, float], None] | None = None
+    stage: Callable[[str], None] | None = None
+    styles: Callable[[int, int, str], None] | None = None
+    warn: Callable[[str], None] | None = None
+
+    def say(self, name: str) -> None:
+        if self.stage is not None:
+            self.stage(name)
+
+
+@dataclass(frozen=True)
+class PhotoPlan:
+    """A photo and its outputs, checked before any work (:func:`plan_photo`).
+
+    ``output`` None: graded in memory only (``wbcgrade report``); ``lut`` None: no LUT.
+    Paths are resolved (links followed).
+    """
+
+    photo: Path
+    output: Path | None
+    lut: Path | None = None
+    lut_size: int = DEFAULT_LUT_SIZE
+    lut_format: str = "cube"
+    overwrite: bool = False
+
+
+def default_output_path(photo: str | os.PathLike) -> Path:
+    """``<stem>_graded<ext>`` beside the photo."""
+    photo = Path(photo)
+    return photo.with_name(f"{photo.stem}_graded{photo.suffix}")
+
+
+def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
+               lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
+               lut_format: str = "cube", overwrite: bool = False,
+               write: bool = True) -> PhotoPlan:
+    """Check that the photo exists and its outputs may be written; -> the plan.
+
+    Checked before any work: the output's file type can be written, and
+    every output (the graded photo, default ``<stem>_graded<ext>`` beside it,
+    and the LUT, which must end in ``.cube`` or ``.clf`` as ``lut_format``
+    says) passes :func:`wbcgrade._publish.plan_outputs`: not the photo, not
+    an existing file unless ``overwrite``, not a device, not two outputs in
+    one file, a folder that exists and is writable. ``write`` False: nothing
+    is written (no output).
+    """
+    photo = Path(photo)
+    if not photo.exists():
+        raise InputError(f"{photo}: no such file")
+    if not write:
+        output = None
+    else:
+        output = Path(output) if output is not None else default_output_path(photo)
+    if output is not None:
+        check_image_output(output)
+    if lut is not None:
+        lut = check_lut_path(lut, lut_format)
+        check_lut_size(lut_size)
+        if lut_format == "clf":
+            check_clf_support()
+    output, lut = plan_outputs([output, lut], [photo], overwrite)
+    return PhotoPlan(photo, output, lut, lut_size, lut_format, overwrite)
+
+
+@dataclass
+class PhotoGrade:
+    """A graded photo in memory.
+
+    Attributes
+    ----------
+    image : the decoded input.
+    pixels : (H, W, C') float32 graded pixels (the image's value convention).
+    alpha_channel : index of alpha in ``pixels`` or -1.
+    grade : the grade applied (weights, colour map, palette).
+    fit : weights and single-style comparison (None for a shared series grade
+        whose summary the caller holds).
+    encoding : the photo's input and working colour spaces.
+    timings : seconds per stage.
+    """
+
+    image: Image
+    pixels: np.ndarray
+    alpha_channel: int
+    grade: Grade
+    fit: FitSummary | None
+    encoding: ColorEncoding
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
+                  encoded: tuple | None = None) -> tuple[np.ndarray, int]:
+    """Graded pixels of a whole image at full resolution.
+
+    Colour channels go through the encoding, the grade and back; alpha and
+    any extra channels pass through untouched. A grey photo becomes RGB (a
+    grade may tint it). ``encoded`` may pass the ``(encoded, state)`` of
+    ``encoding.encode`` the caller already has (it is not modified).
+
+    Returns
+    -------
+    pixels : (H, W, C') float32 in the image's value convention.
+    alpha_channel : index of alpha in ``pixels`` or -1.
+    """
+    pixels, state = encoded if encoded is not None else encoding.encode(image.rgb(),
+                                                                         image.is_float)
+    graded = encoding.decode(grade.apply(pixels), state)
+    chans = image.color_channels
+    if chans == [0, 1, 2] and image.pixels.shape[2] == 3:
+        return graded, image.alpha_channel
+    if len(chans) == 3:
+        out = image.pixels.copy()
+        out[:, :, chans] = graded
+        return out, image.alpha_channel
+    others = [c for c in range(image.pixels.shape[2]) if c not in chans]
+    out = np.concatenate([graded, image.pixels[:, :, others]], axis=2)
+    alpha = 3 + others.index(image.alpha_channel) if image.alpha_channel in others else -1
+    return np.ascontiguousarray(out), alpha
+
+
+def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
+                shared: Grade | None = None, progress: Progress | None = None) -> PhotoGrade:
+    """Read and grade one photo (nothing is written).
+
+    With ``shared`` (a series grade, in the same working space), its colour
+    map is applied as it is; otherwise the photo gets its own grade
+    (:func:`wbcgrade.color.grading.grade_encoded`).
+    """
+    progress = progress or Progress()
+    timings: dict[str, float] = {}
+    progress.say("read")
+    start = time.perf_counter()
+    image = read_image(photo)
+    rgb = image.rgb()
+    encoding = ColorEncoding.for_image(image, options.spaces.input, options.spaces.working)
+    encoded = encoding.encode(rgb, image.is_float)
+    timings["read"] = time.perf_counter() - start
+    fit = None
+    if shared is not None:
+        grade = shared
+    else:
+        grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
+                                   progress.fit, progress.stage)
+        timings.update(grade.timings)
+    progress.say("remap")
+    start = time.perf_counter()
+    pixels, alpha_channel = graded_pixels(image, grade, encoding, encoded)
+    timings["remap"] = time.perf_counter() - start
+    return PhotoGrade(image, pixels, alpha_channel, grade, fit, encoding, timings)
+
+
+@dataclass
+class GradeReport:
+    """What :func:`grade_file` did, for printing, JSON and the report."""
+
+    photo: Path
+    output: Path | None
+    lut: Path | None
+    grade: Grade
+    styles_source: str
+    graded: PhotoGrade
+    timings: dict[str, float] = field(default_factory=dict)
+    fit: FitSummary | None = None
+    report: Path | None = None
+
+    @property
+    def fit_start(self) -> str:
+        """How the weights were found: "uniform", "vertex-refit", "vertex" or "given"."""
+        return self.fit.start if self.fit is not None else "shared"
+
+    @property
+    def color(self) -> dict:
+        """The colour spaces (JSON-friendly)."""
+        return self.graded.encoding.as_dict()
+
+    def as_dict(self) -> dict:
+        """JSON-friendly summary."""
+        return {
+            "photo": str(self.photo),
+            "output": None if self.output is None else str(self.output),
+            "lut": None if self.lut is None else str(self.lut),
+            "styles": self.styles_source,
+            "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
+            "loss": self.grade.loss,
+            "fitted": self.fit_start != "given",
+            "fit_start": self.fit_start,
+            "regrain": self.grade.regrain is not None,
+            "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
+            **dict(self.grade.info),
+            "color": self.color,
+            **({"report": str(self.report)} if self.report is not None else {}),
+        }
+
+
+def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
+               shared: Grade | None = None, progress: Progress | None = None,
+               timings: dict[str, float] | None = None) -> GradeReport:
+    """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
+
+    The photo and the LUT are published together: when the LUT cannot be
+    written, the graded photo is not published either. Files are written
+    atomically, the input is never replaced, and an existing file only with
+    ``plan.overwrite``. ``timings`` may hold stages timed by the caller (e.g.
+    loading styles); they are kept in the report. Colour spaces:
+    ``options.spaces`` (the input: what the file says unless given; the
+    working space: sRGB-encoded Rec.709 unless given); the output is written
+    in the input space, the LUT names the spaces it expects and produces.
+    """
+    progress = progress or Progress()
+    timings = dict(timings or {})
+    graded = grade_photo(plan.photo, styles, options, shared, progress)
+    grade = graded.grade
+    timings.update(graded.timings)
+    if plan.output is not None:
+        progress.say("write")
+        start = time.perf_counter()
+        lut_existed = plan.lut is not None and plan.lut.exists()
+        lut_written = False
+        try:
+            with stage_image(plan.output, graded.pixels, graded.image, plan.overwrite,
+                             graded.alpha_channel):
+                timings["write"] = time.perf_counter() - start
+                if plan.lut is not None:  # written while the photo waits, published before it
+                    progress.say("lut")
+                    start = time.perf_counter()
+                    ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
+                    write_grade_lut(plan.lut, grade, graded.encoding.within_working(),
+                                    plan.lut_size, plan.lut_format,
+                                    title=f"wbcgrade {plan.photo.stem}",
+                                    comments=[f"wbcgrade grade of {plan.photo.name}: {ranked}"],
+                                    overwrite=plan.overwrite)
+                    lut_written = True
+                    timings["lut"] = time.perf_counter() - start
+        except BaseException:
+            if lut_written and not lut_existed:  # the photo failed to publish: take it back
+                with contextlib.suppress(OSError):
+                    plan.lut.unlink()
+            raise
+    timings["total"] = sum(v for k, v in timings.items() if k != "total")
+    return GradeReport(plan.photo, plan.output, plan.lut, grade, styles.source, graded,
+                       timings, graded.fit)

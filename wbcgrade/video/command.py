@@ -1,0 +1,52 @@
+"""The ``video`` command's workflow: plan every output, load the styles, grade, report.
+
+Above :mod:`wbcgrade.video.workflow` (a clip graded end to end) and
+:mod:`wbcgrade.video.report` (contact sheets and report.json), which it joins.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import replace
+
+from wbcgrade.color.options import GradeOptions, RegrainOptions
+from wbcgrade.color.presets import StyleSource, load_styles
+from wbcgrade.video.report import plan_video_report, write_video_report
+from wbcgrade.video.workflow import (
+    VideoProgress,
+    VideoResult,
+    VideoSettings,
+    grade_planned,
+    plan_video,
+)
+
+__all__ = ["grade_clip"]
+
+
+def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
+               styles: StyleSource, options: GradeOptions, settings: VideoSettings | None = None,
+               lut: str | os.PathLike | None = None, overwrite: bool = False,
+               report_dir: str | os.PathLike | None = None,
+               progress: VideoProgress | None = None) -> VideoResult:
+    """``wbcgrade video``: plan every output, load the styles, grade the clip, write the report.
+
+    The clip's grade is a LUT: ``options.regrain`` is turned off. The report
+    (a contact sheet per shot and report.json, :mod:`wbcgrade.video.report`)
+    never replaces files it did not write unless ``overwrite``.
+    """
+    settings = settings or VideoSettings()
+    progress = progress or VideoProgress()
+    source, output, lut = plan_video(source, output, lut, settings, overwrite)
+    if report_dir is not None:
+        plan_video_report(report_dir, [source], overwrite)
+    if options.regrain.enabled:
+        options = replace(options, regrain=RegrainOptions(enabled=False))
+    start = time.perf_counter()
+    loaded = load_styles(styles, options.transfer.bins, options.spaces.working, progress.warn,
+                         progress.styles)
+    result = grade_planned(source, output, lut, loaded, options, settings, overwrite, progress,
+                            {"styles": time.perf_counter() - start})
+    if report_dir is not None:
+        result.report = write_video_report(report_dir, result, loaded, overwrite)
+    return result
