@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 from pathlib import Path
 
@@ -12,6 +14,15 @@ from wbcgrade.explore.app import start_studio
 
 #: The preset the tests explore (three styles on 32^3: the cheapest exact maps).
 PRESET = "warm"
+ROOT = Path(__file__).resolve().parents[2]
+#: ``wbcgrade`` as a command, from this source tree (whatever else is installed).
+WBCGRADE = [sys.executable, "-c", "import sys; from wbcgrade.cli import main; sys.exit(main())"]
+
+
+def command_env() -> dict:
+    """The environment of a ``WBCGRADE`` process: this source tree first on the path."""
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
+    return {**os.environ, "PYTHONPATH": path}
 
 
 @pytest.fixture(scope="session")

@@ -11,13 +11,13 @@ from __future__ import annotations
 import shlex
 import shutil
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.explore.conftest import WBCGRADE, command_env
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
 from wbcgrade.color.remap import apply_color_map
@@ -126,9 +126,8 @@ def test_the_page_grades_drags_and_exports_what_apply_writes(server, browser, do
     assert f"--weights {shown['weightsText']} --no-regrain" in command
     args = shlex.split(command)
     assert args[:3] == ["wbcgrade", "apply", str(photo)]
-    executable = Path(sys.executable).with_name("wbcgrade")
-    run = subprocess.run([str(executable) if executable.exists() else "wbcgrade", *args[1:]],
-                         capture_output=True, text=True, timeout=600)
+    run = subprocess.run([*WBCGRADE, *args[1:]], capture_output=True, text=True, timeout=600,
+                         env=command_env())
     assert run.returncode == 0, run.stderr
     graded = read_image(photo.with_name(f"{photo.stem}_graded.png")).pixels[:, :, :3]
     original = read_image(photo).pixels[:, :, :3]

@@ -4,18 +4,16 @@ Ctrl-C stops the server and its worker."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import socket
 import subprocess
-import sys
 import time
 import urllib.request
 from pathlib import Path
 
 from click.testing import CliRunner
 
-from tests.explore.conftest import PRESET
+from tests.explore.conftest import PRESET, WBCGRADE, command_env
 from wbcgrade.cli import main
 
 
@@ -68,12 +66,10 @@ def _workers() -> set[int]:
 
 def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     before = _workers()
-    executable = Path(sys.executable).with_name("wbcgrade")
     process = subprocess.Popen(
-        [str(executable) if executable.exists() else "wbcgrade", "explore", str(photo),
-         "--preset", PRESET, "--no-browser"],
+        [*WBCGRADE, "explore", str(photo), "--preset", PRESET, "--no-browser"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "DISPLAY": ""})
+        env={**command_env(), "DISPLAY": ""})
     try:
         url = process.stdout.readline().strip()
         assert url.startswith("http://127.0.0.1:") and url.endswith("/"), url

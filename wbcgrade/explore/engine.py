@@ -40,7 +40,7 @@ import shlex
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -71,29 +71,25 @@ THUMBNAIL_SIDE = 96
 
 def _base_options():
     """``apply``'s defaults with ``--no-regrain``: what a LUT can hold."""
-    from wbcgrade.color.transfer import GradeOptions
+    from wbcgrade.color.options import GradeOptions
 
     return GradeOptions(regrain=False)
 
 
-def _options(base, settings: Settings):
-    """The grade options of ``settings`` (its map: the strength is applied afterwards)."""
-    return replace(base, relaxation=settings.relaxation,
-                   preserve_luminance=settings.keep_lightness)
+def _options(base, settings: Settings, **changes):
+    """The grade options of ``settings`` (its map: the strength is applied afterwards),
+    with other settings ``changes`` by their flat names."""
+    from wbcgrade.color.options import as_options
+
+    return as_options(base, relaxation=settings.relaxation,
+                      preserve_luminance=settings.keep_lightness, **changes)
 
 
-def _apply_weights(settings: Settings) -> np.ndarray:
-    """The weights ``apply --weights TEXT`` grades with, normalised as it does.
-
-    ``parse_weights`` reads the text; the vertex check normalises the vector
-    and the grade normalises it again (``color.grading.fit_with_vertex_check``,
-    ``color.transfer.grade_image``): the same float operations here.
-    """
+def _apply_weights(settings: Settings) -> tuple[float, ...]:
+    """The weights ``apply --weights TEXT`` grades with: the text read as it reads it."""
     from wbcgrade.color.weights import parse_weights
 
-    weights = np.asarray(parse_weights(weights_text(settings.weights)), dtype=np.float64)
-    weights = weights / weights.sum()
-    return weights / weights.sum()
+    return tuple(parse_weights(weights_text(settings.weights)))
 
 
 @dataclass
@@ -131,48 +127,31 @@ class FitResult:
 class _FastGrader:
     """Colour maps on small grids for the live preview (module docstring); no state."""
 
-    def __init__(self, styles, photo_hist: np.ndarray, base) -> None:
-        from wbcgrade.color.transfer import transfer_width_bins
-        from wbcgrade.core import GridGeometry
+    def __init__(self, styles, photo_hist: np.ndarray, base, encoding) -> None:
+        from wbcgrade.color.options import as_options
 
         self.styles = styles
         self.photo_hist = photo_hist
-        self.base = replace(base, bins=PREVIEW_BINS, palette_bins=PREVIEW_BINS,
-                            map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL)
+        self.encoding = encoding
+        # the same steps and kernel in colour units (sigma = 1/31 of the cube) as apply,
+        # on the preview grids; the plan to a looser tolerance
+        self.base = as_options(base, bins=PREVIEW_BINS, palette_bins=PREVIEW_BINS,
+                               map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL)
         styles.at_bins(PREVIEW_BINS)  # re-binned once, not on every move
-        sigma = transfer_width_bins(self.base) / (PREVIEW_BINS - 1)  # colour units, as apply
-        self.geometry = GridGeometry((PREVIEW_BINS,) * 3, 2.0 * sigma ** 2)
 
-    def solve(self, settings: Settings, weights: np.ndarray,
-              tol: float | None = None) -> np.ndarray:
-        """(9, 9, 9, 3) map at ``weights`` with ``settings``' other options; the plan
-        solved cold (deterministic: the same weights give the same map) to ``tol``
-        (default :data:`PREVIEW_SINKHORN_TOL`)."""
-        from wbcgrade.color.remap import keep_lightness, monotone_lightness
-        from wbcgrade.color.smooth_map import fit_smooth_map
-        from wbcgrade.color.transfer import palette_barycenter
-        from wbcgrade.core import barycentric_projection, multiscale_sinkhorn
-        from wbcgrade.errors import NumericalError
+    def solve(self, settings: Settings, weights, tol: float | None = None) -> np.ndarray:
+        """(9, 9, 9, 3) map at ``weights`` (S,) with ``settings``' other options: the
+        palette, the plan (solved cold, so the same weights give the same map) to
+        ``tol`` (default :data:`PREVIEW_SINKHORN_TOL`), the smooth map, the finish."""
+        from wbcgrade.color.grading import finish_map
+        from wbcgrade.color.transfer import transport_map
 
-        opts = _options(self.base, settings)
-        if tol is not None:
-            opts = replace(opts, sinkhorn_tol=tol)
-        target, _ = palette_barycenter(self.styles, weights, opts)
-        result = multiscale_sinkhorn(self.photo_hist, target, self.geometry,
-                                     coarsest=PREVIEW_BINS, tol=opts.sinkhorn_tol,
-                                     max_iter=opts.sinkhorn_max_iter, floor=opts.floor,
-                                     relaxation=opts.relaxation, warn=False)
-        raw = barycentric_projection(result, self.geometry)
-        if not np.all(np.isfinite(raw)):
-            raise NumericalError("the preview's colour map is not finite")
-        raw = np.clip(raw, 0.0, 1.0).astype(np.float32)
-        color_map = fit_smooth_map(raw, self.photo_hist, opts.map_size, opts.smoothness,
-                                   opts.stiffness)
-        if opts.monotone and not opts.preserve_luminance:
-            color_map = monotone_lightness(color_map)
-        if opts.preserve_luminance:
-            color_map = keep_lightness(color_map)
-        return color_map
+        options = _options(self.base, settings,
+                           **({} if tol is None else {"sinkhorn_tol": tol}))
+        weights = np.asarray(weights, dtype=np.float64)
+        color_map, _, _, _ = transport_map(self.photo_hist, self.styles,
+                                           weights / weights.sum(), options)
+        return finish_map(color_map, options, self.encoding)
 
 
 def upsample_map(color_map: np.ndarray, size: int) -> np.ndarray:
@@ -194,7 +173,7 @@ class Session:
     style_dir, preset : where the styles came from, as given (one is None).
     names : S style names.
     styles : the style set in the photo's working space.
-    spaces : the photo's colour spaces (``color.colorspace.Spaces``).
+    encoding : the photo's colour encoding (``color.colorspace.ColorEncoding``).
     hists : {bins: (bins, bins, bins)} photo histograms on the fit, preview
         and transfer grids, as ``apply`` bins them.
     preview : (h, w, 3) uint8 preview picture (working-space colours: the
@@ -207,7 +186,7 @@ class Session:
     preset: str | None
     names: list[str]
     styles: object
-    spaces: object
+    encoding: object
     hists: dict
     preview: np.ndarray
     thumbnails: list[np.ndarray]
@@ -215,7 +194,8 @@ class Session:
     lut_size: int
 
     def __post_init__(self) -> None:
-        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base)
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
+                                 self.encoding)
 
     @property
     def n_styles(self) -> int:
@@ -223,12 +203,12 @@ class Session:
 
     def fit(self, callback: Callable[[int, np.ndarray, float], None] | None = None
             ) -> FitResult:
-        """Fit the weights as ``apply`` does (vertex-checked, on the fit grid)."""
-        from wbcgrade.color.grading import fit_with_vertex_check
+        """Fit the weights as ``apply`` does (never worse than one style alone)."""
+        from wbcgrade.color.fit import fit_weights
 
-        summary = fit_with_vertex_check(self.hists[self.base.fit_bins],
-                                        self.styles.at_bins(self.base.fit_bins), self.base,
-                                        callback)
+        fit = self.base.fit
+        summary = fit_weights(self.hists[fit.bins], self.styles.at_bins(fit.bins), fit,
+                              callback)
         return FitResult(weights=tuple(float(w) for w in summary.weights),
                          loss=float(summary.loss),
                          vertex_losses=tuple(float(v) for v in summary.vertex_losses),
@@ -256,7 +236,7 @@ class Session:
         clean = StyleSet(list(styles.names), styles.histograms, styles.source, styles.width,
                          styles.description, dict(styles.meta))
         return {"styles": clean, "hists": self.hists, "base": self.base,
-                "lut_size": self.lut_size}
+                "encoding": self.encoding, "lut_size": self.lut_size}
 
     def command_line(self, settings: Settings) -> str:
         """The ``wbcgrade apply`` command that grades the full-size photo as shown."""
@@ -280,15 +260,19 @@ class Session:
         spaces and the weights) into a private temporary folder, read back
         and removed; nothing is written beside the photo.
         """
+        from wbcgrade.color.grading import Grade
         from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
 
         stem = Path(self.photo).stem
         name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
         ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
             zip(self.names, settings.weights), key=lambda item: -item[1]))
+        grade = Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
+                      color_map=color_map, working=self.encoding.working,
+                      strength=settings.strength)
         with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
             path = Path(folder) / name
-            write_grade_lut(path, color_map, self.spaces, size, settings.strength, lut_format,
+            write_grade_lut(path, grade, self.encoding.within_working(), size, lut_format,
                             title=f"wbcgrade {stem}",
                             comments=[f"wbcgrade explore grade of {Path(self.photo).name}: "
                                       f"{ranked}", f"reproduce: {self.command_line(settings)}"])
@@ -326,11 +310,10 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     cache, as with ``apply``. Raises InputError on a missing or unreadable
     photo or style source (one line).
     """
-    from wbcgrade.color.colorspace import plan_spaces, to_working
+    from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.histogram import HistogramCache, image_histogram
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.pipeline import load_styles
-    from wbcgrade.color.presets import styles_in_space
+    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
     from wbcgrade.color.report import style_pictures
     from wbcgrade.color.sheet import thumbnail
     from wbcgrade.errors import InputError
@@ -339,24 +322,25 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
         raise InputError(f"{photo}: no such file")
     base = _base_options()
     image = read_image(photo)
-    spaces = plan_spaces(image, base.input_space, base.working_space)
-    encoded, _ = to_working(image.rgb(), spaces, image.is_float)
+    encoding = ColorEncoding.for_image(image, base.spaces.input, base.spaces.working)
+    encoded, _ = encoding.encode(image.rgb(), image.is_float)
     alpha = image.alpha()
-    hists = {bins: image_histogram(encoded, bins, alpha, base.max_pixels)
-             for bins in (base.fit_bins, PREVIEW_BINS, base.bins)}
-    styles = load_styles(style_dir, preset, base.bins, cache=HistogramCache(), warn=warn,
-                         progress=progress, working_space=base.working_space)
-    styles = styles_in_space(styles, spaces.working)
+    limit = base.transfer.max_pixels
+    hists = {bins: image_histogram(encoded, bins, alpha, limit)
+             for bins in (base.fit.bins, PREVIEW_BINS, base.transfer.bins)}
+    source = StyleSource(style_dir, preset, HistogramCache())
+    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
+    styles = styles_in_space(styles, encoding.working)
     height, width = encoded.shape[:2]
     side = min(preview_side, max(height, width))
     small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
     preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
     pictures = style_pictures(styles, THUMBNAIL_SIDE)
     return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
-                   preset=preset, names=list(styles.names), styles=styles, spaces=spaces,
+                   preset=preset, names=list(styles.names), styles=styles, encoding=encoding,
                    hists=hists, preview=preview,
                    thumbnails=[pictures[name] for name in styles.names], base=base,
-                   lut_size=base.map_size)
+                   lut_size=base.map.size)
 
 
 class ExactGrader:
@@ -371,23 +355,25 @@ class ExactGrader:
         self.styles = state["styles"]
         self.hists = state["hists"]
         self.base = state["base"]
+        self.encoding = state["encoding"]
         self.lut_size = state["lut_size"]
-        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base)
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
+                                 self.encoding)
         self._loss_problem = None
 
     def color_map(self, settings: Settings) -> np.ndarray:
         """The colour map ``apply --weights W --no-regrain`` grades with (33^3, float32).
 
-        The steps of ``color.transfer.grade_image`` with fixed weights: the
-        palette (``palette_barycenter``) and the smooth map
-        (``grade_color_map``) from the photo's transfer-grid histogram.
+        ``apply``'s own grade path (``color.grading.grade_histograms``) on the
+        photo's histograms, with the weights read from the command line's text.
         """
-        from wbcgrade.color.transfer import grade_color_map, palette_barycenter
+        from wbcgrade.color.grading import PhotoHistograms, grade_histograms
 
-        opts = _options(self.base, settings)
-        target, _ = palette_barycenter(self.styles, _apply_weights(settings), opts)
-        color_map, _ = grade_color_map(self.hists[opts.bins], target, opts)
-        return np.ascontiguousarray(color_map, dtype=np.float32)
+        options = _options(self.base, settings, weights=_apply_weights(settings))
+        photo = PhotoHistograms(self.hists[options.fit.bins],
+                                self.hists[options.transfer.bins])
+        grade, _ = grade_histograms(photo, self.styles, options, self.encoding)
+        return np.ascontiguousarray(grade.color_map, dtype=np.float32)
 
     def reference(self, settings: Settings) -> dict:
         """The exact map of ``settings`` and its offset from the fast map there."""
@@ -405,8 +391,9 @@ class ExactGrader:
         A move dw (summing to 0) changes the map by about ``sum_s dw_s slope_s``
         (dw = sum_s dw_s (e_s - w)): the page's instant preview.
         """
-        weights = _apply_weights(settings)
-        tol = self.base.sinkhorn_tol
+        weights = np.asarray(_apply_weights(settings))
+        weights = weights / weights.sum()
+        tol = self.base.transfer.tol
         centre = upsample_map(self._fast.solve(settings, weights, tol), self.lut_size)
         out = np.empty((len(weights), *centre.shape), dtype=np.float32)
         for s in range(len(weights)):
@@ -417,17 +404,17 @@ class ExactGrader:
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
-        from wbcgrade.color.grading import _fit_problem, _loss_at
+        from wbcgrade.color.fit import _loss_at, _problem
 
+        fit = self.base.fit
         if self._loss_problem is None:
-            bins = self.base.fit_bins
-            self._loss_problem = _fit_problem(self.hists[bins], self.styles.at_bins(bins),
-                                              self.base)
+            self._loss_problem = _problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
+                                          fit)
         target, hists, geometry = self._loss_problem
         out = []
         for row in rows:
             weights = np.asarray(row, dtype=np.float64)
-            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), self.base))
+            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), fit))
         return out
 
 
