@@ -61,6 +61,7 @@ def _register() -> None:
     from wbcgrade.cli.apply import apply
     from wbcgrade.cli.batch import batch
     from wbcgrade.cli.brdf import brdf
+    from wbcgrade.cli.explore import explore
     from wbcgrade.cli.look import look
     from wbcgrade.cli.preset import preset
     from wbcgrade.cli.report import report
@@ -70,6 +71,7 @@ def _register() -> None:
     main.add_command(apply)
     main.add_command(batch)
     main.add_command(brdf)
+    main.add_command(explore)
     main.add_command(look)
     main.add_command(preset)
     main.add_command(report)

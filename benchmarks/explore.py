@@ -1,0 +1,243 @@
+"""Latency of ``wbcgrade explore``: from a move of the point to the new LUT (and pixels).
+
+    python benchmarks/explore.py [--photo samples/chelsea.jpg] [--presets warm,mixed]
+                                 [--moves 40] [--browser]
+
+For each preset, starts a studio on the photo (the server and its job worker,
+as ``wbcgrade explore`` does), waits for the exact map of the fitted weights,
+then replays a drag: ``--moves`` small steps of the point (each moving the
+weights by about 0.02 in L1) on a loop around the fitted weights. It times
+
+- **move -> LUT (server)**: what the server computes for one move (the fast
+  map on 32^3 grids and a 9^3 smooth map, the correction by the nearest exact
+  map, the 33^3 LUT): ``Studio.preview``;
+- **move -> LUT (HTTP)**: the same through an HTTP request to the running
+  server, the LUT received (what the page waits for);
+- with ``--browser``, in headless Chromium, from the pointer event to the
+  preview canvas painted (the page's own measurement; needs selenium,
+  chromium and chromedriver): **move -> first pixels** (the page's instant
+  step, extrapolated from the last exact map and the fast map's slopes
+  there) and **move -> server preview pixels** (the fast map drawn);
+
+and how close each preview is to the exact grade (what ``apply
+--no-regrain`` gives and the export holds), on the preview picture, in
+1/255: at weights an L1 distance d from the nearest exact map known (the
+fitted one): extrapolated (the page's first step), the fast map corrected by
+the exact map (the server's preview), the fast map alone; and the time of
+one exact map (which the page shows once the point rests).
+
+Prints the machine's load average too: the 2-core development machine is
+shared, and timings scale with what else runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import os
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def drag_path(center: np.ndarray, moves: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Weights along a loop around ``center``, each step about 0.02 in L1."""
+    n = len(center)
+    a, b = rng.normal(size=n), rng.normal(size=n)
+    a -= a.mean()
+    b -= b.mean()
+    a /= np.abs(a).sum()
+    b /= np.abs(b).sum()
+    radius = 0.02 * moves / (2 * np.pi)
+    path = []
+    for k in range(moves):
+        angle = 2 * np.pi * k / moves
+        w = np.clip(center + radius * (np.cos(angle) * a + np.sin(angle) * b), 0, None)
+        path.append(w / w.sum())
+    return path
+
+
+def post(port: int, token: str, route: str, body: dict) -> bytes:
+    connection = http.client.HTTPConnection("127.0.0.1", port, timeout=600)
+    data = json.dumps(body).encode()
+    connection.request("POST", f"/{token}/api/{route}", data,
+                       {"Content-Type": "application/json"})
+    response = connection.getresponse()
+    payload = response.read()
+    connection.close()
+    if response.status != 200:
+        raise RuntimeError(f"{route}: HTTP {response.status}: {payload[:200]!r}")
+    return payload
+
+
+def summary(values_s: list[float]) -> str:
+    ms = sorted(1000 * v for v in values_s)
+    p90 = ms[min(len(ms) - 1, int(round(0.9 * (len(ms) - 1))))]
+    return f"{statistics.median(ms):7.0f} {p90:7.0f} {ms[-1]:7.0f}"
+
+
+def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
+    """Move-to-pixels latencies (s) measured by the page in headless Chromium:
+    (first pixels of each move, pixels of the server's preview)."""
+    import shutil
+    import tempfile
+
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update",
+                 "--disable-sync", "--window-size=1280,900",
+                 f"--user-data-dir={tempfile.mkdtemp(prefix='wbcgrade-bench-')}"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")
+                                              or "/usr/bin/chromedriver"), options=options)
+    try:
+        driver.get(url)
+        deadline = time.monotonic() + 600
+        while not driver.execute_script(
+                "const p = window.wbcgradeExplore, s = p && p.shown();"
+                "return s && s.kind === 'exact' && s.version === p.current()"
+                " && p.extrapolates();"):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the page did not get its exact map and slopes in 10 min")
+            time.sleep(0.1)
+        driver.execute_script("window.wbcgradeExplore.latencies.length = 0")
+        point = driver.find_element("id", "point")
+        chain = ActionChains(driver, duration=0).click_and_hold(point)
+        for k in range(moves):  # a slow drag: one small step every 120 ms
+            angle = 2 * np.pi * k / moves
+            chain = chain.move_by_offset(round(4 * np.cos(angle)), round(4 * np.sin(angle))) \
+                .pause(0.12)
+        chain.release().perform()
+        time.sleep(1.0)
+        records = driver.execute_script("return window.wbcgradeExplore.latencies")
+        return ([r["ms"] / 1000 for r in records if r["first"]],
+                [r["ms"] / 1000 for r in records if r["kind"] == "preview"])
+    finally:
+        driver.quit()
+
+
+def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
+    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.explore.app import start_studio
+    from wbcgrade.explore.engine import ExactGrader
+    from wbcgrade.explore.settings import settings_from_json
+
+    server = start_studio(photo, preset=preset)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    studio = server.studio
+    session = studio.session
+    n = session.n_styles
+    try:
+        studio.worker.reference(studio.fitted)  # what the page waits for first
+        fitted = np.array(studio.fitted.weights)
+        path = drag_path(fitted, moves, rng)
+        server_s = []
+        for seq, w in enumerate(path):
+            settings = settings_from_json({"weights": list(w)}, n)
+            start = time.perf_counter()
+            studio.preview(settings, "bench", seq)
+            server_s.append(time.perf_counter() - start)
+        http_s = []
+        for seq, w in enumerate(drag_path(fitted, moves, rng)):
+            start = time.perf_counter()
+            post(server.port, server.token, "preview",
+                 {"weights": list(w), "client": "http", "seq": seq})
+            http_s.append(time.perf_counter() - start)
+        first_s, drawn_s = browser_latencies(server.url, moves) if browser else ([], [])
+        # accuracy: the preview against the exact grade at distances from the reference
+        grader = ExactGrader(session.grader_state())
+        picture = session.preview / np.float32(255)
+        reference = studio.worker.reference(studio.fitted)
+        start = time.perf_counter()
+        slopes = grader.slopes(studio.fitted)
+        slopes_s = time.perf_counter() - start
+        accuracy = []
+        direction = np.eye(n)[int(np.argmin(fitted))]  # towards the least used style
+        for distance in (0.05, 0.1, 0.2, 0.4):
+            step = direction - fitted
+            w = fitted + step * min(1.0, distance / max(np.abs(step).sum(), 1e-9))
+            settings = settings_from_json({"weights": list(w)}, n)
+            start = time.perf_counter()
+            exact = grader.color_map(settings)
+            exact_s = time.perf_counter() - start
+            truth = apply_color_map(picture, exact)
+            fast = session.fast_map(settings)
+            row = {"distance": float(np.abs(np.array(settings.weights) - np.array(
+                reference.settings.weights)).sum()), "exact_s": exact_s}
+            move = np.array(settings.weights) - np.array(reference.settings.weights)
+            move -= move.sum() * np.array(reference.settings.weights)
+            extrapolated = np.clip(reference.exact + np.tensordot(move, slopes, 1), 0, 1)
+            for name, lut in (("extrapolated", extrapolated),
+                              ("corrected", session.preview_lut(fast, reference.offset)),
+                              ("fast", session.preview_lut(fast, None))):
+                diff = np.abs(apply_color_map(picture, lut) - truth) * 255
+                row[name] = (float(diff.mean()), float(np.percentile(diff, 99)))
+            accuracy.append(row)
+    finally:
+        server.shutdown()
+        server.close()
+    return {"preset": preset, "styles": n, "server": server_s, "http": http_s,
+            "first": first_s, "drawn": drawn_s, "accuracy": accuracy, "slopes_s": slopes_s,
+            "preview": f"{session.preview.shape[1]}x{session.preview.shape[0]}"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--photo", default=str(ROOT / "samples" / "chelsea.jpg"))
+    parser.add_argument("--presets", default="warm,mixed")
+    parser.add_argument("--moves", type=int, default=40)
+    parser.add_argument("--browser", action="store_true",
+                        help="also measure move -> pixels in headless Chromium")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    load_before = os.getloadavg()
+    cases = [run_case(args.photo, preset, args.moves, args.browser, rng)
+             for preset in args.presets.split(",")]
+    load_after = os.getloadavg()
+    print(f"photo {Path(args.photo).name}, {args.moves} moves per drag, "
+          f"load average {load_before[0]:.1f} -> {load_after[0]:.1f} "
+          f"({os.cpu_count()} cores)")
+    print()
+    print(f"{'preset (styles)':<16} {'measure':<22} {'median':>7} {'p90':>7} {'max':>7}  (ms)")
+    print(f"{'':<16} {'(pixels: ' + cases[0]['preview'] + ' preview)':<22}")
+    for case in cases:
+        label = f"{case['preset']} ({case['styles']})"
+        rows = [("move -> LUT (server)", case["server"]), ("move -> LUT (HTTP)", case["http"])]
+        if case["first"]:
+            rows.append(("move -> first pixels", case["first"]))
+        if case["drawn"]:
+            rows.append(("move -> server preview", case["drawn"]))
+        for name, values in rows:
+            print(f"{label:<16} {name:<22} {summary(values)}")
+            label = ""
+    print()
+    print("preview vs exact grade on the preview picture (1/255: mean / p99), at an L1 "
+          "distance d from the nearest exact map")
+    print(f"{'preset':<10} {'d':>5}  {'extrapolated':>14}  {'fast, corrected':>15}  "
+          f"{'fast alone':>13}  {'exact map (s)':>13}")
+    for case in cases:
+        for row in case["accuracy"]:
+            cells = "  ".join(f"{row[k][0]:6.2f} / {row[k][1]:5.2f}"
+                              for k in ("extrapolated", "corrected", "fast"))
+            print(f"{case['preset']:<10} {row['distance']:5.2f}  {cells}  {row['exact_s']:13.1f}")
+        print(f"{case['preset']:<10} slopes for {case['styles']} styles: "
+              f"{case['slopes_s']:.1f} s (in the worker, after each exact map)")
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

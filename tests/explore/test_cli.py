@@ -1,0 +1,93 @@
+"""`wbcgrade explore` on the command line: errors are one line, the address is printed,
+Ctrl-C stops the server and its worker."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import time
+import urllib.request
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from tests.explore.conftest import PRESET, WBCGRADE, command_env
+from wbcgrade.cli import main
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_explore_is_a_command_with_its_options():
+    assert "explore" in run("--help").output
+    result = run("explore", "--help")
+    assert result.exit_code == 0
+    for option in ("--style", "--preset", "--port", "--no-browser"):
+        assert option in result.output
+
+
+def test_bad_inputs_are_one_line_errors(tmp_path, photo):
+    for args, message in (
+            ((tmp_path / "missing.jpg", "--preset", PRESET), "no such file"),
+            ((photo,), "give exactly one of --style DIR or --preset"),
+            ((photo, "--preset", PRESET, "--style", tmp_path), "give exactly one of"),
+            ((photo, "--preset", "nosuch"), "unknown preset 'nosuch'"),
+            ((photo, "--style", tmp_path / "nope"), "style folder does not exist")):
+        result = run("explore", *args, "--no-browser")
+        assert result.exit_code == 1, (args, result.output)
+        assert result.stderr.strip().splitlines()[-1].startswith("Error: "), result.stderr
+        assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_busy_port_is_reported_before_any_work(photo):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = run("explore", photo, "--preset", PRESET, "--port", port, "--no-browser")
+    assert result.exit_code == 1
+    assert f"cannot listen on 127.0.0.1:{port}" in result.stderr and "--port" in result.stderr
+
+
+def _workers() -> set[int]:
+    found = set()
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if b"wbcgrade.explore._worker" in (entry / "cmdline").read_bytes():
+                    found.add(int(entry.name))
+            except OSError:
+                continue
+    return found
+
+
+def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
+    before = _workers()
+    process = subprocess.Popen(
+        [*WBCGRADE, "explore", str(photo), "--preset", PRESET, "--no-browser"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**command_env(), "DISPLAY": ""})
+    try:
+        url = process.stdout.readline().strip()
+        assert url.startswith("http://127.0.0.1:") and url.endswith("/"), url
+        with urllib.request.urlopen(url + "api/state", timeout=60) as answer:
+            state = json.load(answer)
+        assert state["names"] == ["coffee", "flower", "sunset"]
+        deadline = time.monotonic() + 60
+        while not (_workers() - before) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert _workers() - before, "the job worker did not start"
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, err
+    assert "Open the address above" in err and "Stopped." in err and "Traceback" not in err
+    deadline = time.monotonic() + 10
+    while (_workers() - before) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not (_workers() - before), "the job worker outlived the server"

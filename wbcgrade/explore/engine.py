@@ -1,0 +1,451 @@
+"""The explore page's one door into the colour library.
+
+Everything ``wbcgrade explore`` asks of :mod:`wbcgrade.color` goes through
+this module (the server, the job worker and the command import nothing
+else of it), so that following a change of the colour library's options or
+grade path means changing this file only. It offers:
+
+- :func:`load_session`: the photo and its styles, read once, as ``apply``
+  reads them (colour spaces, histograms on the fit, preview and transfer
+  grids), a preview-size copy and a thumbnail per style;
+- :meth:`Session.fit`: the weights ``apply`` would fit (never worse than the
+  best single style);
+- :meth:`Session.fast_map`: a colour map in well under a second for the
+  live preview (palette, plan and smooth map on small grids, see below);
+- :class:`ExactGrader` (run in the job worker, :mod:`wbcgrade.explore.jobs`):
+  the colour map exactly as ``apply --weights W --no-regrain`` computes it,
+  and the fit's loss at any weights (the landscape);
+- :meth:`Session.export` (``.cube`` or CLF, any size) and
+  :meth:`Session.command_line` (the ``apply`` command that reproduces it).
+
+The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
+64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
+drag. The preview computes the same steps with the same kernel in colour
+units (sigma = 1/31 of the cube) on 32^3 grids and a 9^3 smooth map (the
+plan to a looser tolerance), then adds the difference between the exact and
+the fast map at the nearest weights whose exact map is known (a control
+variate): at those weights the preview *is* the exact map, and nearby it
+follows the fast map's change. The fast map is solved from scratch each
+time, so that the difference is measured against the same map (a plan
+warm-started from the previous move lags towards it). Before that answer
+arrives, the page extrapolates from the last exact map with the fast map's
+slopes there (:meth:`ExactGrader.slopes`). ``benchmarks/explore.py``
+measures the times and the distances to the exact map.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.explore.settings import Settings, format_number, weights_text
+
+__all__ = ["Session", "FitResult", "ExactGrader", "load_session", "serve_jobs",
+           "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
+
+#: Bins per axis of the preview's palette, plan and photo histogram.
+PREVIEW_BINS = 32
+#: Nodes per axis of the preview's smooth map (upsampled to the exact map's lattice).
+PREVIEW_MAP_SIZE = 9
+#: The preview plan's Sinkhorn tolerance (L1 marginal error; ``apply``: 3e-3). Its
+#: map is within 0.1-0.3/255 on average (p99 < 1/255) of a converged plan's, in
+#: half the iterations (measured on two sample photos).
+PREVIEW_SINKHORN_TOL = 1e-2
+#: Weight step of the slopes the page extrapolates from (:meth:`ExactGrader.slopes`).
+SLOPE_STEP = 0.05
+#: Long side of the preview picture the browser grades, in pixels.
+PREVIEW_SIDE = 1024
+#: LUT sizes and formats the page exports.
+EXPORT_SIZES = (33, 65)
+EXPORT_FORMATS = ("cube", "clf")
+#: Side of a style's thumbnail, in pixels.
+THUMBNAIL_SIDE = 96
+
+
+def _base_options():
+    """``apply``'s defaults with ``--no-regrain``: what a LUT can hold."""
+    from wbcgrade.color.options import GradeOptions
+
+    return GradeOptions(regrain=False)
+
+
+def _options(base, settings: Settings, **changes):
+    """The grade options of ``settings`` (its map: the strength is applied afterwards),
+    with other settings ``changes`` by their flat names."""
+    from wbcgrade.color.options import as_options
+
+    return as_options(base, relaxation=settings.relaxation,
+                      preserve_luminance=settings.keep_lightness, **changes)
+
+
+def _apply_weights(settings: Settings) -> tuple[float, ...]:
+    """The weights ``apply --weights TEXT`` grades with: the text read as it reads it."""
+    from wbcgrade.color.weights import parse_weights
+
+    return tuple(parse_weights(weights_text(settings.weights)))
+
+
+@dataclass
+class FitResult:
+    """The fitted weights and how they compare (fit grid, the fit's loss).
+
+    Attributes
+    ----------
+    weights : (S,) fitted weights.
+    loss : the fit's loss at ``weights``.
+    vertex_losses : (S,) the loss of each style alone.
+    start : "uniform", "vertex-refit" or "vertex" (see ``color.grading.FitSummary``).
+    converged : whether L-BFGS stopped at its tolerance.
+    evaluations : loss evaluations spent.
+    time_s : wall time of the fit.
+    """
+
+    weights: tuple[float, ...]
+    loss: float
+    vertex_losses: tuple[float, ...]
+    start: str
+    converged: bool
+    evaluations: int
+    time_s: float
+
+    def as_json(self, names: list[str]) -> dict:
+        best = int(np.argmin(self.vertex_losses))
+        return {"weights": list(self.weights), "loss": self.loss,
+                "vertex_losses": list(self.vertex_losses), "start": self.start,
+                "converged": self.converged, "evaluations": self.evaluations,
+                "time_s": round(self.time_s, 3), "best_single": names[best],
+                "best_single_loss": self.vertex_losses[best]}
+
+
+class _FastGrader:
+    """Colour maps on small grids for the live preview (module docstring); no state."""
+
+    def __init__(self, styles, photo_hist: np.ndarray, base, encoding) -> None:
+        from wbcgrade.color.options import as_options
+
+        self.styles = styles
+        self.photo_hist = photo_hist
+        self.encoding = encoding
+        # the same steps and kernel in colour units (sigma = 1/31 of the cube) as apply,
+        # on the preview grids; the plan to a looser tolerance
+        self.base = as_options(base, bins=PREVIEW_BINS, palette_bins=PREVIEW_BINS,
+                               map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL)
+        styles.at_bins(PREVIEW_BINS)  # re-binned once, not on every move
+
+    def solve(self, settings: Settings, weights, tol: float | None = None) -> np.ndarray:
+        """(9, 9, 9, 3) map at ``weights`` (S,) with ``settings``' other options: the
+        palette, the plan (solved cold, so the same weights give the same map) to
+        ``tol`` (default :data:`PREVIEW_SINKHORN_TOL`), the smooth map, the finish."""
+        from wbcgrade.color.grading import finish_map
+        from wbcgrade.color.transfer import transport_map
+
+        options = _options(self.base, settings,
+                           **({} if tol is None else {"sinkhorn_tol": tol}))
+        weights = np.asarray(weights, dtype=np.float64)
+        color_map, _, _, _ = transport_map(self.photo_hist, self.styles,
+                                           weights / weights.sum(), options)
+        return finish_map(color_map, options, self.encoding)
+
+
+def upsample_map(color_map: np.ndarray, size: int) -> np.ndarray:
+    """A colour map sampled on a ``size``^3 lattice (its trilinear interpolation)."""
+    from wbcgrade.color.remap import apply_color_map, identity_map
+
+    if color_map.shape[0] == size:
+        return np.asarray(color_map, dtype=np.float32)
+    return apply_color_map(identity_map(size), color_map)
+
+
+@dataclass
+class Session:
+    """A photo and its styles, loaded once for exploring (nothing is ever written to them).
+
+    Attributes
+    ----------
+    photo : the photo's path as given (the command line repeats it).
+    style_dir, preset : where the styles came from, as given (one is None).
+    names : S style names.
+    styles : the style set in the photo's working space.
+    encoding : the photo's colour encoding (``color.colorspace.ColorEncoding``).
+    hists : {bins: (bins, bins, bins)} photo histograms on the fit, preview
+        and transfer grids, as ``apply`` bins them.
+    preview : (h, w, 3) uint8 preview picture (working-space colours: the
+        values the LUT takes).
+    thumbnails : one (h, w, 3) float32 display picture per style.
+    """
+
+    photo: str
+    style_dir: str | None
+    preset: str | None
+    names: list[str]
+    styles: object
+    encoding: object
+    hists: dict
+    preview: np.ndarray
+    thumbnails: list[np.ndarray]
+    base: object
+    lut_size: int
+
+    def __post_init__(self) -> None:
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
+                                 self.encoding)
+
+    @property
+    def n_styles(self) -> int:
+        return len(self.names)
+
+    def fit(self, callback: Callable[[int, np.ndarray, float], None] | None = None
+            ) -> FitResult:
+        """Fit the weights as ``apply`` does (never worse than one style alone)."""
+        from wbcgrade.color.fit import fit_weights
+
+        fit = self.base.fit
+        summary = fit_weights(self.hists[fit.bins], self.styles.at_bins(fit.bins), fit,
+                              callback)
+        return FitResult(weights=tuple(float(w) for w in summary.weights),
+                         loss=float(summary.loss),
+                         vertex_losses=tuple(float(v) for v in summary.vertex_losses),
+                         start=summary.start, converged=bool(summary.info.get("converged", True)),
+                         evaluations=int(summary.info.get("evaluations", 0)),
+                         time_s=summary.time_s)
+
+    def fast_map(self, settings: Settings) -> np.ndarray:
+        """The preview's colour map of ``settings`` (PREVIEW_MAP_SIZE^3, float32)."""
+        return self._fast.solve(settings, _apply_weights(settings))
+
+    def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
+        """The LUT the browser applies: the fast map on the exact map's lattice plus
+        ``offset`` (exact minus fast map at the nearest known weights), clipped."""
+        lut = upsample_map(fast_map, self.lut_size)
+        if offset is not None:
+            lut = np.clip(lut + offset, 0.0, 1.0)
+        return np.ascontiguousarray(lut, dtype=np.float32)
+
+    def grader_state(self) -> dict:
+        """What the job worker needs to build an :class:`ExactGrader` (picklable)."""
+        from wbcgrade.color.presets import StyleSet
+
+        styles = self.styles
+        clean = StyleSet(list(styles.names), styles.histograms, styles.source, styles.width,
+                         styles.description, dict(styles.meta))
+        return {"styles": clean, "hists": self.hists, "base": self.base,
+                "encoding": self.encoding, "lut_size": self.lut_size}
+
+    def command_line(self, settings: Settings) -> str:
+        """The ``wbcgrade apply`` command that grades the full-size photo as shown."""
+        parts = ["wbcgrade", "apply", self.photo]
+        parts += ["--style", self.style_dir] if self.style_dir is not None \
+            else ["--preset", self.preset]
+        parts += ["--weights", weights_text(settings.weights), "--no-regrain"]
+        if settings.strength != 1.0:
+            parts += ["--strength", format_number(settings.strength, 3)]
+        if settings.relaxation is not None:
+            parts += ["--relax", format(settings.relaxation, ".3g")]
+        if settings.keep_lightness:
+            parts += ["--preserve-luminance"]
+        return " ".join(shlex.quote(p) for p in parts)
+
+    def export(self, color_map: np.ndarray, settings: Settings, lut_format: str,
+               size: int) -> tuple[str, bytes]:
+        """The LUT file of ``color_map`` at ``settings.strength`` -> (file name, bytes).
+
+        Written by the colour library's LUT writer (the header names the
+        spaces and the weights) into a private temporary folder, read back
+        and removed; nothing is written beside the photo.
+        """
+        from wbcgrade.color.grading import Grade
+        from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
+
+        stem = Path(self.photo).stem
+        name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
+        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
+            zip(self.names, settings.weights), key=lambda item: -item[1]))
+        grade = Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
+                      color_map=color_map, working=self.encoding.working,
+                      strength=settings.strength)
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
+            path = Path(folder) / name
+            write_grade_lut(path, grade, self.encoding.within_working(), size, lut_format,
+                            title=f"wbcgrade {stem}",
+                            comments=[f"wbcgrade explore grade of {Path(self.photo).name}: "
+                                      f"{ranked}", f"reproduce: {self.command_line(settings)}"])
+            return name, path.read_bytes()
+
+    def png(self, pixels: np.ndarray) -> bytes:
+        """An (h, w, 3) picture (uint8, or floats in [0, 1]) as PNG bytes."""
+        from wbcgrade._publish import write_png
+
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
+            path = Path(folder) / "picture.png"
+            write_png(path, pixels)
+            return path.read_bytes()
+
+
+def clf_available() -> bool:
+    """Whether CLF LUTs can be written (the ``opencolorio`` package is installed)."""
+    from wbcgrade.color.lut import check_clf_support
+    from wbcgrade.errors import InputError
+
+    try:
+        check_clf_support()
+    except InputError:
+        return False
+    return True
+
+
+def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
+                 preview_side: int = PREVIEW_SIDE,
+                 warn: Callable[[str], None] | None = None,
+                 progress: Callable[[int, int, str], None] | None = None) -> Session:
+    """Read the photo and the styles as ``apply`` does; nothing is written.
+
+    ``style_dir`` photos' histograms come from (and go to) the histogram
+    cache, as with ``apply``. Raises InputError on a missing or unreadable
+    photo or style source (one line).
+    """
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.histogram import HistogramCache, image_histogram
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
+    from wbcgrade.color.report import style_pictures
+    from wbcgrade.color.sheet import thumbnail
+    from wbcgrade.errors import InputError
+
+    if not Path(photo).is_file():
+        raise InputError(f"{photo}: no such file")
+    base = _base_options()
+    image = read_image(photo)
+    encoding = ColorEncoding.for_image(image, base.spaces.input, base.spaces.working)
+    encoded, _ = encoding.encode(image.rgb(), image.is_float)
+    alpha = image.alpha()
+    limit = base.transfer.max_pixels
+    hists = {bins: image_histogram(encoded, bins, alpha, limit)
+             for bins in (base.fit.bins, PREVIEW_BINS, base.transfer.bins)}
+    source = StyleSource(style_dir, preset, HistogramCache())
+    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
+    styles = styles_in_space(styles, encoding.working)
+    height, width = encoded.shape[:2]
+    side = min(preview_side, max(height, width))
+    small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
+    preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
+    pictures = style_pictures(styles, THUMBNAIL_SIDE)
+    return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
+                   preset=preset, names=list(styles.names), styles=styles, encoding=encoding,
+                   hists=hists, preview=preview,
+                   thumbnails=[pictures[name] for name in styles.names], base=base,
+                   lut_size=base.map.size)
+
+
+class ExactGrader:
+    """The exact colour maps and the fit's losses (built in the job worker).
+
+    Parameters
+    ----------
+    state : :meth:`Session.grader_state`.
+    """
+
+    def __init__(self, state: dict) -> None:
+        self.styles = state["styles"]
+        self.hists = state["hists"]
+        self.base = state["base"]
+        self.encoding = state["encoding"]
+        self.lut_size = state["lut_size"]
+        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
+                                 self.encoding)
+        self._loss_problem = None
+
+    def color_map(self, settings: Settings) -> np.ndarray:
+        """The colour map ``apply --weights W --no-regrain`` grades with (33^3, float32).
+
+        ``apply``'s own grade path (``color.grading.grade_histograms``) on the
+        photo's histograms, with the weights read from the command line's text.
+        """
+        from wbcgrade.color.grading import PhotoHistograms, grade_histograms
+
+        options = _options(self.base, settings, weights=_apply_weights(settings))
+        photo = PhotoHistograms(self.hists[options.fit.bins],
+                                self.hists[options.transfer.bins])
+        grade, _ = grade_histograms(photo, self.styles, options, self.encoding)
+        return np.ascontiguousarray(grade.color_map, dtype=np.float32)
+
+    def reference(self, settings: Settings) -> dict:
+        """The exact map of ``settings`` and its offset from the fast map there."""
+        exact = self.color_map(settings)
+        fast = self._fast.solve(settings, _apply_weights(settings))
+        return {"exact": exact,
+                "offset": (exact - upsample_map(fast, self.lut_size)).astype(np.float32)}
+
+    def slopes(self, settings: Settings, step: float = SLOPE_STEP) -> np.ndarray:
+        """How the fast map changes towards each style, at ``settings``' weights w.
+
+        Returns (S, n, n, n, 3) float32 (n: the LUT size): slope s is
+        ``(F((1 - h) w + h e_s) - F(w)) / h`` with F the fast map (its plan at
+        ``apply``'s tolerance, every one from the plan at w) and h = ``step``.
+        A move dw (summing to 0) changes the map by about ``sum_s dw_s slope_s``
+        (dw = sum_s dw_s (e_s - w)): the page's instant preview.
+        """
+        weights = np.asarray(_apply_weights(settings))
+        weights = weights / weights.sum()
+        tol = self.base.transfer.tol
+        centre = upsample_map(self._fast.solve(settings, weights, tol), self.lut_size)
+        out = np.empty((len(weights), *centre.shape), dtype=np.float32)
+        for s in range(len(weights)):
+            towards = (1.0 - step) * weights + step * np.eye(len(weights))[s]
+            moved = self._fast.solve(settings, towards, tol)
+            out[s] = (upsample_map(moved, self.lut_size) - centre) / step
+        return out
+
+    def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
+        """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
+        from wbcgrade.color.fit import _loss_at, _problem
+
+        fit = self.base.fit
+        if self._loss_problem is None:
+            self._loss_problem = _problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
+                                          fit)
+        target, hists, geometry = self._loss_problem
+        out = []
+        for row in rows:
+            weights = np.asarray(row, dtype=np.float64)
+            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), fit))
+        return out
+
+
+def serve_jobs(connection) -> None:
+    """The job worker's loop: build an :class:`ExactGrader`, answer jobs until EOF.
+
+    Messages: ``(kind, payload)`` with kind "reference" or "slopes" (payload:
+    Settings) or "losses" (payload: rows of weights); answers ``("ok",
+    result, seconds)`` or ``("error", one line, seconds)``.
+    """
+    grader = ExactGrader(connection.recv())
+    connection.send(("ready", os.getpid(), 0.0))
+    while True:
+        try:
+            kind, payload = connection.recv()
+        except (EOFError, OSError):
+            return
+        start = time.perf_counter()
+        try:
+            if kind == "reference":
+                answer = ("ok", grader.reference(payload))
+            elif kind == "slopes":
+                answer = ("ok", grader.slopes(payload))
+            elif kind == "losses":
+                answer = ("ok", grader.losses(payload))
+            else:
+                answer = ("error", f"unknown job {kind!r}")
+        except Exception as exc:  # reported to the page as one line, the worker lives on
+            text = str(exc).strip().splitlines()
+            answer = ("error", text[0] if text else type(exc).__name__)
+        try:
+            connection.send((*answer, time.perf_counter() - start))
+        except (EOFError, OSError):
+            return
