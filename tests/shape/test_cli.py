@@ -43,7 +43,7 @@ def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     record = json.loads(result.stdout)
     assert set(record["weights"]) == {"box", "sphere", "torus"}
     assert sum(record["weights"].values()) == pytest.approx(1.0)
-    assert record["loss"] == "kl_observed" and record["watertight"]
+    assert record["loss"] == "kl_reverse, observed voxels" and record["watertight"]
     mesh = trimesh.load(out, force="mesh")
     assert mesh.is_watertight
     assert np.load(tmp_path / "done.npy").shape == (12, 12, 12)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from wbcgrade.shape.defaults import DEFAULT_COMPLETION_LOSS, DEFAULT_LOSS, LOSS_NAMES
+from wbcgrade.shape.defaults import DEFAULT_LOSS, LOSS_NAMES
 
 _LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
 
@@ -128,9 +128,11 @@ def shape() -> None:
 @shape.command()
 @click.argument("partial", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_COMPLETION_LOSS, show_default=True,
-              help="kl_observed = KL(input|barycenter) on the input's voxels only; "
-                   "kl_reverse = on all voxels; kl = the paper's KL(barycenter|input).")
+@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_LOSS, show_default=True,
+              help="kl_reverse = KL(input|barycenter); kl = the paper's KL(barycenter|input).")
+@click.option("--observed-only/--all-voxels", default=True, show_default=True,
+              help="Compare the input's voxels only, leaving the barycenter free where the "
+                   "input is missing (kl_reverse, kl, quadratic, l1), or every voxel.")
 @click.option("--align", is_flag=True,
               help="Align every mesh on its principal axes first, picking the axes' signs "
                    "that overlap the input most, and fit a rotation when placing the input "
@@ -144,8 +146,8 @@ def shape() -> None:
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
               help="Worker processes voxelising the database meshes.")
 def complete(partial, database, resolution, missing, euclidean, width, iterations, max_iter,
-             coarse, png_path, top, as_json, quiet, loss, align, output, volume_path,
-             smooth, jobs) -> None:
+             coarse, png_path, top, as_json, quiet, loss, observed_only, align, output,
+             volume_path, smooth, jobs) -> None:
     """Infer the missing geometry of the mesh PARTIAL from a database of meshes.
 
     PARTIAL is placed where it overlaps a database shape best (scale and
@@ -178,7 +180,8 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
             partial, database, output=output, volume_path=volume_path, png_path=png_path,
             resolution=resolution, missing=missing, loss=loss, euclidean=euclidean,
             width=width, n_iter=iterations, max_iter=max_iter, coarse_to_fine=coarse,
-            align=align, smooth=smooth, top=top, warn=warn, on_mesh=on_mesh,
+            align=align, observed_only=observed_only, smooth=smooth, top=top, warn=warn,
+            on_mesh=on_mesh,
             callback=callback, jobs=jobs)
     finally:
         for bar in bars:

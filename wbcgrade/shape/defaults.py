@@ -8,13 +8,10 @@ from __future__ import annotations
 
 DEFAULT_RESOLUTION = 64
 DEFAULT_LOSS = "kl_reverse"
-"""Default loss of a projection (``shape project``, :func:`wbcgrade.shape.complete.project`)."""
-
-DEFAULT_COMPLETION_LOSS = "kl_observed"
-"""Default loss of a completion (``shape complete``): KL on the observed voxels only."""
 DEFAULT_N_ITER = 60
 DEFAULT_MAX_ITER = 15
 
-LOSS_NAMES = ("kl_observed", "kl_reverse", "kl", "quadratic", "l1", "wasserstein")
-"""Losses a projection accepts: ``kl_observed`` (:data:`wbcgrade.shape.complete.KL_OBSERVED`)
-and names of the core's loss registry."""
+LOSS_NAMES = ("kl_reverse", "kl", "quadratic", "l1", "wasserstein")
+"""Losses a projection accepts (names of the core's loss registry);
+``kl_reverse`` is the default for shapes. A completion compares the input's
+voxels only by default (``observed_only``), which the first four allow."""

@@ -28,7 +28,6 @@ from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import (
-    DEFAULT_COMPLETION_LOSS,
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
@@ -130,13 +129,14 @@ def complete_mesh_file(
     png_path: str | os.PathLike | None = None,
     resolution: int = DEFAULT_RESOLUTION,
     missing: float | None = None,
-    loss: str = DEFAULT_COMPLETION_LOSS,
+    loss: str = DEFAULT_LOSS,
     euclidean: bool = False,
     width: float | None = None,
     n_iter: int = DEFAULT_N_ITER,
     max_iter: int = DEFAULT_MAX_ITER,
     coarse_to_fine: bool = True,
     align: bool = False,
+    observed_only: bool = True,
     smooth: int = 10,
     top: int = 3,
     warn: Callable[[str], None] | None = None,
@@ -170,6 +170,8 @@ def complete_mesh_file(
         Fraction of the shape's volume missing from the input; estimated when None.
     loss, euclidean, width, n_iter, max_iter, coarse_to_fine :
         See :func:`wbcgrade.shape.complete.project` (``width`` in voxels).
+    observed_only : bool
+        Compare the input's voxels only (``--all-voxels`` turns it off).
     align : bool
         Rotate every mesh onto its principal axes, signs chosen to overlap the
         input most, and fit a rotation when placing the input.
@@ -233,7 +235,7 @@ def complete_mesh_file(
     completion = complete_shape(
         shapes[0], shapes[1:], missing=missing, loss=loss, euclidean=euclidean, width=width,
         n_iter=n_iter, max_iter=max_iter, callback=callback, coarse_to_fine=coarse_to_fine,
-        rotate=align,
+        rotate=align, observed_only=observed_only,
     )
     surface = completion_surface(completion, smooth_iterations=smooth, n_iter=n_iter)
     remove_stale_beside(output, volume_path, png_path)  # what killed runs left
