@@ -292,13 +292,11 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
     natural_map = naturals[map_bins]
     style_weights = (np.ones(n_styles) if style_weights is None
                      else np.asarray(style_weights, dtype=np.float64))
-    points = grid_points(map_bins)
     geometry = _fit_geometry(map_bins)
     all_weights = np.zeros((n_styles, len(natural_map)))
     losses = np.zeros(n_styles)
-    for _ in range(rounds):
-        pushed = np.stack([push_histogram(h, look, fit_bins)
-                           for h in _resampled(naturals, fit_bins)])
+    for round_ in range(rounds):
+        pushed = np.stack([push_histogram(h, look, fit_bins) for h in naturals[fit_bins]])
         sources, targets, masses = [], [], []
         for m in range(n_styles):
             weights, losses[m] = look_coordinates(styles[fit_bins][m], pushed)
@@ -306,27 +304,19 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
             keep = np.flatnonzero(weights > 1e-3)
             content = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map[keep]]),
                                  weights[keep] / weights[keep].sum(), geometry, 60)
-            projection, kept = relaxed_correspondences(
-                push_histogram(content, look), styles[map_bins][m], width, relaxation)
-            flat = content.ravel()
-            used = np.flatnonzero(flat > 1e-7)
-            moved = look(points[used])
-            sources.append(points[used])
-            targets.append(_trilinear(projection, moved))
-            mass = flat[used] * _trilinear(kept[..., None], moved)[:, 0]
+            points, moved_to, mass, _ = _correspondences(content, styles[map_bins][m], look,
+                                                         width, relaxation)
+            sources.append(points)
+            targets.append(moved_to)
             masses.append(style_weights[m] * mass / max(mass.sum(), 1e-300))
             if progress is not None:
-                progress(len(masses) + _ * n_styles, rounds * n_styles)
+                progress(round_ * n_styles + m + 1, rounds * n_styles)
         look = fit_look_map(np.concatenate(sources), np.concatenate(targets),
                             np.concatenate(masses), None, smoothness, ridge, knots)
     info = {"rounds": rounds, "relaxation": relaxation, "width_bins": width,
             "smoothness": smoothness, "ridge": ridge, "knots": knots,
             "fit_bins": fit_bins, "map_bins": map_bins, "amplitude": look.amplitude()}
     return LookResult(look, all_weights, losses, info)
-
-
-def _resampled(hists: dict[int, np.ndarray], bins: int) -> np.ndarray:
-    return hists[bins]
 
 
 def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width: float,
