@@ -257,6 +257,7 @@ def parse_options(pairs: list[str]):
                     values[key] = float(text)
                 except ValueError:
                     values[key] = text
+    values.setdefault("mode", "palette")  # the palette transfer, as this benchmark always measured
     return GradeOptions(**values)
 
 

@@ -58,11 +58,11 @@ def photo(tmp_path) -> Path:
 @pytest.fixture
 def fast_options() -> GradeOptions:
     """Small grids so a whole grade takes a fraction of a second."""
-    return GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    return GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30)
 
 
-FAST_ARGS = ["--bins", "16", "--fit-bins", "8", "--max-iter", "10", "--iterations", "30",
-             "--no-cache"]
+FAST_ARGS = ["--mode", "palette", "--bins", "16", "--fit-bins", "8", "--max-iter", "10",
+             "--iterations", "30", "--no-cache"]
 
 
 def grade_of(rgb, styles, options):

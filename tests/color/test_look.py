@@ -137,8 +137,9 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path):
     from wbcgrade.color.lut import read_cube
 
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--mode", "look",
-                                       "-o", str(tmp_path / "o.png"), "--json", *FAST_ARGS])
+    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "-o",
+                                       str(tmp_path / "o.png"), "--json", *FAST_ARGS,
+                                       "--mode", "look"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["map"]["builder"] == "look" and report["fit_start"] == "look"

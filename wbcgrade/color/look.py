@@ -622,8 +622,8 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     """The look a style set shares (:func:`extract_look`), computed once per set.
 
     Kept in memory for the process and, with ``cache``, on disk beside the
-    style histogram cache (``looks/`` in :func:`~wbcgrade.color.histogram.default_cache_dir`),
-    keyed by the histograms themselves.
+    style histogram cache (``looks/`` in the styles' cache folder, see
+    :func:`_look_cache_path`), keyed by the histograms themselves.
 
     Parameters
     ----------
@@ -640,14 +640,14 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS)).encode())
     key = (digest.hexdigest(),)
     if key not in _SET_LOOKS:
-        found = _read_cached_look(key[0]) if cache else None
+        found = _read_cached_look(key[0], styles) if cache else None
         if found is None:
             found = extract_look(
                 {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
                 {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
                 fit_bins=FIT_BINS, map_bins=MAP_BINS, progress=progress)
             if cache:
-                _write_cached_look(key[0], found)
+                _write_cached_look(key[0], found, styles)
         _SET_LOOKS[key] = found
     return _SET_LOOKS[key]
 
@@ -656,16 +656,24 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 LOOK_VERSION = 2
 
 
-def _look_cache_path(key: str):
+def _look_cache_path(key: str, styles=None):
+    """Where a set's look is kept: the styles' cache folder (``meta["cache_dir"]``, None
+    when the command said ``--no-cache``), else the default one."""
+    from pathlib import Path
+
     from wbcgrade.color.histogram import default_cache_dir
 
-    return default_cache_dir() / "looks" / f"{key}.npz"
+    meta = getattr(styles, "meta", {}) or {}
+    folder = meta["cache_dir"] if "cache_dir" in meta else default_cache_dir()
+    return None if folder is None else Path(folder) / "looks" / f"{key}.npz"
 
 
-def _read_cached_look(key: str) -> LookResult | None:
+def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
 
-    path = _look_cache_path(key)
+    path = _look_cache_path(key, styles)
+    if path is None:
+        return None
     try:
         with np.load(path, allow_pickle=False) as data:
             look = LookMap(np.array(data["coefficients"]), int(data["knots"]))
@@ -675,13 +683,15 @@ def _read_cached_look(key: str) -> LookResult | None:
         return None
 
 
-def _write_cached_look(key: str, result: LookResult) -> None:
+def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
     import os
     import tempfile
 
-    path = _look_cache_path(key)
+    path = _look_cache_path(key, styles)
+    if path is None:
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)

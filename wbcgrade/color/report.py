@@ -132,11 +132,12 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
     bins = 16
-    target = histogram_palette(graded.grade.barycenter)  # in the working space
-    target.colors = encoding.to_display(target.colors, working=True)
-    palettes = [("input", histogram_palette(image_histogram(before, bins))),
-                ("barycenter", target),
-                ("output", histogram_palette(image_histogram(after, bins)))]
+    palettes = [("input", histogram_palette(image_histogram(before, bins)))]
+    if graded.grade.barycenter is not None:  # a palette grade's target (a look grade has none)
+        target = histogram_palette(graded.grade.barycenter)  # in the working space
+        target.colors = encoding.to_display(target.colors, working=True)
+        palettes.append(("barycenter", target))
+    palettes.append(("output", histogram_palette(image_histogram(after, bins))))
     best = int(np.argmin(result.vertex_losses))
     subtitle = (f"loss {result.loss:.4g}  |  best single style {result.names[best]}: "
                 f"{result.vertex_losses[best]:.4g}  |  {result.n_nonzero} of {len(result.names)} "

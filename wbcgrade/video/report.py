@@ -77,11 +77,12 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]
-    target = histogram_palette(shot.grade.barycenter)  # in the working space
-    target.colors = encoding.to_display(target.colors, working=True)
-    palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
-                ("barycenter", target),
-                ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
+    palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16)))]
+    if shot.grade.barycenter is not None:  # a palette grade's target (a look grade has none)
+        target = histogram_palette(shot.grade.barycenter)  # in the working space
+        target.colors = encoding.to_display(target.colors, working=True)
+        palettes.append(("barycenter", target))
+    palettes.append(("graded", histogram_palette(image_histogram(np.concatenate(after), 16))))
     best = shot.fit.best_vertex
     title = (f"{result.input.name}  shot {number} of {len(result.shots)}: frames "
              f"{shot.first}-{shot.last} ({shot.first / fps:.2f}-{(shot.last + 1) / fps:.2f} s), "
