@@ -235,7 +235,6 @@ def look_map(request: MapRequest) -> BuiltMap:
         MAP_BINS,
         SCENE_LOSS,
         SCENE_RELAXATION,
-        LookMap,
         find_scene_look,
         look_color_map,
         natural_palettes,
@@ -264,8 +263,9 @@ def look_map(request: MapRequest) -> BuiltMap:
         scene = find_scene_look(request.photo.pixels[0], styles, base)
         timings["scene"] = time.perf_counter() - start
         if scene is not None and scene.confidence > 0:
-            look = LookMap(base.coefficients + scene.confidence
-                           * (scene.look.coefficients - base.coefficients), base.knots)
+            size = options.map.size
+            base_map = base.lattice(size)
+            color_map = base_map + scene.confidence * (scene.lattice(size) - base_map)
             total = sum(scene.matches.values())
             weights = np.full(n_styles, (1.0 - scene.confidence) / n_styles)
             for index, inliers in scene.matches.items():
@@ -282,7 +282,7 @@ def look_map(request: MapRequest) -> BuiltMap:
             fit = FitSummary(weights, scene.residual, alone, "scene",
                              {"start": "scene", "match": styles.names[best],
                               "confidence": scene.confidence}, sum(timings.values()))
-            return BuiltMap(look.lattice(options.map.size), None, info, timings, fit)
+            return BuiltMap(color_map.astype(np.float32), None, info, timings, fit)
         start = time.perf_counter()
     base, photo, info = look_color_map(photo_hist, styles, naturals)
     timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
