@@ -101,7 +101,35 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
                            comments=list(comments or [])), grid), 7
     with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
         colour.write_LUT(lut, tmp, decimals=decimals, method="Resolve Cube")
+        if shaper is not None:
+            _shaper_header_for_readers(tmp)
     return path
+
+
+def _shaper_header_for_readers(path: str) -> None:
+    """Rewrite a shaper ``.cube``'s header so that every reader either reads it right or
+    refuses it: no ``TITLE`` (OpenColorIO's Resolve reader refuses the tag; the title
+    stays as a comment), and ``LUT_3D_SIZE`` before the 1D keywords (ffmpeg's ``lut3d``,
+    which has no shaper, then stops at ``LUT_1D_SIZE`` with "Invalid data" instead of
+    reading the shaper's entries as the 3D table). OpenColorIO and colour-science take
+    the keywords in any order (tests/color/test_lut_interop.py)."""
+    with open(path, encoding="utf-8") as handle:
+        lines = handle.read().splitlines()
+    start = next(n for n, line in enumerate(lines) if line and line[0] in "0123456789-+.")
+    header, data = lines[:start], lines[start:]
+    size_3d = [line for line in header if line.startswith("LUT_3D_SIZE")]
+    out = []
+    for line in header:
+        if line.startswith("TITLE"):
+            line = "# title: " + line[5:].strip().strip('"')
+        elif line.startswith("LUT_3D_SIZE"):
+            continue
+        elif line.startswith("LUT_1D_SIZE"):
+            out += size_3d
+        out.append(line)
+    out += data
+    with open(path, "w", encoding="utf-8") as handle:
+        handle.write("\n".join(out) + "\n")
 
 
 def read_cube(path: str | os.PathLike):
