@@ -263,12 +263,20 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
         _fsync_path(tmp)
         _publish(tmp, target, overwrite)
         _fsync_path(folder, directory=True)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if type(exc) in _PLAIN_OS_ERRORS and exc.errno is not None \
+                and exc.filename in (None, tmp):  # a full disk: say which file
+            raise type(exc)(exc.errno, exc.strerror, str(target)) from None
         raise
     finally:
         os.close(fd)
+
+
+#: Errors re-raised naming the target when the writer's own error named no file (or the
+#: hidden temporary one): a full disk during ``write()`` says only "[Errno 28]".
+_PLAIN_OS_ERRORS = (OSError, PermissionError, FileNotFoundError)
 
 
 def publish_bytes(target: str | os.PathLike, data: bytes, overwrite: bool = True) -> Path:
