@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
@@ -88,6 +89,8 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
     path = Path(path)
     if path.suffix.lower() != ".cube":
         raise InputError(f"{path}: LUT file name must end in .cube")
+    title = safe_text(title)  # a header naming a non-UTF-8 file: its bytes as \xNN
+    comments = [safe_text(line) for line in comments or []]
     grid = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
                         domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
                         size=table.shape[0], comments=list(comments or []))
@@ -207,7 +210,8 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     baked = encoding.input != encoding.working
     table = grade.lut(size, encoding if baked else None)
     shaper = not baked and encoding.logarithmic
-    notes = list(comments or []) + lut_header(encoding, shaper)
+    notes = [safe_text(line) for line in list(comments or []) + lut_header(encoding, shaper)]
+    title = safe_text(title)
     if lut_format == "clf":
         return _write_clf(path, table, encoding, shaper, title, notes, overwrite)
     return write_cube(path, table, title=title, comments=notes, overwrite=overwrite,

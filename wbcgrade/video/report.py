@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.fit import NONZERO_THRESHOLD
 from wbcgrade.color.histogram import image_histogram
@@ -84,7 +85,7 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
                 ("barycenter", target),
                 ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
     best = shot.fit.best_vertex
-    title = (f"{result.input.name}  shot {number} of {len(result.shots)}: frames "
+    title = (f"{safe_text(result.input.name)}  shot {number} of {len(result.shots)}: frames "
              f"{shot.first}-{shot.last} ({shot.first / fps:.2f}-{(shot.last + 1) / fps:.2f} s), "
              f"{len(shot.samples)} sampled")
     subtitle = (f"loss {shot.fit.loss:.4g}  |  best single style {names[best]}: "
