@@ -38,7 +38,8 @@ from typing import Any
 
 from wbcgrade.errors import InputError
 
-__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT", "PARENT_WATCH_S"]
+__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT",
+           "PARENT_WATCH_S"]
 
 #: How long to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"

@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from wbcgrade._names import readable_name, writable_name, writer_name
 from wbcgrade._publish import atomic_path, check_output_path
-from wbcgrade._names import readable_name, writer_name
 from wbcgrade.errors import InputError, first_line
 
 __all__ = [
