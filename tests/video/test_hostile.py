@@ -22,7 +22,7 @@ import pytest
 from click.testing import CliRunner
 
 from wbcgrade.cli import main
-from wbcgrade.video.ffmpeg import ffmpeg_exe, probe
+from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
 FAST = ["--preset", "warm", "--bins", "16", "--no-cache", "--weights", "0.5,0.3,0.2"]
@@ -66,6 +66,8 @@ def clips(tmp_path_factory) -> dict[str, Path]:
             "-c:v", "libx264", "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(full))
     data = full.read_bytes()
     out["truncated.mp4"].write_bytes(data[:len(data) // 2])
+    out["cut.mp4"] = folder / "cut.mp4"  # a cut by stream copy: an edit list trims packets
+    _ffmpeg("-ss", "0.5", "-i", str(full), "-c", "copy", str(out["cut.mp4"]))
     return out
 
 
@@ -126,6 +128,18 @@ def test_a_truncated_clip_is_refused_not_graded_short(clips, tmp_path):
     refused(run(clips["truncated.mp4"], "-o", tmp_path / "graded.mp4", *FAST),
             "truncated", "2.00 s")
     assert outputs(tmp_path) == []
+
+
+def test_a_clip_cut_by_stream_copy_is_graded_to_its_visible_length(clips, tmp_path):
+    """Not a truncation: the probe counts 50 packets, 37 frames are shown; all 37 come out."""
+    out = tmp_path / "graded.mp4"
+    result = run(clips["cut.mp4"], "-o", out, *FAST)
+    assert result.exit_code == 0, result.output
+    def shown(path):
+        return sum(1 for _ in decode_frames(path, probe(path)))
+
+    assert probe(out).frames == shown(out) == shown(clips["cut.mp4"])
+    assert 30 < shown(out) < 50
 
 
 # --- 7: every output together or none ----------------------------------------------------------

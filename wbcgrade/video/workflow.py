@@ -38,7 +38,7 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -538,9 +538,9 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
                    progress=None if frames is None else
                    (lambda n: frames("scan", n, info.frames)))
     timings["scan"] = time.perf_counter() - t0
-    if samples.n_frames != info.frames:
-        raise InputError(f"{source}: {samples.n_frames} of its {info.frames} frames could be "
-                         "decoded (a damaged file?); refusing to grade it into another length")
+    if samples.n_frames != info.frames:  # the decoded frames are the clip (an edit list
+        # trims the packets counted by the probe: a cut made with -c copy)
+        info = replace(info, frames=samples.n_frames, duration=samples.n_frames / info.fps)
 
     shots = []
     t0 = time.perf_counter()
