@@ -87,6 +87,9 @@ CODECS = {
     "prores": ("prores_ks", (".mov", ".mkv")),
     "ffv1": ("ffv1", (".mkv", ".avi")),
 }
+#: Codecs that store alpha so that ffmpeg reads it back (libx265's yuva420p does not:
+#: the HEVC decoder drops the alpha layer).
+ALPHA_CODECS = ("prores", "ffv1")
 #: x264/x265 constant rate factor (18: visually lossless for x264).
 DEFAULT_CRF = 18
 #: Frames over which the grade changes at a cut (--per-shot).
@@ -341,12 +344,10 @@ def check_encoding(info: VideoInfo, settings: VideoSettings, output: Path, folde
     """
     encoder = CODECS[settings.codec][0]
     where = f"{info.path}: " if info.path else ""
-    if info.alpha and not any(pixel_format(f)[2] for f in encoder_pixel_formats(encoder)):
-        keep = [name for name, (enc, _) in CODECS.items()
-                if any(pixel_format(f)[2] for f in encoder_pixel_formats(enc))]
+    if info.alpha and settings.codec not in ALPHA_CODECS:
         raise InputError(f"{where}the frames have an alpha channel ({info.pix_fmt}), which "
-                         f"--codec {settings.codec} cannot store; use --codec "
-                         f"{' or '.join(keep)} to keep it")
+                         f"--codec {settings.codec} cannot store; use --codec prores (.mov) "
+                         "or ffv1 (.mkv) to keep it")
     trial = folder / f"trial{output.suffix}"
     with _writing_in(folder):
         args, encoder, pix_fmt = encode_args(info, settings, trial, "null", folder,
