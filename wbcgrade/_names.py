@@ -39,16 +39,27 @@ def safe_text(name: str | os.PathLike) -> str:
 
 
 @contextlib.contextmanager
-def readable_name(path: str | os.PathLike) -> Iterator[str]:
-    """A name OpenImageIO can open for reading ``path``, valid inside the ``with``."""
+def _fd_name(path: str | os.PathLike, flags: int) -> Iterator[str]:
+    """``path`` itself when it is UTF-8, else ``/proc/self/fd/N`` of it opened with ``flags``."""
     if is_utf8(path) or not os.path.exists("/proc/self/fd"):
         yield os.fspath(path)
         return
-    fd = os.open(path, os.O_RDONLY)
+    fd = os.open(path, flags)
     try:
         yield f"/proc/self/fd/{fd}"
     finally:
         os.close(fd)
+
+
+def readable_name(path: str | os.PathLike) -> contextlib.AbstractContextManager[str]:
+    """A name OpenImageIO can open for reading ``path``, valid inside the ``with``."""
+    return _fd_name(path, os.O_RDONLY)
+
+
+def writable_name(path: str | os.PathLike) -> contextlib.AbstractContextManager[str]:
+    """A name OpenImageIO can open for writing the existing file ``path`` (an
+    :func:`~wbcgrade._publish.atomic_path` temporary), valid inside the ``with``."""
+    return _fd_name(path, os.O_WRONLY)
 
 
 def writer_name(path: str | os.PathLike) -> str:
@@ -56,16 +67,3 @@ def writer_name(path: str | os.PathLike) -> str:
     text = os.fspath(path)
     return text if is_utf8(text) else "image" + safe_text(os.path.splitext(text)[1])
 
-
-@contextlib.contextmanager
-def writable_name(path: str | os.PathLike) -> Iterator[str]:
-    """A name OpenImageIO can open for writing the existing file ``path`` (an
-    :func:`~wbcgrade._publish.atomic_path` temporary), valid inside the ``with``."""
-    if is_utf8(path) or not os.path.exists("/proc/self/fd"):
-        yield os.fspath(path)
-        return
-    fd = os.open(path, os.O_WRONLY)
-    try:
-        yield f"/proc/self/fd/{fd}"
-    finally:
-        os.close(fd)
