@@ -22,6 +22,7 @@ import pytest
 from click.testing import CliRunner
 
 from wbcgrade.cli import main
+from wbcgrade.color.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
@@ -113,6 +114,24 @@ def test_alpha_is_carried_through_untouched_and_the_colour_graded(clips, tmp_pat
     assert before[..., 3].std() > 1000  # a real ramp of alpha
     assert np.abs(after[..., 3] - before[..., 3]).max() <= 64  # 10-bit ProRes: 1 step of 2^6
     assert np.abs(after[..., :3] - before[..., :3]).mean() > 5 * 257  # the colours graded
+
+
+def test_transparent_pixels_do_not_count_in_the_grade(tmp_path):
+    """A clip whose left half is transparent magenta grades as its opaque right half alone."""
+    half = tmp_path / "half.mov"
+    _ffmpeg("-f", "lavfi", "-i", "testsrc2=size=64x48:rate=25:duration=0.2,format=rgba,"
+            "geq=r='if(lt(X,32),255,r(X,Y))':g='if(lt(X,32),0,g(X,Y))':"
+            "b='if(lt(X,32),255,b(X,Y))':a='if(lt(X,32),0,255)'", "-c:v", "png", str(half))
+    opaque = tmp_path / "opaque.mkv"
+    _ffmpeg("-i", str(half), "-vf", "crop=32:48:32:0,format=bgr0", "-c:v", "ffv1", str(opaque))
+    tables = []
+    for clip in (half, opaque):
+        lut = tmp_path / f"{clip.stem}.cube"
+        result = run(clip, "-o", tmp_path / f"{clip.stem}_graded.mkv", "--codec", "ffv1",
+                     "--lut", lut, *FAST)
+        assert result.exit_code == 0, result.output
+        tables.append(read_cube(lut).table)
+    assert np.abs(tables[0] - tables[1]).max() < 1e-5
 
 
 def test_alpha_a_codec_cannot_store_is_refused_in_one_line(clips, tmp_path):

@@ -488,8 +488,9 @@ def run_pass(args: list[str], progress: Callable[[int], None] | None = None,
 
 
 def decode_frames(path: str | os.PathLike, info: VideoInfo, width: int | None = None,
-                  height: int | None = None) -> Iterator[np.ndarray]:
-    """Every frame of the first video stream as (h, w, 3) uint8 RGB, in order.
+                  height: int | None = None, alpha: bool = False) -> Iterator[np.ndarray]:
+    """Every frame of the first video stream as (h, w, 3) uint8 RGB, in order
+    (``alpha``: (h, w, 4) RGBA, the clip's alpha as the fourth channel).
 
     Converted with the input's matrix and range (:func:`to_rgb_filter`);
     optionally resized (area average) to ``width`` x ``height``. Frames are
@@ -497,13 +498,14 @@ def decode_frames(path: str | os.PathLike, info: VideoInfo, width: int | None = 
     array is the frame the encoding pass's filters see as ``n = k``.
     """
     w, h = (width, height) if width else (info.width, info.height)
-    size = w * h * 3
+    channels, pix_fmt = (4, "rgba") if alpha else (3, "rgb24")
+    size = w * h * channels
     args = [*input_args(path), "-map", "0:v:0", "-fps_mode", "passthrough",
-            "-vf", to_rgb_filter(info, "rgb24", width, height), "-f", "rawvideo",
-            "-pix_fmt", "rgb24", "-loglevel", "error", "pipe:1"]
+            "-vf", to_rgb_filter(info, pix_fmt, width, height), "-f", "rawvideo",
+            "-pix_fmt", pix_fmt, "-loglevel", "error", "pipe:1"]
     with _process(args) as (proc, _):
         while True:
             data = proc.stdout.read(size)
             if len(data) < size:
                 break
-            yield np.frombuffer(data, dtype=np.uint8).reshape(h, w, 3)
+            yield np.frombuffer(data, dtype=np.uint8).reshape(h, w, channels)

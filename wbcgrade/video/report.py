@@ -70,7 +70,7 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
            pictures: dict[str, np.ndarray]) -> SheetContent:
     fps = result.info.fps
     shown = _shown(shot.samples, FRAMES_PER_SHEET)
-    before = [result.samples.frames[n].astype(np.float32) / 255 for n in shown]
+    before = [result.samples.frames[n][..., :3].astype(np.float32) / 255 for n in shown]
     after = [apply_color_map(frame, shot.table) for frame in before]
     encoding = result.encoding
     before = [encoding.to_display(frame) for frame in before]  # pictures in sRGB

@@ -245,8 +245,9 @@ def shot_grade(frames: list[np.ndarray], styles: StyleSet, options: GradeOptions
     styles must be there already), through the photos' grade path.
     """
     pool_fit, pool = PaletteSum(), PaletteSum()
-    for frame in frames:
-        hists = photo_histograms(frame_to_working(frame, encoding), options)
+    for frame in frames:  # (h, w, 4) with alpha: transparent pixels do not count
+        alpha = frame[..., 3].astype(np.float32) / 255 if frame.shape[-1] == 4 else None
+        hists = photo_histograms(frame_to_working(frame[..., :3], encoding), options, alpha)
         pool_fit.add(hists.fit)
         pool.add(hists.transfer)
     return grade_histograms(PhotoHistograms(pool_fit.result(), pool.result()), styles, options,
