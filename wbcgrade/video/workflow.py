@@ -2,7 +2,10 @@
 
 1. check every output first (:func:`plan_video`, through
    :func:`wbcgrade._publish.plan_outputs`), then
-   :func:`~wbcgrade.video.ffmpeg.probe` the input.
+   :func:`~wbcgrade.video.ffmpeg.probe` the input (playlists and truncated
+   files refused) and check the encoding with a trial pass of a few frames
+   (:func:`check_encoding`: ffmpeg's own reason, lost size, streams or alpha
+   refused, lost bit depth or field order said), all before the fit.
 2. :func:`~wbcgrade.video.sampling.scan`: one small decoding pass keeps a
    frame every ``sample_every`` seconds (and finds the cuts with ``per_shot``).
 3. Per shot (the whole clip by default), the sampled frames' palettes are
@@ -17,7 +20,10 @@
    applies them with ``lut3d`` (tetrahedral), converts back to the input's
    pixel format and colour tags, and encodes, copying every other stream
    (audio, subtitles, data) as it is, into a temporary file beside the
-   output that is renamed onto it only when ffmpeg succeeded.
+   output; alpha is carried through (``lut3d`` on planar RGBA), interlaced
+   frames keep their field order. The clip and its LUTs are published
+   together (and with the report, :func:`wbcgrade.video.command.grade_clip`)
+   only when everything was written and ffmpeg wrote every frame.
 
 Colour spaces (:mod:`wbcgrade.video.spaces`): the sampled frames are
 converted from the clip's input space (``opts.input_space``, else its tags)
