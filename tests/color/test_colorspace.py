@@ -31,7 +31,7 @@ from wbcgrade.color.presets import (
     save_preset,
     styles_in_space,
 )
-from wbcgrade.errors import OptionError
+from wbcgrade.errors import InputError, OptionError
 
 AP1 = (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767)
 #: The colour tests' fast settings and a small colour map (each grade well under a second).
@@ -398,8 +398,17 @@ def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path):
 def test_ocio_environment_variable_names_the_config(tmp_path, monkeypatch):
     monkeypatch.setenv("OCIO", str(tmp_path / "missing.ocio"))
     assert cs.config_path() == str(tmp_path / "missing.ocio")
-    with pytest.raises(OptionError, match="missing.ocio; \\$OCIO names no readable file"):
+    with pytest.raises(InputError, match=r"missing.ocio \(\$OCIO\) could not be read "
+                                         r"\(Requested non-existent"):
         cs.resolve_space("acescct")
+    garbage = tmp_path / "garbage.ocio"  # issue 21, case 15: not "unknown colour space"
+    garbage.write_text("ocio_profile_version: [\n")
+    monkeypatch.setenv("OCIO", str(garbage))
+    result = CliRunner().invoke(cli, ["apply", "x.jpg", "--preset", "warm", "--working-space",
+                                      "acescct", "-o", str(tmp_path / "o.jpg")])
+    assert result.exit_code != 0 and "unknown colour space" not in result.output
+    assert result.output.startswith(f"Error: OpenColorIO config {garbage} ($OCIO) could not "
+                                    "be read") and "unset OCIO" in result.output
     monkeypatch.delenv("OCIO")
     assert cs.config_path() == cs.DEFAULT_CONFIG and cs.resolve_space("acescct")
 

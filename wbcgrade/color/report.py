@@ -43,8 +43,8 @@ INDEX_FILES = ("report.json", "weights.csv", "index.html")
 def _write_text(path: Path, text: str, overwrite: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path, overwrite=overwrite) as tmp, \
-            open(tmp, "w", encoding="utf-8", newline="") as handle:
-        handle.write(text)
+            open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as handle:
+        handle.write(text)  # a non-UTF-8 file name keeps its own bytes (links still work)
 
 
 def sheet_path(relative: str) -> Path:

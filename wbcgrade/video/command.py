@@ -6,6 +6,7 @@ Above :mod:`wbcgrade.video.workflow` (a clip graded end to end) and
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import replace
@@ -33,7 +34,10 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
 
     The clip's grade is a LUT: ``options.regrain`` is turned off. The report
     (a contact sheet per shot and report.json, :mod:`wbcgrade.video.report`)
-    never replaces files it did not write unless ``overwrite``.
+    never replaces files it did not write unless ``overwrite``. The clip, its
+    LUTs and the report are published together once all are written: a
+    failure in any (a full disk under the LUT, a report folder that cannot be
+    written) publishes none.
     """
     settings = settings or VideoSettings()
     progress = progress or VideoProgress()
@@ -45,8 +49,9 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     start = time.perf_counter()
     loaded = load_styles(styles, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles)
-    result = grade_planned(source, output, lut, loaded, options, settings, overwrite, progress,
-                            {"styles": time.perf_counter() - start})
-    if report_dir is not None:
-        result.report = write_video_report(report_dir, result, loaded, overwrite)
+    with contextlib.ExitStack() as stack:  # every output published together, or none
+        result = grade_planned(source, output, lut, loaded, options, settings, overwrite,
+                                progress, {"styles": time.perf_counter() - start}, stack)
+        if report_dir is not None:
+            result.report = write_video_report(report_dir, result, loaded, overwrite, stack)
     return result
