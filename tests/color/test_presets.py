@@ -8,6 +8,7 @@ import zipfile
 import numpy as np
 import pytest
 
+from tests.color.conftest import SAMPLES
 from wbcgrade.color.presets import (
     list_presets,
     load_preset,
@@ -32,15 +33,21 @@ def test_round_trip(tmp_path, style_dir):
         save_preset(path, styles)
 
 
-def test_shipped_presets_load_and_resolve():
+def test_shipped_presets_are_looks_of_photos_outside_the_samples():
     names = [name for name, _ in list_presets()]
-    assert {"landscape", "warm", "mixed"} <= set(names)
+    assert {"kodak-2383", "teal-orange", "bleach-bypass", "faded", "warm"} <= set(names)
+    samples = {p.stem for p in SAMPLES.glob("*.jpg")}
     for name in names:
         styles = load_preset(resolve_preset(name))
         assert styles.histograms.shape[0] == len(styles.names) >= 2
         assert np.allclose(styles.histograms.sum(axis=(1, 2, 3)), 1.0)
-    with pytest.raises(InputError, match="unknown preset 'nope'.*landscape"):
+        provenance = styles.meta["provenance"]
+        assert provenance["look"] and set(provenance["photos"]) == set(styles.names)
+        assert not samples & set(styles.names)  # no sample photo is graded towards itself
+    with pytest.raises(InputError, match="unknown preset 'nope'.*kodak-2383"):
         resolve_preset("nope")
+    with pytest.raises(InputError, match="'landscape'.*no longer shipped.*looks.*teal-orange"):
+        resolve_preset("landscape")
     with pytest.raises(InputError, match="no such preset file"):
         resolve_preset("missing/file.npz")
 
