@@ -67,6 +67,8 @@ __all__ = [
     "PRESET_VERSION",
     "RETIRED_PRESETS",
     "styles_in_space",
+    "own_style",
+    "own_style_warning",
 ]
 
 log = logging.getLogger(__name__)
@@ -432,3 +434,48 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space)
+
+
+#: A photo is graded towards itself when one style holds at least this weight ...
+OWN_STYLE_WEIGHT = 0.8
+#: ... and that style's palette is within this total variation distance of the
+#: photo's (half the L1 distance of the two histograms on the fit grid). The
+#: same photo resized or saved again is within 0.1 on 16^3 bins; a look applied
+#: to it (a film print LMT, a CDL) moves it 0.27 or more, another photo 0.68 or more.
+OWN_STYLE_DISTANCE = 0.15
+
+
+def own_style(photo_hist: np.ndarray, style_hists: np.ndarray, names: Sequence[str],
+              weights: np.ndarray) -> dict | None:
+    """Whether a grade takes a photo towards its own palette (the photo is one of the styles).
+
+    Parameters
+    ----------
+    photo_hist : (n, n, n) the photo's histogram.
+    style_hists : (S, n, n, n) the styles' histograms on the same grid.
+    names : S style names.
+    weights : (S,) the grade's weights.
+
+    Returns
+    -------
+    None, or ``{"style": name, "weight": w, "distance": d}`` when the largest
+    weight is at least :data:`OWN_STYLE_WEIGHT` and that style's palette is
+    within :data:`OWN_STYLE_DISTANCE` (total variation) of the photo's.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    top = int(np.argmax(weights))
+    if weights[top] < OWN_STYLE_WEIGHT or photo_hist.shape != style_hists.shape[1:]:
+        return None
+    photo = photo_hist / max(float(photo_hist.sum()), 1e-300)
+    style = style_hists[top] / max(float(style_hists[top].sum()), 1e-300)
+    distance = 0.5 * float(np.abs(photo - style).sum())
+    if distance > OWN_STYLE_DISTANCE:
+        return None
+    return {"style": str(names[top]), "weight": float(weights[top]), "distance": distance}
+
+
+def own_style_warning(photo: str, found: dict) -> str:
+    """The one-line warning for :func:`own_style`'s finding about ``photo``."""
+    return (f"{photo} is graded towards its own palette (style {found['style']!r} has weight "
+            f"{found['weight']:.3f} and a palette {found['distance']:.3f} from the photo's): "
+            "it is one of the styles, so little changes; leave it out of the style set")
