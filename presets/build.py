@@ -16,7 +16,9 @@ never the photos. Its header records the look's source and the photos
 (``provenance``), which ``wbcgrade preset list --json`` shows.
 
 ``--sheets DIR`` also writes ``DIR/<preset>.png``: the looked photos of each
-preset side by side (check a rebuilt preset by eye).
+preset side by side (check a rebuilt preset by eye). ``--try PHOTO`` (with
+``--sheets``) grades PHOTO with every shipped preset, in the default palette
+mode and in ``--mode look``, into ``DIR/try_<photo>.png``.
 """
 
 from __future__ import annotations
@@ -69,25 +71,36 @@ def to_8bit(rgb: np.ndarray) -> np.ndarray:
     return np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def contact_sheet(pictures: list[tuple[str, np.ndarray]], path: Path, tile: int = 320,
+def contact_sheet(pictures: list[tuple[str, np.ndarray | None]], path: Path, tile: int = 320,
                   columns: int = 3, title: str = "") -> Path:
-    """A grid of labelled pictures ((H, W, 3) uint8 or float in [0, 1]) saved as PNG."""
+    """A grid of labelled pictures ((H, W, 3) uint8 or float in [0, 1]; None: an empty
+    cell), each fitted into ``tile`` x ``tile``, rows as high as their tallest picture,
+    saved as PNG."""
     from PIL import Image, ImageDraw
 
+    thumbs = []
+    for name, picture in pictures:
+        if picture is None:
+            thumbs.append((name, None))
+            continue
+        image = Image.fromarray(picture if picture.dtype == np.uint8 else to_8bit(picture))
+        image.thumbnail((tile, tile), Image.LANCZOS)
+        thumbs.append((name, image))
     label, top = 18, 24 if title else 0
-    rows = -(-len(pictures) // columns)
-    sheet = Image.new("RGB", (columns * tile, top + rows * (tile + label)), "white")
+    rows = [thumbs[i:i + columns] for i in range(0, len(thumbs), columns)]
+    heights = [max((im.height for _, im in row if im is not None), default=0) + label
+               for row in rows]
+    sheet = Image.new("RGB", (columns * tile, top + sum(heights)), "white")
     draw = ImageDraw.Draw(sheet)
     if title:
         draw.text((6, 6), title, fill="black")
-    for i, (name, picture) in enumerate(pictures):
-        if picture.dtype != np.uint8:
-            picture = to_8bit(picture)
-        image = Image.fromarray(picture)
-        image.thumbnail((tile, tile), Image.LANCZOS)
-        x, y = (i % columns) * tile, top + (i // columns) * (tile + label)
-        sheet.paste(image, (x, y))
-        draw.text((x + 4, y + tile + 3), name, fill="black")
+    y = top
+    for row, height in zip(rows, heights):
+        for column, (name, image) in enumerate(row):
+            if image is not None:
+                sheet.paste(image, (column * tile, y))
+            draw.text((column * tile + 4, y + height - label + 3), name, fill="black")
+        y += height
     path.parent.mkdir(parents=True, exist_ok=True)
     sheet.save(path)
     return path
@@ -121,13 +134,48 @@ def build(folder: Path, out: Path, sheets: Path | None) -> None:
                           title=f"preset {preset}: {description}")
 
 
+def try_presets(photo: Path, sheets: Path, size: int = 512) -> Path:
+    """Grade ``photo`` (downscaled to ``size``) with every shipped preset in both modes."""
+    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.options import GradeOptions
+    from wbcgrade.color.presets import list_presets, load_preset
+
+    rgb = read_photo(photo)
+    if max(rgb.shape[:2]) > size:
+        from PIL import Image
+
+        image = Image.fromarray(to_8bit(rgb))
+        image.thumbnail((size, size), Image.LANCZOS)
+        rgb = np.asarray(image, dtype=np.float64) / 255.0
+    pictures: list[tuple[str, np.ndarray | None]] = [(f"{photo.stem} (input)", rgb),
+                                                     ("", None)]
+    for name, path in list_presets():
+        styles = load_preset(path)
+        for mode in ("palette", "look"):
+            graded, grade = grade_array(rgb, styles, GradeOptions(mode=mode))
+            top = max(zip(grade.weights, styles.names))
+            pictures.append((f"{name}, {mode} (top: {top[1]} {top[0]:.2f})", graded))
+            print(f"{name} {mode}: mean change {np.abs(graded - rgb).mean() * 255:.1f}/255")
+    return contact_sheet(pictures, sheets / f"try_{photo.stem}.png", tile=400, columns=2,
+                         title=f"{photo.name} graded with each shipped preset: palette mode, "
+                               "look mode")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("photos", type=Path, help="folder holding the photos of PHOTOS")
     parser.add_argument("--out", type=Path, default=ROOT / "wbcgrade" / "color" / "presets_data")
     parser.add_argument("--sheets", type=Path, default=None,
                         help="also write a contact sheet of each preset's looked photos here")
+    parser.add_argument("--try", dest="try_photo", type=Path, default=None, metavar="PHOTO",
+                        help="with --sheets: grade PHOTO with every shipped preset (both "
+                             "modes) instead of building")
     args = parser.parse_args()
+    if args.try_photo is not None:
+        if args.sheets is None:
+            parser.error("--try needs --sheets DIR")
+        print(try_presets(args.try_photo, args.sheets))
+        return
     build(args.photos, args.out, args.sheets)
 
 
