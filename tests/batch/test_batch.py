@@ -88,8 +88,9 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     assert not (local_run / "broken.jpg").exists()
     assert not (local_run / "notes.txt").exists()
     hidden = [p.name for p in local_run.rglob(".*")]
-    # the run's settings and the folder's lock file; no temporary file left
-    assert sorted(hidden) == [".wbcgrade-batch.json", ".wbcgrade.lock"]
+    # the run's settings, its per-photo results and the folder's lock file; no temporary
+    # file left
+    assert sorted(hidden) == [".wbcgrade-batch.json", ".wbcgrade-results", ".wbcgrade.lock"]
 
     # A rerun reports the bad file again and skips the finished ones.
     out = local_run.parent / "rerun"

@@ -12,6 +12,9 @@ from wbcgrade.color.options import GradeOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 STYLE_PHOTOS = ("aitzgorri", "coffee", "flower", "seeding")
+#: A preset of three sample photos (coffee, flower, sunset; 32^3, no working space recorded):
+#: the former shipped "warm" preset, kept for tests that need three styles or an old file.
+THREE_STYLES = Path(__file__).resolve().parents[1] / "data" / "three_samples.npz"
 
 
 def small_copy(src: Path, dst: Path, width: int = 96) -> Path:

@@ -92,6 +92,10 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source, options, output, lut, lut_size, lut_format,
                              overwrite, report_dir, progress)
+    if "own_style" in report.grade.info:
+        from wbcgrade.color.presets import own_style_warning
+
+        _warn(own_style_warning(str(photo), report.grade.info["own_style"]))
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")

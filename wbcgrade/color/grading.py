@@ -58,7 +58,7 @@ from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
-from wbcgrade.color.presets import StyleSet, styles_in_space
+from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
 from wbcgrade.color.transfer import transport_map
@@ -368,6 +368,10 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     info = {"fit": built.fit.info, **built.info}
     info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
                    "preserve_luminance": options.map.preserve_luminance}
+    found = own_style(photo.fit, styles.at_bins(photo.fit.shape[0]), styles.names,
+                      built.fit.weights)
+    if found is not None:  # the photo is one of the styles (the CLI warns)
+        info["own_style"] = found
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,

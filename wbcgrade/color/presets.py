@@ -6,11 +6,12 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
 - ``header``: uint8 bytes of a UTF-8 JSON object ``{"format": "wbcgrade-preset",
   "version": 1, "bins": n, "names": [...], "width": w, "gamma": g,
   "description": "...", "space": "...", "working_space": "ACEScct",
-  "ocio_config": "ocio://default"}``; ``working_space`` (an OpenColorIO
+  "ocio_config": "ocio://default", "provenance": {...}}``; ``working_space`` (an OpenColorIO
   colour space name) is the space whose unit cube the histograms cover;
   presets written before it existed lack it and mean sRGB-encoded Rec.709.
   Grading in another working space converts the histograms
-  (:func:`styles_in_space`);
+  (:func:`styles_in_space`); ``provenance`` (optional) says how the styles
+  were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid;
 - ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``.
@@ -64,7 +65,10 @@ __all__ = [
     "shipped_presets_dir",
     "PRESET_FORMAT",
     "PRESET_VERSION",
+    "RETIRED_PRESETS",
     "styles_in_space",
+    "own_style",
+    "own_style_warning",
 ]
 
 log = logging.getLogger(__name__)
@@ -211,11 +215,12 @@ def check_preset_width(width: float) -> float:
 
 def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
-                threshold: float = 1e-7) -> Path:
+                threshold: float = 1e-7, provenance: dict | None = None) -> Path:
     """Write a style set as a preset file (atomically; see the module docstring).
 
     ``threshold`` drops bins holding less than that fraction of a style's mass
-    (they are far below the fitting floor) to keep files small.
+    (they are far below the fitting floor) to keep files small; ``provenance``
+    (JSON-friendly) is recorded in the header as it is.
     """
     path = Path(path)
     if path.suffix.lower() != ".npz":
@@ -235,6 +240,8 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
               "names": list(styles.names), "width": float(width), "gamma": gamma,
               "description": description, "space": f"{working}-encoded RGB",
               "working_space": working, "ocio_config": config_path()}
+    if provenance:
+        header["provenance"] = provenance
     with atomic_path(path, suffix=".npz.tmp", overwrite=overwrite) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(
@@ -330,11 +337,19 @@ def list_presets() -> list[tuple[str, Path]]:
     return sorted((p.stem, p) for p in folder.glob("*.npz"))
 
 
+#: Presets shipped before the presets became looks: name -> what to use instead.
+RETIRED_PRESETS = {
+    "landscape": "the palettes of the sample landscapes",
+    "mixed": "the palettes of the sample photos",
+}
+
+
 def resolve_preset(name_or_path: str) -> Path:
     """A preset file from a shipped preset's NAME or a FILE path.
 
     An existing path wins; otherwise the name is looked up among the shipped
-    presets. Raises InputError listing the available names.
+    presets. Raises InputError listing the available names (and saying so
+    when the name is one of :data:`RETIRED_PRESETS`).
     """
     candidate = Path(name_or_path).expanduser()
     if candidate.is_file():
@@ -345,6 +360,11 @@ def resolve_preset(name_or_path: str) -> Path:
     if candidate.suffix or os.sep in name_or_path:
         raise InputError(f"{name_or_path}: no such preset file")
     names = ", ".join(shipped) or "none installed"
+    if name_or_path in RETIRED_PRESETS:
+        raise InputError(
+            f"preset {name_or_path!r} ({RETIRED_PRESETS[name_or_path]}) is no longer shipped: "
+            f"the shipped presets are looks ({names}); for palettes of your own photos "
+            "use --style DIR or `wbcgrade preset build DIR -o FILE.npz`")
     raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")
 
 
@@ -417,3 +437,48 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space)
+
+
+#: A photo is graded towards itself when one style holds at least this weight ...
+OWN_STYLE_WEIGHT = 0.8
+#: ... and that style's palette is within this total variation distance of the
+#: photo's (half the L1 distance of the two histograms on the fit grid). The
+#: same photo resized or saved again is within 0.1 on 16^3 bins; a look applied
+#: to it (a film print LMT, a CDL) moves it 0.27 or more, another photo 0.68 or more.
+OWN_STYLE_DISTANCE = 0.15
+
+
+def own_style(photo_hist: np.ndarray, style_hists: np.ndarray, names: Sequence[str],
+              weights: np.ndarray) -> dict | None:
+    """Whether a grade takes a photo towards its own palette (the photo is one of the styles).
+
+    Parameters
+    ----------
+    photo_hist : (n, n, n) the photo's histogram.
+    style_hists : (S, n, n, n) the styles' histograms on the same grid.
+    names : S style names.
+    weights : (S,) the grade's weights.
+
+    Returns
+    -------
+    None, or ``{"style": name, "weight": w, "distance": d}`` when the largest
+    weight is at least :data:`OWN_STYLE_WEIGHT` and that style's palette is
+    within :data:`OWN_STYLE_DISTANCE` (total variation) of the photo's.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    top = int(np.argmax(weights))
+    if weights[top] < OWN_STYLE_WEIGHT or photo_hist.shape != style_hists.shape[1:]:
+        return None
+    photo = photo_hist / max(float(photo_hist.sum()), 1e-300)
+    style = style_hists[top] / max(float(style_hists[top].sum()), 1e-300)
+    distance = 0.5 * float(np.abs(photo - style).sum())
+    if distance > OWN_STYLE_DISTANCE:
+        return None
+    return {"style": str(names[top]), "weight": float(weights[top]), "distance": distance}
+
+
+def own_style_warning(photo: str, found: dict) -> str:
+    """The one-line warning for :func:`own_style`'s finding about ``photo``."""
+    return (f"{photo} is graded towards its own palette (style {found['style']!r} has weight "
+            f"{found['weight']:.3f} and a palette {found['distance']:.3f} from the photo's): "
+            "it is one of the styles, so little changes; leave it out of the style set")
