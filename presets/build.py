@@ -54,6 +54,8 @@ PRESETS = {
 #: Long side of the photos as graded (they are stored at 1024 px or less).
 SIZE = 1024
 BINS = 32
+#: Nodes per axis of the look lattice stored with each preset (the grade's own map size).
+LOOK_SIZE = 33
 
 
 def read_photo(path: Path) -> np.ndarray:
@@ -109,6 +111,7 @@ def contact_sheet(pictures: list[tuple[str, np.ndarray | None]], path: Path, til
 def build(folder: Path, out: Path, sheets: Path | None) -> None:
     from PIL import Image
 
+    from wbcgrade.color.histogram import grid_points
     from wbcgrade.color.presets import load_style_folder, save_preset
 
     missing = [name for name in PHOTOS if not (folder / f"{name}.jpg").is_file()]
@@ -126,8 +129,12 @@ def build(folder: Path, out: Path, sheets: Path | None) -> None:
         provenance = {"look": look_name, "look_source": look.source(),
                       "photos": list(PHOTOS), "photo_size": SIZE,
                       "built_by": "presets/build.py (sources: presets/README.md)"}
+        # the look itself, known exactly: its lattice LUT on sRGB-encoded colours (the
+        # preset's working space), which the "look" grade applies as it is
+        points = grid_points(LOOK_SIZE).reshape(LOOK_SIZE ** 2, LOOK_SIZE, 3)
+        lattice = np.clip(look.apply(points), 0.0, 1.0).reshape((LOOK_SIZE,) * 3 + (3,))
         path = save_preset(out / f"{preset}.npz", styles, description=description,
-                           overwrite=True, provenance=provenance)
+                           overwrite=True, provenance=provenance, look=lattice)
         print(f"{path}: {len(styles.names)} styles, {path.stat().st_size / 1024:.0f} KiB")
         if sheets is not None:
             contact_sheet(list(looked.items()), sheets / f"{preset}.png",

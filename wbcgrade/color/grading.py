@@ -245,6 +245,14 @@ def look_map(request: MapRequest) -> BuiltMap:
     options, styles, say = request.options, request.styles, request.stage
     if options.fit.weights is not None:
         return palette_map(request)
+    if styles.meta.get("look") is not None:  # a preset made with a known look: that look
+        from wbcgrade.color.look import resample_lattice
+
+        n_styles = len(styles.names)
+        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
+                         {"start": "preset", "look": "the preset's own"}, 0.0)
+        return BuiltMap(resample_lattice(styles.meta["look"], options.map.size), None,
+                        {"look": {"source": "preset"}}, {}, fit)
     timings: dict[str, float] = {}
     start = time.perf_counter()
     say("histograms")

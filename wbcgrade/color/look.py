@@ -173,6 +173,15 @@ def push_histogram(hist: np.ndarray, look: LookMap, bins: int | None = None) -> 
     return soft_histogram(look(points), bins or n, flat[keep])
 
 
+def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
+    """An (m, m, m, 3) lattice LUT read trilinearly at a (size, size, size) grid -> float32."""
+    lattice = np.asarray(lattice, dtype=np.float64)
+    if lattice.shape[0] == size:
+        return lattice.astype(np.float32)
+    points = grid_points(size)
+    return _trilinear(lattice, points).reshape(size, size, size, 3).astype(np.float32)
+
+
 def _trilinear(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
     """Interpolate (n, n, n, C) grid values at (N, 3) colours in [0, 1] -> (N, C)."""
     from scipy.ndimage import map_coordinates
@@ -846,6 +855,13 @@ def set_look_map(styles, naturals=None, strength: float = SET_LOOK_STRENGTH,
 
     Returns ((map_size,) * 3 + (3,) float32 lattice, JSON-friendly info).
     """
+    if styles.meta.get("look") is not None:  # a preset made with a known look
+        identity = grid_points(map_size).reshape((map_size,) * 3 + (3,))
+        known = resample_lattice(styles.meta["look"], map_size)
+        moved = strength * (known - identity)
+        return ((identity + moved).astype(np.float32),
+                {"source": "preset", "strength": strength,
+                 "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))})
     extracted = set_look(styles, naturals, progress)
     look = LookMap(strength * extracted.look.coefficients, extracted.look.knots)
     names = (naturals if naturals is not None else natural_palettes()).names

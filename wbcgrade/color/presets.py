@@ -14,7 +14,11 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
   were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid;
-- ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``.
+- ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``;
+- ``look`` (optional, float16 (m, m, m, 3), indexed [r, g, b], values in [0, 1]):
+  the look the styles share, known exactly because the preset was made by
+  applying it (a lattice LUT in the working space); the "look" grade applies
+  it as it is instead of estimating it from the palettes.
 
 Everything is checked on load and a broken or foreign file gives one clear
 error. Shipped presets live in ``wbcgrade/color/presets_data/`` so that they
@@ -215,13 +219,17 @@ def check_preset_width(width: float) -> float:
 
 def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
-                threshold: float = 1e-7, provenance: dict | None = None) -> Path:
+                threshold: float = 1e-7, provenance: dict | None = None,
+                look: np.ndarray | None = None) -> Path:
     """Write a style set as a preset file (atomically; see the module docstring).
 
     ``threshold`` drops bins holding less than that fraction of a style's mass
     (they are far below the fitting floor) to keep files small; ``provenance``
-    (JSON-friendly) is recorded in the header as it is.
+    (JSON-friendly) is recorded in the header as it is; ``look`` (m, m, m, 3):
+    the look the styles were made with, as a lattice LUT in the working space.
     """
+    if look is not None:
+        look = _check_look(np.asarray(look), InputError, "look")
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError(f"{path}: preset file name must end in .npz")
@@ -248,8 +256,19 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
                 handle,
                 header=np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8),
                 index=np.concatenate(indices), values=np.concatenate(values),
-                offsets=np.asarray(offsets, dtype=np.int64))
+                offsets=np.asarray(offsets, dtype=np.int64),
+                **({} if look is None else {"look": look.astype(np.float16)}))
     return path
+
+
+def _check_look(look: np.ndarray, error, where: str) -> np.ndarray:
+    """``look`` when it is an (m, m, m, 3) lattice of finite values in [0, 1], m >= 2."""
+    if (look.ndim != 4 or look.shape[3] != 3 or not look.shape[0] == look.shape[1]
+            == look.shape[2] >= 2 or not np.issubdtype(look.dtype, np.floating)):
+        raise error(f"{where}: the look must be an (m, m, m, 3) lattice")
+    if not np.all(np.isfinite(look)) or look.min() < 0 or look.max() > 1:
+        raise error(f"{where}: the look's values must be finite, in [0, 1]")
+    return look
 
 
 def _bad(path: Path, why: str) -> InputError:
@@ -271,6 +290,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
                 raise _bad(path, f"missing {', '.join(sorted(missing))}")
             header_bytes = data["header"]
             index, values, offsets = data["index"], data["values"], data["offsets"]
+            look = data["look"] if "look" in data.files else None
     except InputError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
@@ -319,9 +339,13 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         if not values[part].sum() > 0:
             raise _bad(path, f"style {names[s]!r} is empty")
         hists.append(from_sparse(index[part], values[part], bins))
+    meta = dict(header)
+    if look is not None:
+        meta["look"] = _check_look(look.astype(np.float32),
+                                   lambda why: _bad(path, why.split(": ", 1)[1]), "look")
     return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
                     width=None if width is None else float(width),
-                    description=str(header.get("description", "")), meta=header)
+                    description=str(header.get("description", "")), meta=meta)
 
 
 def shipped_presets_dir() -> Path:
@@ -396,7 +420,8 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
             keep = np.flatnonzero(flat > 0)
             moved = convert(centres[keep], source, working)
             hists.append(soft_histogram(moved, styles.bins, flat[keep]))
-        meta = {**styles.meta, "working_space": working, "converted_from": source}
+        meta = {**{k: v for k, v in styles.meta.items() if k != "look"},  # (its own space's)
+                "working_space": working, "converted_from": source}
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
