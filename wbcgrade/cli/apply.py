@@ -26,15 +26,18 @@ def _print_report(report, as_json: bool) -> None:
         click.echo(json.dumps(report.as_dict(), indent=2))
         return
     grade = report.grade
-    ranked = grade.ranked()
-    width = max(len("style"), *(len(name) for name, _ in ranked))
-    click.echo(f"{'style':<{width}}  weight")
-    click.echo(f"{'-' * width}  ------")
-    for name, weight in ranked:
-        click.echo(f"{name:<{width}}  {weight:6.3f}")
     fit = grade.info.get("fit", {})
     start = report.fit_start
-    if start == "given":
+    if start != "preset":  # a preset's own look has no weights to speak of
+        ranked = grade.ranked()
+        width = max(len("style"), *(len(name) for name, _ in ranked))
+        click.echo(f"{'style':<{width}}  weight")
+        click.echo(f"{'-' * width}  ------")
+        for name, weight in ranked:
+            click.echo(f"{name:<{width}}  {weight:6.3f}")
+    if start in ("preset", "scene", "look"):
+        _print_look(start, grade.info.get("look", {}), len(grade.names))
+    elif start == "given":
         click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
     else:
         how = {"uniform": "fitted from uniform weights",
@@ -50,6 +53,19 @@ def _print_report(report, as_json: bool) -> None:
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in report.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {report.timings['total']:.1f}s)")
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
+
+
+def _print_look(start: str, look: dict, n_styles: int) -> None:
+    if start == "preset":
+        click.echo("look: the preset's own look, applied as it is")
+    elif start == "scene":
+        click.echo(f"look: read off the style photo of this scene ({look.get('match')}, "
+                   f"confidence {look.get('confidence', 0):.2f})")
+    else:
+        confidence = look.get("confidence", 0.0)
+        towards = (f", moved towards the palette grade of {look.get('match')} "
+                   f"(confidence {confidence:.2f})" if confidence > 0 else "")
+        click.echo(f"look: the look the {n_styles} styles share{towards}")
 
 
 @click.command("apply", cls=LazyOptionsCommand)
