@@ -21,12 +21,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.color.conftest import THREE_STYLES
 from wbcgrade.cli import main
 from wbcgrade.color.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
-FAST = ["--preset", "warm", "--bins", "16", "--no-cache", "--weights", "0.5,0.3,0.2"]
+FAST = ["--preset", str(THREE_STYLES), "--bins", "16", "--no-cache", "--weights", "0.5,0.3,0.2"]
 
 
 def _ffmpeg(*args: str, **kwargs) -> None:
