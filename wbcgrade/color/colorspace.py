@@ -441,7 +441,12 @@ class ColorEncoding:
     @classmethod
     def for_image(cls, image, input_space: str | None = None,
                   working_space: str | None = None) -> ColorEncoding:
-        """The encoding of a decoded photo (``input_space`` None: what the file says)."""
+        """The encoding of a decoded photo (``input_space`` None: what the file says;
+        ``working_space`` None: ACEScct for a raw photo, else sRGB-encoded Rec.709)."""
+        if working_space is None and image.format_name == "raw":
+            from wbcgrade.color.raw import RAW_WORKING_SPACE
+
+            working_space = RAW_WORKING_SPACE
         if input_space:
             return cls.of(input_space, working_space)
         space, where = detect_input_space(image)

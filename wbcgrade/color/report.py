@@ -123,7 +123,7 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
     color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
     # pictures and palettes shown in sRGB, whatever the photo's space
     before = encoding.to_display(image.rgb())
-    after = encoding.to_display(graded.pixels[:, :, color])
+    after = encoding.to_display(np.repeat(graded.pixels[:, :, color], 3 // len(color), axis=2))
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
