@@ -50,7 +50,7 @@ from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
-           "look_styles", "look_fit", "apply_look", "SAMPLED_LUT_SIZE"]
+           "look_styles", "look_fit", "apply_look", "look_batch_options", "SAMPLED_LUT_SIZE"]
 
 #: The ``format`` tag of a saved grade.
 LOOK_FORMAT = "wbcgrade-look"
@@ -293,3 +293,22 @@ def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike 
                         progress=progress)
     report.fit = look_fit(look)
     return report
+
+
+def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
+                       report_dir=None):
+    """The options of a batch (or clip) graded with a saved grade: its working space.
+
+    ``--consistent``, ``--lut`` and ``--report`` make no sense with one (it is
+    already one grade for every photo, and there are no styles): OptionError.
+    """
+    from dataclasses import replace
+
+    from wbcgrade.errors import OptionError
+
+    for given, flag in ((consistent, "--consistent"), (lut is not None, "--lut"),
+                        (report_dir is not None, "--report")):
+        if given:
+            raise OptionError(f"{flag} does not go with --look (a saved grade is already one "
+                              "grade for every photo, with no styles to report)", flag)
+    return replace(options, spaces=replace(options.spaces, working=look.working))

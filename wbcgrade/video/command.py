@@ -28,12 +28,14 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
                styles: StyleSource, options: GradeOptions, settings: VideoSettings | None = None,
                lut: str | os.PathLike | None = None, overwrite: bool = False,
                report_dir: str | os.PathLike | None = None,
-               progress: VideoProgress | None = None) -> VideoResult:
+               progress: VideoProgress | None = None, look=None) -> VideoResult:
     """``wbcgrade video``: plan every output, load the styles, grade the clip, write the report.
 
     The clip's grade is a LUT: ``options.regrain`` is turned off. The report
     (a contact sheet per shot and report.json, :mod:`wbcgrade.video.report`)
-    never replaces files it did not write unless ``overwrite``.
+    never replaces files it did not write unless ``overwrite``. ``look``: a
+    saved grade (:func:`wbcgrade.color.saved_look.load_look`) applied to
+    every frame instead of a fit (``styles`` is not read).
     """
     settings = settings or VideoSettings()
     progress = progress or VideoProgress()
@@ -43,10 +45,16 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     if options.regrain.enabled:
         options = replace(options, regrain=RegrainOptions(enabled=False))
     start = time.perf_counter()
-    loaded = load_styles(styles, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
+    if look is None:
+        loaded = load_styles(styles, options.transfer.bins, options.spaces.working,
+                             progress.warn, progress.styles)
+    else:
+        from wbcgrade.color.saved_look import look_batch_options, look_styles
+
+        options = look_batch_options(options, look, report_dir=report_dir)
+        loaded = look_styles(look, str(dict(look.info).get("look", {}).get("file")))
     result = grade_planned(source, output, lut, loaded, options, settings, overwrite, progress,
-                            {"styles": time.perf_counter() - start})
+                            {"styles": time.perf_counter() - start}, look)
     if report_dir is not None:
         result.report = write_video_report(report_dir, result, loaded, overwrite)
     return result
