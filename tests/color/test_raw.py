@@ -110,3 +110,18 @@ def test_bad_raw_gets_one_line_error(tmp_path, damage):
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("Error: ") and "bad.nef" in lines[0]
     assert "Traceback" not in result.output and not (tmp_path / "out.jpg").exists()
+
+
+def test_batch_grades_raw_photos_into_tiffs(tmp_path, style_dir):
+    folder = tmp_path / "shoot"
+    folder.mkdir()
+    write_dng(folder / "ramp.dng", ramp_mosaic(32, 128))
+    small = read_image(write_dng(tmp_path / "x.dng", ramp_mosaic(32, 128)))
+    assert small.pixels.shape == (32, 128, 3)
+    for consistent in ([], ["--consistent"]):
+        out = tmp_path / f"out{len(consistent)}"
+        result = run("batch", folder, "-o", out, "--style", style_dir, *consistent, *FAST_ARGS)
+        assert result.exit_code == 0, result.output
+        assert "graded 1," in result.output
+        graded = read_image(out / "ramp.tif")
+        assert graded.spec.format == oiio.UINT16 and graded.pixels.shape == (32, 128, 3)

@@ -444,23 +444,19 @@ def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
     from wbcgrade.errors import OptionError
 
     held = _FORMAT_DEPTHS.get(format_name)
-    wanted = bit_depth
-    if wanted is None:
-        wanted = "16" if like.extra.get("raw") else _depth_of(like.spec.format)
-        if like.extra.get("raw") and held is not None and "float" in held \
-                and format_name == "openexr":
-            wanted = "float"
+    raw = bool(like.extra.get("raw"))
+    if bit_depth is None and not raw and (held is None or _depth_of(like.spec.format) in held):
+        return like.spec.format  # the input's own type (half float stays half)
+    wanted = bit_depth or ("float" if raw and format_name == "openexr" else
+                           "16" if raw else _depth_of(like.spec.format))
     if held is not None and wanted not in held:
         if strict:
             raise OptionError(f"--bit-depth {bit_depth}: {format_name.upper()} files hold "
                               f"{' or '.join(held)} only", "bit_depth")
         order = {"8": 0, "16": 1, "float": 2}
         wanted = min(held, key=lambda d: abs(order[d] - order[wanted]))
-    if format_name == "openexr":
-        return oiio.TypeDesc(oiio.HALF) if wanted == "16" else oiio.TypeDesc(oiio.FLOAT)
-    if bit_depth is None and like.spec.format.basetype not in (oiio.UINT8, oiio.INT8) \
-            and _depth_of(like.spec.format) == wanted and not like.extra.get("raw"):
-        return like.spec.format  # e.g. half float TIFF stays half
+    if format_name == "openexr" and wanted == "16":
+        return oiio.TypeDesc(oiio.HALF)
     return oiio.TypeDesc(_DEPTH_TYPES[wanted])
 
 

@@ -30,7 +30,8 @@ import numpy as np
 
 from wbcgrade.errors import InputError, first_line
 
-__all__ = ["RAW_SUFFIXES", "RAW_WORKING_SPACE", "AP0_CHROMATICITIES", "is_raw", "read_raw"]
+__all__ = ["RAW_SUFFIXES", "RAW_WORKING_SPACE", "RAW_OUTPUT_SUFFIX", "AP0_CHROMATICITIES",
+           "is_raw", "read_raw", "output_name"]
 
 #: File endings read as raw camera files (lower case).
 RAW_SUFFIXES = frozenset({
@@ -40,6 +41,8 @@ RAW_SUFFIXES = frozenset({
 })
 #: The working space of a raw photo when ``--working-space`` is not given.
 RAW_WORKING_SPACE = "acescct"
+#: What ``batch`` writes a raw photo as (no writer makes raw files): a 16-bit TIFF.
+RAW_OUTPUT_SUFFIX = ".tif"
 #: ACES AP0 primaries and white (rx, ry, gx, gy, bx, by, wx, wy), as EXR stores them.
 AP0_CHROMATICITIES = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
 
@@ -47,6 +50,11 @@ AP0_CHROMATICITIES = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767
 def is_raw(path: str | os.PathLike) -> bool:
     """Whether ``path``'s ending names a raw camera file (:data:`RAW_SUFFIXES`)."""
     return Path(path).suffix.lower() in RAW_SUFFIXES
+
+
+def output_name(path: Path) -> Path:
+    """The name of a photo's graded copy in a batch: a raw's as a TIFF, others unchanged."""
+    return path.with_suffix(RAW_OUTPUT_SUFFIX) if is_raw(path) else path
 
 
 def read_raw(path: str | os.PathLike):

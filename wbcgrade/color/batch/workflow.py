@@ -139,6 +139,13 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                                                          " (use --recursive for sub-folders)"))
     if lut is not None:
         lut = plan_outputs([lut], [t.source for t in plan.all_photos], overwrite)[0]
+    if consistent and options.spaces.working is None:  # one working space for the series
+        from dataclasses import replace
+
+        from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
+
+        if any(is_raw(t.source) for t in plan.all_photos):
+            options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))

@@ -1,0 +1,108 @@
+"""Saved grades (``apply --look``) and JPEG quality: speed, sameness and file size.
+
+For each photo: ``wbcgrade apply PHOTO --preset warm`` (the original run: fit,
+transport, map, regrain; it also saves the grade as ``--json`` and ``--lut
+.cube``), then ``apply PHOTO --look grade.json`` and ``--look grade.cube``
+(the saved grade again, no fit). Each command is a fresh process timed end
+to end (start-up included, as a user sees it); outputs are 16-bit PNGs so
+the comparison is not blurred by JPEG. Printed per photo: the three times,
+the looks' time as a fraction of the original's (the issue's target: below
+1/4), the largest difference from the original photo in 8-bit codes
+(target: at most 1), and the size of a JPEG written with ``--quality 90``
+relative to the input JPEG (target: within 10 %).
+
+    python benchmarks/saved_look.py                      # the shipped samples/*.jpg
+    python benchmarks/saved_look.py --photo ../shared/data/photos/seeding_full.jpg
+
+The machine is shared: quote ratios, not absolute seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_PHOTO = ROOT.parent / "shared" / "data" / "photos" / "seeding_full.jpg"
+
+
+def wbcgrade(*args: str) -> list[str]:
+    exe = shutil.which("wbcgrade", path=str(Path(sys.executable).parent)) or "wbcgrade"
+    return [exe, *args]
+
+
+def timed(command: list[str], stdout=None) -> float:
+    start = time.perf_counter()
+    subprocess.run(command, check=True, stdout=stdout or subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL, env=dict(os.environ, TQDM_DISABLE="1"))
+    return time.perf_counter() - start
+
+
+def codes(path: Path) -> np.ndarray:
+    return np.round(oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT) * 255.0)
+
+
+def measure(photo: Path, folder: Path, preset: str) -> dict:
+    out = folder / photo.stem
+    out.mkdir()
+    with open(out / "grade.json", "w") as json_file:
+        original = timed(wbcgrade("apply", str(photo), "--preset", preset, "-o",
+                                  str(out / "original.png"), "--bit-depth", "16",
+                                  "--lut", str(out / "grade.cube"), "--json"), json_file)
+    row = {"photo": photo.name, "original_s": original}
+    for kind in ("json", "cube"):
+        row[f"{kind}_s"] = timed(wbcgrade("apply", str(photo), "--look",
+                                          str(out / f"grade.{kind}"), "--bit-depth", "16",
+                                          "-o", str(out / f"{kind}.png")))
+        row[f"{kind}_max"] = float(np.abs(codes(out / f"{kind}.png")
+                                          - codes(out / "original.png")).max())
+    if photo.suffix.lower() in (".jpg", ".jpeg"):
+        timed(wbcgrade("apply", str(photo), "--look", str(out / "grade.cube"),
+                       "--quality", "90", "-o", str(out / "q90.jpg")))
+        row["q90_size"] = (out / "q90.jpg").stat().st_size / photo.stat().st_size
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--photo", type=Path, action="append", default=None,
+                        help="photo to measure (repeatable) [default: samples/*.jpg, and the "
+                             "16 MP shared photo when it is there]")
+    parser.add_argument("--preset", default="warm")
+    args = parser.parse_args()
+    photos = args.photo or sorted((ROOT / "samples").glob("*.jpg")) + (
+        [SHARED_PHOTO] if SHARED_PHOTO.exists() else [])
+    header = (f"{'photo':<22} {'original':>9} {'--look json':>12} {'--look cube':>12} "
+              f"{'json/orig':>9} {'cube/orig':>9} {'max diff json':>13} "
+              f"{'max diff cube':>13} {'q90 size':>9}")
+    print(header)
+    print("-" * len(header))
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="wbcgrade-bench-look-") as tmp:
+        for photo in photos:
+            row = measure(Path(photo), Path(tmp), args.preset)
+            rows.append(row)
+            size = f"{row['q90_size']:.2f}" if "q90_size" in row else "-"
+            print(f"{row['photo']:<22} {row['original_s']:8.2f}s {row['json_s']:11.2f}s "
+                  f"{row['cube_s']:11.2f}s {row['json_s'] / row['original_s']:9.2f} "
+                  f"{row['cube_s'] / row['original_s']:9.2f} {row['json_max']:9.0f}/255 "
+                  f"{row['cube_max']:9.0f}/255 {size:>9}", flush=True)
+    worst = max(max(r["json_s"], r["cube_s"]) / r["original_s"] for r in rows)
+    diff = max(max(r["json_max"], r["cube_max"]) for r in rows)
+    sizes = [r["q90_size"] for r in rows if "q90_size" in r]
+    print(f"\nworst look/original time {worst:.2f} (target < 0.25); largest difference "
+          f"{diff:.0f}/255 (target <= 1); --quality 90 size {min(sizes):.2f}-{max(sizes):.2f} "
+          "of the input (target 0.90-1.10)")
+
+
+if __name__ == "__main__":
+    main()
