@@ -95,6 +95,9 @@ def test_raw_grades_end_to_end_keeping_its_tonal_range(tmp_path, style_dir):
     result = run("apply", dng, "--look", identity, "-o", tmp_path / "same.tif")
     assert result.exit_code == 0, result.output
     same = read_image(tmp_path / "same.tif").pixels[24, :, 1]
+    result = run("apply", dng, "--look", identity)  # no -o: a TIFF beside the raw
+    assert result.exit_code == 0, result.output
+    assert read_image(tmp_path / "ramp_graded.tif").spec.format == oiio.UINT16
     assert same[0] < 0.06 and same[-1] > 0.99 and len(np.unique(same)) > 480
 
 

@@ -125,9 +125,11 @@ def lut_format_of(path: str | os.PathLike, lut_format: str | None = None) -> str
                      f"{' or '.join(LUT_FORMATS.values())} (the format follows the ending)")
 
 
-def check_lut_path(path: str | os.PathLike, lut_format: str = "cube") -> Path:
-    """``path`` as a Path when its ending suits ``lut_format`` (else InputError)."""
+def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Path:
+    """``path`` as a Path when its ending suits ``lut_format`` (None: any LUT ending,
+    :func:`lut_format_of`), else InputError."""
     path = Path(path)
+    lut_format = lut_format_of(path, lut_format)
     if lut_format not in LUT_FORMATS:
         raise InputError(f"--lut-format must be one of {', '.join(LUT_FORMATS)}")
     suffix = LUT_FORMATS[lut_format]
@@ -190,7 +192,7 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package);
         None: the one ``path``'s ending names.
     """
-    path = check_lut_path(path, lut_format_of(path, lut_format))
+    path = check_lut_path(path, lut_format)
     lut_format = lut_format_of(path, lut_format)
     baked = encoding.input != encoding.working
     table = grade.lut(size, encoding if baked else None)

@@ -96,9 +96,11 @@ class PhotoPlan:
 
 
 def default_output_path(photo: str | os.PathLike) -> Path:
-    """``<stem>_graded<ext>`` beside the photo."""
+    """``<stem>_graded<ext>`` beside the photo (a raw photo's: ``<stem>_graded.tif``)."""
+    from wbcgrade.color.raw import output_name
+
     photo = Path(photo)
-    return photo.with_name(f"{photo.stem}_graded{photo.suffix}")
+    return photo.with_name(f"{photo.stem}_graded{output_name(photo).suffix}")
 
 
 def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
@@ -240,7 +242,8 @@ class GradeReport:
 
     @property
     def fit_start(self) -> str:
-        """How the weights were found: "uniform", "vertex-refit", "vertex" or "given"."""
+        """How the weights were found: "uniform", "vertex-refit", "vertex", "given" or
+        "look" (a saved grade, nothing fitted)."""
         return self.fit.start if self.fit is not None else "shared"
 
     @property
@@ -257,7 +260,7 @@ class GradeReport:
             "styles": self.styles_source,
             "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
             "loss": self.grade.loss,
-            "fitted": self.fit_start != "given",
+            "fitted": self.fit_start not in ("given", "look"),
             "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
