@@ -255,7 +255,8 @@ def wbcgrade_grade(photo: np.ndarray, styles: list[np.ndarray], style_names: lis
         hists = np.stack([image_histogram(np.asarray(s, np.float32), bins, None, max_pixels)
                           for s in styles])
         memo[key] = StyleSet(names=list(style_names), histograms=hists, source="look benchmark",
-                             meta={"working_space": default_working_space()})
+                             meta={"working_space": default_working_space(),
+                                   "images": [np.asarray(s, np.float32) for s in styles]})
     graded, grade = grade_array(np.asarray(photo, np.float32), memo[key], opts)
     return np.clip(graded, 0.0, 1.0), dict(zip(grade.names, map(float, grade.weights)))
 

@@ -70,10 +70,14 @@ def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
     others = [scene(s) for s in range(20, 24)]
     styles = {b: np.stack([image_histogram(warm_look(c), b) for c in contents]) for b in (16, 32)}
     naturals = {b: np.stack([image_histogram(c, b) for c in contents + others]) for b in (16, 32)}
-    result = extract_look(styles, naturals)
+    result = extract_look(styles, naturals, shrink=False)
     test = scene(99)
     identity = error(LookMap.identity(), warm_look, test)
     assert error(result.look, warm_look, test) < 0.75 * identity
+    # shrunk where the styles' own maps disagree: a smaller move, still towards the look
+    shrunk = extract_look(styles, naturals)
+    assert shrunk.look.amplitude() < result.look.amplitude()
+    assert error(shrunk.look, warm_look, test) < 0.85 * identity
     # each style's content is found among the natural palettes: its own scene weighs most
     assert np.sum(np.argmax(result.weights, axis=1) == np.arange(6)) >= 4
 
@@ -145,3 +149,17 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path):
     assert read_cube(lut).size == 9
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 1 and "file exists (use --overwrite" in result.output
+
+
+def test_shrinking_keeps_what_the_styles_agree_on_and_drops_what_they_do_not():
+    from wbcgrade.color.look import _shrunk
+
+    rng = np.random.default_rng(3)
+    colors = rng.random((3000, 3))
+    warm = fit_look_map(colors, warm_look(colors), np.ones(len(colors)), ridge=1e-6)
+    agreeing = _shrunk(warm, [warm, warm, warm])
+    assert np.mean(np.abs(agreeing(colors) - warm(colors))) < 0.003
+    cool = LookMap(-warm.coefficients, warm.knots)  # the opposite move
+    pooled = LookMap(0.2 * warm.coefficients, warm.knots)  # their pool leans one way a little
+    torn = _shrunk(pooled, [warm, cool, warm, cool])
+    assert torn.amplitude() < 0.25 * pooled.amplitude()  # (0.2^2 / (0.2^2 + 1/4) = 0.14)

@@ -235,8 +235,11 @@ def look_map(request: MapRequest) -> BuiltMap:
         MAP_BINS,
         SCENE_LOSS,
         SCENE_RELAXATION,
+        LookMap,
+        find_scene_look,
         look_color_map,
         natural_palettes,
+        set_look_base,
     )
     from wbcgrade.color.presets import load_preset
 
@@ -252,9 +255,37 @@ def look_map(request: MapRequest) -> BuiltMap:
     start = time.perf_counter()
     naturals = load_preset(options.map.natural) if options.map.natural else natural_palettes()
     naturals = styles_in_space(naturals, styles.working_space)
-    base, photo, info = look_color_map(photo_hist, styles, naturals)
-    timings["look"] = time.perf_counter() - start
     n_styles = len(styles.names)
+    if request.photo.pixels is not None:
+        base, extracted = set_look_base(styles, naturals)
+        timings["look"] = time.perf_counter() - start
+        say("scene")
+        start = time.perf_counter()
+        scene = find_scene_look(request.photo.pixels[0], styles, base)
+        timings["scene"] = time.perf_counter() - start
+        if scene is not None and scene.confidence > 0:
+            look = LookMap(base.coefficients + scene.confidence
+                           * (scene.look.coefficients - base.coefficients), base.knots)
+            total = sum(scene.matches.values())
+            weights = np.full(n_styles, (1.0 - scene.confidence) / n_styles)
+            for index, inliers in scene.matches.items():
+                weights[index] += scene.confidence * inliers / total
+            best = max(scene.matches, key=scene.matches.get)
+            info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                             "match": styles.names[best], "confidence": scene.confidence,
+                             "scene": {styles.names[i]: n for i, n in scene.matches.items()},
+                             "scene_residual": scene.residual, "pairs": scene.pairs,
+                             **extracted.info}}
+            # per style: the pair residual where it shows the scene, the cube's diagonal elsewhere
+            alone = np.full(n_styles, float(np.sqrt(3.0)))
+            alone[list(scene.matches)] = scene.residual
+            fit = FitSummary(weights, scene.residual, alone, "scene",
+                             {"start": "scene", "match": styles.names[best],
+                              "confidence": scene.confidence}, sum(timings.values()))
+            return BuiltMap(look.lattice(options.map.size), None, info, timings, fit)
+        start = time.perf_counter()
+    base, photo, info = look_color_map(photo_hist, styles, naturals)
+    timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
     confidence = photo.confidence
     weights = np.full(n_styles, 1.0 / n_styles)
     color_map = base.lattice(options.map.size)

@@ -29,7 +29,7 @@ to a few style photos stays a look.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,7 +38,8 @@ from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
-           "PhotoLook", "photo_look"]
+           "PhotoLook", "photo_look", "SceneLook", "fit_scene_look", "find_scene_look",
+           "set_look_base"]
 
 #: Rec.709 luma weights (on encoded values: a lightness proxy, as colourists' luma).
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -270,7 +271,7 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
                  width: float = DEFAULT_WIDTH, smoothness: float = DEFAULT_SMOOTHNESS,
                  ridge: float = DEFAULT_RIDGE, knots: int = DEFAULT_KNOTS,
                  fit_bins: int = 16, map_bins: int = 32, initial: LookMap | None = None,
-                 style_weights: np.ndarray | None = None,
+                 style_weights: np.ndarray | None = None, shrink: bool = True,
                  progress: Callable[[int, int], None] | None = None) -> LookResult:
     """The look shared by style palettes, with natural palettes as the content model.
 
@@ -313,10 +314,33 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
                 progress(round_ * n_styles + m + 1, rounds * n_styles)
         look = fit_look_map(np.concatenate(sources), np.concatenate(targets),
                             np.concatenate(masses), None, smoothness, ridge, knots)
+        if shrink and n_styles > 1:
+            look = _shrunk(look, [fit_look_map(sources[m], targets[m], masses[m], None,
+                                               smoothness, ridge, knots)
+                                  for m in range(n_styles)])
     info = {"rounds": rounds, "relaxation": relaxation, "width_bins": width,
             "smoothness": smoothness, "ridge": ridge, "knots": knots,
             "fit_bins": fit_bins, "map_bins": map_bins, "amplitude": look.amplitude()}
     return LookResult(look, all_weights, losses, info)
+
+
+def _shrunk(pooled: LookMap, each: list[LookMap], size: int = 17) -> LookMap:
+    """``pooled`` with its displacement shrunk where the styles' own maps disagree.
+
+    At every colour of a ``size``^3 lattice the pooled displacement ``d`` is
+    scaled by ``|d|^2 / (|d|^2 + v / M)``, ``v`` the spread of the M styles'
+    own displacements around their mean (a colour the styles move alike keeps
+    the pooled move; one they move every which way, or only one style shows,
+    moves little), and the family is fitted again to the result.
+    """
+    points = grid_points(size)
+    moved = pooled(points) - points
+    own = np.stack([look(points) - points for look in each])
+    spread = np.mean(np.sum((own - own.mean(axis=0)) ** 2, axis=-1), axis=0)
+    power = np.sum(moved ** 2, axis=-1)
+    factor = power / np.maximum(power + spread / len(each), 1e-300)
+    return fit_look_map(points, points + factor[:, None] * moved, np.ones(len(points)), None,
+                        1e-4, 1e-6, pooled.knots)
 
 
 def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width: float,
@@ -466,12 +490,94 @@ def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None =
                      overlap)
 
 
+# --------------------------------------------------------------------------- the photo's own scene
+
+
+@dataclass(frozen=True)
+class SceneLook:
+    """The look read off style photos that show the photo's own scene.
+
+    Attributes
+    ----------
+    look : the map fitted to the colour pairs of the overlaps.
+    matches : {style index: agreeing keypoints} of the styles that show the scene.
+    confidence : in [0, 1], how far the grade follows ``look`` rather than the set's.
+    residual : median distance (colour units) left between mapped photo colours
+        and the style's at the same place.
+    pairs : colour pairs the fit used.
+    """
+
+    look: LookMap
+    matches: dict
+    confidence: float
+    residual: float
+    pairs: int
+
+
+#: Median pair residual (colour units) at or below which the matched scene fits
+#: surely, and at or above which the overlap is not one look of one scene
+#: (moved content, another place that happens to share keypoints).
+SURE_RESIDUAL = 0.04
+UNSURE_RESIDUAL = 0.10
+#: Pull of the scene fit towards its prior and smoothness of its curves (pairs
+#: are plentiful: the prior only fills colours the overlap lacks).
+SCENE_RIDGE = 1e-3
+SCENE_SMOOTHNESS = 3e-3
+
+
+def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
+                   rounds: int = 3) -> SceneLook | None:
+    """Fit the look on pixel pairs of the style photos that show the photo's scene.
+
+    Parameters
+    ----------
+    photo : :class:`~wbcgrade.color.scene.SceneImage` of the photo.
+    styles : a SceneImage (or None) per style.
+    prior : the map the fit falls back on for colours no overlap shows
+        (default identity).
+    rounds : robust refits (pairs far from the fit, e.g. content that moved
+        between the shots, weigh less each round).
+
+    Returns None when no style shows the scene.
+    """
+    from wbcgrade.color.scene import colour_pairs, match_scene
+
+    prior = prior or LookMap.identity()
+    matches, parts = {}, []
+    for index, style in enumerate(styles):
+        if style is None:
+            continue
+        match = match_scene(photo, style)
+        if match is None:
+            continue
+        matches[index] = match
+        sources, targets, weights = colour_pairs(photo, style, match)
+        parts.append((sources, targets, weights * match.sureness / max(len(weights), 1)))
+    if not matches or not any(p[2].sum() > 0 for p in parts):
+        return None
+    sources, targets, weights = (np.concatenate(column) for column in zip(*parts))
+    look, robust = prior, weights
+    for _ in range(rounds):
+        look = fit_look_map(sources, targets, robust, prior, SCENE_SMOOTHNESS, SCENE_RIDGE,
+                            prior.knots)
+        distance = np.linalg.norm(look(sources) - targets, axis=1)
+        scale = max(float(np.median(distance)), 1e-3)
+        robust = weights / (1.0 + (distance / (2.0 * scale)) ** 2)  # Cauchy
+    residual = float(np.median(np.linalg.norm(look(sources) - targets, axis=1)))
+    sure_of_pairs = float(np.clip((UNSURE_RESIDUAL - residual) / (UNSURE_RESIDUAL - SURE_RESIDUAL),
+                                  0.0, 1.0))
+    sureness = max(match.sureness for match in matches.values())
+    return SceneLook(look, {i: m.inliers for i, m in matches.items()}, sureness * sure_of_pairs,
+                     residual, int(len(sources)))
+
+
 # --------------------------------------------------------------------------- grading with looks
 
-#: Strength of the set's own look where no style is the photo's scene: the
-#: look extracted across scenes is half believed (measured: full strength
-#: lands more of the look on average and damages a few photos).
-SET_LOOK_STRENGTH = 0.5
+#: Strength of the set's own look where no style shows the photo's scene. The
+#: extracted look is already shrunk where the styles disagree (:func:`_shrunk`);
+#: measured on ``benchmarks/look.py`` (cross-content), full strength lands the
+#: most of the look without a worse worst photo than half strength.
+SET_LOOK_STRENGTH = 1.0
 
 #: The per-photo correction towards the photo's own scene (when a style shows
 #: it): the palette grade with this loss and relaxation (benchmarks/look.py,
@@ -547,7 +653,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 1
+LOOK_VERSION = 2
 
 
 def _look_cache_path(key: str):
@@ -591,6 +697,32 @@ def _write_cached_look(key: str, result: LookResult) -> None:
             pass
 
 
+def set_look_base(styles, naturals=None, strength: float = SET_LOOK_STRENGTH
+                  ) -> tuple[LookMap, LookResult]:
+    """The set's look at ``strength`` (what a photo of another scene gets), and the extraction."""
+    extracted = set_look(styles, naturals)
+    return LookMap(strength * extracted.look.coefficients, extracted.look.knots), extracted
+
+
+def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> SceneLook | None:
+    """The look read off the style photos that show the photo's own scene, if any do.
+
+    Parameters
+    ----------
+    photo_colors : (H, W, 3) the photo's working-space colours in [0, 1].
+    styles : StyleSet whose ``meta`` names its files or carries its images
+        (:func:`~wbcgrade.color.scene.style_scene_images`); a preset has none.
+    prior : what colours absent from every overlap get (default identity).
+    """
+    from wbcgrade.color.scene import scene_image, style_scene_images
+
+    style_images = style_scene_images(styles, progress)
+    if not any(image is not None for image in style_images):
+        return None
+    return fit_scene_look(scene_image(photo_colors), style_images, prior)
+
+
 def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
                    set_strength: float = SET_LOOK_STRENGTH) -> tuple[LookMap, PhotoLook, dict]:
     """The set's look and how sure it is that a style shows the photo's own scene.
@@ -609,8 +741,7 @@ def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
     """
     from wbcgrade.color.histogram import resample_histogram
 
-    extracted = set_look(styles, naturals)
-    base = LookMap(set_strength * extracted.look.coefficients, extracted.look.knots)
+    base, extracted = set_look_base(styles, naturals, set_strength)
     photo = photo_look(resample_histogram(photo_hist, MAP_BINS), styles.at_bins(MAP_BINS), base)
     info = {"look": {"set_amplitude": extracted.look.amplitude(),
                      "set_strength": set_strength,

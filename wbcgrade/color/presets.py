@@ -164,7 +164,7 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     working = resolve_space(working_space) if working_space else default_working_space()
     space = f"{config_path()}|{working}"
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    names, hists = [], []
+    names, hists, used = [], [], []
     for number, path in enumerate(files):
         if progress:
             progress(number, len(files), path.name)
@@ -181,6 +181,7 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
             cache.put(path, bins, hist, max_pixels, space)
         names.append(path.stem)
         hists.append(hist)
+        used.append(str(path))
     if progress:
         progress(len(files), len(files), "")
     if not hists:
@@ -189,7 +190,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
         dupes = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"{folder}: several style photos share the name {dupes[0]!r}")
     return StyleSet(names=names, histograms=np.stack(hists), source=str(folder),
-                    meta={"working_space": working, "ocio_config": config_path()})
+                    meta={"working_space": working, "ocio_config": config_path(),
+                          "files": used,
+                          "cache_dir": str(cache.folder) if cache.enabled else None})
 
 
 def check_preset_width(width: float) -> float:

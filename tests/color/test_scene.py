@@ -1,0 +1,116 @@
+"""The photo's own scene among the style photos (wbcgrade.color.scene): found, and its look
+read off the overlap; photos of other scenes are not matched."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.color.test_look import halves, sample, warm_look
+from wbcgrade.color.look import find_scene_look, fit_scene_look
+from wbcgrade.color.scene import match_scene, scene_image
+
+SAMPLES = Path(__file__).resolve().parents[2] / "samples"
+NAMES = ("aitzgorri", "coffee", "flower", "seeding", "sunset")
+
+
+@pytest.fixture(scope="module")
+def photos():
+    return {name: sample(name, 480) for name in NAMES}
+
+
+def error(mapped, truth):
+    return float(np.mean(np.abs(mapped - truth)))
+
+
+def test_two_framings_of_a_scene_match_and_other_scenes_do_not(photos):
+    prepared = {n: scene_image(warm_look(halves(p)[0]).astype(np.float32))
+                for n, p in photos.items()}
+    for name, image in photos.items():
+        right = scene_image(halves(image)[1].astype(np.float32))
+        own = match_scene(right, prepared[name])
+        assert own is not None and own.inliers >= 24, name
+        # the left framing lies left of the right one: the homography shifts it rightwards
+        assert own.homography[0, 2] / own.homography[2, 2] < 0
+        assert 0.2 < own.coverage < 0.8
+        others = [match_scene(right, prepared[n]) for n in photos if n != name]
+        assert all(m is None for m in others), name
+
+
+def test_the_look_read_off_the_overlap_is_the_look(photos):
+    image = photos["aitzgorri"]
+    left, right = halves(image)
+    styles = [scene_image(warm_look(halves(photos[n])[0]).astype(np.float32)) for n in NAMES]
+    found = fit_scene_look(scene_image(right.astype(np.float32)), styles)
+    assert found is not None
+    assert list(found.matches) == [NAMES.index("aitzgorri")]
+    assert found.confidence == 1.0 and found.residual < 0.02
+    truth = warm_look(right)
+    # recovered on the whole right framing, its unseen part included
+    assert error(found.look(right), truth) < 0.15 * error(right, truth)
+
+
+def test_no_scene_without_a_match_and_none_from_palettes_alone(photos):
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.presets import StyleSet
+
+    others = [warm_look(photos[n]) for n in ("seeding", "coffee")]
+    with_images = StyleSet(["seeding", "coffee"],
+                           np.stack([image_histogram(o, 16) for o in others]),
+                           meta={"images": [o.astype(np.float32) for o in others]})
+    assert find_scene_look(photos["sunset"].astype(np.float32), with_images) is None
+    palettes_only = StyleSet(["seeding", "coffee"], with_images.histograms)
+    assert find_scene_look(photos["coffee"].astype(np.float32), palettes_only) is None
+
+
+def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, monkeypatch):
+    """``apply --mode look --style DIR``: the folder's graded framing of the photo's scene
+    gives the look; the grade lands close to the truth and the report names the scene."""
+    import json
+
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from wbcgrade.cli import main
+
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    styles = tmp_path / "styles"
+    styles.mkdir()
+
+    def write(path, rgb):
+        buf = oiio.ImageBuf(oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.UINT8))
+        buf.set_pixels(oiio.ROI(), np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8))
+        assert buf.write(str(path)), buf.geterror()
+
+    for name in ("seeding", "coffee", "sunset"):
+        write(styles / f"{name}.png", warm_look(halves(photos[name])[0]))
+    right = halves(photos["coffee"])[1]
+    write(tmp_path / "photo.png", right)
+    out = tmp_path / "out.png"
+    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
+                                       str(styles), "--mode", "look", "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["fit_start"] == "scene"
+    assert max(report["weights"], key=lambda w: w["weight"])["style"] == "coffee"
+    graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3]
+    truth = np.round(warm_look(right) * 255) / 255
+    assert error(graded, truth) < 0.25 * error(right, truth)
+    # a second run reads the style images back from the cache folder and agrees
+    cached = list((tmp_path / "cache" / "scenes").glob("*.npz"))
+    assert len(cached) == 3
+    again = tmp_path / "again.png"
+    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
+                                       str(styles), "--mode", "look", "-o", str(again)])
+    assert result.exit_code == 0, result.output
+    assert np.abs(oiio.ImageBuf(str(again)).get_pixels(oiio.FLOAT)[..., :3]
+                  - graded).max() <= 1.5 / 255  # the cache keeps colours in half floats
+    # --no-cache reads the photos and writes no cache
+    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
+                                       str(styles), "--mode", "look", "-o",
+                                       str(tmp_path / "uncached.png"), "--no-cache",
+                                       "--cache-dir", str(tmp_path / "other")])
+    assert result.exit_code == 0, result.output
+    assert not (tmp_path / "other").exists()
+

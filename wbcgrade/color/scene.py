@@ -1,0 +1,297 @@
+"""Finding the photo's own scene among the style photos, and the colour pairs it gives.
+
+When a style photo shows the same scene as the photo being graded (another
+framing of the shot, the next frame of a burst, the hero shot of a
+sequence), the look needs no guessing: the two images can be laid over each
+other, and every pixel of the overlap is a pair (colour before the look,
+colour after it). :class:`~wbcgrade.color.look.LookMap` fitted to such pairs
+recovers the look far better than any comparison of palettes, which cannot
+tell content from look.
+
+The steps, on images of at most :data:`MATCH_SIZE` pixels a side:
+
+1. SIFT keypoints on the lightness of both images (features that survive a
+   change of tone and colour: gradient orientations);
+2. descriptor matches kept by the ratio test, then a homography fitted with
+   RANSAC; a match counts when enough keypoints agree (:data:`MIN_INLIERS`;
+   photos of other scenes give a handful by chance) and the homography is a
+   plausible change of framing (no mirror image, scale within a factor 4);
+3. the style image warped onto the photo's frame; pixels of the overlap
+   (away from its border, down-weighted on edges where a small misalignment
+   mixes colours) give the pairs.
+
+Feature detection and matching use OpenCV.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.errors import InputError
+
+__all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
+           "style_scene_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
+
+#: Long side (pixels) of the images keypoints are found on and pairs are read from.
+MATCH_SIZE = 768
+#: Keypoints agreeing with one homography for a style to count as the photo's scene,
+#: and the count from which the match is sure. Measured on the look benchmark's
+#: photos (``benchmarks/look.py``) at 1024 px: two different scenes agree on at
+#: most 5 keypoints (all 210 pairs), two framings of one scene under a look on 79
+#: or more.
+MIN_INLIERS = 12
+SURE_INLIERS = 24
+#: Overlap (share of the photo's pixels) below which a match gives too few pairs.
+MIN_COVERAGE = 0.05
+#: Most keypoints per image, and the least contrast of one (OpenCV's SIFT
+#: ``contrastThreshold``; half its default: hazy, low-contrast scenes keep keypoints).
+MAX_FEATURES = 4000
+CONTRAST = 0.02
+#: Bumped when what is cached (size, features) changes.
+SCENE_VERSION = 1
+
+
+def _cv2():
+    try:
+        import cv2
+    except ImportError as exc:  # pragma: no cover - a dependency
+        raise ImportError("finding the photo's scene needs OpenCV "
+                          "(pip install opencv-python-headless)") from exc
+    return cv2
+
+
+@dataclass(frozen=True)
+class SceneImage:
+    """A photo prepared for matching.
+
+    Attributes
+    ----------
+    colors : (h, w, 3) float32 working-space colours, long side at most
+        :data:`MATCH_SIZE`.
+    points : (N, 2) float32 keypoint positions (x, y) in ``colors``' pixels.
+    descriptors : (N, 128) float32 SIFT descriptors.
+    """
+
+    colors: np.ndarray
+    points: np.ndarray
+    descriptors: np.ndarray
+
+
+@dataclass(frozen=True)
+class SceneMatch:
+    """A style photo found to show the photo's scene.
+
+    Attributes
+    ----------
+    homography : (3, 3) from the style image's pixels to the photo's (both
+        at their :class:`SceneImage` size).
+    inliers : keypoints that agree with it.
+    coverage : share of the photo's pixels the style image covers.
+    """
+
+    homography: np.ndarray
+    inliers: int
+    coverage: float
+
+    @property
+    def sureness(self) -> float:
+        """0 at :data:`MIN_INLIERS` agreeing keypoints, 1 from :data:`SURE_INLIERS` on."""
+        return float(np.clip((self.inliers - MIN_INLIERS) / (SURE_INLIERS - MIN_INLIERS),
+                             0.0, 1.0))
+
+
+def _lightness8(colors: np.ndarray) -> np.ndarray:
+    luma = np.asarray(colors, dtype=np.float32) @ np.float32([0.299, 0.587, 0.114])
+    return np.clip(np.rint(luma * 255.0), 0, 255).astype(np.uint8)
+
+
+def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
+    cv2 = _cv2()
+    h, w = colors.shape[:2]
+    scale = size / max(h, w)
+    colors = np.ascontiguousarray(colors[..., :3], dtype=np.float32)
+    if scale >= 1.0:
+        return colors
+    shape = (max(1, round(w * scale)), max(1, round(h * scale)))
+    return cv2.resize(colors, shape, interpolation=cv2.INTER_AREA)
+
+
+def scene_image(colors: np.ndarray, size: int = MATCH_SIZE) -> SceneImage:
+    """Shrink (H, W, 3) working-space colours in [0, 1] and find their keypoints."""
+    cv2 = _cv2()
+    small = _shrink(colors, size)
+    sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=CONTRAST)
+    keypoints, descriptors = sift.detectAndCompute(_lightness8(small), None)
+    if descriptors is None or not keypoints:
+        return SceneImage(small, np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
+    points = np.float32([k.pt for k in keypoints])
+    return SceneImage(small, points, np.asarray(descriptors, dtype=np.float32))
+
+
+def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75) -> SceneMatch | None:
+    """The framing that lays ``style`` over ``photo``, or None when it shows another scene."""
+    cv2 = _cv2()
+    if len(photo.points) < MIN_INLIERS or len(style.points) < MIN_INLIERS:
+        return None
+    matcher = cv2.BFMatcher(cv2.NORM_L2)
+    pairs = matcher.knnMatch(photo.descriptors, style.descriptors, k=2)
+    good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < ratio * p[1].distance]
+    if len(good) < MIN_INLIERS:
+        return None
+    src = style.points[[m.trainIdx for m in good]]
+    dst = photo.points[[m.queryIdx for m in good]]
+    homography, mask = cv2.findHomography(src, dst, cv2.RANSAC, 3.0)
+    if homography is None or mask is None:
+        return None
+    inliers = int(mask.sum())
+    if inliers < MIN_INLIERS or not _plausible(homography):
+        return None
+    coverage = float(_overlap_mask(photo, style, homography, erode=0).mean())
+    if coverage < MIN_COVERAGE:
+        return None
+    return SceneMatch(homography, inliers, coverage)
+
+
+def _plausible(homography: np.ndarray) -> bool:
+    """A change of framing: no mirror image, scale within a factor 4, mild perspective."""
+    h = homography / homography[2, 2] if homography[2, 2] != 0 else homography
+    det = float(np.linalg.det(h[:2, :2]))
+    return bool(np.isfinite(h).all() and 1 / 16 < det < 16
+                and np.abs(h[2, :2]).max() < 2e-3)
+
+
+def _overlap_mask(photo: SceneImage, style: SceneImage, homography: np.ndarray,
+                  erode: int) -> np.ndarray:
+    cv2 = _cv2()
+    h, w = photo.colors.shape[:2]
+    ones = np.ones(style.colors.shape[:2], np.uint8)
+    mask = cv2.warpPerspective(ones, homography, (w, h), flags=cv2.INTER_NEAREST)
+    if erode:
+        mask = cv2.erode(mask, np.ones((2 * erode + 1,) * 2, np.uint8))
+    return mask.astype(bool)
+
+
+def colour_pairs(photo: SceneImage, style: SceneImage, match: SceneMatch,
+                 max_pairs: int = 100_000, seed: int = 0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Colour pairs of the overlap: the photo's colour and the style's at the same place.
+
+    Returns (sources (N, 3), targets (N, 3), weights (N,)); pixels on strong
+    edges weigh less (a fraction of a pixel of misalignment mixes two colours
+    there), and at most ``max_pairs`` pixels are drawn.
+    """
+    cv2 = _cv2()
+    h, w = photo.colors.shape[:2]
+    warped = cv2.warpPerspective(style.colors, match.homography, (w, h),
+                                 flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    mask = _overlap_mask(photo, style, match.homography, erode=3)
+    light = _lightness8(photo.colors).astype(np.float32) / 255.0
+    edges = np.hypot(cv2.Sobel(light, cv2.CV_32F, 1, 0), cv2.Sobel(light, cv2.CV_32F, 0, 1))
+    weights = 1.0 / (1.0 + 4.0 * edges)
+    where = np.flatnonzero(mask.ravel())
+    if len(where) > max_pairs:
+        where = np.sort(np.random.default_rng(seed).choice(where, max_pairs, replace=False))
+    return (photo.colors.reshape(-1, 3)[where].astype(np.float64),
+            np.clip(warped.reshape(-1, 3)[where], 0.0, 1.0).astype(np.float64),
+            weights.ravel()[where].astype(np.float64))
+
+
+# ------------------------------------------------------------------------ style images
+
+
+def _scene_cache_path(path: Path, working_space: str, folder: Path) -> Path | None:
+    try:
+        stat = path.stat()
+    except OSError:
+        return None
+    key = hashlib.sha1(f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{working_space}|"
+                       f"{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|{SCENE_VERSION}".encode()).hexdigest()
+    return folder / "scenes" / f"{key}.npz"
+
+
+def _read_cached(path: Path | None) -> SceneImage | None:
+    if path is None:
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return SceneImage(data["colors"].astype(np.float32),
+                              data["points"].astype(np.float32),
+                              data["descriptors"].astype(np.float32))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _write_cached(path: Path | None, image: SceneImage) -> None:
+    """Best effort: a cache that cannot be written is skipped."""
+    if path is None:
+        return
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
+        with os.fdopen(handle, "wb") as out:
+            np.savez(out, colors=image.colors.astype(np.float16), points=image.points,
+                     descriptors=image.descriptors.astype(np.float16))
+        os.replace(tmp, path)
+    except (OSError, ValueError):
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+def _read_style(path: Path, working_space: str) -> SceneImage:
+    """A style photo from its file, in the working space, prepared for matching."""
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.imageio import read_image
+
+    image = read_image(path)
+    encoding = ColorEncoding.for_image(image, None, working_space)
+    encoded, _ = encoding.encode(image.rgb(), image.is_float)
+    return scene_image(encoded)
+
+
+def style_scene_images(styles, progress: Callable[[int, int], None] | None = None,
+                       cache: bool = True) -> list[SceneImage | None]:
+    """The style photos prepared for matching, one per style (None where there is none).
+
+    A :class:`~wbcgrade.color.presets.StyleSet` loaded from a folder names its
+    files (``meta["files"]``); one built from arrays may carry the images
+    themselves (``meta["images"]``: (H, W, 3) working-space colours); a preset
+    holds palettes only (all None). Images read from files are kept in the
+    style cache folder (``meta["cache_dir"]``, beside the histograms; None:
+    not cached), in ``scenes/``, keyed by the file and the working space.
+    """
+    images: Sequence = styles.meta.get("images") or ()
+    files: Sequence = styles.meta.get("files") or ()
+    out: list[SceneImage | None] = []
+    n = len(styles.names)
+    for i in range(n):
+        found = None
+        if i < len(images) and images[i] is not None:
+            found = scene_image(np.asarray(images[i], dtype=np.float32))
+        elif i < len(files) and files[i]:
+            path = Path(files[i])
+            folder = styles.meta.get("cache_dir") if cache else None
+            where = (_scene_cache_path(path, styles.working_space, Path(folder))
+                     if folder else None)
+            found = _read_cached(where)
+            if found is None:
+                try:
+                    found = _read_style(path, styles.working_space)
+                except (InputError, OSError, ValueError):  # gone or changed since: no scene
+                    found = None
+                else:
+                    _write_cached(where, found)
+        out.append(found)
+        if progress is not None:
+            progress(i + 1, n)
+    return out
