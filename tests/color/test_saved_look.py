@@ -107,3 +107,21 @@ def test_video_takes_a_look(tmp_path):
     result = run("video", SAMPLES / "clip.mp4", "--look", darker, "-o", out)
     assert result.exit_code == 0, result.output
     assert out.stat().st_size > 1000 and "darker 1.000" in result.output
+
+
+def test_cube_files_read_back_as_written(tmp_path, rng):
+    from wbcgrade.color.lut import write_cube
+    from wbcgrade.color.saved_look import SAMPLED_LUT_SIZE, load_look
+
+    table = rng.random((5, 5, 5, 3))
+    path = write_cube(tmp_path / "r.cube", table)
+    look = load_look(path)
+    assert look.color_map.shape == (5, 5, 5, 3)
+    assert np.abs(look.color_map - table).max() < 1e-6  # indexed [r, g, b] as written
+    # another domain: read by colour-science and sampled on the [0, 1] cube
+    text = path.read_text().replace("LUT_3D_SIZE 5",
+                                    "LUT_3D_SIZE 5\nDOMAIN_MIN 0 0 0\nDOMAIN_MAX 2 2 2")
+    (tmp_path / "wide.cube").write_text(text)
+    wide = load_look(tmp_path / "wide.cube")
+    assert wide.color_map.shape == (SAMPLED_LUT_SIZE,) * 3 + (3,)
+    assert np.abs(wide.color_map[-1, -1, -1] - table[2, 2, 2]).max() < 1e-5  # 1.0 is mid-domain

@@ -154,8 +154,54 @@ def _resolve(name: str, path: Path, option: str) -> str:
     return resolve_space(name, f"{path}: {option}")
 
 
+def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
+    """A ``.cube`` whose 3-D table covers [0, 1] (with no 1-D part, or wbcgrade's shaper),
+    read directly (colour-science takes a second to import); None for any other kind."""
+    try:
+        text = path.read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    comments, rows, size, size_1d = [], [], 0, 0
+    for line in text.splitlines():
+        line = line.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            comments.append(line[1:].strip())
+            continue
+        key = line.split(None, 1)[0]
+        if key[0].isdigit() or key[0] in "-+.":
+            rows.append(line)
+        elif key == "LUT_3D_SIZE":
+            size = int(line.split()[1])
+        elif key == "LUT_1D_SIZE":
+            size_1d = int(line.split()[1])
+        elif key in ("DOMAIN_MIN", "DOMAIN_MAX", "LUT_3D_INPUT_RANGE"):
+            values = [float(v) for v in line.split()[1:]]
+            if values not in ([0.0] * 3, [1.0] * 3, [0.0, 1.0]):
+                return None
+        elif key not in ("TITLE", "LUT_1D_INPUT_RANGE"):
+            return None
+    space = _header_space(comments)
+    if size < 2 or (size_1d and space is None) or len(rows) != size_1d + size ** 3:
+        return None
+    try:
+        values = np.array(" ".join(rows[size_1d:]).split(), dtype=np.float64)
+    except ValueError:
+        return None
+    if values.size != 3 * size ** 3:
+        return None
+    # red varies fastest in a .cube: the rows are [b, g, r] in C order
+    table = values.reshape(size, size, size, 3).transpose(2, 1, 0, 3)
+    return np.ascontiguousarray(table, dtype=np.float32), space
+
+
 def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
     """(the table on the [0, 1] working cube, the space named in the header or None)."""
+    if path.suffix.lower() == ".cube":
+        plain = _plain_cube(path)
+        if plain is not None:
+            return plain
     from wbcgrade.color._colour import colour
 
     try:
