@@ -300,16 +300,19 @@ def _peak(linear: str, working: str, path: str) -> float:
         grey = np.repeat(np.asarray(values, dtype=np.float64)[:, None], 3, axis=1)
         return convert(grey, linear, working).max(axis=1) <= 1.0 + 1e-6
 
-    ramp = np.geomspace(1e-3, 1e5, 4097)  # a coarse ramp, then bisection between two samples
+    ramp = np.geomspace(1e-3, 1e5, 4097)  # a coarse ramp, then finer ramps between two samples
     inside = np.flatnonzero(encodes_inside(ramp))
     if len(inside) == 0:
         return 1.0
     if inside[-1] == len(ramp) - 1:
         return float(ramp[-1])
     low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
-    for _ in range(40):
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if encodes_inside(np.array([middle]))[0] else (low, middle)
+    for _ in range(3):  # each ramp narrows the step 4096 times (one conversion, not twelve)
+        ramp = np.linspace(low, high, 4097)
+        inside = np.flatnonzero(encodes_inside(ramp))
+        if len(inside) == 0:
+            break
+        low, high = float(ramp[inside[-1]]), float(ramp[min(inside[-1] + 1, len(ramp) - 1)])
     return low
 
 
