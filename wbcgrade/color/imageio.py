@@ -379,8 +379,6 @@ def _output_spec(like: Image, height: int, width: int, nchannels: int,
         if name == "chromaticities" and floats:  # the primaries of scene-linear values
             spec.attribute(name, attrib.type, attrib.value)
             continue
-        if name in ("Compression", "CompressionQuality") or name.endswith(":quality"):
-            continue  # the writer's own default, or --quality
         if not same_format and prefix not in _GENERIC_PREFIXES and name not in (
                 "Make", "Model", "Software", "Artist", "Copyright", "ImageDescription",
                 "DateTime", "XResolution", "YResolution", "ResolutionUnit"):
@@ -656,6 +654,7 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | N
     spec = _output_spec(like, height, width, nchannels, format_name, alpha,
                         _pixel_type(format_name, like, options.bit_depth))
     if options.quality is not None and format_name in _QUALITY_FORMATS:
+        spec.erase_attribute("CompressionQuality")  # an input's own setting: not this one
         spec.attribute("Compression", f"{_QUALITY_FORMATS[format_name]}:{options.quality}")
     if 0 <= alpha < nchannels:
         # In memory colour is unassociated; EXR stores it multiplied by alpha.
