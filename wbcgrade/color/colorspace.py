@@ -481,7 +481,8 @@ class ColorEncoding:
 
         Returns
         -------
-        encoded : (..., 3) float32 in [0, 1]
+        encoded : (..., 3) float32 in [0, 1] (``rgb`` itself when it is already
+            there in the working space: read it, do not write to it)
         state : for :meth:`decode`.
         """
         rgb = np.asarray(rgb, dtype=np.float32)
@@ -493,8 +494,12 @@ class ColorEncoding:
                 scale = np.maximum(top, 1.0).astype(np.float32)
                 linear /= scale
             working = convert(linear, self.linear, self.working)
+        elif self.input == self.working:
+            working = rgb  # no conversion, no copy (the result is never written to)
         else:
             working = convert(rgb, self.input, self.working)
+        if working.size and float(working.min()) >= 0.0 and float(working.max()) <= 1.0:
+            return working, WorkingState(scale, None)  # inside the cube: nothing to carry
         encoded = np.clip(working, 0.0, 1.0)
         residual = working - encoded
         if not np.any(residual):
