@@ -1,6 +1,7 @@
 """Saved grades (``apply --look``) and JPEG quality: speed, sameness and file size.
 
-For each photo: ``wbcgrade apply PHOTO --preset warm`` (the original run: fit,
+For each photo: ``wbcgrade apply PHOTO --preset warm`` (or ``--style`` with ten
+photos, ``--styles-from``; the original run: fit,
 transport, map, regrain; it also saves the grade as ``--json`` and ``--lut
 .cube``), then ``apply PHOTO --look grade.json`` and ``--look grade.cube``
 (the saved grade again, no fit). Each command is a fresh process timed end
@@ -13,6 +14,8 @@ with ``--quality 90`` relative to the input JPEG (target: within 10 %).
 
     python benchmarks/saved_look.py                      # the shipped samples/*.jpg
     python benchmarks/saved_look.py --photo ../shared/data/photos/seeding_full.jpg --repeats 3
+    python benchmarks/saved_look.py --photo ../shared/data/photos/seeding_full.jpg \
+        --styles-from ../shared/data/photos --repeats 3   # the 10-style grade of apply.py
 
 Times are the shortest of ``--repeats`` runs, wall and CPU (user + system,
 of the command's process): on a shared machine the CPU ratio is the steadier.
@@ -63,7 +66,7 @@ def codes(path: Path) -> np.ndarray:
     return np.round(oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT) * 255.0)
 
 
-def measure(photo: Path, folder: Path, preset: str, repeats: int = 1) -> dict:
+def measure(photo: Path, folder: Path, styles: list[str], repeats: int = 1) -> dict:
     """The three runs, interleaved ``repeats`` times (the shortest time of each), writing
     JPEGs as a user would; then, untimed, the same three writing 8-bit BMPs (lossless,
     so the comparison is not blurred by JPEG)."""
@@ -74,7 +77,7 @@ def measure(photo: Path, folder: Path, preset: str, repeats: int = 1) -> dict:
 
     def original(suffix: str) -> float:
         with open(out / "grade.json", "w") as json_file:
-            return timed(wbcgrade("apply", str(photo), "--preset", preset, "-o",
+            return timed(wbcgrade("apply", str(photo), *styles, "-o",
                                   str(out / f"original{suffix}"), "--lut",
                                   str(out / "grade.cube"), "--json", "--overwrite"), json_file)
 
@@ -82,6 +85,7 @@ def measure(photo: Path, folder: Path, preset: str, repeats: int = 1) -> dict:
         return timed(wbcgrade("apply", str(photo), "--look", str(out / f"grade.{kind}"),
                               "-o", str(out / f"{kind}{suffix}"), "--overwrite", *extra))
 
+    original(".jpg")  # unmeasured: fills the style histogram cache, as a user's runs have
     for _ in range(repeats):
         times["original"].append(original(".jpg"))
         cpu["original"].append(LAST_CPU[0])
@@ -108,6 +112,10 @@ def main() -> None:
                         help="photo to measure (repeatable) [default: samples/*.jpg, and the "
                              "16 MP shared photo when it is there]")
     parser.add_argument("--preset", default="warm")
+    parser.add_argument("--styles-from", type=Path, default=None, metavar="DIR",
+                        help="grade with --style: N photos of DIR (not the photo itself), as "
+                             "benchmarks/apply.py does, instead of --preset")
+    parser.add_argument("--styles", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=1,
                         help="runs of each command, interleaved; the shortest counts")
     args = parser.parse_args()
@@ -120,8 +128,17 @@ def main() -> None:
     print("-" * len(header))
     rows = []
     with tempfile.TemporaryDirectory(prefix="wbcgrade-bench-look-") as tmp:
+        os.environ["WBCGRADE_CACHE_DIR"] = str(Path(tmp) / "cache")  # a private cache
         for photo in photos:
-            row = measure(Path(photo), Path(tmp), args.preset, args.repeats)
+            styles = ["--preset", args.preset]
+            if args.styles_from is not None:
+                from apply import style_folder  # benchmarks/apply.py's choice of styles
+
+                folder = Path(tmp) / f"styles-{Path(photo).stem}"
+                folder.mkdir()
+                style_folder(args.styles_from, Path(photo), args.styles, folder)
+                styles = ["--style", str(folder)]
+            row = measure(Path(photo), Path(tmp), styles, args.repeats)
             rows.append(row)
             size = f"{row['q90_size']:.2f}" if "q90_size" in row else "-"
             print(f"{row['photo']:<22} {row['original_s']:8.2f}s {row['json_s']:11.2f}s "
