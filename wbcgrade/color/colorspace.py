@@ -307,7 +307,7 @@ def _peak(linear: str, working: str, path: str) -> float:
     if inside[-1] == len(ramp) - 1:
         return float(ramp[-1])
     low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
-    for _ in range(3):  # each ramp narrows the step 4096 times (one conversion, not twelve)
+    for _ in range(3):  # each ramp, one conversion, narrows the step 4096 times (not 40 halvings)
         ramp = np.linspace(low, high, 4097)
         inside = np.flatnonzero(encodes_inside(ramp))
         if len(inside) == 0:
