@@ -331,7 +331,10 @@ def wbcgrade_method(**options) -> Method:
     mode: held-out naturals)."""
 
     def method(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
-        extra = {"natural": natural_preset(context)} if options.get("mode") == "look" else {}
+        from wbcgrade.color.options import GradeOptions
+
+        look = GradeOptions(**options).map.builder == "look"  # (the default)
+        extra = {"natural": natural_preset(context)} if look else {}
         out, weights = wbcgrade_grade(photo, styles, context.style_names, context.memo,
                                       **options, **extra)
         context.info["weights"] = weights
@@ -377,8 +380,8 @@ def idt_pooled(photo, styles, context):
 
 METHODS: dict[str, Method] = {
     "nothing": nothing,
-    "wbcgrade": wbcgrade_method(),
-    "wbcgrade-look": wbcgrade_method(mode="look"),
+    "wbcgrade": wbcgrade_method(),  # the defaults: the look grade
+    "wbcgrade-palette": wbcgrade_method(mode="palette"),
     "wbcgrade-relax0.1": wbcgrade_method(mode="palette", relaxation=0.1),
     "wbcgrade-kl-relax0.01": wbcgrade_method(mode="palette", loss="kl", relaxation=0.01),
     "mkl-nearest": mkl_nearest,

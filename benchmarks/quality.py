@@ -257,6 +257,7 @@ def parse_options(pairs: list[str]):
                     values[key] = float(text)
                 except ValueError:
                     values[key] = text
+    values.setdefault("mode", "palette")  # the palette transfer, as this benchmark always measured
     return GradeOptions(**values)
 
 
@@ -269,7 +270,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-peers", action="store_true", help="wbcgrade only")
     parser.add_argument("--set", dest="options", action="append", default=[],
                         metavar="KEY=VALUE",
-                        help="a grade option by its flat name, e.g. relaxation=0.05 (repeatable)")
+                        help="a grade option by its flat name, e.g. relaxation=0.05 (repeatable); "
+                             "mode=palette unless set (this benchmark measures the palette "
+                             "transfer: distance to the style palettes)")
     args = parser.parse_args(argv)
 
     opts = parse_options(args.options)

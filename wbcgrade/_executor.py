@@ -24,9 +24,12 @@ run (one bad file) return their failure as a value instead.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import gc
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -35,7 +38,8 @@ from typing import Any
 
 from wbcgrade.errors import InputError
 
-__all__ = ["Executor", "cpu_count", "DASK_CONNECT_TIMEOUT", "PARENT_WATCH_S"]
+__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT",
+           "PARENT_WATCH_S"]
 
 #: How long to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
@@ -79,10 +83,32 @@ def _die_with_parent(parent: int) -> None:
                      name="wbcgrade-parent-watch").start()
 
 
+def release_cached_objects() -> None:
+    """Empty the ``functools`` caches of the loaded wbcgrade modules and collect garbage.
+
+    Run at a worker's exit (``atexit``, before the interpreter tears its
+    modules down): library objects held in those caches (OpenImageIO's
+    ``ColorConfig`` and colour processors, in :mod:`wbcgrade.color.colorspace`)
+    are freed while their bindings still exist, so no binding reports them
+    as leaked at exit ("nanobind: leaked ..." lines that look like a crash).
+    """
+    for name, module in list(sys.modules.items()):
+        if not name.startswith("wbcgrade") or module is None:
+            continue
+        for value in list(vars(module).values()):
+            clear = getattr(value, "cache_clear", None)
+            if callable(clear) and getattr(value, "__module__", None) == name:
+                with contextlib.suppress(Exception):
+                    clear()
+    gc.collect()
+
+
 def _init_worker(context: Any, threads: int, parent: int | None,
                  setup: Callable[[Any], None] | None) -> None:
-    """Process-pool initializer: die with the parent, keep the context, cap threads."""
+    """Process-pool initializer: die with the parent, keep the context, cap threads,
+    release cached library objects at exit (:func:`release_cached_objects`)."""
     global _WORKER_CONTEXT
+    atexit.register(release_cached_objects)
     if parent is not None:
         _die_with_parent(parent)
     _WORKER_CONTEXT = context

@@ -64,6 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._names import safe_text, writable_name, writer_name
 from wbcgrade.errors import InputError, first_line
 
 __all__ = ["TEMP_MARK", "LOCK_FILE", "atomic_path", "publish_bytes", "write_png",
@@ -254,8 +255,8 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
     target = Path(target)
     check_regular_target(target)
     folder = check_folder(target)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem[:100]}{TEMP_MARK}",
-                               suffix=suffix or target.suffix, dir=folder)
+    fd, tmp = tempfile.mkstemp(prefix=f".{safe_text(target.stem)[:100]}{TEMP_MARK}",
+                               suffix=safe_text(suffix or target.suffix), dir=folder)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # tells a cleaner this file is live
         os.chmod(tmp, 0o666 & ~_UMASK)
@@ -263,12 +264,20 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
         _fsync_path(tmp)
         _publish(tmp, target, overwrite)
         _fsync_path(folder, directory=True)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if type(exc) in _PLAIN_OS_ERRORS and exc.errno is not None \
+                and exc.filename in (None, tmp):  # a full disk: say which file
+            raise type(exc)(exc.errno, exc.strerror, str(target)) from None
         raise
     finally:
         os.close(fd)
+
+
+#: Errors re-raised naming the target when the writer's own error named no file (or the
+#: hidden temporary one): a full disk during ``write()`` says only "[Errno 28]".
+_PLAIN_OS_ERRORS = (OSError, PermissionError, FileNotFoundError)
 
 
 def publish_bytes(target: str | os.PathLike, data: bytes, overwrite: bool = True) -> Path:
@@ -315,12 +324,13 @@ def write_png(target: str | os.PathLike, image: np.ndarray, overwrite: bool = Tr
             raise InputError(f"{target}: the image holds NaN values")
         pixels = np.clip(np.round(pixels * 255.0), 0, 255).astype(np.uint8)
     pixels = np.ascontiguousarray(pixels)
-    with atomic_path(target, suffix=".png", overwrite=overwrite) as tmp:
-        output = oiio.ImageOutput.create(tmp)
+    with atomic_path(target, suffix=".png", overwrite=overwrite) as tmp, \
+            writable_name(tmp) as name:
+        output = oiio.ImageOutput.create(writer_name(tmp))
         if output is None:
             raise OSError(f"{target}: cannot create a PNG writer ({first_line(oiio.geterror())})")
         spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
-        ok = output.open(tmp, spec) and output.write_image(pixels)
+        ok = output.open(name, spec) and output.write_image(pixels)
         error = output.geterror()
         output.close()
         if not ok:

@@ -29,6 +29,16 @@ class OptionError(InputError):
         self.option = option
 
 
+class Terminated(KeyboardInterrupt):
+    """The process was asked to end (SIGTERM, SIGHUP): raised in the main thread by the
+    CLI's signal handler, so that clean-up runs as for Ctrl-C (temporary files removed,
+    ffmpeg and workers stopped). ``signum`` is the signal's number."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
 class ConvergenceWarning(UserWarning):
     """An iterative solve stopped at its iteration limit before reaching its tolerance.
 

@@ -20,7 +20,8 @@ from wbcgrade.color.options import FitOptions, GradeOptions
 from wbcgrade.color.presets import load_style_folder
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
-FAST = ["--bins", "8", "--fit-bins", "6", "--max-iter", "3", "--iterations", "10", "--no-cache"]
+FAST = ["--mode", "palette", "--bins", "8", "--fit-bins", "6", "--max-iter", "3",
+        "--iterations", "10", "--no-cache"]
 GOOD = ["chelsea.jpg", "astronaut.png", "sub/bridge.jpg"]
 
 
@@ -87,8 +88,9 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     assert not (local_run / "broken.jpg").exists()
     assert not (local_run / "notes.txt").exists()
     hidden = [p.name for p in local_run.rglob(".*")]
-    # the run's settings and the folder's lock file; no temporary file left
-    assert sorted(hidden) == [".wbcgrade-batch.json", ".wbcgrade.lock"]
+    # the run's settings, its per-photo results and the folder's lock file; no temporary
+    # file left
+    assert sorted(hidden) == [".wbcgrade-batch.json", ".wbcgrade-results", ".wbcgrade.lock"]
 
     # A rerun reports the bad file again and skips the finished ones.
     out = local_run.parent / "rerun"
@@ -181,7 +183,8 @@ def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
     # Two local processes, library level (two photos keep it short).
     style_set = load_style_folder(styles, 8)
     plan = plan_batch(photos, tmp_path / "pool")
-    context = BatchContext(style_set, GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10))
+    context = BatchContext(style_set, GradeOptions(mode="palette", bins=8, fit_bins=6,
+                                                   max_iter=3, n_iter=10))
     outcome = run_batch(plan, context, jobs=2)
     assert outcome.count("graded") == 2 and outcome.count("failed") == 1
     for name in ("chelsea.jpg", "astronaut.png"):
@@ -281,7 +284,7 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
 
     monkeypatch.setattr(workflow, "stage_image", write_then_interrupt)
     context = BatchContext(load_style_folder(styles, 8),
-                           GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10))
+                           GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10))
     with pytest.raises(KeyboardInterrupt):
         run_batch(plan, context)
     written = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
@@ -294,7 +297,7 @@ def test_report_hook_for_apply(folders, tmp_path):
     from wbcgrade.color.workflow import grade_file, plan_photo
 
     photos, styles = folders
-    opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10)
+    opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10)
     style_set = load_style_folder(styles, 8)
     graded = grade_file(plan_photo(photos / "chelsea.jpg", tmp_path / "c.jpg"), style_set, opts)
     path = report_from_grade(tmp_path / "report", graded, style_set, opts)
@@ -321,7 +324,7 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
     from wbcgrade.color.workflow import grade_file, plan_photo
 
     photos, styles = folders
-    opts = GradeOptions(bins=8, fit_bins=6, max_iter=3, n_iter=10,
+    opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10,
                         weights=[1.0, 1.0, 0.0] if start == "given" else None)
     style_set = load_style_folder(styles, 8)
     fit = grading.fit_weights

@@ -12,6 +12,9 @@ from wbcgrade.color.options import GradeOptions
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 STYLE_PHOTOS = ("aitzgorri", "coffee", "flower", "seeding")
+#: A preset of three sample photos (coffee, flower, sunset; 32^3, no working space recorded):
+#: the former shipped "warm" preset, kept for tests that need three styles or an old file.
+THREE_STYLES = Path(__file__).resolve().parents[1] / "data" / "three_samples.npz"
 
 
 def small_copy(src: Path, dst: Path, width: int = 96) -> Path:
@@ -58,11 +61,11 @@ def photo(tmp_path) -> Path:
 @pytest.fixture
 def fast_options() -> GradeOptions:
     """Small grids so a whole grade takes a fraction of a second."""
-    return GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    return GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30)
 
 
-FAST_ARGS = ["--bins", "16", "--fit-bins", "8", "--max-iter", "10", "--iterations", "30",
-             "--no-cache"]
+FAST_ARGS = ["--mode", "palette", "--bins", "16", "--fit-bins", "8", "--max-iter", "10",
+             "--iterations", "30", "--no-cache"]
 
 
 def grade_of(rgb, styles, options):

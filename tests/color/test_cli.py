@@ -98,10 +98,10 @@ def test_preset_build_list_and_apply(tmp_path, styles, photo):
     result = run("apply", photo, "--preset", preset_file, "-o", tmp_path / "a.jpg", *FAST_ARGS)
     assert result.exit_code == 0, result.output
     listing = run("preset", "list")
-    assert listing.exit_code == 0 and "warm" in listing.stdout and "landscape" in listing.stdout
-    result = run("apply", photo, "--preset", "warm", "-o", tmp_path / "b.jpg", *FAST_ARGS)
+    assert listing.exit_code == 0 and "warm" in listing.stdout and "kodak-2383" in listing.stdout
+    result = run("apply", photo, "--preset", "kodak-2383", "-o", tmp_path / "b.jpg", *FAST_ARGS)
     assert result.exit_code == 0, result.output
-    assert {"coffee", "flower", "sunset"} <= set(result.stdout.split())
+    assert {"grace_hopper", "china", "wine"} <= set(result.stdout.split())
 
 
 def test_apply_keeps_16bit_rgba_and_orientation(tmp_path, styles, rng):

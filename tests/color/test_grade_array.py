@@ -20,7 +20,7 @@ def scene(style_dir, tmp_path_factory):
     path = small_copy(SAMPLES / "chelsea.jpg", folder / "chelsea.jpg")
     pixels = np.round(read_image(path).rgb() * 255).astype(np.uint8)
     png = write_array(folder / "chelsea.png", pixels / 255.0, "uint8")
-    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    opts = GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30)
     return pixels, png, load_style_folder(style_dir, opts.transfer.bins), opts
 
 
@@ -62,8 +62,9 @@ def test_grouped_options_and_the_former_flat_ones_are_the_same(scene):
     pixels, _, styles, opts = scene
     grouped = GradeOptions(fit=FitOptions(bins=8, max_iter=10, n_iter=30),
                            transfer=TransferOptions(bins=16, relaxation=0.05),
-                           map=MapOptions(size=9))
-    flat = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30, relaxation=0.05,
+                           map=MapOptions(builder="palette", size=9))
+    flat = GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30,
+                        relaxation=0.05,
                         map_size=9)
     assert grouped == flat
     a, grade = grade_array(pixels, styles, grouped)

@@ -190,17 +190,17 @@ def test_default_grade_is_a_lattice_lut_with_regrain(scene):
     rgb, style_dir = scene
     from wbcgrade.color.presets import load_style_folder
 
-    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    opts = GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30)
     styles = load_style_folder(style_dir, 16)
     grade = grade_of(rgb, styles, opts)
     assert grade.color_map.shape == (33, 33, 33, 3) and grade.regrain is not None
     assert grade.info["map"]["size"] == 33 and grade.info["sinkhorn"]["relaxation"] is None
-    plain = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30, smoothness=0,
+    plain = GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30, smoothness=0,
                          stiffness=0, regrain=False)
     raw = grade_of(rgb, styles, plain)
     assert raw.color_map.shape == (16, 16, 16, 3) and raw.regrain is None
     lum = grade_of(rgb, StyleSet(styles.names, styles.histograms),
-                   GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30,
+                   GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30,
                                 preserve_luminance=True))
     assert lum.info["map"]["preserve_luminance"] is True
     before, after = rgb.reshape(-1, 3), lum.apply(rgb.reshape(-1, 3))
@@ -228,7 +228,7 @@ def test_histogram_of_regrained_output_still_lands_near_the_palette(scene):
     from wbcgrade.color.presets import load_style_folder
 
     styles = load_style_folder(style_dir, 16)
-    opts = GradeOptions(bins=16, fit_bins=8, max_iter=10, n_iter=30)
+    opts = GradeOptions(mode="palette", bins=16, fit_bins=8, max_iter=10, n_iter=30)
     grade = grade_of(rgb, styles, opts)
     with_regrain = grade.apply(rgb)
     without = replace(grade, regrain=None).apply(rgb)

@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.look import (
@@ -137,8 +138,9 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path):
     from wbcgrade.color.lut import read_cube
 
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--mode", "look",
-                                       "-o", str(tmp_path / "o.png"), "--json", *FAST_ARGS])
+    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "-o",
+                                       str(tmp_path / "o.png"), "--json", *FAST_ARGS,
+                                       "--mode", "look"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["map"]["builder"] == "look" and report["fit_start"] == "look"
@@ -163,3 +165,41 @@ def test_shrinking_keeps_what_the_styles_agree_on_and_drops_what_they_do_not():
     pooled = LookMap(0.2 * warm.coefficients, warm.knots)  # their pool leans one way a little
     torn = _shrunk(pooled, [warm, cool, warm, cool])
     assert torn.amplitude() < 0.25 * pooled.amplitude()  # (0.2^2 / (0.2^2 + 1/4) = 0.14)
+
+
+def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
+    """The shipped presets carry the look they were made with: the look grade applies it as
+    it is (no estimate), `look extract` writes it, and a preset with a broken look is refused."""
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from tests.color.conftest import small_copy
+    from wbcgrade.cli import main
+    from wbcgrade.color.look import resample_lattice
+    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.presets import load_preset, resolve_preset, save_preset
+    from wbcgrade.errors import InputError
+
+    styles = load_preset(resolve_preset("warm"))
+    look = styles.meta["look"]
+    assert look.shape == (33, 33, 33, 3)
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.png", 96)
+    out = tmp_path / "o.png"
+    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--no-regrain",
+                                       "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    pixels = oiio.ImageBuf(str(photo)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
+    graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
+    from wbcgrade.color.look import _trilinear
+
+    expected = _trilinear(look.astype(np.float64), pixels.astype(np.float64))
+    assert np.abs(graded - expected).max() <= 1.5 / 255
+    assert np.abs(graded - pixels).mean() > 5 / 255  # and the look is not a small one
+    cube = tmp_path / "look.cube"
+    assert CliRunner().invoke(main, ["look", "extract", "--preset", "warm", "--strength", "1",
+                                     "-o", str(cube)]).exit_code == 0
+    assert np.abs(read_cube(cube).table - resample_lattice(look, 33)).max() < 1e-4
+    broken = look.copy()
+    broken[0, 0, 0, 0] = np.nan
+    with pytest.raises(InputError, match="finite"):
+        save_preset(tmp_path / "bad.npz", styles, look=broken)

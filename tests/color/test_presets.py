@@ -8,6 +8,7 @@ import zipfile
 import numpy as np
 import pytest
 
+from tests.color.conftest import SAMPLES
 from wbcgrade.color.presets import (
     list_presets,
     load_preset,
@@ -32,15 +33,21 @@ def test_round_trip(tmp_path, style_dir):
         save_preset(path, styles)
 
 
-def test_shipped_presets_load_and_resolve():
+def test_shipped_presets_are_looks_of_photos_outside_the_samples():
     names = [name for name, _ in list_presets()]
-    assert {"landscape", "warm", "mixed"} <= set(names)
+    assert {"kodak-2383", "teal-orange", "bleach-bypass", "faded", "warm"} <= set(names)
+    samples = {p.stem for p in SAMPLES.glob("*.jpg")}
     for name in names:
         styles = load_preset(resolve_preset(name))
         assert styles.histograms.shape[0] == len(styles.names) >= 2
         assert np.allclose(styles.histograms.sum(axis=(1, 2, 3)), 1.0)
-    with pytest.raises(InputError, match="unknown preset 'nope'.*landscape"):
+        provenance = styles.meta["provenance"]
+        assert provenance["look"] and set(provenance["photos"]) == set(styles.names)
+        assert not samples & set(styles.names)  # no sample photo is graded towards itself
+    with pytest.raises(InputError, match="unknown preset 'nope'.*kodak-2383"):
         resolve_preset("nope")
+    with pytest.raises(InputError, match="'landscape'.*no longer shipped.*looks.*teal-orange"):
+        resolve_preset("landscape")
     with pytest.raises(InputError, match="no such preset file"):
         resolve_preset("missing/file.npz")
 
@@ -111,3 +118,52 @@ def test_style_folder_skips_non_images_and_rejects_empty(tmp_path, style_dir):
     assert styles.names == ["coffee"] and len(warnings) == 2
     with pytest.raises(InputError, match="does not exist"):
         load_style_folder(tmp_path / "nowhere", 8)
+
+
+
+def test_own_style_is_found_only_for_the_photo_itself_at_a_large_weight(tmp_path):
+    from tests.color.conftest import small_copy
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.presets import own_style
+
+    def hist(rgb):
+        return image_histogram(np.asarray(rgb, np.float32), 16)
+
+    coffee = read_image(SAMPLES / "coffee.jpg").rgb()
+    photo = hist(coffee)
+    warm = np.clip(coffee * np.array([1.1, 1.0, 0.85]) + 0.03, 0, 1)  # a mild grade of it
+    styles = np.stack([hist(read_image(SAMPLES / "flower.jpg").rgb()), hist(coffee[::3, ::3]),
+                       hist(warm)])
+    names = ["flower", "coffee", "coffee_warm"]
+    found = own_style(photo, styles, names, [0.0, 0.95, 0.05])
+    assert found["style"] == "coffee" and found["weight"] == 0.95 and found["distance"] < 0.1
+    assert own_style(photo, styles, names, [0.3, 0.5, 0.2]) is None  # a blend, not itself
+    assert own_style(photo, styles, names, [0.0, 0.0, 1.0]) is None  # its graded version
+    assert own_style(photo, styles, names, [1.0, 0.0, 0.0]) is None  # another photo
+    small = read_image(small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.png", 96)).rgb()
+    assert own_style(hist(small), styles, names, [0, 1, 0])["style"] == "coffee"
+
+
+def test_apply_warns_in_one_line_when_the_photo_is_one_of_the_styles(tmp_path):
+    from click.testing import CliRunner
+
+    from tests.color.conftest import FAST_ARGS, small_copy
+    from wbcgrade.cli import main
+
+    styles = tmp_path / "styles"
+    styles.mkdir()
+    for name in ("coffee", "flower", "sunset"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 96)
+    photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "mine.jpg", 64)
+    result = CliRunner().invoke(main, ["apply", str(photo), "--style", str(styles), "-o",
+                                       str(tmp_path / "out.jpg"), *FAST_ARGS])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if "own palette" in line]
+    assert len(warnings) == 1
+    assert warnings[0].startswith(f"Warning: {photo} is graded towards its own palette "
+                                  "(style 'coffee' has weight ")
+    other = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.jpg", 64)
+    result = CliRunner().invoke(main, ["apply", str(other), "--style", str(styles), "-o",
+                                       str(tmp_path / "cat_out.jpg"), *FAST_ARGS])
+    assert result.exit_code == 0 and "own palette" not in result.stderr

@@ -34,7 +34,7 @@ def test_look_from_json_cube_and_clf_reproduces_the_grade(tmp_path, photo, style
                  "--lut", tmp_path / "grade.cube", "--json", *spaces, *FAST_ARGS)
     assert result.exit_code == 0, result.output
     (tmp_path / "grade.json").write_text(result.stdout)
-    assert json.loads(result.stdout)["look"]["format"] == "wbcgrade-look"
+    assert json.loads(result.stdout)["saved_grade"]["format"] == "wbcgrade-look"
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original2.png",
                  "--lut", tmp_path / "grade.clf", *spaces, *FAST_ARGS)
     assert result.exit_code == 0, result.output  # the format follows the ending: no --lut-format
@@ -72,7 +72,7 @@ def test_look_flags_and_refusals(tmp_path, photo, style_dir):
         result = run("apply", photo, "--look", look, *args, "-o", tmp_path / "x.png")
         assert result.exit_code != 0 and word in result.output
     damaged = tmp_path / "damaged.json"
-    damaged.write_text('{"look": {"format": "wbcgrade-look", "map": {"data": "!!"}}}')
+    damaged.write_text('{"saved_grade": {"format": "wbcgrade-look", "map": {"data": "!!"}}}')
     for bad in (damaged, tmp_path / "missing.json", tmp_path / "grade.txt"):
         (tmp_path / "grade.txt").write_text("x")
         result = run("apply", photo, "--look", bad, "-o", tmp_path / "x.png")

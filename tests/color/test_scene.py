@@ -114,3 +114,27 @@ def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, 
     assert result.exit_code == 0, result.output
     assert not (tmp_path / "other").exists()
 
+
+
+def test_the_lattice_correction_holds_what_the_curves_cannot():
+    """A cross-channel move (green follows red times blue) is beyond curves of R, G, B and
+    luma; the smooth lattice fitted after them takes most of the rest."""
+    from wbcgrade.color.look import SceneLook, fit_correction, fit_look_map
+
+    rng = np.random.default_rng(5)
+    colors = rng.random((20000, 3))
+
+    def look(rgb):
+        out = rgb.copy()
+        out[:, 1] += 0.25 * (rgb[:, 0] * rgb[:, 2] - 0.25)
+        return np.clip(out, 0.0, 1.0)
+
+    targets, ones = look(colors), np.ones(len(colors))
+    curves = fit_look_map(colors, targets, ones, ridge=1e-6, smoothness=1e-6)
+    mapped = curves(colors)
+    correction = fit_correction(mapped, targets, ones)
+    test = rng.random((2000, 3))
+    both = SceneLook(curves, {}, 1.0, 0.0, len(colors), correction)
+    alone = float(np.mean(np.abs(curves(test) - look(test))))
+    assert float(np.mean(np.abs(both(test) - look(test)))) < 0.5 * alone
+    assert correction.shape == (9, 9, 9, 3)

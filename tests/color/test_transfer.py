@@ -80,7 +80,7 @@ def test_graded_photo_is_closer_to_the_barycenter(scene, fast_options):
 
 def test_grading_against_its_own_palette_changes_little(scene):
     rgb, _ = scene
-    opts = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30)
+    opts = GradeOptions(mode="palette", bins=24, fit_bins=8, max_iter=10, n_iter=30)
     own = StyleSet(names=["self"], histograms=image_histogram(rgb, 24)[None])
     graded = grade_of(rgb, own, opts).apply(rgb)
     assert np.abs(graded - rgb).mean() < 1 / 255
@@ -90,9 +90,9 @@ def test_default_transfer_kernel_keeps_colourfulness(scene):
     """A map built with the fit's wide kernel dulls the photo; the default does not."""
     rgb, style_dir = scene
     styles = load_style_folder(style_dir, 24)
-    sharp = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30)
+    sharp = GradeOptions(mode="palette", bins=24, fit_bins=8, max_iter=10, n_iter=30)
     fit_sigma_in_bins = sharp.fit.width / (sharp.fit.bins - 1) * (sharp.transfer.bins - 1)
-    blurred = GradeOptions(bins=24, fit_bins=8, max_iter=10, n_iter=30,
+    blurred = GradeOptions(mode="palette", bins=24, fit_bins=8, max_iter=10, n_iter=30,
                            transfer_width=fit_sigma_in_bins)  # ~5 bins
     grade = grade_of(rgb, styles, sharp)
     chroma_sharp = _chroma(grade.apply(rgb))
@@ -174,7 +174,7 @@ def test_the_palette_rebins_only_the_styles_it_uses(rng):
     hists = rng.random((4, 16, 16, 16)) ** 6
     hists /= hists.sum(axis=(1, 2, 3), keepdims=True)
     styles = StyleSet([f"s{i}" for i in range(4)], hists)
-    opts = GradeOptions(bins=16, palette_bins=8, n_iter=5)
+    opts = GradeOptions(mode="palette", bins=16, palette_bins=8, n_iter=5)
     for weights in (np.array([0.0, 1.0, 0.0, 0.0]), np.array([0.5, 0.0, 0.5, 0.0])):
         target, _ = palette_barycenter(styles, weights, opts)
         assert styles._resampled == {}  # the unused styles were never re-binned

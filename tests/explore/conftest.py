@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from tests.color.conftest import SAMPLES, small_copy
+from tests.color.conftest import SAMPLES, THREE_STYLES, small_copy
 from wbcgrade.explore.app import start_studio
 
 #: The preset the tests explore (three styles on 32^3: the cheapest exact maps).
-PRESET = "warm"
+PRESET = str(THREE_STYLES)
 ROOT = Path(__file__).resolve().parents[2]
 #: ``wbcgrade`` as a command, from this source tree (whatever else is installed).
 WBCGRADE = [sys.executable, "-c", "import sys; from wbcgrade.cli import main; sys.exit(main())"]

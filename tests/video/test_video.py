@@ -30,6 +30,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.color.conftest import THREE_STYLES
 from wbcgrade.cli import main
 from wbcgrade.color.colorspace import convert
 from wbcgrade.color.lut import read_cube
@@ -37,7 +38,7 @@ from wbcgrade.color.remap import apply_color_map
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 from wbcgrade.video.shots import frame_tables, lut_schedule
 
-FAST = ["--preset", "warm", "--bins", "32", "--no-cache"]
+FAST = ["--preset", str(THREE_STYLES), "--bins", "32", "--no-cache"]
 WEIGHTS = ["--weights", "0.5,0.3,0.2"]  # skip the fit where the test is about frames
 
 
@@ -241,7 +242,7 @@ def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     from wbcgrade.color.presets import load_preset, resolve_preset
     from wbcgrade.video.workflow import VideoSettings, grade_video
 
-    styles = load_preset(resolve_preset("warm"))
+    styles = load_preset(resolve_preset(str(THREE_STYLES)))
     opts = GradeOptions(bins=32, weights=[0.5, 0.3, 0.2], regrain=False)
     result = grade_video(clips["rgb"], tmp_path / "graded.mkv", styles, opts,
                          VideoSettings(codec="ffv1"))

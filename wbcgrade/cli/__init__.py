@@ -11,18 +11,61 @@ wbcgrade.core). Layers and data flow: docs/architecture.md.
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import signal
 import sys
+import threading
 import warnings
 
 import click
 
 from wbcgrade import __version__
-from wbcgrade.errors import OptionError, WbcgradeError, first_line
+from wbcgrade.errors import OptionError, Terminated, WbcgradeError, first_line
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Library warnings (e.g. a solve stopping above its tolerance) as one line each."""
     click.echo(f"Warning: {first_line(message, category.__name__)}", err=True)
+
+
+#: Signals that end a command the way Ctrl-C does (clean-up included).
+_ENDING_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP")
+                        if hasattr(signal, name))
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def _signals_end_cleanly():
+    """SIGTERM and SIGHUP raise :class:`~wbcgrade.errors.Terminated` in the main thread
+    while a command runs (temporary files and work folders are removed, ffmpeg and
+    worker processes stopped); the previous handlers come back afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.signal(signum, _terminate) for signum in _ENDING_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+_DISK_FULL = {errno.ENOSPC: "disk full", errno.EDQUOT: "disk quota exceeded",
+              errno.EFBIG: "file size limit"}
+
+
+def _message(exc: BaseException) -> str:
+    """One line for an error: an OSError as ``FILE: reason (disk full)``, not ``[Errno 28] ...``."""
+    if isinstance(exc, OSError) and not isinstance(exc, WbcgradeError) and exc.strerror:
+        text = exc.strerror
+        if exc.errno in _DISK_FULL:
+            text += f" ({_DISK_FULL[exc.errno]})"
+        return f"{exc.filename}: {text}" if exc.filename else text
+    return first_line(exc)
 
 
 class _Group(click.Group):
@@ -31,9 +74,13 @@ class _Group(click.Group):
     def invoke(self, ctx: click.Context):
         warnings.showwarning = _show_warning
         try:
-            return super().invoke(ctx)
+            with _signals_end_cleanly():
+                return super().invoke(ctx)
         except (click.exceptions.Exit, click.ClickException, click.Abort):
             raise
+        except Terminated as exc:
+            click.echo(f"Terminated ({signal.Signals(exc.signum).name}).", err=True)
+            sys.exit(128 + exc.signum)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
             sys.exit(130)
@@ -42,7 +89,7 @@ class _Group(click.Group):
                 from wbcgrade.cli.grading_options import flag_error
 
                 exc = flag_error(exc)
-            click.echo(f"Error: {first_line(exc)}", err=True)
+            click.echo(f"Error: {_message(exc)}", err=True)
             sys.exit(1)
 
 

@@ -22,11 +22,36 @@ def style_progress() -> Iterator[Callable[[int, int, str], None]]:
         yield progress
 
 
-def bar_callbacks(bar: tqdm) -> dict:
-    """``styles``, ``fit`` and ``stage`` callbacks drawing on one bar: style photos read,
-    then the fit's evaluations and each stage's name."""
+#: What the bar says while each stage of a grade runs (stage names from the library).
+STAGE_TEXT = {"read": "reading the photo", "fit": "fitting the weights",
+              "histograms": "photo histograms", "look": "extracting the set's look",
+              "barycenter": "barycenter palette", "transfer": "colour transport",
+              "remap": "applying the grade", "write": "writing", "lut": "writing the LUT",
+              "scan": "scanning frames", "encode": "encoding"}
+
+
+def stage_text(name: str) -> str:
+    """The words a bar shows for a stage ("scene fit" -> "scene: fitting the weights")."""
+    if name.startswith("scene "):
+        return "scene: " + stage_text(name[len("scene "):])
+    return STAGE_TEXT.get(name, name)
+
+
+def bar_callbacks(bar: tqdm, photos: bool = False) -> dict:
+    """``styles``, ``fit`` and ``stage`` callbacks drawing on one bar: style photos
+    read, then the fit's evaluations and what each stage does; with ``photos``
+    also ``photo(name)``, which names the photo in the bar (a batch). A new photo
+    (or its "read" stage) starts the bar afresh: nothing of the previous photo's
+    (its loss) stays on it."""
+    current = {"photo": ""}
+
+    def describe(text: str) -> None:
+        bar.set_description(f"{current['photo']}: {text}" if current["photo"] else text,
+                            refresh=False)
+        bar.refresh()
+
     def on_styles(done: int, total: int, name: str) -> None:
-        bar.set_description("style photos")
+        bar.set_description("reading style photos")
         bar.total = total
         bar.n = done
         bar.set_postfix_str(name)
@@ -39,6 +64,16 @@ def bar_callbacks(bar: tqdm) -> dict:
     def on_stage(name: str) -> None:
         if name in ("read", "fit"):
             bar.reset(total=None)
-        bar.set_description(name)
+            bar.set_postfix_str("", refresh=False)
+        describe(stage_text(name))
 
-    return {"styles": on_styles, "fit": on_fit, "stage": on_stage}
+    def on_photo(name: str) -> None:
+        current["photo"] = name
+        bar.reset(total=None)
+        bar.set_postfix_str("", refresh=False)
+        describe("starting")
+
+    callbacks = {"styles": on_styles, "fit": on_fit, "stage": on_stage}
+    if photos:
+        callbacks["photo"] = on_photo
+    return callbacks

@@ -30,22 +30,26 @@ def _print_report(report, as_json: bool) -> None:
         from wbcgrade.color.saved_look import look_dict
 
         # the grade itself rides along: `apply --look` reads this JSON back without a fit
-        click.echo(json.dumps({**report.as_dict(), "look": look_dict(report.grade)}, indent=2))
+        click.echo(json.dumps({**report.as_dict(), "saved_grade": look_dict(report.grade)},
+                              indent=2))
         return
     grade = report.grade
-    ranked = grade.ranked()
-    width = max(len("style"), *(len(name) for name, _ in ranked))
-    click.echo(f"{'style':<{width}}  weight")
-    click.echo(f"{'-' * width}  ------")
-    for name, weight in ranked:
-        click.echo(f"{name:<{width}}  {weight:6.3f}")
     fit = grade.info.get("fit", {})
     start = report.fit_start
-    if start == "look":
-        look = grade.info.get("look", {})
+    if start != "preset":  # a preset's own look has no weights to speak of
+        ranked = grade.ranked()
+        width = max(len("style"), *(len(name) for name, _ in ranked))
+        click.echo(f"{'style':<{width}}  weight")
+        click.echo(f"{'-' * width}  ------")
+        for name, weight in ranked:
+            click.echo(f"{name:<{width}}  {weight:6.3f}")
+    if start == "saved":
+        saved = grade.info.get("saved_look", {})
         regrain = "regrained" if grade.regrain is not None else "no regrain"
-        click.echo(f"look: {look.get('file')} applied as saved ({look.get('kind')}, "
+        click.echo(f"grade: {saved.get('file')} applied as saved ({saved.get('kind')}, "
                    f"{regrain}; no fit)")
+    elif start in ("preset", "scene", "look"):
+        _print_look(start, grade.info.get("look", {}), len(grade.names))
     elif start == "given":
         click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
     else:
@@ -62,6 +66,19 @@ def _print_report(report, as_json: bool) -> None:
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in report.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {report.timings['total']:.1f}s)")
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
+
+
+def _print_look(start: str, look: dict, n_styles: int) -> None:
+    if start == "preset":
+        click.echo("look: the preset's own look, applied as it is")
+    elif start == "scene":
+        click.echo(f"look: read off the style photo of this scene ({look.get('match')}, "
+                   f"confidence {look.get('confidence', 0):.2f})")
+    else:
+        confidence = look.get("confidence", 0.0)
+        towards = (f", moved towards the palette grade of {look.get('match')} "
+                   f"(confidence {confidence:.2f})" if confidence > 0 else "")
+        click.echo(f"look: the look the {n_styles} styles share{towards}")
 
 
 @click.command("apply", cls=LazyOptionsCommand)
@@ -117,6 +134,10 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source, options, output, lut, lut_size, lut_format,
                              overwrite, report_dir, progress, encode)
+    if "own_style" in report.grade.info:
+        from wbcgrade.color.presets import own_style_warning
+
+        _warn(own_style_warning(str(photo), report.grade.info["own_style"]))
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
@@ -23,7 +24,7 @@ from wbcgrade.cli.grading_options import (
 )
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
-    from wbcgrade.color.batch import BatchProgress, BatchResult
+    from wbcgrade.color.batch import BatchProgress, BatchResult, FileResult
     from wbcgrade.color.options import GradeOptions
 
 
@@ -31,14 +32,40 @@ def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
 
 
+#: Weights shown on a photo's line (the largest ones).
+SHOWN_WEIGHTS = 4
+
+
+def photo_line(result: FileResult) -> str:
+    """One line about a finished photo: what happened, its name, and for a graded one
+    its largest weights, the fit's loss and the time."""
+    if result.status == "skipped":
+        return f"skipped  {result.relative} (its output is complete)"
+    if result.status != "graded":
+        return f"{result.status:<8} {result.relative}: {result.error}"
+    ranked = sorted(zip(result.names, result.weights), key=lambda pair: -pair[1])
+    shown = ", ".join(f"{name} {weight:.3f}" for name, weight in ranked[:SHOWN_WEIGHTS]
+                      if weight >= 0.0005)
+    rest = sum(weight >= 0.0005 for _, weight in ranked[SHOWN_WEIGHTS:])
+    if rest:
+        shown += f" (+{rest} more)"
+    loss = "" if result.loss is None else f"  loss {result.loss:.4g}"
+    return (f"graded   {result.relative}: {shown}{loss}  "
+            f"{result.timings.get('total', 0.0):.1f} s")
+
+
 @contextlib.contextmanager
 def batch_progress() -> Iterator[BatchProgress]:
-    """Two tqdm bars: photos (with the failures counted), and the fit stages of the work
-    done in this process (or the series' palettes being read)."""
+    """Two tqdm bars: photos (with the failures counted), and what the work done in this
+    process is doing (the photo's name and stage, or the series' palettes being read).
+    Each finished photo also gets a line on stdout (:func:`photo_line`; above the bars
+    on a terminal, the record of the run in a log), and a photo graded towards its own
+    palette a warning."""
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import bar_callbacks
     from wbcgrade.color.batch import BatchProgress
+    from wbcgrade.color.presets import own_style_warning
 
     with tqdm(desc="photos", unit="photo", disable=None, position=0) as files, \
             tqdm(desc="styles", disable=None, leave=False, position=1) as bar:
@@ -48,6 +75,10 @@ def batch_progress() -> Iterator[BatchProgress]:
             if result.status == "failed":
                 failed.append(result.relative)
                 files.set_postfix(failed=len(failed), refresh=False)
+            tqdm.write(photo_line(result), file=sys.stdout)
+            if result.own_style:
+                tqdm.write("Warning: " + own_style_warning(result.relative, result.own_style),
+                           file=sys.stderr)
             files.update(1)
 
         def on_planned(total):
@@ -55,13 +86,13 @@ def batch_progress() -> Iterator[BatchProgress]:
             files.refresh()
 
         def on_read(done, total):
-            bar.set_description("palettes")
+            bar.set_description("reading the photos' palettes")
             bar.total = total
             bar.n = done
             bar.refresh()
 
         yield BatchProgress(warn=_warn, planned=on_planned, result=on_result, read=on_read,
-                            **bar_callbacks(bar))
+                            **bar_callbacks(bar, photos=True))
 
 
 def warn_fit_bins(options: GradeOptions) -> None:

@@ -63,7 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbcgrade.errors import InputError, OptionError
+from wbcgrade.errors import InputError, OptionError, first_line
 
 __all__ = [
     "DEFAULT_CONFIG",
@@ -162,6 +162,13 @@ def _config(path: str):
     import OpenImageIO as oiio
 
     config = oiio.ColorConfig(path)
+    if config.configname() == "built-in" and path != "built-in":
+        # OpenImageIO falls back to a minimal config of its own, which would turn
+        # every space name into "unknown colour space"
+        why = first_line(config.geterror(), "no reason given").replace("Error: ", "")
+        source = "$OCIO" if path == os.environ.get("OCIO", "").strip() else "the config"
+        raise InputError(f"OpenColorIO config {path} ({source}) could not be read ({why}); "
+                         "fix it, or unset OCIO to use the built-in ocio://default")
     names = list(config.getColorSpaceNames())
     if not names:
         raise InputError(f"OpenColorIO config {path!r} could not be read or lists no colour "
@@ -217,11 +224,8 @@ def resolve_space(name: str, option: str = "--working-space") -> str:
     found = _lookup(config_path()).get(_squash(text)) if text else None
     if found is None:
         shorts = ", ".join(s for s in SHORT_ALIASES if canonical(s))
-        path = config_path()
-        missing = ("; $OCIO names no readable file: OpenImageIO fell back to its minimal "
-                   "config" if "://" not in path and not os.path.isfile(path) else "")
         raise OptionError(
-            f"{option}: unknown colour space {name!r} in OpenColorIO config {path}{missing} "
+            f"{option}: unknown colour space {name!r} in OpenColorIO config {config_path()} "
             f"(valid: {', '.join(space_names())}; or {shorts})", option)
     return found
 

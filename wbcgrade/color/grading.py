@@ -58,7 +58,7 @@ from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
-from wbcgrade.color.presets import StyleSet, styles_in_space
+from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
 from wbcgrade.color.transfer import transport_map
@@ -235,7 +235,6 @@ def look_map(request: MapRequest) -> BuiltMap:
         MAP_BINS,
         SCENE_LOSS,
         SCENE_RELAXATION,
-        LookMap,
         find_scene_look,
         look_color_map,
         natural_palettes,
@@ -246,6 +245,14 @@ def look_map(request: MapRequest) -> BuiltMap:
     options, styles, say = request.options, request.styles, request.stage
     if options.fit.weights is not None:
         return palette_map(request)
+    if styles.meta.get("look") is not None:  # a preset made with a known look: that look
+        from wbcgrade.color.look import resample_lattice
+
+        n_styles = len(styles.names)
+        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
+                         {"start": "preset", "look": "the preset's own"}, 0.0)
+        return BuiltMap(resample_lattice(styles.meta["look"], options.map.size), None,
+                        {"look": {"source": "preset"}}, {}, fit)
     timings: dict[str, float] = {}
     start = time.perf_counter()
     say("histograms")
@@ -264,8 +271,9 @@ def look_map(request: MapRequest) -> BuiltMap:
         scene = find_scene_look(request.photo.pixels[0], styles, base)
         timings["scene"] = time.perf_counter() - start
         if scene is not None and scene.confidence > 0:
-            look = LookMap(base.coefficients + scene.confidence
-                           * (scene.look.coefficients - base.coefficients), base.knots)
+            size = options.map.size
+            base_map = base.lattice(size)
+            color_map = base_map + scene.confidence * (scene.lattice(size) - base_map)
             total = sum(scene.matches.values())
             weights = np.full(n_styles, (1.0 - scene.confidence) / n_styles)
             for index, inliers in scene.matches.items():
@@ -282,7 +290,7 @@ def look_map(request: MapRequest) -> BuiltMap:
             fit = FitSummary(weights, scene.residual, alone, "scene",
                              {"start": "scene", "match": styles.names[best],
                               "confidence": scene.confidence}, sum(timings.values()))
-            return BuiltMap(look.lattice(options.map.size), None, info, timings, fit)
+            return BuiltMap(color_map.astype(np.float32), None, info, timings, fit)
         start = time.perf_counter()
     base, photo, info = look_color_map(photo_hist, styles, naturals)
     timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
@@ -368,6 +376,10 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     info = {"fit": built.fit.info, **built.info}
     info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
                    "preserve_luminance": options.map.preserve_luminance}
+    found = own_style(photo.fit, styles.at_bins(photo.fit.shape[0]), styles.names,
+                      built.fit.weights)
+    if found is not None:  # the photo is one of the styles (the CLI warns)
+        info["own_style"] = found
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,

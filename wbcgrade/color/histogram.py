@@ -8,7 +8,9 @@ recovered exactly as the weighted mean of its bins' positions.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import logging
 import os
 import tempfile
@@ -172,6 +174,7 @@ class HistogramCache:
     def __init__(self, folder: str | os.PathLike | None = None, enabled: bool = True):
         self.folder = Path(folder) if folder is not None else default_cache_dir()
         self.enabled = enabled
+        self._unwritable = False
 
     def _key(self, path: Path, bins: int, max_pixels: int, space: str = "") -> Path:
         stat = path.stat()
@@ -195,16 +198,28 @@ class HistogramCache:
         """Store a histogram (failures are logged, not raised)."""
         if not self.enabled:
             return
+        if self._unwritable:
+            return
+        tmp = None
         try:
             target = self._key(path, bins, max_pixels, space)
             self.folder.mkdir(parents=True, exist_ok=True)
             index, values = to_sparse(hist)
+            data = io.BytesIO()  # the archive is made in memory: a full disk cannot leave
+            np.savez_compressed(data, index=index, values=values)  # a half-closed ZipFile
             fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".npz.tmp")
             with os.fdopen(fd, "wb") as handle:
-                np.savez_compressed(handle, index=index, values=values)
+                handle.write(data.getbuffer())
             os.replace(tmp, target)
+            tmp = None
         except OSError as exc:
-            log.warning("histogram cache not written (%s)", exc)
+            self._unwritable = True  # one line per run, not one per style photo
+            log.warning("histogram cache %s not written (%s); going on without it",
+                        self.folder, exc.strerror or exc)
+        finally:
+            if tmp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
 
 
 class PaletteSum:

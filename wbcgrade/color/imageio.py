@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from wbcgrade._names import readable_name, writable_name, writer_name
 from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.errors import InputError, first_line
 
@@ -232,7 +233,8 @@ def read_image(path: str | os.PathLike) -> Image:
         return read_raw(path)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
-    inp = oiio.ImageInput.open(str(path), config)
+    with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
+        inp = oiio.ImageInput.open(name, config)
     if inp is None:
         raise InputError(f"{path}: not a readable image "
                          f"({first_line(oiio.geterror(), 'unknown format')})")
@@ -335,7 +337,7 @@ def _cmyk_through_profile(path: Path, icc: bytes, shape: tuple) -> np.ndarray | 
 def check_image_output(out: str | os.PathLike) -> str:
     """Raise InputError unless OpenImageIO can write ``out``'s file type; -> format name."""
     out = Path(out)
-    writer = oiio.ImageOutput.create(str(out))
+    writer = oiio.ImageOutput.create(writer_name(out))
     if writer is None:
         detail = first_line(oiio.geterror(), "")
         raise InputError(f"{out}: cannot write this file type{f' ({detail})' if detail else ''}; "
@@ -493,7 +495,7 @@ def _encode_into(target: str, path: Path, spec: oiio.ImageSpec, data: np.ndarray
     has anything to say, the whole file is decoded back and must read cleanly.
     """
     oiio.geterror()  # clear stale global errors of this thread
-    out = oiio.ImageOutput.create(str(path))
+    out = oiio.ImageOutput.create(writer_name(path))
     if out is None:
         raise InputError(f"{path}: cannot write this file type "
                          f"({first_line(oiio.geterror(), 'unknown format')})")
@@ -625,7 +627,8 @@ def _verify_written(tmp: str, path: Path, spec: oiio.ImageSpec, decode: bool = F
                     note: str = "") -> None:
     """Re-open the written file and check its header (and with ``decode`` its pixels)."""
     why = f" ({note})" if note else ""
-    inp = oiio.ImageInput.open(tmp)
+    with readable_name(tmp) as name:
+        inp = oiio.ImageInput.open(name)
     if inp is None:
         raise OSError(f"{path}: write failed, the file does not read back"
                       f"{why or ' (' + first_line(oiio.geterror(), 'unreadable') + ')'}")
@@ -702,7 +705,8 @@ def _write_encoded(fd: int | None, tmp: str, path: Path, spec: oiio.ImageSpec,
     """Fill the temporary file: the bytes encoded in ``fd``, or (no memory files) an
     encoder writing it directly; then check what was written."""
     if fd is None:  # pragma: no cover - not Linux
-        _encode_into(tmp, path, spec, data)
+        with writable_name(tmp) as name:  # a non-UTF-8 folder: see wbcgrade._names
+            _encode_into(name, path, spec, data)
     else:
         _copy_encoded(fd, tmp, path)
     _verify_written(tmp, path, spec)

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
@@ -89,6 +90,8 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
     path = Path(path)
     if path.suffix.lower() != ".cube":
         raise InputError(f"{path}: LUT file name must end in .cube")
+    title = safe_text(title)  # a header naming a non-UTF-8 file: its bytes as \xNN
+    comments = [safe_text(line) for line in comments or []]
     grid = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
                         domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
                         size=table.shape[0], comments=list(comments or []))
@@ -102,7 +105,35 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
                            comments=list(comments or [])), grid), 7
     with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
         colour.write_LUT(lut, tmp, decimals=decimals, method="Resolve Cube")
+        if shaper is not None:
+            _shaper_header_for_readers(tmp)
     return path
+
+
+def _shaper_header_for_readers(path: str) -> None:
+    """Rewrite a shaper ``.cube``'s header so that every reader either reads it right or
+    refuses it: no ``TITLE`` (OpenColorIO's Resolve reader refuses the tag; the title
+    stays as a comment), and ``LUT_3D_SIZE`` before the 1D keywords (ffmpeg's ``lut3d``,
+    which has no shaper, then stops at ``LUT_1D_SIZE`` with "Invalid data" instead of
+    reading the shaper's entries as the 3D table). OpenColorIO and colour-science take
+    the keywords in any order (tests/color/test_lut_interop.py)."""
+    with open(path, encoding="utf-8") as handle:
+        lines = handle.read().splitlines()
+    start = next(n for n, line in enumerate(lines) if line and line[0] in "0123456789-+.")
+    header, data = lines[:start], lines[start:]
+    size_3d = [line for line in header if line.startswith("LUT_3D_SIZE")]
+    out = []
+    for line in header:
+        if line.startswith("TITLE"):
+            line = "# title: " + line[5:].strip().strip('"')
+        elif line.startswith("LUT_3D_SIZE"):
+            continue
+        elif line.startswith("LUT_1D_SIZE"):
+            out += size_3d
+        out.append(line)
+    out += data
+    with open(path, "w", encoding="utf-8") as handle:
+        handle.write("\n".join(out) + "\n")
 
 
 def read_cube(path: str | os.PathLike):
@@ -197,7 +228,8 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     baked = encoding.input != encoding.working
     table = grade.lut(size, encoding if baked else None)
     shaper = not baked and encoding.logarithmic
-    notes = list(comments or []) + lut_header(encoding, shaper)
+    notes = [safe_text(line) for line in list(comments or []) + lut_header(encoding, shaper)]
+    title = safe_text(title)
     if lut_format == "clf":
         return _write_clf(path, table, encoding, shaper, title, notes, overwrite)
     return write_cube(path, table, title=title, comments=notes, overwrite=overwrite,

@@ -23,7 +23,7 @@ sorted into the groups (:data:`FLAT_FIELDS`).
 >>> from wbcgrade.color.options import GradeOptions, TransferOptions
 >>> opts = GradeOptions(transfer=TransferOptions(bins=64, relaxation=0.05))
 >>> opts.transfer.bins, opts.fit.bins, opts.map.builder
-(64, 16, 'palette')
+(64, 16, 'look')
 >>> GradeOptions(bins=64, relaxation=0.05) == opts  # the former flat names
 True
 >>> GradeOptions(strength=2)
@@ -211,9 +211,10 @@ class MapOptions:
     ----------
     builder : how the map is built (a name registered with
         :func:`wbcgrade.color.grading.register_map_builder`; :data:`MODES`:
-        "palette": the fitted barycenter palette, (unbalanced) Sinkhorn, smooth
-        map; "look": the look the style set shares, moved towards the photo's
-        own scene by how sure it is that a style shows it).
+        "look" (the default): the look the style set shares, or the look read
+        off the style photos that show the photo's own scene
+        (:mod:`wbcgrade.color.scene`); "palette": the fitted barycenter
+        palette, (unbalanced) Sinkhorn, smooth map, the paper's colour transfer).
     natural : preset file (.npz) of ungraded photos, the content model of the
         "look" builder; None: the shipped one.
     size : nodes per axis of the smooth colour map (the grade is this lattice
@@ -228,7 +229,7 @@ class MapOptions:
     strength : t in [0, 1]: x -> (1 - t) x + t T(x).
     """
 
-    builder: str = "palette"
+    builder: str = "look"
     natural: str | None = None
     size: int = DEFAULT_MAP_SIZE
     smoothness: float = DEFAULT_SMOOTHNESS

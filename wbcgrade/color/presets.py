@@ -6,14 +6,19 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
 - ``header``: uint8 bytes of a UTF-8 JSON object ``{"format": "wbcgrade-preset",
   "version": 1, "bins": n, "names": [...], "width": w, "gamma": g,
   "description": "...", "space": "...", "working_space": "ACEScct",
-  "ocio_config": "ocio://default"}``; ``working_space`` (an OpenColorIO
+  "ocio_config": "ocio://default", "provenance": {...}}``; ``working_space`` (an OpenColorIO
   colour space name) is the space whose unit cube the histograms cover;
   presets written before it existed lack it and mean sRGB-encoded Rec.709.
   Grading in another working space converts the histograms
-  (:func:`styles_in_space`);
+  (:func:`styles_in_space`); ``provenance`` (optional) says how the styles
+  were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid;
-- ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``.
+- ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``;
+- ``look`` (optional, float16 (m, m, m, 3), indexed [r, g, b], values in [0, 1]):
+  the look the styles share, known exactly because the preset was made by
+  applying it (a lattice LUT in the working space); the "look" grade applies
+  it as it is instead of estimating it from the palettes.
 
 Everything is checked on load and a broken or foreign file gives one clear
 error. Shipped presets live in ``wbcgrade/color/presets_data/`` so that they
@@ -64,7 +69,10 @@ __all__ = [
     "shipped_presets_dir",
     "PRESET_FORMAT",
     "PRESET_VERSION",
+    "RETIRED_PRESETS",
     "styles_in_space",
+    "own_style",
+    "own_style_warning",
 ]
 
 log = logging.getLogger(__name__)
@@ -211,12 +219,17 @@ def check_preset_width(width: float) -> float:
 
 def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
-                threshold: float = 1e-7) -> Path:
+                threshold: float = 1e-7, provenance: dict | None = None,
+                look: np.ndarray | None = None) -> Path:
     """Write a style set as a preset file (atomically; see the module docstring).
 
     ``threshold`` drops bins holding less than that fraction of a style's mass
-    (they are far below the fitting floor) to keep files small.
+    (they are far below the fitting floor) to keep files small; ``provenance``
+    (JSON-friendly) is recorded in the header as it is; ``look`` (m, m, m, 3):
+    the look the styles were made with, as a lattice LUT in the working space.
     """
+    if look is not None:
+        look = _check_look(np.asarray(look), InputError, "look")
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError(f"{path}: preset file name must end in .npz")
@@ -235,14 +248,27 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
               "names": list(styles.names), "width": float(width), "gamma": gamma,
               "description": description, "space": f"{working}-encoded RGB",
               "working_space": working, "ocio_config": config_path()}
+    if provenance:
+        header["provenance"] = provenance
     with atomic_path(path, suffix=".npz.tmp", overwrite=overwrite) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(
                 handle,
                 header=np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8),
                 index=np.concatenate(indices), values=np.concatenate(values),
-                offsets=np.asarray(offsets, dtype=np.int64))
+                offsets=np.asarray(offsets, dtype=np.int64),
+                **({} if look is None else {"look": look.astype(np.float16)}))
     return path
+
+
+def _check_look(look: np.ndarray, error, where: str) -> np.ndarray:
+    """``look`` when it is an (m, m, m, 3) lattice of finite values in [0, 1], m >= 2."""
+    if (look.ndim != 4 or look.shape[3] != 3 or not look.shape[0] == look.shape[1]
+            == look.shape[2] >= 2 or not np.issubdtype(look.dtype, np.floating)):
+        raise error(f"{where}: the look must be an (m, m, m, 3) lattice")
+    if not np.all(np.isfinite(look)) or look.min() < 0 or look.max() > 1:
+        raise error(f"{where}: the look's values must be finite, in [0, 1]")
+    return look
 
 
 def _bad(path: Path, why: str) -> InputError:
@@ -264,6 +290,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
                 raise _bad(path, f"missing {', '.join(sorted(missing))}")
             header_bytes = data["header"]
             index, values, offsets = data["index"], data["values"], data["offsets"]
+            look = data["look"] if "look" in data.files else None
     except InputError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
@@ -312,9 +339,13 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         if not values[part].sum() > 0:
             raise _bad(path, f"style {names[s]!r} is empty")
         hists.append(from_sparse(index[part], values[part], bins))
+    meta = dict(header)
+    if look is not None:
+        meta["look"] = _check_look(look.astype(np.float32),
+                                   lambda why: _bad(path, why.split(": ", 1)[1]), "look")
     return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
                     width=None if width is None else float(width),
-                    description=str(header.get("description", "")), meta=header)
+                    description=str(header.get("description", "")), meta=meta)
 
 
 def shipped_presets_dir() -> Path:
@@ -330,11 +361,19 @@ def list_presets() -> list[tuple[str, Path]]:
     return sorted((p.stem, p) for p in folder.glob("*.npz"))
 
 
+#: Presets shipped before the presets became looks: name -> what to use instead.
+RETIRED_PRESETS = {
+    "landscape": "the palettes of the sample landscapes",
+    "mixed": "the palettes of the sample photos",
+}
+
+
 def resolve_preset(name_or_path: str) -> Path:
     """A preset file from a shipped preset's NAME or a FILE path.
 
     An existing path wins; otherwise the name is looked up among the shipped
-    presets. Raises InputError listing the available names.
+    presets. Raises InputError listing the available names (and saying so
+    when the name is one of :data:`RETIRED_PRESETS`).
     """
     candidate = Path(name_or_path).expanduser()
     if candidate.is_file():
@@ -345,6 +384,11 @@ def resolve_preset(name_or_path: str) -> Path:
     if candidate.suffix or os.sep in name_or_path:
         raise InputError(f"{name_or_path}: no such preset file")
     names = ", ".join(shipped) or "none installed"
+    if name_or_path in RETIRED_PRESETS:
+        raise InputError(
+            f"preset {name_or_path!r} ({RETIRED_PRESETS[name_or_path]}) is no longer shipped: "
+            f"the shipped presets are looks ({names}); for palettes of your own photos "
+            "use --style DIR or `wbcgrade preset build DIR -o FILE.npz`")
     raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")
 
 
@@ -376,7 +420,8 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
             keep = np.flatnonzero(flat > 0)
             moved = convert(centres[keep], source, working)
             hists.append(soft_histogram(moved, styles.bins, flat[keep]))
-        meta = {**styles.meta, "working_space": working, "converted_from": source}
+        meta = {**{k: v for k, v in styles.meta.items() if k != "look"},  # (its own space's)
+                "working_space": working, "converted_from": source}
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
@@ -417,3 +462,48 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space)
+
+
+#: A photo is graded towards itself when one style holds at least this weight ...
+OWN_STYLE_WEIGHT = 0.8
+#: ... and that style's palette is within this total variation distance of the
+#: photo's (half the L1 distance of the two histograms on the fit grid). The
+#: same photo resized or saved again is within 0.1 on 16^3 bins; a look applied
+#: to it (a film print LMT, a CDL) moves it 0.27 or more, another photo 0.68 or more.
+OWN_STYLE_DISTANCE = 0.15
+
+
+def own_style(photo_hist: np.ndarray, style_hists: np.ndarray, names: Sequence[str],
+              weights: np.ndarray) -> dict | None:
+    """Whether a grade takes a photo towards its own palette (the photo is one of the styles).
+
+    Parameters
+    ----------
+    photo_hist : (n, n, n) the photo's histogram.
+    style_hists : (S, n, n, n) the styles' histograms on the same grid.
+    names : S style names.
+    weights : (S,) the grade's weights.
+
+    Returns
+    -------
+    None, or ``{"style": name, "weight": w, "distance": d}`` when the largest
+    weight is at least :data:`OWN_STYLE_WEIGHT` and that style's palette is
+    within :data:`OWN_STYLE_DISTANCE` (total variation) of the photo's.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    top = int(np.argmax(weights))
+    if weights[top] < OWN_STYLE_WEIGHT or photo_hist.shape != style_hists.shape[1:]:
+        return None
+    photo = photo_hist / max(float(photo_hist.sum()), 1e-300)
+    style = style_hists[top] / max(float(style_hists[top].sum()), 1e-300)
+    distance = 0.5 * float(np.abs(photo - style).sum())
+    if distance > OWN_STYLE_DISTANCE:
+        return None
+    return {"style": str(names[top]), "weight": float(weights[top]), "distance": distance}
+
+
+def own_style_warning(photo: str, found: dict) -> str:
+    """The one-line warning for :func:`own_style`'s finding about ``photo``."""
+    return (f"{photo} is graded towards its own palette (style {found['style']!r} has weight "
+            f"{found['weight']:.3f} and a palette {found['distance']:.3f} from the photo's): "
+            "it is one of the styles, so little changes; leave it out of the style set")

@@ -34,7 +34,8 @@ from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.workflow import GradeReport, PhotoGrade
 
 __all__ = ["style_pictures", "report_paths", "plan_report", "write_report", "report_entries",
-           "report_from_grade", "sheet_content", "sheet_path"]
+           "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
+           "palette_record"]
 
 #: The files of a report folder besides the per-photo ones.
 INDEX_FILES = ("report.json", "weights.csv", "index.html")
@@ -43,8 +44,8 @@ INDEX_FILES = ("report.json", "weights.csv", "index.html")
 def _write_text(path: Path, text: str, overwrite: bool) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path, overwrite=overwrite) as tmp, \
-            open(tmp, "w", encoding="utf-8", newline="") as handle:
-        handle.write(text)
+            open(tmp, "w", encoding="utf-8", errors="surrogateescape", newline="") as handle:
+        handle.write(text)  # a non-UTF-8 file name keeps its own bytes (links still work)
 
 
 def sheet_path(relative: str) -> Path:
@@ -113,17 +114,58 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
     return pictures
 
 
+def palette_record(grade, encoding: ColorEncoding) -> dict | None:
+    """The main colours of the palette a grade aimed at (its barycenter), display-encoded,
+    as JSON (``{"colors": [[r, g, b], ...], "shares": [...]}``); None when the grade
+    has no barycenter (a look)."""
+    from wbcgrade.color.sheet import histogram_palette
+
+    if grade.barycenter is None:
+        return None
+    palette = histogram_palette(grade.barycenter)  # in the working space
+    colors = encoding.to_display(palette.colors, working=True)
+    return {"colors": np.round(np.asarray(colors, np.float64), 4).tolist(),
+            "shares": np.round(np.asarray(palette.shares, np.float64), 4).tolist()}
+
+
+def _palette(record: dict | None):
+    from wbcgrade.color.sheet import Palette
+
+    if not record:
+        return None
+    return Palette(np.asarray(record["colors"], np.float64), np.asarray(record["shares"]))
+
+
 def sheet_content(result: FileResult, graded: PhotoGrade,
                   style_pictures: dict[str, np.ndarray] | None = None):
     """The SheetContent of a graded photo (pictures, style tiles, palettes, losses)."""
-    from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
-
     image, encoding = graded.image, graded.encoding
     color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
     # pictures and palettes shown in sRGB, whatever the photo's space
     before = encoding.to_display(image.rgb())
     after = encoding.to_display(np.repeat(graded.pixels[:, :, color], 3 // len(color), axis=2))
+    return _content(result, before, after, _palette(palette_record(graded.grade, encoding)),
+                    style_pictures)
+
+
+def sheet_from_files(result: FileResult, style_pictures: dict[str, np.ndarray] | None = None):
+    """The SheetContent of a photo a batch graded, from its files (``result.source``, the
+    photo; ``result.output``, the graded copy) and its record (weights, losses, the
+    palette aimed at): nothing is graded. Raises InputError when a file is unreadable."""
+    from wbcgrade.color.imageio import read_image
+
+    pictures = []
+    for path in (result.source, result.output):
+        image = read_image(path)
+        pictures.append(ColorEncoding.for_image(image).to_display(image.rgb()))
+    return _content(result, *pictures, _palette(result.palette), style_pictures)
+
+
+def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
+             style_pictures: dict[str, np.ndarray] | None):
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
+
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
@@ -132,10 +174,8 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
     bins = 16
-    target = histogram_palette(graded.grade.barycenter)  # in the working space
-    target.colors = encoding.to_display(target.colors, working=True)
     palettes = [("input", histogram_palette(image_histogram(before, bins))),
-                ("barycenter", target),
+                *([("barycenter", target)] if target is not None else []),
                 ("output", histogram_palette(image_histogram(after, bins)))]
     best = int(np.argmin(result.vertex_losses))
     subtitle = (f"loss {result.loss:.4g}  |  best single style {result.names[best]}: "
@@ -254,10 +294,11 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
 
 
 def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: StyleSet,
-                 options: GradeOptions, mode: str = "per-photo",
+                 options: GradeOptions | dict, mode: str = "per-photo",
                  overwrite: bool = False) -> Path:
     """Write report.json, weights.csv, index.html (and per-photo records) into ``report_dir``.
 
+    ``options``: the grade's options, or their flat names as a batch recorded them.
     Sheets are written by the tasks themselves (``BatchContext.sheet_dir``).
     Existing files are replaced only with ``overwrite`` (:func:`plan_report`
     checked them before any work). Returns the path of report.json.
@@ -275,11 +316,12 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     meta = {"styles": styles.source, "mode": mode, "photos": len(entries),
             "graded": result.count("graded"), "skipped": result.count("skipped"),
             "failed": result.count("failed"), "time_s": round(result.time_s, 2)}
-    color = {**config_info(), "input_space": options.spaces.input or "what each file says",
-             "working_space": options.spaces.working or default_working_space()}
+    flat = options.flat() if isinstance(options, GradeOptions) else dict(options)
+    color = {**config_info(), "input_space": flat.get("input_space") or "what each file says",
+             "working_space": flat.get("working_space") or default_working_space()}
     document = {"format": "wbcgrade-report", "version": 1, **meta, "color": color,
                 "style_names": names, "nonzero_threshold": NONZERO_THRESHOLD,
-                "options": options.flat(), "ignored": result.ignored, "photos": entries}
+                "options": flat, "ignored": result.ignored, "photos": entries}
     if result.series is not None:
         document["series_weights"] = dict(zip(names, map(float, result.series.weights)))
         document["series_loss"] = float(result.series.loss)
@@ -307,7 +349,8 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
                         names=list(styles.names),
                         weights=[float(w) for w in graded.grade.weights],
                         loss=float(fit.loss), vertex_losses=[float(v) for v in fit.vertex_losses],
-                        start=fit.start, timings=dict(graded.timings), color=graded.color)
+                        start=fit.start, timings=dict(graded.timings), color=graded.color,
+                        own_style=graded.grade.info.get("own_style"))
     sheet = sheet_path(result.relative)
     write_sheet(report_dir / sheet, sheet_content(result, graded.graded, style_pictures(styles)),
                 overwrite=overwrite)

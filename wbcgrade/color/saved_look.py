@@ -5,7 +5,7 @@ space, the strength and the regrain settings (:class:`~wbcgrade.color.grading.Gr
 Two files hold one:
 
 - the JSON that ``wbcgrade apply --json`` prints (or a file holding only its
-  ``"look"`` entry, :func:`look_dict`): the map itself (16-bit codes,
+  ``"saved_grade"`` entry, :func:`look_dict`): the map itself (16-bit codes,
   within 0.002/255, compressed: ~150 kB for 33³), its working space,
   strength, regrain settings, style names and weights. Applied again it
   gives the same photo, regrain included;
@@ -136,7 +136,7 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
     return Grade(names=names, weights=weights, color_map=color_map,
                  working=str(entry.get("working_space") or ""), strength=strength,
                  regrain=regrain, loss=None if loss is None else float(loss),
-                 info={"look": {"file": where, "kind": "json"}})
+                 info={"saved_look": {"file": where, "kind": "json"}})
 
 
 def _header_space(lines: list[str]) -> str | None:
@@ -249,7 +249,7 @@ def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
 
 
 def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grade:
-    """Read a saved grade: a ``.json`` from ``apply --json`` (or its ``"look"`` entry), or a
+    """Read a saved grade: a ``.json`` from ``apply --json`` (or its ``"saved_grade"``), or a
     3-D LUT (:data:`LOOK_SUFFIXES`).
 
     Parameters
@@ -262,7 +262,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     -------
     Grade whose ``color_map`` is the saved map (a LUT's table, strength 1 and
     no regrain settings: the caller decides), ``working`` the config's name
-    of its space, ``info["look"]`` the file and its kind.
+    of its space, ``info["saved_look"]`` the file and its kind.
     """
     from wbcgrade.color.colorspace import default_working_space
 
@@ -276,7 +276,8 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
             data = json.loads(path.read_text("utf-8"))
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             raise InputError(f"{path}: not a readable JSON file ({exc})") from None
-        entry = data.get("look") if isinstance(data, dict) and "look" in data else data
+        entry = data.get("saved_grade") if isinstance(data, dict) and "saved_grade" in data \
+            else data
         if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
             raise InputError(f"{path}: holds no saved grade (write one with "
                              "`wbcgrade apply PHOTO ... --json > grade.json`)")
@@ -299,7 +300,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
         space = default_working_space()
     kind = suffix.lstrip(".")
     return Grade(names=(path.stem,), weights=np.ones(1), color_map=table, working=space,
-                 info={"look": {"file": str(path), "kind": kind}})
+                 info={"saved_look": {"file": str(path), "kind": kind}})
 
 
 def look_styles(grade: Grade, source: str) -> StyleSet:
@@ -309,10 +310,10 @@ def look_styles(grade: Grade, source: str) -> StyleSet:
 
 
 def look_fit(grade: Grade) -> FitSummary:
-    """The weights of a saved grade, as a fit summary (start "look": nothing was fitted)."""
+    """The weights of a saved grade, as a fit summary (start "saved": nothing was fitted)."""
     return FitSummary(np.asarray(grade.weights, dtype=np.float64),
                       float(grade.loss) if grade.loss is not None else 0.0,
-                      np.zeros(len(grade.names)), "look", {"look": dict(grade.info)}, 0.0)
+                      np.zeros(len(grade.names)), "saved", dict(grade.info), 0.0)
 
 
 def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike | None = None,
@@ -325,7 +326,7 @@ def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike 
     then the photo is read, encoded into the look's working space, moved
     through its map (and regrain, when the look has it) and written as a
     fresh grade is (:func:`~wbcgrade.color.workflow.grade_file`). Returns
-    the :class:`~wbcgrade.color.workflow.GradeReport` (``fit_start`` "look").
+    the :class:`~wbcgrade.color.workflow.GradeReport` (``fit_start`` "saved").
     """
     from wbcgrade.color.lut import DEFAULT_LUT_SIZE
     from wbcgrade.color.options import GradeOptions
@@ -334,7 +335,7 @@ def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike 
     plan = plan_photo(photo, output, lut, lut_size or DEFAULT_LUT_SIZE, lut_format, overwrite,
                       encode=encode)
     options = GradeOptions(input_space=input_space, working_space=look.working)
-    source = str(dict(look.info).get("look", {}).get("file", "saved grade"))
+    source = str(dict(look.info).get("saved_look", {}).get("file", "saved grade"))
     report = grade_file(plan, look_styles(look, source), options, shared=look,
                         progress=progress)
     report.fit = look_fit(look)

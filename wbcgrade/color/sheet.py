@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
+from wbcgrade._names import safe_text, writable_name, writer_name
 from wbcgrade._publish import atomic_path
 from wbcgrade.color.histogram import grid_points, resample_histogram
 
@@ -149,7 +150,7 @@ class _Canvas:
         self.pixels[top:top + height, left:left + width] = colour
 
     def text(self, x: int, baseline: int, text: str, size: int = 14, colour=_INK) -> None:
-        self.texts.append((x, baseline, text, size, colour))
+        self.texts.append((x, baseline, safe_text(text), size, colour))  # non-UTF-8 names
 
     def render(self) -> np.ndarray:
         if not USE_FONTS:
@@ -226,9 +227,9 @@ def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960
     path.parent.mkdir(parents=True, exist_ok=True)
     spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
-    with atomic_path(path, overwrite=overwrite) as tmp:
-        out = oiio.ImageOutput.create(tmp)
-        if out is None or not out.open(tmp, spec):
+    with atomic_path(path, overwrite=overwrite) as tmp, writable_name(tmp) as name:
+        out = oiio.ImageOutput.create(writer_name(tmp))
+        if out is None or not out.open(name, spec):
             raise OSError(f"{path}: cannot write the sheet ({oiio.geterror().strip()})")
         ok = out.write_image(np.ascontiguousarray(pixels, dtype=np.float32))
         error = out.geterror()

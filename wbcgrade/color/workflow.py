@@ -243,7 +243,7 @@ class GradeReport:
     @property
     def fit_start(self) -> str:
         """How the weights were found: "uniform", "vertex-refit", "vertex", "given" or
-        "look" (a saved grade, nothing fitted)."""
+        "saved" (a saved grade, ``--look``: nothing fitted)."""
         return self.fit.start if self.fit is not None else "shared"
 
     @property
@@ -260,7 +260,7 @@ class GradeReport:
             "styles": self.styles_source,
             "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
             "loss": self.grade.loss,
-            "fitted": self.fit_start not in ("given", "look"),
+            "fitted": self.fit_start not in ("given", "saved"),
             "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},

@@ -6,6 +6,7 @@ Above :mod:`wbcgrade.video.workflow` (a clip graded end to end) and
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import replace
@@ -33,9 +34,12 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
 
     The clip's grade is a LUT: ``options.regrain`` is turned off. The report
     (a contact sheet per shot and report.json, :mod:`wbcgrade.video.report`)
-    never replaces files it did not write unless ``overwrite``. ``look``: a
-    saved grade (:func:`wbcgrade.color.saved_look.load_look`) applied to
-    every frame instead of a fit (``styles`` is not read).
+    never replaces files it did not write unless ``overwrite``. The clip, its
+    LUTs and the report are published together once all are written: a
+    failure in any (a full disk under the LUT, a report folder that cannot be
+    written) publishes none. ``look``: a saved grade
+    (:func:`wbcgrade.color.saved_look.load_look`) applied to every frame
+    instead of a fit (``styles`` is not read).
     """
     settings = settings or VideoSettings()
     progress = progress or VideoProgress()
@@ -52,9 +56,10 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
         from wbcgrade.color.saved_look import look_batch_options, look_styles
 
         options = look_batch_options(options, look, report_dir=report_dir)
-        loaded = look_styles(look, str(dict(look.info).get("look", {}).get("file")))
-    result = grade_planned(source, output, lut, loaded, options, settings, overwrite, progress,
-                            {"styles": time.perf_counter() - start}, look)
-    if report_dir is not None:
-        result.report = write_video_report(report_dir, result, loaded, overwrite)
+        loaded = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
+    with contextlib.ExitStack() as stack:  # every output published together, or none
+        result = grade_planned(source, output, lut, loaded, options, settings, overwrite,
+                                progress, {"styles": time.perf_counter() - start}, stack, look)
+        if report_dir is not None:
+            result.report = write_video_report(report_dir, result, loaded, overwrite, stack)
     return result

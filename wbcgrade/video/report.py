@@ -23,12 +23,14 @@ written atomically, and only into a folder whose files they do not replace
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.fit import NONZERO_THRESHOLD
 from wbcgrade.color.histogram import image_histogram
@@ -68,7 +70,7 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
            pictures: dict[str, np.ndarray]) -> SheetContent:
     fps = result.info.fps
     shown = _shown(shot.samples, FRAMES_PER_SHEET)
-    before = [result.samples.frames[n].astype(np.float32) / 255 for n in shown]
+    before = [result.samples.frames[n][..., :3].astype(np.float32) / 255 for n in shown]
     after = [apply_color_map(frame, shot.table) for frame in before]
     encoding = result.encoding
     before = [encoding.to_display(frame) for frame in before]  # pictures in sRGB
@@ -77,13 +79,14 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]
-    target = histogram_palette(shot.grade.barycenter)  # in the working space
-    target.colors = encoding.to_display(target.colors, working=True)
-    palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
-                ("barycenter", target),
-                ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
+    palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16)))]
+    if shot.grade.barycenter is not None:  # a palette grade's target (a look grade has none)
+        target = histogram_palette(shot.grade.barycenter)  # in the working space
+        target.colors = encoding.to_display(target.colors, working=True)
+        palettes.append(("barycenter", target))
+    palettes.append(("graded", histogram_palette(image_histogram(np.concatenate(after), 16))))
     best = shot.fit.best_vertex
-    title = (f"{result.input.name}  shot {number} of {len(result.shots)}: frames "
+    title = (f"{safe_text(result.input.name)}  shot {number} of {len(result.shots)}: frames "
              f"{shot.first}-{shot.last} ({shot.first / fps:.2f}-{(shot.last + 1) / fps:.2f} s), "
              f"{len(shot.samples)} sampled")
     subtitle = (f"loss {shot.fit.loss:.4g}  |  best single style {names[best]}: "
@@ -107,21 +110,37 @@ def plan_video_report(report_dir: str | os.PathLike, inputs=(),
 
 
 def write_video_report(report_dir: str | os.PathLike, result: VideoResult,
-                       styles: StyleSet, overwrite: bool = False) -> Path:
+                       styles: StyleSet, overwrite: bool = False,
+                       stack: contextlib.ExitStack | None = None) -> Path:
     """Write the sheets and ``report.json`` into ``report_dir`` -> the JSON's path
-    (existing files replaced only with ``overwrite``)."""
+    (existing files replaced only with ``overwrite``).
+
+    With ``stack``, every file is written to a temporary file entered on it
+    (:func:`wbcgrade._publish.atomic_path`) and published only when the caller
+    closes the stack without an exception: the report goes out with the clip or
+    not at all. A report folder this call made is removed again on failure.
+    """
     report_dir = Path(report_dir)
-    report_dir.mkdir(parents=True, exist_ok=True)
-    pictures = style_pictures(styles)
-    document = result.as_dict()
-    document["styles"] = {"source": styles.source, "names": list(styles.names)}
-    for number, shot in enumerate(result.shots, start=1):
-        name = f"shot-{number:02d}.png"
-        write_sheet(report_dir / name, _sheet(result, number, shot, pictures),
-                    overwrite=overwrite)
-        document["shots"][number - 1]["sheet"] = name
-    path = report_dir / "report.json"
-    with atomic_path(path, overwrite=overwrite) as tmp, \
-            open(tmp, "w", encoding="utf-8") as handle:
-        json.dump(document, handle, indent=2, default=float)
+    with contextlib.ExitStack() as own:
+        stack = stack if stack is not None else own
+        if not report_dir.is_dir():
+            report_dir.mkdir(parents=True)
+            stack.push(lambda kind, *_: kind is not None and _remove_empty(report_dir))
+        pictures = style_pictures(styles)
+        document = result.as_dict()
+        document["styles"] = {"source": styles.source, "names": list(styles.names)}
+        for number, shot in enumerate(result.shots, start=1):
+            name = f"shot-{number:02d}.png"
+            tmp = stack.enter_context(atomic_path(report_dir / name, overwrite=overwrite))
+            write_sheet(tmp, _sheet(result, number, shot, pictures), overwrite=True)
+            document["shots"][number - 1]["sheet"] = name
+        path = report_dir / "report.json"
+        tmp = stack.enter_context(atomic_path(path, overwrite=overwrite))
+        with open(tmp, "w", encoding="utf-8") as handle:
+            json.dump(document, handle, indent=2, default=float)
     return path
+
+
+def _remove_empty(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        folder.rmdir()

@@ -49,7 +49,8 @@ class Samples:
 
     Attributes
     ----------
-    frames : {frame index: (h, w, 3) uint8 RGB} the sampled frames.
+    frames : {frame index: (h, w, 3) uint8 RGB} the sampled frames ((h, w, 4) RGBA for a
+        clip with alpha: transparent pixels do not count in the palettes).
     cuts : frame indices where a new shot starts (0 not included).
     distances : (n_frames,) colour distance of each frame to the previous (0 for the first).
     n_frames : frames decoded.
@@ -103,7 +104,7 @@ def scan(path: str | os.PathLike, info: VideoInfo, sample_every: float = DEFAULT
     out = Samples()
     distances = []
     previous = None
-    for n, frame in enumerate(decode_frames(path, info, width, height)):
+    for n, frame in enumerate(decode_frames(path, info, width, height, alpha=info.alpha)):
         hist = _coarse_histogram(frame)
         distance = 0.0 if previous is None else 0.5 * float(np.abs(hist - previous).sum())
         previous = hist

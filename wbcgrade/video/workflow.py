@@ -2,7 +2,10 @@
 
 1. check every output first (:func:`plan_video`, through
    :func:`wbcgrade._publish.plan_outputs`), then
-   :func:`~wbcgrade.video.ffmpeg.probe` the input.
+   :func:`~wbcgrade.video.ffmpeg.probe` the input (playlists and truncated
+   files refused) and check the encoding with a trial pass of a few frames
+   (:func:`check_encoding`: ffmpeg's own reason, lost size, streams or alpha
+   refused, lost bit depth or field order said), all before the fit.
 2. :func:`~wbcgrade.video.sampling.scan`: one small decoding pass keeps a
    frame every ``sample_every`` seconds (and finds the cuts with ``per_shot``).
 3. Per shot (the whole clip by default), the sampled frames' palettes are
@@ -17,7 +20,10 @@
    applies them with ``lut3d`` (tetrahedral), converts back to the input's
    pixel format and colour tags, and encodes, copying every other stream
    (audio, subtitles, data) as it is, into a temporary file beside the
-   output that is renamed onto it only when ffmpeg succeeded.
+   output; alpha is carried through (``lut3d`` on planar RGBA), interlaced
+   frames keep their field order. The clip and its LUTs are published
+   together (and with the report, :func:`wbcgrade.video.command.grade_clip`)
+   only when everything was written and ffmpeg wrote every frame.
 
 Colour spaces (:mod:`wbcgrade.video.spaces`): the sampled frames are
 converted from the clip's input space (``opts.input_space``, else its tags)
@@ -31,16 +37,19 @@ written) is :func:`wbcgrade.video.command.grade_clip`.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
+import shutil
 import tempfile
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path, plan_outputs
+from wbcgrade._publish import atomic_path, is_unlocked, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
@@ -49,12 +58,15 @@ from wbcgrade.color.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.color.workflow import Progress
-from wbcgrade.errors import InputError, OptionError
+from wbcgrade.errors import InputError, OptionError, WbcgradeError
 from wbcgrade.video.ffmpeg import (
+    FfmpegError,
     VideoInfo,
     encoder_pixel_formats,
     file_arg,
     from_rgb_filter,
+    input_args,
+    pixel_format,
     probe,
     run_pass,
     to_rgb_filter,
@@ -71,7 +83,8 @@ from wbcgrade.video.spaces import clip_encoding, frame_to_working, lut_comments
 
 __all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "VideoProgress",
            "ShotGrade", "VideoResult", "default_output", "plan_video", "shot_lut_paths",
-           "shot_grade", "grade_video", "encode_args"]
+           "shot_grade", "grade_video", "grade_planned", "encode_args", "check_encoding",
+           "work_folder", "remove_stale_work_folders", "WORK_PREFIX"]
 
 #: --codec NAME -> (ffmpeg encoder, containers it may go in).
 CODECS = {
@@ -80,6 +93,9 @@ CODECS = {
     "prores": ("prores_ks", (".mov", ".mkv")),
     "ffv1": ("ffv1", (".mkv", ".avi")),
 }
+#: Codecs that store alpha so that ffmpeg reads it back (libx265's yuva420p does not:
+#: the HEVC decoder drops the alpha layer).
+ALPHA_CODECS = ("prores", "ffv1")
 #: x264/x265 constant rate factor (18: visually lossless for x264).
 DEFAULT_CRF = 18
 #: Frames over which the grade changes at a cut (--per-shot).
@@ -235,38 +251,51 @@ def shot_grade(frames: list[np.ndarray], styles: StyleSet, options: GradeOptions
     styles must be there already), through the photos' grade path.
     """
     pool_fit, pool = PaletteSum(), PaletteSum()
-    for frame in frames:
-        hists = photo_histograms(frame_to_working(frame, encoding), options)
+    for frame in frames:  # (h, w, 4) with alpha: transparent pixels do not count
+        alpha = frame[..., 3].astype(np.float32) / 255 if frame.shape[-1] == 4 else None
+        hists = photo_histograms(frame_to_working(frame[..., :3], encoding), options, alpha)
         pool_fit.add(hists.fit)
         pool.add(hists.transfer)
     return grade_histograms(PhotoHistograms(pool_fit.result(), pool.result()), styles, options,
                             encoding, callback, stage)
 
 
+def _family(pix_fmt: str) -> str:
+    """"rgb", or the chroma layout of a Y'CbCr format (``yuv420``, ``yuv444``...), alpha or not."""
+    if pix_fmt.startswith(("gbr", "bgr", "rgb", "argb", "abgr", "0rgb", "0bgr")):
+        return "rgb"
+    return pix_fmt.replace("yuva", "yuv").replace("yuvj", "yuv")[:6]
+
+
 def _output_pix_fmt(info: VideoInfo, encoder: str) -> str:
-    """The input's pixel format when the encoder takes it; else the nearest it takes."""
-    supported = encoder_pixel_formats(encoder)
+    """The input's pixel format when the encoder takes it; else the nearest it takes: with
+    alpha when the input has alpha, the same RGB or chroma layout where there is one, and
+    the shallowest depth at least the input's (else the deepest)."""
+    supported = list(encoder_pixel_formats(encoder))
     if not supported or info.pix_fmt in supported:
         return info.pix_fmt
-    if info.is_rgb:
-        rgb = [f for f in supported if f.startswith(("gbr", "bgr", "rgb"))]
-        if rgb:
-            return rgb[0]
-    chroma = info.pix_fmt[:6]  # yuv420 / yuv422 / yuv444
-    same = [f for f in supported if f.startswith(chroma)]
-    deep = [f for f in same if info.high_depth == ("10" in f or "12" in f or "16" in f)]
-    return (deep or same or list(supported))[0]
+    alpha = [f for f in supported if pixel_format(f)[2]]
+    pool = alpha if info.alpha else ([f for f in supported if f not in alpha] or supported)
+    family = "rgb" if info.is_rgb else _family(info.pix_fmt)
+    pool = [f for f in pool if _family(f) == family] or pool
+    deep = [f for f in pool if pixel_format(f)[1] >= info.bits]
+    if deep:
+        return min(deep, key=lambda f: pixel_format(f)[1])
+    return max(pool, key=lambda f: pixel_format(f)[1])
 
 
 def encode_args(info: VideoInfo, settings: VideoSettings, output: Path, chain: str,
-                folder: Path) -> tuple[list[str], str, str]:
+                folder: Path, frames: int | None = None) -> tuple[list[str], str, str]:
     """ffmpeg arguments of the grading pass -> (args, encoder, output pixel format).
 
     ``chain`` is the filter chain (``lut3d`` filters) between the conversion to
     RGB and back; the whole graph is written to ``folder/graph.txt`` (read
     with ``-/filter_complex``: a clip with many shots makes a long graph) and
     ffmpeg must run in ``folder``. The output file is given as is (the caller
-    passes a temporary path with the output's extension).
+    passes a temporary path with the output's extension). ``frames``: encode
+    only the first ``frames`` frames (the trial pass, :func:`check_encoding`).
+    Alpha is carried through untouched (``lut3d`` grades RGB and copies the
+    alpha plane); interlaced footage keeps its field order.
     """
     encoder, _ = CODECS[settings.codec]
     pix_fmt = _output_pix_fmt(info, encoder)
@@ -274,11 +303,11 @@ def encode_args(info: VideoInfo, settings: VideoSettings, output: Path, chain: s
     # through it within 2/255 (mean ~0.05/255), the same conversion decode_frames uses
     # for the samples; its 16-bit and float paths are twice as fast but shift the mean
     # by 1-1.5/255 against it (measured on a 480x270 clip, identity LUT).
-    rgb = "gbrp16le" if info.high_depth else "gbrp"
+    rgb = ("gbrap" if info.alpha else "gbrp") + ("16le" if info.high_depth else "")
     graph = (f"[0:v:0]{to_rgb_filter(info, rgb)},{chain},"
              f"{from_rgb_filter(info, pix_fmt)}[graded]")
     (folder / "graph.txt").write_text(graph, encoding="utf-8")
-    args = ["-i", file_arg(info.path), "-/filter_complex", "graph.txt",
+    args = [*input_args(info.path), "-/filter_complex", "graph.txt",
             "-map", "[graded]", "-map", "0", "-map", "-0:v:0",
             "-c", "copy", "-c:v:0", encoder]
     if settings.codec in ("x264", "x265"):
@@ -291,11 +320,80 @@ def encode_args(info: VideoInfo, settings: VideoSettings, output: Path, chain: s
         args += ["-profile:v:0", "3" if "444" not in pix_fmt else "4"]
     elif settings.codec == "ffv1":
         args += ["-level", "3"]
+    if info.interlaced:
+        if settings.codec in ("x264", "prores"):
+            args += ["-flags:v:0", "+ildct+ilme" if settings.codec == "x264" else "+ildct"]
+        args += ["-field_order:v:0", info.field_order]
     if output.suffix.lower() in (".mp4", ".m4v", ".mov"):
         args += ["-movflags", "+faststart"]
+    if frames is not None:
+        args += ["-frames:v:0", str(frames)]
     args += ["-fps_mode", "passthrough", "-map_metadata", "0", "-loglevel", "error", "-y",
              file_arg(output)]
     return args, encoder, pix_fmt
+
+
+#: Frames the trial pass encodes before the fit.
+TRIAL_FRAMES = 3
+
+
+def check_encoding(info: VideoInfo, settings: VideoSettings, output: Path, folder: Path,
+                   warn: Callable[[str], None] | None = None) -> tuple[str, str]:
+    """Check, before the fit, that the clip can be written as asked -> (encoder, pix_fmt).
+
+    Alpha the codec cannot store is refused (InputError naming codecs that
+    can). Then a trial pass encodes the first :data:`TRIAL_FRAMES` frames
+    with every stream into ``folder`` (same container, codec, pixel format,
+    streams): ffmpeg's own reason when it fails ("codec not currently
+    supported in container", an odd size...), and a refusal when the trial
+    file lost frame size, streams or alpha. Losing bit depth (12-bit footage
+    into a 10-bit encoder) or interlacing is said through ``warn``.
+    """
+    encoder = CODECS[settings.codec][0]
+    where = f"{info.path}: " if info.path else ""
+    if info.alpha and settings.codec not in ALPHA_CODECS:
+        raise InputError(f"{where}the frames have an alpha channel ({info.pix_fmt}), which "
+                         f"--codec {settings.codec} cannot store; use --codec prores (.mov) "
+                         "or ffv1 (.mkv) to keep it")
+    trial = folder / f"trial{output.suffix}"
+    with _writing_in(folder):
+        args, encoder, pix_fmt = encode_args(info, settings, trial, "null", folder,
+                                             TRIAL_FRAMES)
+    try:
+        run_pass(args, cwd=str(folder))
+    except FfmpegError as exc:
+        reason = str(exc).removeprefix("ffmpeg failed: ")
+        if "No space left" in reason:
+            raise InputError(f"{folder}: cannot write the temporary files ({reason}); set "
+                             "TMPDIR to a folder with space") from None
+        raise InputError(f"{output}: ffmpeg cannot write this clip with --codec "
+                         f"{settings.codec} into {output.suffix}: {reason}") from None
+    written = probe(trial)
+    if (written.width, written.height) != (info.width, info.height):
+        raise InputError(f"{output}: {encoder} ({pix_fmt}) would store the {info.width}x"
+                         f"{info.height} frames as {written.width}x{written.height}; use "
+                         "--codec ffv1 (.mkv) or prores (.mov)")
+    if written.streams != info.streams:
+        raise InputError(f"{output}: {output.suffix} would keep the streams "
+                         f"{', '.join(written.streams)} of {', '.join(info.streams)}; "
+                         "choose another container")
+    if info.alpha and not written.alpha:
+        raise InputError(f"{output}: the alpha channel would be lost ({pix_fmt}); use "
+                         "--codec prores (.mov) or ffv1 (.mkv)")
+    say = warn or (lambda message: None)
+    out_bits, in_bits = pixel_format(pix_fmt)[1], info.bits
+    prores = info.codec == "prores" and settings.codec == "prores"  # 4444 decodes as 12-bit
+    if out_bits < in_bits and not prores:
+        deeper = [n for n, (enc, _) in CODECS.items()
+                  if max((pixel_format(f)[1] for f in encoder_pixel_formats(enc)),
+                         default=0) >= in_bits]
+        say(f"{info.path.name}: {in_bits}-bit footage written {out_bits}-bit ({encoder} "
+            f"takes {pix_fmt} at most)" + (f"; --codec {' or '.join(deeper)} keeps "
+                                           f"{in_bits} bits" if deeper else ""))
+    if info.interlaced and written.field_order is None:
+        say(f"{info.path.name}: interlaced footage ({info.field_order}) written without its "
+            f"field order by {encoder}; --codec x264, prores or ffv1 keeps it")
+    return encoder, pix_fmt
 
 
 def _lut_chain(segments: list[Segment], names: list[str]) -> str:
@@ -336,22 +434,101 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
         :func:`shot_lut_paths`).
     progress : fit, stage and frame progress.
 
-    The outputs are checked first (:func:`plan_video`). The output is written
-    to a temporary file beside it and renamed onto it when ffmpeg succeeded;
-    on any failure or Ctrl-C ffmpeg is killed and the temporary file removed.
+    The outputs are checked first (:func:`plan_video`), the encoding before
+    the fit (:func:`check_encoding`). Every output is written to a temporary
+    file beside it and all are renamed onto their names only when everything
+    was written (:func:`grade_planned`); on any failure, Ctrl-C or SIGTERM
+    ffmpeg is killed and the temporary files removed.
     """
     settings = settings or VideoSettings()
     planned = plan_video(source, output, lut, settings, overwrite)
-    return grade_planned(*planned, styles, options, settings, overwrite,
-                          progress or VideoProgress(), timings)
+    with contextlib.ExitStack() as stack:
+        return grade_planned(*planned, styles, options, settings, overwrite,
+                              progress or VideoProgress(), timings, stack)
+
+
+#: Prefix of the work folders in the system's temporary folder (``$TMPDIR``).
+WORK_PREFIX = "wbcgrade-video-"
+#: The lock file a live run holds in its work folder.
+WORK_LOCK = ".lock"
+#: A work folder without a lock file is removed when older than this (seconds).
+UNLOCKED_WORK_AGE_S = 3600.0
+
+
+def remove_stale_work_folders(base: str | os.PathLike | None = None) -> list[Path]:
+    """Remove the work folders of killed runs (their lock is free) -> the removed folders."""
+    base = Path(base or tempfile.gettempdir())
+    removed = []
+    try:
+        entries = [e for e in os.scandir(base) if e.name.startswith(WORK_PREFIX)]
+    except OSError:
+        return removed
+    for entry in entries:
+        try:
+            if not entry.is_dir(follow_symlinks=False) or entry.stat().st_uid != os.getuid():
+                continue
+            lock = Path(entry.path) / WORK_LOCK
+            stale = (is_unlocked(lock) if lock.exists() else
+                     time.time() - entry.stat().st_mtime > UNLOCKED_WORK_AGE_S)
+        except OSError:
+            continue
+        if stale:
+            shutil.rmtree(entry.path, ignore_errors=True)
+            removed.append(Path(entry.path))
+    return removed
+
+
+@contextlib.contextmanager
+def work_folder() -> Iterator[Path]:
+    """A private folder in ``$TMPDIR`` for the LUTs, graph and trial file of one run.
+
+    Locked while the run lives; removed when it ends (an exception, Ctrl-C and
+    SIGTERM/SIGHUP included: the CLI turns those into exceptions). A folder a
+    SIGKILL left behind is removed by the next run (:func:`remove_stale_work_folders`).
+    Failures to write here (a full ``$TMPDIR``) are InputErrors naming the folder.
+    """
+    base = Path(tempfile.gettempdir())
+    remove_stale_work_folders(base)
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX, dir=base))
+    except OSError as exc:
+        raise InputError(f"{base}: cannot create a temporary folder here ({exc.strerror}); "
+                         "set TMPDIR to a folder with space") from None
+    lock = None
+    try:
+        lock = os.open(folder / WORK_LOCK, os.O_RDWR | os.O_CREAT, 0o600)
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        yield folder
+    finally:
+        if lock is not None:
+            os.close(lock)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _writing_in(folder: Path) -> Iterator[None]:
+    """A failure to write into the work folder (a full ``$TMPDIR``) as an InputError naming it."""
+    try:
+        yield
+    except OSError as exc:
+        if isinstance(exc, WbcgradeError) or exc.errno is None:
+            raise
+        raise InputError(f"{folder}: cannot write the temporary files ({exc.strerror}); set "
+                         "TMPDIR to a folder with space") from None
 
 
 def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
                    options: GradeOptions, settings: VideoSettings, overwrite: bool,
                    progress: VideoProgress, timings: dict[str, float] | None,
-                   look: Grade | None = None) -> VideoResult:
+                   stack: contextlib.ExitStack, look: Grade | None = None) -> VideoResult:
     """:func:`grade_video` once :func:`plan_video` checked the outputs (the outputs as
-    it returned them); ``look``: a saved grade used for every shot (no fit)."""
+    it returned them); ``look``: a saved grade used for every shot (no fit).
+
+    The graded clip and its LUTs are written to temporary files entered on
+    ``stack`` (:func:`wbcgrade._publish.atomic_path`): they are published when
+    the caller closes the stack without an exception (after writing whatever
+    else belongs to the run, e.g. the report), and all removed otherwise.
+    """
     timings = dict(timings or {})
     start = time.perf_counter()
     info = probe(source)
@@ -359,6 +536,8 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
     styles = styles_in_space(styles, encoding.working)
     options.check_styles(len(styles.names))
     frames = progress.frames
+    folder = stack.enter_context(work_folder())
+    check_encoding(info, settings, output, folder, progress.warn)
 
     progress.say("scan")
     t0 = time.perf_counter()
@@ -367,6 +546,9 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
                    progress=None if frames is None else
                    (lambda n: frames("scan", n, info.frames)))
     timings["scan"] = time.perf_counter() - t0
+    if samples.n_frames != info.frames:  # the decoded frames are the clip (an edit list
+        # trims the packets counted by the probe: a cut made with -c copy)
+        info = replace(info, frames=samples.n_frames, duration=samples.n_frames / info.fps)
 
     shots = []
     t0 = time.perf_counter()
@@ -388,27 +570,31 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
 
     progress.say("encode")
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="wbcgrade-video-") as folder:
-        names = []
-        for number, seg in enumerate(segments):
-            name = f"lut{number:05d}.cube"
-            write_cube(Path(folder) / name, seg.table)
-            names.append(name)
-        chain = _lut_chain(segments, names)
-        with atomic_path(output, overwrite=overwrite) as tmp:
-            args, encoder, pix_fmt = encode_args(info, settings, Path(tmp), chain,
-                                                  Path(folder))
-            run_pass(args, None if frames is None else
-                     (lambda n: frames("encode", n, info.frames)), cwd=folder)
+    names = [f"lut{number:05d}.cube" for number in range(len(segments))]
+    tmp = stack.enter_context(atomic_path(output, overwrite=overwrite))
+    with _writing_in(folder):
+        for name, seg in zip(names, segments):
+            write_cube(folder / name, seg.table)
+        args, encoder, pix_fmt = encode_args(info, settings, Path(tmp), _lut_chain(
+            segments, names), folder)
+    try:
+        done = run_pass(args, None if frames is None else
+                        (lambda n: frames("encode", n, info.frames)), cwd=str(folder))
+    except FfmpegError as exc:
+        raise FfmpegError(f"{output}: {exc}") from None
+    if done != info.frames:
+        raise FfmpegError(f"{output}: ffmpeg wrote {done} of the clip's {info.frames} frames; "
+                          "nothing is published")
     timings["encode"] = time.perf_counter() - t0
     for path, shot in zip(luts, shots):
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked())
-        write_cube(path, shot.table, title=f"wbcgrade video {Path(source).name}",
+        written = stack.enter_context(atomic_path(path, overwrite=overwrite))
+        write_cube(written, shot.table, title=f"wbcgrade video {Path(source).name}",
                    comments=[f"wbcgrade grade of {Path(source).name}, frames {shot.first}-"
                              f"{shot.last}: {ranked}",
                              "input: full-range RGB decoded with the clip's own matrix",
                              *lut_comments(encoding)],
-                   overwrite=overwrite)
+                   overwrite=True)
     timings["total"] = time.perf_counter() - start
     return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
                        timings, encoder, pix_fmt, encoding, styles.working_space)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import OpenImageIO as oiio
 
+from wbcgrade._names import readable_name
 from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
 from wbcgrade.errors import InputError
 
@@ -99,7 +100,8 @@ def output_is_complete(source: Path, output: Path) -> bool:
         return False
     sizes = []
     for path in (source, output):
-        inp = oiio.ImageInput.open(str(path))
+        with readable_name(path) as name:  # a non-UTF-8 name: see wbcgrade._names
+            inp = oiio.ImageInput.open(name)
         if inp is None:
             oiio.geterror()
             return False

@@ -30,6 +30,8 @@ class FileResult:
     sheet: str | None = None
     timings: dict[str, float] = field(default_factory=dict)
     color: dict = field(default_factory=dict)  # colour spaces and config (ColorEncoding)
+    own_style: dict | None = None  # the photo is one of the styles (presets.own_style)
+    palette: dict | None = None  # display colours and shares the grade aimed at (sheets)
 
     @property
     def n_nonzero(self) -> int:
@@ -55,6 +57,10 @@ class FileResult:
                 "nonzero_weights": self.n_nonzero,
                 "nonzero_threshold": NONZERO_THRESHOLD,
             })
+        if self.own_style:
+            entry["own_style"] = self.own_style
+        if self.palette:
+            entry["target_palette"] = self.palette
         if self.color:
             entry["color"] = self.color
         if self.sheet:
@@ -62,6 +68,24 @@ class FileResult:
         entry["time_s"] = round(self.timings.get("total", 0.0), 3)
         entry["timings_s"] = {k: round(v, 3) for k, v in self.timings.items()}
         return entry
+
+    @classmethod
+    def from_dict(cls, entry: dict) -> FileResult:
+        """The result an :meth:`as_dict` entry describes (weights back in the styles'
+        order; rounded as the entry holds them). Raises KeyError, TypeError or
+        ValueError on an entry that is not one."""
+        losses = entry.get("single_style_losses") or {}
+        weights = {str(w["style"]): float(w["weight"]) for w in entry.get("weights", [])}
+        names = list(losses) or list(weights)
+        return cls(str(entry["photo"]), str(entry["source"]), entry.get("output"),
+                   str(entry["status"]), error=str(entry.get("error", "")), names=names,
+                   weights=[weights.get(name, 0.0) for name in names],
+                   loss=None if entry.get("loss") is None else float(entry["loss"]),
+                   vertex_losses=[float(losses[name]) for name in losses],
+                   start=str(entry.get("fit_start", "")), sheet=entry.get("sheet"),
+                   timings={k: float(v) for k, v in entry.get("timings_s", {}).items()},
+                   color=dict(entry.get("color", {})), own_style=entry.get("own_style"),
+                   palette=entry.get("target_palette"))
 
 
 @dataclass

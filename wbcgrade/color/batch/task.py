@@ -78,6 +78,9 @@ def run_task(task: BatchTask, context: BatchContext,
     and programming errors propagate.
     """
     start = time.perf_counter()
+    starting = getattr(progress, "photo", None)  # a batch's progress names the photo
+    if starting is not None:
+        starting(task.relative)
     result = FileResult(task.relative, str(task.source),
                         None if task.output is None else str(task.output), "failed")
     set_max_image_pixels(context.max_image_pixels)
@@ -97,9 +100,12 @@ def run_task(task: BatchTask, context: BatchContext,
         result.start = fit.start
         result.timings = dict(report.timings)
         result.color = report.color
+        result.own_style = report.grade.info.get("own_style")
+        from wbcgrade.color.report import palette_record, sheet_content, sheet_path
+
+        result.palette = palette_record(report.grade, report.graded.encoding)
         result.timings["total"] = time.perf_counter() - start
         if context.sheet_dir is not None:
-            from wbcgrade.color.report import sheet_content, sheet_path
             from wbcgrade.color.sheet import write_sheet
 
             sheet = sheet_path(task.relative)

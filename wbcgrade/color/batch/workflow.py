@@ -3,9 +3,12 @@
 :func:`grade_folder` (``wbcgrade batch``): plan every output before any
 work (the graded copies, the series LUT, the report's files), take the
 output folder's lock, load the styles, say which recorded settings changed,
-run the batch (:func:`wbcgrade.color.batch.run.run_batch`), and write the
-settings record, the report and the series LUT. :func:`report_folder`
-(``wbcgrade report``): the same run with nothing written but the report.
+run the batch (:func:`wbcgrade.color.batch.run.run_batch`), record each
+photo's result as it is graded (:mod:`wbcgrade.color.batch.records`), and
+write the settings record, the report and the series LUT.
+:func:`report_folder` (``wbcgrade report``): the same run with nothing
+written but the report; on a batch's output folder it reads the batch's
+records instead (:func:`report_batch_output`: nothing is graded).
 """
 
 from __future__ import annotations
@@ -16,11 +19,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from wbcgrade._publish import lock_folder, plan_outputs
 from wbcgrade.color.batch.plan import BatchPlan, plan_batch, recheck_plan
+from wbcgrade.color.batch.records import RESULTS_FOLDER, read_record, write_record
 from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.batch.run import run_batch
-from wbcgrade.color.batch.settings import batch_settings, settings_changed, write_settings
+from wbcgrade.color.batch.settings import (
+    SETTINGS_FILE,
+    batch_settings,
+    settings_changed,
+    write_settings,
+)
 from wbcgrade.color.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.lut import (
@@ -36,7 +47,8 @@ from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
 from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError
 
-__all__ = ["BatchProgress", "grade_folder", "report_folder"]
+__all__ = ["BatchProgress", "grade_folder", "report_folder", "report_batch_output",
+           "recorded_batch"]
 
 
 @dataclass(frozen=True)
@@ -45,12 +57,13 @@ class BatchProgress(Progress):
 
     ``planned(n_photos)`` once the photos are known; ``result(FileResult)``
     as each photo finishes; ``read(done, total)`` while a series reads its
-    photos' histograms.
+    photos' histograms; ``photo(relative)`` as a photo graded in this process starts.
     """
 
     planned: Callable[[int], None] | None = None
     result: Callable[[FileResult], None] | None = None
     read: Callable[[int, int], None] | None = None
+    photo: Callable[[str], None] | None = None
 
 
 def _load(source: StyleSource, options: GradeOptions, progress: Progress) -> StyleSet:
@@ -60,9 +73,31 @@ def _load(source: StyleSource, options: GradeOptions, progress: Progress) -> Sty
     return styles
 
 
+def _recorder(out_dir: Path, progress: BatchProgress) -> Callable[[FileResult], None]:
+    """``on_result`` that records each graded photo in ``out_dir``, then tells ``progress``."""
+    unrecorded: list[str] = []
+
+    def on_result(result: FileResult) -> None:
+        if result.status == "graded":
+            try:
+                write_record(out_dir, result)
+            except OSError as exc:  # the photo is written; only `report`'s shortcut is lost
+                if not unrecorded and progress.warn:
+                    progress.warn(f"cannot record the results in {out_dir / RESULTS_FOLDER} "
+                                  f"({exc.strerror or exc}); `wbcgrade report` will grade "
+                                  "those photos again")
+                unrecorded.append(result.relative)
+        if progress.result:
+            progress.result(result)
+
+    return on_result
+
+
 def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: bool,
          jobs: int, scheduler: str | None, report_dir: Path | None, write_outputs: bool,
-         overwrite: bool, progress: BatchProgress, look=None, encode=None) -> BatchResult:
+         overwrite: bool, progress: BatchProgress,
+         on_result: Callable[[FileResult], None] | None = None, look=None,
+         encode=None) -> BatchResult:
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite)
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
@@ -78,7 +113,7 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
         context.style_pictures = style_pictures(styles)
     in_process = scheduler is None and jobs == 1
     return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
-                     on_result=progress.result,
+                     on_result=on_result or progress.result,
                      progress=progress if in_process or consistent else None,
                      on_read=progress.read)
 
@@ -161,7 +196,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         else:
             from wbcgrade.color.saved_look import look_styles
 
-            styles = look_styles(look, str(dict(look.info).get("look", {}).get("file")))
+            styles = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
@@ -169,8 +204,12 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                           f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite "
                           "to redo them")
         result = _run(plan, styles, options, consistent, jobs, scheduler, report_dir, True,
-                      overwrite, progress, look, encode)
+                      overwrite, progress, _recorder(Path(out_dir), progress), look, encode)
         if result.count("graded"):
+            if result.series is not None:
+                settings["series_weights"] = dict(zip(styles.names,
+                                                      map(float, result.series.weights)))
+                settings["series_loss"] = float(result.series.loss)
             write_settings(out_dir, settings)
         result.time_s = time.perf_counter() - start
         if report_dir is not None:
@@ -205,11 +244,17 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
     Writes ``report_dir`` (default ``<name>_report`` beside ``target``):
     report.json, weights.csv, a sheet per photo and index.html; existing
     files are replaced only with ``overwrite`` (checked before any work).
+    A ``target`` that is a batch's output folder (:func:`recorded_batch`) is
+    reported from the batch's records (:func:`report_batch_output`).
     """
     progress = progress or BatchProgress()
     _check_jobs(jobs)
     target = Path(target)
     out = Path(report_dir) if report_dir else default_report_dir(target)
+    recorded = recorded_batch(target)
+    if recorded is not None:
+        return report_batch_output(target, out, recorded, source, options,
+                                   recursive=recursive, overwrite=overwrite, progress=progress)
     plan = plan_batch(target, None, recursive=recursive, exclude=[out])
     if not plan.tasks:
         if target.is_file():
@@ -227,4 +272,135 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
 
     result.report = write_report(out, result, styles, options,
                                  "consistent" if consistent else "per-photo", overwrite)
+    return result
+
+
+def recorded_batch(folder: str | os.PathLike) -> dict | None:
+    """The settings a batch recorded in its output folder ``folder``, when it holds
+    results recorded for ``wbcgrade report`` (else None)."""
+    import json
+
+    folder = Path(folder)
+    if not (folder / RESULTS_FOLDER).is_dir():
+        return None
+    try:
+        settings = json.loads((folder / SETTINGS_FILE).read_text("utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(settings, dict) or not isinstance(settings.get("style_names"), list):
+        return None
+    return settings
+
+
+def _recorded_styles(recorded: str, names: list[str]) -> StyleSet:
+    """The styles a batch recorded, for the sheets' pictures: the preset when it is still
+    there with these names, else the names alone (a folder's pictures are its photos)."""
+    from wbcgrade.color.presets import load_preset
+
+    if Path(recorded).is_file():
+        try:
+            styles = load_preset(recorded)
+            if styles.names == names:
+                return styles
+        except InputError:
+            pass
+    return StyleSet(names, np.ones((len(names), 1, 1, 1)), recorded)
+
+
+def _same_styles(given: StyleSource, recorded: str) -> bool:
+    from wbcgrade.color.presets import resolve_preset
+
+    if given.style_dir is not None:
+        return Path(given.style_dir).resolve() == Path(recorded).resolve()
+    try:
+        return resolve_preset(given.preset).resolve() == Path(recorded).resolve()
+    except InputError:
+        return False
+
+
+def _given_options(options: GradeOptions, recorded: dict) -> list[str]:
+    """Options set to something else than their default and than the batch recorded."""
+    import json
+
+    given = json.loads(json.dumps(options.flat(), default=float))
+    default = json.loads(json.dumps(GradeOptions().flat(), default=float))
+    return [k for k, v in given.items() if v != default.get(k) and v != recorded.get(k)]
+
+
+def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike,
+                        settings: dict, source: StyleSource | None = None,
+                        options: GradeOptions | None = None, *, recursive: bool = False,
+                        overwrite: bool = False,
+                        progress: BatchProgress | None = None) -> BatchResult:
+    """The report of a batch's output folder from what the batch recorded: nothing is graded.
+
+    Every graded copy under ``folder`` is reported with the weights, losses
+    and timings its batch recorded (:mod:`wbcgrade.color.batch.records`) and a
+    sheet made from the photo and its graded copy. A copy without a record
+    fails (the report says so). ``source`` and ``options`` are those given to
+    ``wbcgrade report``: styles other than the batch's are refused, other
+    options are ignored with a warning.
+    """
+    from wbcgrade.color.batch.results import FileResult as Result
+    from wbcgrade.color.fit import FitSummary
+    from wbcgrade.color.report import sheet_from_files, sheet_path, style_pictures, write_report
+    from wbcgrade.color.sheet import write_sheet
+
+    progress = progress or BatchProgress()
+    folder, report_dir = Path(folder), Path(report_dir)
+    recorded_styles = str(settings.get("styles", ""))
+    flat = settings.get("options") if isinstance(settings.get("options"), dict) else {}
+    if source is not None and (source.style_dir, source.preset) != (None, None) \
+            and not _same_styles(source, recorded_styles):
+        raise InputError(f"{folder} holds the graded copies of a `wbcgrade batch` with the styles "
+                         f"{recorded_styles}; its report reads the batch's results: leave out "
+                         "--style/--preset (or report the photos' own folder to grade them "
+                         "again)")
+    ignored = _given_options(options, flat) if options is not None else []
+    if ignored and progress.warn:
+        progress.warn(f"{', '.join(ignored[:4])}: ignored, the report shows the batch's grades "
+                      f"(made with the options it recorded in {folder / SETTINGS_FILE})")
+    plan = plan_batch(folder, None, recursive=recursive, exclude=[report_dir])
+    if not plan.tasks:
+        raise InputError(f"{folder}: no graded photos found"
+                         + ("" if recursive else " (use --recursive for sub-folders)"))
+    _plan_report(report_dir, plan, overwrite)
+    if progress.planned:
+        progress.planned(len(plan.tasks))
+    start = time.perf_counter()
+    names = [str(n) for n in settings["style_names"]]
+    styles = _recorded_styles(recorded_styles, names)
+    pictures = style_pictures(styles)
+    report_dir.mkdir(parents=True, exist_ok=True)
+    results = []
+    for task in plan.tasks:
+        if progress.photo:
+            progress.photo(task.relative)
+        result = read_record(folder, task.relative)
+        if result is None:
+            result = Result(task.relative, "", str(task.source), "failed",
+                            error=f"no result recorded by the batch in {folder / RESULTS_FOLDER}")
+        else:
+            result.output = str(task.source)
+            sheet = sheet_path(task.relative)
+            try:
+                write_sheet(report_dir / sheet, sheet_from_files(result, pictures),
+                            overwrite=overwrite)
+                result.sheet = sheet.as_posix()
+            except (InputError, ValueError, OSError) as exc:
+                if progress.warn:
+                    progress.warn(f"{task.relative}: no sheet ({exc})")
+        results.append(result)
+        if progress.result:
+            progress.result(result)
+    series = None
+    if isinstance(settings.get("series_weights"), dict):
+        weights = settings["series_weights"]
+        series = FitSummary(np.array([float(weights.get(n, 0.0)) for n in names]),
+                            float(settings.get("series_loss", 0.0)), np.zeros(len(names)),
+                            "recorded")
+    result = BatchResult(results, list(plan.ignored), time.perf_counter() - start, series, names)
+    mode = "consistent" if settings.get("consistent") else "per-photo"
+    result.report = write_report(report_dir, result, styles, flat, f"{mode} (batch results)",
+                                 overwrite)
     return result

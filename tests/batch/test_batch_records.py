@@ -1,0 +1,126 @@
+"""A batch records its results; `report` on its output reads them (grades nothing); one
+line per photo; a photo that is one of the styles is warned about (issue 22)."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from tqdm import tqdm
+
+import wbcgrade.color.grading as grading
+from tests.batch.test_batch import FAST, SAMPLES, small_copy
+from wbcgrade.cli import main
+
+
+@pytest.fixture
+def fits(monkeypatch) -> list[str]:
+    """Every weight fit and every pass of the grade path, by name, as they happen."""
+    calls: list[str] = []
+    fit, grade = grading.fit_weights, grading.grade_histograms
+
+    def counted_fit(*args, **kwargs):
+        calls.append("fit")
+        return fit(*args, **kwargs)
+
+    def counted_grade(*args, **kwargs):
+        calls.append("grade")
+        return grade(*args, **kwargs)
+
+    monkeypatch.setattr(grading, "fit_weights", counted_fit)
+    monkeypatch.setattr(grading, "grade_histograms", counted_grade)
+    return calls
+
+
+@pytest.fixture
+def folders(tmp_path) -> tuple[Path, Path]:
+    """(photos, styles): chelsea and coffee; the styles coffee (a larger copy: the same
+    photo), flower and sunset."""
+    photos, styles = tmp_path / "photos", tmp_path / "styles"
+    for name in ("chelsea", "coffee"):
+        small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 64)
+    for name in ("coffee", "flower", "sunset"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 96)
+    return photos, styles
+
+
+def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path, folders, fits):
+    photos, styles = folders
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style",
+                                       str(styles), *FAST])
+    assert result.exit_code == 0, result.output
+    assert fits.count("grade") == 2 and "fit" in fits
+    # one line per photo (not a terminal here): name, weights, loss, time
+    lines = [line for line in result.stdout.splitlines() if line.startswith("graded   ")]
+    assert len(lines) == 2 and all(" loss " in line and line.endswith(" s") for line in lines)
+    assert any(line.startswith("graded   coffee.jpg: coffee 1.000") for line in lines)
+    # coffee is one of the styles: one warning line, only for it
+    warnings = [line for line in result.stderr.splitlines() if "its own palette" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("Warning: coffee.jpg is graded")
+    records = {p.name: json.loads(p.read_text()) for p in (out / ".wbcgrade-results").iterdir()}
+    assert set(records) == {"chelsea.jpg.json", "coffee.jpg.json"}
+    assert records["coffee.jpg.json"]["own_style"]["style"] == "coffee"
+    assert "own_style" not in records["chelsea.jpg.json"]
+
+    fits.clear()
+    report_dir = tmp_path / "report"
+    result = CliRunner().invoke(main, ["report", str(out), "-o", str(report_dir)])
+    assert result.exit_code == 0, result.output
+    assert fits == []  # nothing graded
+    assert "reported 2, skipped 0, failed 0" in result.stdout
+    assert "coffee.jpg is graded towards its own palette" in result.stderr
+    document = json.loads((report_dir / "report.json").read_text())
+    assert document["style_names"] == ["coffee", "flower", "sunset"]
+    for entry in document["photos"]:
+        record = records[f"{entry['photo']}.json"]
+        assert entry["weights"] == record["weights"] and entry["loss"] == record["loss"]
+        assert entry["output"] == str(out / entry["photo"])
+        assert (report_dir / entry["sheet"]).is_file()
+    assert (report_dir / "weights.csv").read_text().count("\n") == 3
+    # the batch's grades are reported whatever the options; other styles are refused
+    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "r2"),
+                                       "--preset", "warm"])
+    assert result.exit_code == 1 and fits == []
+    assert result.output.strip().splitlines()[-1].startswith(f"Error: {out} holds the graded")
+    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "r3"),
+                                       "--style", str(styles), "--strength", "0.5"])
+    assert result.exit_code == 0 and fits == []
+    assert "strength: ignored" in result.stderr
+
+
+def test_report_of_a_copy_the_batch_did_not_record_says_so(tmp_path, folders, fits):
+    photos, styles = folders
+    out = tmp_path / "out"
+    args = ["batch", str(photos), "-o", str(out), "--style", str(styles), *FAST]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    small_copy(SAMPLES / "flower.jpg", out / "stranger.jpg", 32)
+    fits.clear()
+    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "report")])
+    assert result.exit_code == 1 and fits == []
+    assert "failed   stranger.jpg: no result recorded by the batch" in result.stdout
+
+
+def test_stage_bar_says_what_it_does_and_drops_the_previous_photos_loss():
+    from wbcgrade.cli._progress import bar_callbacks
+
+    with tqdm(file=io.StringIO(), disable=False) as bar:
+        callbacks = bar_callbacks(bar, photos=True)
+        callbacks["photo"]("a.jpg")
+        callbacks["stage"]("fit")
+        callbacks["fit"](1, np.ones(3) / 3, 0.125)
+        assert bar.desc.removesuffix(": ") == "a.jpg: fitting the weights"
+        assert "0.125" in bar.postfix
+        callbacks["stage"]("barycenter")
+        assert bar.desc.removesuffix(": ") == "a.jpg: barycenter palette"
+        callbacks["photo"]("b.jpg")
+        assert bar.desc.removesuffix(": ") == "b.jpg: starting" and not bar.postfix
+        callbacks["fit"](1, np.ones(3) / 3, 0.5)
+        callbacks["stage"]("read")  # apply: no photo names, the read stage starts afresh
+        assert bar.desc.removesuffix(": ") == "b.jpg: reading the photo" and not bar.postfix
+        callbacks["stage"]("scene transfer")
+        assert bar.desc.removesuffix(": ") == "b.jpg: scene: colour transport"
