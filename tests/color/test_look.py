@@ -137,8 +137,10 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path):
     from wbcgrade.cli import main
     from wbcgrade.color.lut import read_cube
 
+    # a preset of palettes only (no look of its own): the look is extracted
+    palettes = str(Path(__file__).resolve().parents[1] / "data" / "three_samples.npz")
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "-o",
+    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", palettes, "-o",
                                        str(tmp_path / "o.png"), "--json", *FAST_ARGS,
                                        "--mode", "look"])
     assert result.exit_code == 0, result.output
@@ -146,7 +148,7 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path):
     assert report["map"]["builder"] == "look" and report["fit_start"] == "look"
     assert abs(sum(w["weight"] for w in report["weights"]) - 1) < 1e-5  # rounded to 6 digits
     lut = tmp_path / "look.cube"
-    args = ["look", "extract", "--preset", "warm", "-o", str(lut), "--lut-size", "9"]
+    args = ["look", "extract", "--preset", palettes, "-o", str(lut), "--lut-size", "9"]
     assert CliRunner().invoke(main, args).exit_code == 0
     assert read_cube(lut).size == 9
     result = CliRunner().invoke(main, args)

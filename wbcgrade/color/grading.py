@@ -241,6 +241,7 @@ def look_map(request: MapRequest) -> BuiltMap:
         set_look_base,
     )
     from wbcgrade.color.presets import load_preset
+    from wbcgrade.color.scene import has_style_images
 
     options, styles, say = request.options, request.styles, request.stage
     if options.fit.weights is not None:
@@ -291,6 +292,15 @@ def look_map(request: MapRequest) -> BuiltMap:
                              {"start": "scene", "match": styles.names[best],
                               "confidence": scene.confidence}, sum(timings.values()))
             return BuiltMap(color_map.astype(np.float32), None, info, timings, fit)
+        if has_style_images(styles):
+            # the style photos were looked at and none shows this scene: the set's look
+            # (a palette that merely resembles the photo's is no better sign of its scene)
+            info = {"look": {"set_amplitude": extracted.look.amplitude(), "match": None,
+                             "confidence": 0.0, **extracted.info}}
+            fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
+                             "look", {"start": "look", "match": None, "confidence": 0.0},
+                             sum(timings.values()))
+            return BuiltMap(base.lattice(options.map.size), None, info, timings, fit)
         start = time.perf_counter()
     base, photo, info = look_color_map(photo_hist, styles, naturals)
     timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
@@ -307,9 +317,9 @@ def look_map(request: MapRequest) -> BuiltMap:
             replace(options.map, builder="palette"), options.regrain, options.spaces)
         scene, summary = grade_histograms(request.photo, styles, scene_options,
                                           request.encoding, None,
-                                          lambda name: say(f"scene {name}"))
+                                          lambda name: say(f"palette {name}"))
         for name, seconds in scene.timings.items():
-            timings[f"scene {name}"] = seconds
+            timings[f"palette {name}"] = seconds
         base_map = base.lattice(scene.color_map.shape[0])
         color_map = (base_map + confidence * (scene.color_map - base_map)).astype(np.float32)
         weights = confidence * np.asarray(summary.weights) + (1.0 - confidence) * weights

@@ -37,7 +37,7 @@ import numpy as np
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
-           "style_scene_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
+           "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
 #: Long side (pixels) of the images keypoints are found on and pairs are read from.
 MATCH_SIZE = 768
@@ -257,6 +257,12 @@ def _read_style(path: Path, working_space: str) -> SceneImage:
     encoding = ColorEncoding.for_image(image, None, working_space)
     encoded, _ = encoding.encode(image.rgb(), image.is_float)
     return scene_image(encoded)
+
+
+def has_style_images(styles) -> bool:
+    """Whether a StyleSet names its photos' files or carries their images (a folder's
+    does, a preset's does not): whether :func:`style_scene_images` has anything to match."""
+    return bool(styles.meta.get("images") or styles.meta.get("files"))
 
 
 def style_scene_images(styles, progress: Callable[[int, int], None] | None = None,
