@@ -133,11 +133,13 @@ def test_render_grey_and_alpha(tmp_path, rng):
     grey_alpha = rng.random((5, 6, 2)).astype(np.float32)
     image = read_image(write_array(tmp_path / "ga.png", grey_alpha, "uint16"))
     pixels, alpha = render(image, grade)
-    assert pixels.shape == (5, 6, 4) and alpha == 3
-    np.testing.assert_array_equal(pixels[:, :, 3], image.pixels[:, :, 1])  # alpha untouched
-    np.testing.assert_allclose(pixels[:, :, 1], 0.8 * image.pixels[:, :, 0], atol=1e-6)
+    # grey stays grey (the luma of the graded colours), alpha untouched
+    assert pixels.shape == (5, 6, 2) and alpha == 1
+    np.testing.assert_array_equal(pixels[:, :, 1], image.pixels[:, :, 1])
+    luma = 0.299 * 1.0 + 0.587 * 0.8 + 0.114 * 0.6
+    np.testing.assert_allclose(pixels[:, :, 0], luma * image.pixels[:, :, 0], atol=1e-6)
     back = read_image(write_image(tmp_path / "out.png", pixels, image, alpha_channel=alpha))
-    assert back.spec.channelnames == ("R", "G", "B", "A") and back.alpha_channel == 3
+    assert back.spec.nchannels == 2 and back.alpha_channel == 1
     assert back.spec.format == image.spec.format
     rgba = read_image(write_array(tmp_path / "c.png", rng.random((5, 6, 4)), "uint8"))
     pixels, alpha = render(rgba, grade)

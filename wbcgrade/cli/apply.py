@@ -10,10 +10,14 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     lazy_options,
+    look_option,
     lut_format_option,
     lut_size_option,
     space_options,
     take_grading_options,
+    take_look,
+    take_write_options,
+    write_options,
 )
 
 
@@ -23,7 +27,11 @@ def _warn(message: str) -> None:
 
 def _print_report(report, as_json: bool) -> None:
     if as_json:
-        click.echo(json.dumps(report.as_dict(), indent=2))
+        from wbcgrade.color.saved_look import look_dict
+
+        # the grade itself rides along: `apply --look` reads this JSON back without a fit
+        click.echo(json.dumps({**report.as_dict(), "saved_grade": look_dict(report.grade)},
+                              indent=2))
         return
     grade = report.grade
     fit = grade.info.get("fit", {})
@@ -35,7 +43,12 @@ def _print_report(report, as_json: bool) -> None:
         click.echo(f"{'-' * width}  ------")
         for name, weight in ranked:
             click.echo(f"{name:<{width}}  {weight:6.3f}")
-    if start in ("preset", "scene", "look"):
+    if start == "saved":
+        saved = grade.info.get("saved_look", {})
+        regrain = "regrained" if grade.regrain is not None else "no regrain"
+        click.echo(f"grade: {saved.get('file')} applied as saved ({saved.get('kind')}, "
+                   f"{regrain}; no fit)")
+    elif start in ("preset", "scene", "look"):
         _print_look(start, grade.info.get("look", {}), len(grade.names))
     elif start == "given":
         click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
@@ -79,12 +92,16 @@ def _print_look(start: str, look: dict, n_styles: int) -> None:
                    "colour spaces it expects and produces).")
 @lazy_options(lut_size_option)
 @lazy_options(lut_format_option)
+@lazy_options(look_option)
+@lazy_options(write_options)
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
               "index.html) into this folder.")
-def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_dir, **kwargs):
+@click.pass_context
+def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, as_json,
+          report_dir, **kwargs):
     """Grade PHOTO towards the barycenter of style palettes closest to its own.
 
     The style palettes come from a folder of photos (--style DIR) or a preset
@@ -93,7 +110,10 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     their ICC profile names, converted) and float (EXR) photos in the
     sRGB-encoded domain; values above 1 keep their intensity and get the
     grade of their hue. --working-space (e.g. acescct) grades elsewhere;
-    the output stays in the photo's own space.
+    the output stays in the photo's own space. Raw camera files (DNG, CR2,
+    NEF, ARW, ...) are demosaiced by LibRaw and graded in ACEScct. --look
+    FILE applies a saved grade (the JSON of `apply --json`, or a LUT) with
+    no fit.
     """
     from tqdm import tqdm
 
@@ -101,13 +121,19 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     from wbcgrade.color.apply import apply_photo
     from wbcgrade.color.workflow import Progress
 
+    encode = take_write_options(kwargs)
     options, source = take_grading_options(kwargs)
+    look = take_look(ctx, look_path, kwargs, options)
+    if look is not None:
+        _apply_look(photo, look, output, lut, lut_size, lut_format, overwrite, as_json,
+                    report_dir, options, encode)
+        return
     if options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     with tqdm(desc="styles", disable=None, leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source, options, output, lut, lut_size, lut_format,
-                             overwrite, report_dir, progress)
+                             overwrite, report_dir, progress, encode)
     if "own_style" in report.grade.info:
         from wbcgrade.color.presets import own_style_warning
 
@@ -115,3 +141,23 @@ def apply(photo, output, lut, lut_size, lut_format, overwrite, as_json, report_d
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")
+
+
+def _apply_look(photo, look, output, lut, lut_size, lut_format, overwrite, as_json, report_dir,
+                options, encode) -> None:
+    """``apply --look``: the saved grade applied as it is (no styles, no fit)."""
+    from tqdm import tqdm
+
+    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.color.saved_look import apply_look
+    from wbcgrade.color.workflow import Progress
+    from wbcgrade.errors import OptionError
+
+    if report_dir is not None:
+        raise OptionError("--report needs styles to compare with; a saved --look has none",
+                          "--report")
+    with tqdm(desc="look", disable=None, leave=False) as bar:
+        progress = Progress(warn=_warn, **bar_callbacks(bar))
+        report = apply_look(photo, look, output, lut, lut_size, lut_format, overwrite,
+                            options.spaces.input, encode, progress)
+    _print_report(report, as_json)

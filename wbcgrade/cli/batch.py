@@ -13,10 +13,14 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     lazy_options,
+    look_option,
     lut_format_option,
     lut_size_option,
     space_options,
     take_grading_options,
+    take_look,
+    take_write_options,
+    write_options,
 )
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
@@ -142,9 +146,11 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
                    ".clf; its header names the colour spaces).")
 @lazy_options(lut_size_option)
 @lazy_options(lut_format_option)
+@lazy_options(look_option)
+@lazy_options(write_options)
 @click.pass_context
 def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, jobs, scheduler,
-          report_dir, lut, lut_size, lut_format, **kwargs):
+          report_dir, lut, lut_size, lut_format, look_path, **kwargs):
     """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
 
     Each photo gets its own barycentric coordinates, or with --consistent the
@@ -153,19 +159,24 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     temporary files of a killed run. One run at a time may write into OUT_DIR.
     Files that are not images (by extension) are ignored; unreadable photos
     and failed writes (e.g. a full disk) are reported and make the exit
-    status 1.
+    status 1. --look FILE applies a saved grade (the JSON of `apply --json`,
+    or a LUT) to every photo with no fit.
     """
     from wbcgrade.color.batch import grade_folder
 
     if force_alias:
         _warn("--force is deprecated; use --overwrite")
+    encode = take_write_options(kwargs)
     options, source = take_grading_options(kwargs)
-    warn_fit_bins(options)
+    look = take_look(ctx, look_path, kwargs, options)
+    if look is None:
+        warn_fit_bins(options)
     with batch_progress() as progress:
         result = grade_folder(in_dir, out_dir, source, options, recursive=recursive,
                               consistent=consistent, overwrite=overwrite or force_alias,
                               jobs=jobs, scheduler=scheduler, report_dir=report_dir, lut=lut,
-                              lut_size=lut_size, lut_format=lut_format, progress=progress)
+                              lut_size=lut_size, lut_format=lut_format, progress=progress,
+                              look=look, encode=encode)
     if result.report is not None:
         click.echo(f"report: {result.report.parent / 'index.html'}")
     print_summary(result)

@@ -121,12 +121,78 @@ def _space_options() -> list:
 
 
 def lut_format_option() -> list:
-    """``--lut-format cube|clf``, for :func:`lazy_options`."""
-    return [click.option("--lut-format", type=click.Choice(["cube", "clf"]), default="cube",
-                         show_default=True,
+    """``--lut-format cube|clf`` (default: the ``--lut`` file's ending), for
+    :func:`lazy_options`."""
+    return [click.option("--lut-format", type=click.Choice(["cube", "clf"]), default=None,
                          help="LUT file format: .cube (Resolve/Adobe; with a 1D shaper for a "
                               "logarithmic working space) or .clf (Academy/ASC Common LUT "
-                              "Format; needs the opencolorio package).")]
+                              "Format; needs the opencolorio package) [default: the --lut "
+                              "file's ending].")]
+
+
+def look_option() -> list:
+    """``--look FILE``: apply a saved grade, no fit (for :func:`lazy_options`)."""
+    return [click.option("--look", "look_path", type=click.Path(dir_okay=False, path_type=str),
+                         default=None, metavar="FILE",
+                         help="Apply a saved grade instead of fitting one: the JSON printed by "
+                              "`apply --json` (regrain as it was) or a 3-D LUT (.cube from "
+                              "--lut, .clf, ...; regrained unless --no-regrain). Replaces "
+                              "--style/--preset; the fit options are not used.")]
+
+
+def write_options() -> list:
+    """``--quality`` and ``--bit-depth`` (how outputs are encoded), for :func:`lazy_options`."""
+    return [
+        click.option("--quality", type=click.IntRange(1, 100), default=None, metavar="N",
+                     help="JPEG/WebP quality 1-100 [default: the encoder's, 98 for JPEG; "
+                          "90 gives about the size of a typical camera JPEG]."),
+        click.option("--bit-depth", type=click.Choice(["8", "16", "float"]), default=None,
+                     help="Bits per channel of the output (where its format holds them: JPEG "
+                          "8; PNG 8/16; TIFF 8/16/float; EXR 16 = half, float) [default: the "
+                          "input's; raw photos 16, float in EXR]."),
+    ]
+
+
+def take_write_options(kwargs: dict):
+    """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.imageio.WriteOptions`."""
+    from wbcgrade.color.imageio import WriteOptions
+
+    return WriteOptions(quality=kwargs.pop("quality", None),
+                        bit_depth=kwargs.pop("bit_depth", None))
+
+
+def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
+    """The saved grade of ``--look`` (a Grade), or None; the grading flags given on the command
+    line that a look takes (``--strength``, the regrain flags) apply to it.
+
+    Called after :func:`take_grading_options` (``options`` its result); ``kwargs`` are the
+    command's remaining parameters. ``--style``/``--preset`` with ``--look`` is an OptionError.
+    """
+    if look_path is None:
+        return None
+    from dataclasses import replace
+
+    from click.core import ParameterSource
+
+    from wbcgrade.color.saved_look import load_look
+    from wbcgrade.errors import OptionError
+
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE
+
+    for name, flag in (("style_dir", "--style"), ("preset", "--preset"),
+                       ("weights_text", "--weights")):
+        if given(name):
+            raise OptionError(f"--look replaces {flag}: give one of them", "--look")
+    look = load_look(look_path, options.spaces.working)
+    is_json = dict(look.info).get("saved_look", {}).get("kind") == "json"
+    regrain_given = any(given(n) for n in ("regrain", "regrain_radius", "regrain_eps"))
+    changes = {}
+    if regrain_given or not is_json:
+        changes["regrain"] = options.regrain.settings
+    if given("strength"):
+        changes["strength"] = options.map.strength
+    return replace(look, **changes) if changes else look
 
 
 def _set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):

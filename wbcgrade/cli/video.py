@@ -10,8 +10,10 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options_except,
     lazy_options,
+    look_option,
     lut_size_option,
     take_grading_options,
+    take_look,
 )
 
 #: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
@@ -74,6 +76,7 @@ def _print_result(result, as_json: bool) -> None:
               help="Also write the grade as a 3-D LUT (.cube); with several shots, "
                    "<stem>_shotNN.cube per shot.")
 @lazy_options(lut_size_option)
+@lazy_options(look_option)
 @click.option("--input-space", default=None, metavar="NAME",
               help="Colour space of the clip's code values (an OpenColorIO name, alias or "
                    "role, or srgb, display-p3, linear-rec709, acescct, ...; case ignored) "
@@ -90,8 +93,9 @@ def _print_result(result, as_json: bool) -> None:
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a contact sheet per shot (sampled frames before "
               "and after, weights, palettes) and report.json into this folder.")
-def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, codec, crf, lut,
-          lut_size, overwrite, as_json, report_dir, **kwargs):
+@click.pass_context
+def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames, codec, crf,
+          lut, lut_size, look_path, overwrite, as_json, report_dir, **kwargs):
     """Grade CLIP towards the barycenter of style palettes closest to its own.
 
     Frames sampled every --sample-every seconds are pooled into one palette
@@ -116,6 +120,7 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
     kwargs.update(regrain=False, regrain_radius=defaults["regrain_radius"],
                   regrain_eps=defaults["regrain_eps"])
     options, source = take_grading_options(kwargs)
+    look = take_look(ctx, look_path, kwargs, options)
     settings = VideoSettings(per_shot=per_shot, sample_every=sample_every,
                              cut_threshold=cut_threshold, blend=blend_frames, codec=codec,
                              crf=crf, lut_size=lut_size)
@@ -139,7 +144,7 @@ def video(clip, output, per_shot, sample_every, cut_threshold, blend_frames, cod
 
         progress = VideoProgress(warn=_warn, frames=on_frames, stage=on_stage, **callbacks)
         result = grade_clip(clip, output, source, options, settings, lut, overwrite,
-                            report_dir, progress)
+                            report_dir, progress, look)
     _print_result(result, as_json)
     if result.report is not None and not as_json:
         click.echo(f"report: {result.report}")

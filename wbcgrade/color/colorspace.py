@@ -304,16 +304,19 @@ def _peak(linear: str, working: str, path: str) -> float:
         grey = np.repeat(np.asarray(values, dtype=np.float64)[:, None], 3, axis=1)
         return convert(grey, linear, working).max(axis=1) <= 1.0 + 1e-6
 
-    ramp = np.geomspace(1e-3, 1e5, 4097)  # a coarse ramp, then bisection between two samples
+    ramp = np.geomspace(1e-3, 1e5, 4097)  # a coarse ramp, then finer ramps between two samples
     inside = np.flatnonzero(encodes_inside(ramp))
     if len(inside) == 0:
         return 1.0
     if inside[-1] == len(ramp) - 1:
         return float(ramp[-1])
     low, high = float(ramp[inside[-1]]), float(ramp[inside[-1] + 1])
-    for _ in range(40):
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if encodes_inside(np.array([middle]))[0] else (low, middle)
+    for _ in range(3):  # each ramp, one conversion, narrows the step 4096 times (not 40 halvings)
+        ramp = np.linspace(low, high, 4097)
+        inside = np.flatnonzero(encodes_inside(ramp))
+        if len(inside) == 0:
+            break
+        low, high = float(ramp[inside[-1]]), float(ramp[min(inside[-1] + 1, len(ramp) - 1)])
     return low
 
 
@@ -445,7 +448,12 @@ class ColorEncoding:
     @classmethod
     def for_image(cls, image, input_space: str | None = None,
                   working_space: str | None = None) -> ColorEncoding:
-        """The encoding of a decoded photo (``input_space`` None: what the file says)."""
+        """The encoding of a decoded photo (``input_space`` None: what the file says;
+        ``working_space`` None: ACEScct for a raw photo, else sRGB-encoded Rec.709)."""
+        if working_space is None and image.format_name == "raw":
+            from wbcgrade.color.raw import RAW_WORKING_SPACE
+
+            working_space = RAW_WORKING_SPACE
         if input_space:
             return cls.of(input_space, working_space)
         space, where = detect_input_space(image)
@@ -477,7 +485,8 @@ class ColorEncoding:
 
         Returns
         -------
-        encoded : (..., 3) float32 in [0, 1]
+        encoded : (..., 3) float32 in [0, 1] (``rgb`` itself when it is already
+            there in the working space: read it, do not write to it)
         state : for :meth:`decode`.
         """
         rgb = np.asarray(rgb, dtype=np.float32)
@@ -489,8 +498,12 @@ class ColorEncoding:
                 scale = np.maximum(top, 1.0).astype(np.float32)
                 linear /= scale
             working = convert(linear, self.linear, self.working)
+        elif self.input == self.working:
+            working = rgb  # no conversion, no copy (the result is never written to)
         else:
             working = convert(rgb, self.input, self.working)
+        if working.size and float(working.min()) >= 0.0 and float(working.max()) <= 1.0:
+            return working, WorkingState(scale, None)  # inside the cube: nothing to carry
         encoded = np.clip(working, 0.0, 1.0)
         residual = working - encoded
         if not np.any(residual):

@@ -49,6 +49,10 @@ __all__ = [
     "set_max_image_pixels",
     "DEFAULT_MAX_IMAGE_PIXELS",
     "orient",
+    "WriteOptions",
+    "BIT_DEPTHS",
+    "output_type",
+    "check_write_options",
 ]
 
 #: Largest image (width x height) decoded by default: 200 megapixels, about 3 GB
@@ -206,6 +210,11 @@ def read_image(path: str | os.PathLike) -> Image:
     -------
     Image with display-oriented float32 pixels (H, W, C).
 
+    Raw camera files (DNG, CR2, NEF, ARW, ...) are demosaiced by LibRaw
+    (:func:`wbcgrade.color.raw.read_raw`): scene-linear float pixels. CMYK
+    JPEGs come back as RGB (through their CMYK ICC profile when they carry
+    one), without the CMYK profile.
+
     Raises
     ------
     InputError
@@ -218,6 +227,10 @@ def read_image(path: str | os.PathLike) -> Image:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
+    from wbcgrade.color.raw import is_raw, read_raw
+
+    if is_raw(path):
+        return read_raw(path)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
     with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
@@ -243,6 +256,8 @@ def read_image(path: str | os.PathLike) -> Image:
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     if not np.isfinite(pixels).all():
         raise InputError(f"{path}: image holds NaN or infinite pixel values")
+    if _is_cmyk(spec):
+        pixels, spec = _from_cmyk(path, pixels, spec)
     orientation = spec.get_int_attribute("Orientation", 1)
     pixels = np.ascontiguousarray(orient(pixels, orientation))
     alpha = spec.alpha_channel
@@ -256,6 +271,67 @@ def read_image(path: str | os.PathLike) -> Image:
                          f"{path}: dividing by alpha")
     return Image(pixels=pixels, spec=spec, path=path, alpha_channel=int(alpha),
                  format_name=format_name)
+
+
+def _icc_bytes(spec: oiio.ImageSpec) -> bytes | None:
+    value = spec.getattribute("ICCProfile")
+    return None if value is None else np.asarray(value, dtype=np.uint8).tobytes()
+
+
+def _is_cmyk(spec: oiio.ImageSpec) -> bool:
+    """Whether the file stored CMYK (OpenImageIO hands such JPEGs over as RGB)."""
+    icc = _icc_bytes(spec)
+    return (spec.get_string_attribute("jpeg:ColorSpace", "").upper() == "CMYK"
+            or (icc is not None and icc[16:20] == b"CMYK"))
+
+
+def _from_cmyk(path: Path, pixels: np.ndarray,
+               spec: oiio.ImageSpec) -> tuple[np.ndarray, oiio.ImageSpec]:
+    """RGB pixels and an RGB spec for a CMYK file.
+
+    With a usable CMYK ICC profile the stored CMYK values are converted to
+    sRGB by LittleCMS (Pillow's ``ImageCms``, relative colorimetric intent);
+    otherwise OpenImageIO's own conversion (``(1 - C)(1 - K)``, ...) is kept.
+    Either way the CMYK profile and the CMYK tag are dropped: the pixels
+    are sRGB now.
+    """
+    icc = _icc_bytes(spec)
+    if icc is not None and icc[16:20] == b"CMYK" and _valid_icc(spec.getattribute("ICCProfile")):
+        converted = _cmyk_through_profile(path, icc, pixels.shape)
+        if converted is not None:
+            pixels = converted
+    clean = oiio.ImageSpec(spec.width, spec.height, pixels.shape[2], spec.format)
+    clean.channelnames = ("R", "G", "B")[:pixels.shape[2]] if pixels.shape[2] <= 3 \
+        else spec.channelnames
+    for attrib in spec.extra_attribs:
+        if attrib.name == "ICCProfile" or attrib.name.startswith("ICCProfile:") \
+                or attrib.name == "jpeg:ColorSpace":
+            continue
+        with contextlib.suppress(TypeError, ValueError, RuntimeError):
+            clean.attribute(attrib.name, attrib.type, attrib.value)
+    return pixels, clean
+
+
+def _cmyk_through_profile(path: Path, icc: bytes, shape: tuple) -> np.ndarray | None:
+    """The file's CMYK pixels converted to sRGB through its profile, or None if that fails."""
+    import io
+
+    try:
+        from PIL import Image as PILImage
+        from PIL import ImageCms
+    except ImportError:  # pragma: no cover - pillow is a dependency
+        return None
+    try:
+        with PILImage.open(path) as picture:
+            if picture.mode != "CMYK" or (picture.height, picture.width) != shape[:2]:
+                return None
+            source = ImageCms.ImageCmsProfile(io.BytesIO(icc))
+            rgb = ImageCms.profileToProfile(
+                picture, source, ImageCms.createProfile("sRGB"),
+                renderingIntent=ImageCms.Intent.RELATIVE_COLORIMETRIC, outputMode="RGB")
+            return np.asarray(rgb, dtype=np.float32) / np.float32(255.0)
+    except (OSError, ValueError, ImageCms.PyCMSError):
+        return None
 
 
 def check_image_output(out: str | os.PathLike) -> str:
@@ -277,8 +353,11 @@ def _valid_icc(value) -> bool:
 
 
 def _output_spec(like: Image, height: int, width: int, nchannels: int,
-                 out_format_name: str, alpha_channel: int) -> oiio.ImageSpec:
-    spec = oiio.ImageSpec(width, height, nchannels, like.spec.format)
+                 out_format_name: str, alpha_channel: int,
+                 pixel_type: oiio.TypeDesc | None = None) -> oiio.ImageSpec:
+    pixel_type = like.spec.format if pixel_type is None else pixel_type
+    spec = oiio.ImageSpec(width, height, nchannels, pixel_type)
+    floats = pixel_type.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
     if nchannels == like.spec.nchannels:
         spec.channelnames = like.spec.channelnames
     elif nchannels >= 3:
@@ -299,6 +378,9 @@ def _output_spec(like: Image, height: int, width: int, nchannels: int,
         prefix = name.split(":", 1)[0] if ":" in name else ""
         if name.startswith("oiio:") and name != "oiio:ColorSpace":
             continue
+        if name == "chromaticities" and floats:  # the primaries of scene-linear values
+            spec.attribute(name, attrib.type, attrib.value)
+            continue
         if not same_format and prefix not in _GENERIC_PREFIXES and name not in (
                 "Make", "Model", "Software", "Artist", "Copyright", "ImageDescription",
                 "DateTime", "XResolution", "YResolution", "ResolutionUnit"):
@@ -309,6 +391,88 @@ def _output_spec(like: Image, height: int, width: int, nchannels: int,
             continue  # an attribute the binding cannot copy: drop it, not the photo
     spec.attribute("Orientation", 1)  # pixels are written display-oriented
     return spec
+
+
+# ------------------------------------------------------------------ output options
+#: ``--bit-depth`` choices.
+BIT_DEPTHS = ("8", "16", "float")
+_DEPTH_TYPES = {"8": oiio.UINT8, "16": oiio.UINT16, "float": oiio.FLOAT}
+#: The bit depths each writer holds (OpenImageIO format names); a format not
+#: listed gets what it asks for and makes of it what its writer can.
+_FORMAT_DEPTHS = {"jpeg": ("8",), "webp": ("8",), "bmp": ("8",), "targa": ("8",),
+                  "png": ("8", "16"), "tiff": ("8", "16", "float"), "openexr": ("16", "float")}
+#: Writers with a quality setting -> the prefix of OpenImageIO's ``Compression`` attribute.
+_QUALITY_FORMATS = {"jpeg": "jpeg", "webp": "webp"}
+
+
+@dataclass(frozen=True)
+class WriteOptions:
+    """How an image is encoded.
+
+    Attributes
+    ----------
+    quality : 1-100, JPEG and WebP quality (None: the writer's default, 98
+        for JPEG); other formats are lossless and ignore it.
+    bit_depth : "8", "16" or "float" (EXR: "16" is half float), or None:
+        the input's where the output format holds it (a raw photo: 16-bit
+        integers, float in EXR).
+    """
+
+    quality: int | None = None
+    bit_depth: str | None = None
+
+    def __post_init__(self) -> None:
+        from wbcgrade.errors import OptionError
+
+        if self.quality is not None and (isinstance(self.quality, bool)
+                                         or not 1 <= int(self.quality) <= 100):
+            raise OptionError("quality must be between 1 and 100", "quality")
+        if self.bit_depth is not None and self.bit_depth not in BIT_DEPTHS:
+            raise OptionError(f"bit_depth must be one of {', '.join(BIT_DEPTHS)}", "bit_depth")
+
+
+def _depth_of(pixel_type: oiio.TypeDesc) -> str:
+    if pixel_type.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
+        return "float"
+    return "8" if pixel_type.basetype in (oiio.UINT8, oiio.INT8) else "16"
+
+
+def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
+                strict: bool = False) -> oiio.TypeDesc:
+    """The pixel type written: ``bit_depth`` (else the input's; a raw photo's 16-bit
+    integers, float in EXR), or the nearest the format holds (``strict``: OptionError)."""
+    from wbcgrade.errors import OptionError
+
+    held = _FORMAT_DEPTHS.get(format_name)
+    raw = bool(like.extra.get("raw"))
+    if bit_depth is None and not raw and (held is None or _depth_of(like.spec.format) in held):
+        return like.spec.format  # the input's own type (half float stays half)
+    wanted = bit_depth or ("float" if raw and format_name == "openexr" else
+                           "16" if raw else _depth_of(like.spec.format))
+    if held is not None and wanted not in held:
+        if strict:
+            raise OptionError(f"--bit-depth {bit_depth}: {format_name.upper()} files hold "
+                              f"{' or '.join(held)} only", "bit_depth")
+        order = {"8": 0, "16": 1, "float": 2}
+        wanted = min(held, key=lambda d: abs(order[d] - order[wanted]))
+    if format_name == "openexr" and wanted == "16":
+        return oiio.TypeDesc(oiio.HALF)
+    return oiio.TypeDesc(_DEPTH_TYPES[wanted])
+
+
+def output_type(path: str | os.PathLike, like: Image,
+                options: WriteOptions | None = None) -> oiio.TypeDesc:
+    """The pixel type :func:`write_image` writes to ``path`` for an image like ``like``."""
+    options = options or WriteOptions()
+    return _pixel_type(check_image_output(path), like, options.bit_depth)
+
+
+def check_write_options(path: str | os.PathLike, options: WriteOptions) -> None:
+    """OptionError when ``path``'s format cannot hold ``options.bit_depth`` (before any work)."""
+    if options.bit_depth is not None:
+        format_name = check_image_output(path)
+        like = Image(np.zeros((1, 1, 3), np.float32), oiio.ImageSpec(1, 1, 3, oiio.UINT8))
+        _pixel_type(format_name, like, options.bit_depth, strict=True)
 
 
 #: OpenImageIO formats whose library ends the whole process on a write error
@@ -482,14 +646,19 @@ def _verify_written(tmp: str, path: Path, spec: oiio.ImageSpec, decode: bool = F
         inp.close()
 
 
-def _prepare(path: Path, pixels: np.ndarray, like: Image,
-             alpha_channel: int | None) -> tuple[oiio.ImageSpec, np.ndarray, str]:
+def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | None,
+             options: WriteOptions | None = None) -> tuple[oiio.ImageSpec, np.ndarray, str]:
     if pixels.ndim != 3:
         raise InputError("pixels must be (H, W, C)")
+    options = options or WriteOptions()
     height, width, nchannels = pixels.shape
     format_name = check_image_output(path)
     alpha = like.alpha_channel if alpha_channel is None else alpha_channel
-    spec = _output_spec(like, height, width, nchannels, format_name, alpha)
+    spec = _output_spec(like, height, width, nchannels, format_name, alpha,
+                        _pixel_type(format_name, like, options.bit_depth))
+    if options.quality is not None and format_name in _QUALITY_FORMATS:
+        spec.erase_attribute("CompressionQuality")  # an input's own setting: not this one
+        spec.attribute("Compression", f"{_QUALITY_FORMATS[format_name]}:{options.quality}")
     if 0 <= alpha < nchannels:
         # In memory colour is unassociated; EXR stores it multiplied by alpha.
         if format_name == "openexr":
@@ -508,7 +677,8 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image,
 
 @contextlib.contextmanager
 def stage_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
-                overwrite: bool = False, alpha_channel: int | None = None) -> Iterator[Path]:
+                overwrite: bool = False, alpha_channel: int | None = None,
+                options: WriteOptions | None = None) -> Iterator[Path]:
     """Write the image to a temporary file; publish it when the ``with`` body succeeds.
 
     Same arguments as :func:`write_image`; ``path`` was checked before any
@@ -518,7 +688,7 @@ def stage_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     An existing file is replaced only with ``overwrite``.
     """
     path = Path(path)
-    spec, data, format_name = _prepare(path, pixels, like, alpha_channel)
+    spec, data, format_name = _prepare(path, pixels, like, alpha_channel, options)
     # encoded in memory first where the system can (Linux): see _encode
     fd = _encode(path, spec, data, format_name) if hasattr(os, "memfd_create") else None
     try:
@@ -543,7 +713,8 @@ def _write_encoded(fd: int | None, tmp: str, path: Path, spec: oiio.ImageSpec,
 
 
 def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
-                overwrite: bool = False, alpha_channel: int | None = None) -> Path:
+                overwrite: bool = False, alpha_channel: int | None = None,
+                options: WriteOptions | None = None) -> Path:
     """Write pixels with the format, bit depth and metadata of ``like``.
 
     Parameters
@@ -554,6 +725,8 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     like : the image whose spec (bit depth, EXIF, ICC, ...) is kept.
     overwrite : replace an existing file (never the input).
     alpha_channel : index of alpha in ``pixels`` (default: ``like``'s).
+    options : JPEG/WebP quality and the bit depth (default: ``like``'s where
+        the format holds it; :func:`output_type`).
 
     ``path`` is checked first (:func:`wbcgrade._publish.check_output_path`:
     never ``like``'s own file). The image is encoded in memory, copied to a
@@ -562,6 +735,6 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
     nothing behind.
     """
     path = check_output_path(path, [like.path], overwrite)
-    with stage_image(path, pixels, like, overwrite, alpha_channel) as written:
+    with stage_image(path, pixels, like, overwrite, alpha_channel, options) as written:
         pass
     return written

@@ -45,6 +45,7 @@ from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["color_map_to_lut", "write_cube", "read_cube", "write_grade_lut", "lut_header",
            "shaper_table", "check_lut_path", "check_lut_size", "check_clf_support",
+           "lut_format_of",
            "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE"]
 
 DEFAULT_LUT_SIZE = 33
@@ -142,9 +143,24 @@ def read_cube(path: str | os.PathLike):
     return colour.read_LUT(str(path))
 
 
-def check_lut_path(path: str | os.PathLike, lut_format: str = "cube") -> Path:
-    """``path`` as a Path when its ending suits ``lut_format`` (else InputError)."""
+def lut_format_of(path: str | os.PathLike, lut_format: str | None = None) -> str:
+    """The LUT format of ``path``: ``lut_format`` when given, else the one its ending names
+    (``.cube`` or ``.clf``, :data:`LUT_FORMATS`); InputError for any other ending."""
+    if lut_format is not None:
+        return lut_format
+    suffix = Path(path).suffix.lower()
+    for name, ending in LUT_FORMATS.items():
+        if suffix == ending:
+            return name
+    raise InputError(f"{path}: a LUT file name must end in "
+                     f"{' or '.join(LUT_FORMATS.values())} (the format follows the ending)")
+
+
+def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Path:
+    """``path`` as a Path when its ending suits ``lut_format`` (None: any LUT ending,
+    :func:`lut_format_of`), else InputError."""
     path = Path(path)
+    lut_format = lut_format_of(path, lut_format)
     if lut_format not in LUT_FORMATS:
         raise InputError(f"--lut-format must be one of {', '.join(LUT_FORMATS)}")
     suffix = LUT_FORMATS[lut_format]
@@ -193,7 +209,7 @@ def lut_header(encoding, shaper: bool = False) -> list[str]:
 
 
 def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAULT_LUT_SIZE,
-                    lut_format: str = "cube", title: str = "wbcgrade",
+                    lut_format: str | None = None, title: str = "wbcgrade",
                     comments: list[str] | None = None, overwrite: bool = False) -> Path:
     """Write a :class:`~wbcgrade.color.grading.Grade` as a LUT whose header names its spaces.
 
@@ -204,9 +220,11 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
         is what the LUT takes and gives (the working space itself: a LUT in
         the working space, with a shaper when it is logarithmic; another
         space: the grade baked in its code values, :meth:`Grade.lut`).
-    lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package).
+    lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package);
+        None: the one ``path``'s ending names.
     """
     path = check_lut_path(path, lut_format)
+    lut_format = lut_format_of(path, lut_format)
     baked = encoding.input != encoding.working
     table = grade.lut(size, encoding if baked else None)
     shaper = not baked and encoding.logarithmic

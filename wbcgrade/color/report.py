@@ -143,7 +143,7 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
     color = [c for c in range(graded.pixels.shape[2]) if c != graded.alpha_channel][:3]
     # pictures and palettes shown in sRGB, whatever the photo's space
     before = encoding.to_display(image.rgb())
-    after = encoding.to_display(graded.pixels[:, :, color])
+    after = encoding.to_display(np.repeat(graded.pixels[:, :, color], 3 // len(color), axis=2))
     return _content(result, before, after, _palette(palette_record(graded.grade, encoding)),
                     style_pictures)
 

@@ -32,12 +32,20 @@ from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, grade_encoded
-from wbcgrade.color.imageio import Image, check_image_output, read_image, stage_image
+from wbcgrade.color.imageio import (
+    Image,
+    WriteOptions,
+    check_image_output,
+    check_write_options,
+    read_image,
+    stage_image,
+)
 from wbcgrade.color.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
     check_lut_path,
     check_lut_size,
+    lut_format_of,
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
@@ -84,24 +92,27 @@ class PhotoPlan:
     lut_size: int = DEFAULT_LUT_SIZE
     lut_format: str = "cube"
     overwrite: bool = False
+    encode: WriteOptions = WriteOptions()
 
 
 def default_output_path(photo: str | os.PathLike) -> Path:
-    """``<stem>_graded<ext>`` beside the photo."""
+    """``<stem>_graded<ext>`` beside the photo (a raw photo's: ``<stem>_graded.tif``)."""
+    from wbcgrade.color.raw import output_name
+
     photo = Path(photo)
-    return photo.with_name(f"{photo.stem}_graded{photo.suffix}")
+    return photo.with_name(f"{photo.stem}_graded{output_name(photo).suffix}")
 
 
 def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
                lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
-               lut_format: str = "cube", overwrite: bool = False,
-               write: bool = True) -> PhotoPlan:
+               lut_format: str | None = None, overwrite: bool = False,
+               write: bool = True, encode: WriteOptions | None = None) -> PhotoPlan:
     """Check that the photo exists and its outputs may be written; -> the plan.
 
     Checked before any work: the output's file type can be written, and
     every output (the graded photo, default ``<stem>_graded<ext>`` beside it,
-    and the LUT, which must end in ``.cube`` or ``.clf`` as ``lut_format``
-    says) passes :func:`wbcgrade._publish.plan_outputs`: not the photo, not
+    and the LUT, whose format ``lut_format`` names, else its ending: ``.cube``
+    or ``.clf``) passes :func:`wbcgrade._publish.plan_outputs`: not the photo, not
     an existing file unless ``overwrite``, not a device, not two outputs in
     one file, a folder that exists and is writable. ``write`` False: nothing
     is written (no output).
@@ -113,15 +124,18 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
         output = None
     else:
         output = Path(output) if output is not None else default_output_path(photo)
+    encode = encode or WriteOptions()
     if output is not None:
         check_image_output(output)
+        check_write_options(output, encode)
     if lut is not None:
+        lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
         check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
     output, lut = plan_outputs([output, lut], [photo], overwrite)
-    return PhotoPlan(photo, output, lut, lut_size, lut_format, overwrite)
+    return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode)
 
 
 @dataclass
@@ -154,9 +168,10 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
     """Graded pixels of a whole image at full resolution.
 
     Colour channels go through the encoding, the grade and back; alpha and
-    any extra channels pass through untouched. A grey photo becomes RGB (a
-    grade may tint it). ``encoded`` may pass the ``(encoded, state)`` of
-    ``encoding.encode`` the caller already has (it is not modified).
+    any extra channels pass through untouched. A grey photo stays grey: the
+    luma of its graded colours (:func:`wbcgrade.color.output.grey_of`).
+    ``encoded`` may pass the ``(encoded, state)`` of ``encoding.encode`` the
+    caller already has (it is not modified).
 
     Returns
     -------
@@ -173,10 +188,11 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
         out = image.pixels.copy()
         out[:, :, chans] = graded
         return out, image.alpha_channel
-    others = [c for c in range(image.pixels.shape[2]) if c not in chans]
-    out = np.concatenate([graded, image.pixels[:, :, others]], axis=2)
-    alpha = 3 + others.index(image.alpha_channel) if image.alpha_channel in others else -1
-    return np.ascontiguousarray(out), alpha
+    from wbcgrade.color.output import grey_of
+
+    out = image.pixels.copy()
+    out[:, :, chans[0]] = grey_of(graded, image.is_float)
+    return out, image.alpha_channel
 
 
 def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
@@ -226,7 +242,8 @@ class GradeReport:
 
     @property
     def fit_start(self) -> str:
-        """How the weights were found: "uniform", "vertex-refit", "vertex" or "given"."""
+        """How the weights were found: "uniform", "vertex-refit", "vertex", "given" or
+        "saved" (a saved grade, ``--look``: nothing fitted)."""
         return self.fit.start if self.fit is not None else "shared"
 
     @property
@@ -243,7 +260,7 @@ class GradeReport:
             "styles": self.styles_source,
             "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
             "loss": self.grade.loss,
-            "fitted": self.fit_start != "given",
+            "fitted": self.fit_start not in ("given", "saved"),
             "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
@@ -278,8 +295,12 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
         lut_existed = plan.lut is not None and plan.lut.exists()
         lut_written = False
         try:
-            with stage_image(plan.output, graded.pixels, graded.image, plan.overwrite,
-                             graded.alpha_channel):
+            from wbcgrade.color.output import output_pixels
+
+            pixels = output_pixels(graded.pixels, graded.alpha_channel, graded.image,
+                                   graded.encoding, plan.output, plan.encode)
+            with stage_image(plan.output, pixels, graded.image, plan.overwrite,
+                             graded.alpha_channel, plan.encode):
                 timings["write"] = time.perf_counter() - start
                 if plan.lut is not None:  # written while the photo waits, published before it
                     progress.say("lut")

@@ -29,7 +29,7 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
                styles: StyleSource, options: GradeOptions, settings: VideoSettings | None = None,
                lut: str | os.PathLike | None = None, overwrite: bool = False,
                report_dir: str | os.PathLike | None = None,
-               progress: VideoProgress | None = None) -> VideoResult:
+               progress: VideoProgress | None = None, look=None) -> VideoResult:
     """``wbcgrade video``: plan every output, load the styles, grade the clip, write the report.
 
     The clip's grade is a LUT: ``options.regrain`` is turned off. The report
@@ -37,7 +37,9 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     never replaces files it did not write unless ``overwrite``. The clip, its
     LUTs and the report are published together once all are written: a
     failure in any (a full disk under the LUT, a report folder that cannot be
-    written) publishes none.
+    written) publishes none. ``look``: a saved grade
+    (:func:`wbcgrade.color.saved_look.load_look`) applied to every frame
+    instead of a fit (``styles`` is not read).
     """
     settings = settings or VideoSettings()
     progress = progress or VideoProgress()
@@ -47,11 +49,17 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     if options.regrain.enabled:
         options = replace(options, regrain=RegrainOptions(enabled=False))
     start = time.perf_counter()
-    loaded = load_styles(styles, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
+    if look is None:
+        loaded = load_styles(styles, options.transfer.bins, options.spaces.working,
+                             progress.warn, progress.styles)
+    else:
+        from wbcgrade.color.saved_look import look_batch_options, look_styles
+
+        options = look_batch_options(options, look, report_dir=report_dir)
+        loaded = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
     with contextlib.ExitStack() as stack:  # every output published together, or none
         result = grade_planned(source, output, lut, loaded, options, settings, overwrite,
-                                progress, {"styles": time.perf_counter() - start}, stack)
+                                progress, {"styles": time.perf_counter() - start}, stack, look)
         if report_dir is not None:
             result.report = write_video_report(report_dir, result, loaded, overwrite, stack)
     return result

@@ -520,9 +520,9 @@ def _writing_in(folder: Path) -> Iterator[None]:
 def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
                    options: GradeOptions, settings: VideoSettings, overwrite: bool,
                    progress: VideoProgress, timings: dict[str, float] | None,
-                   stack: contextlib.ExitStack) -> VideoResult:
+                   stack: contextlib.ExitStack, look: Grade | None = None) -> VideoResult:
     """:func:`grade_video` once :func:`plan_video` checked the outputs (the outputs as
-    it returned them).
+    it returned them); ``look``: a saved grade used for every shot (no fit).
 
     The graded clip and its LUTs are written to temporary files entered on
     ``stack`` (:func:`wbcgrade._publish.atomic_path`): they are published when
@@ -554,8 +554,13 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
     t0 = time.perf_counter()
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
-        grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options, encoding,
-                                progress.fit, progress.stage)
+        if look is not None:
+            from wbcgrade.color.saved_look import look_fit
+
+            grade, fit = look, look_fit(look)
+        else:
+            grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options,
+                                    encoding, progress.fit, progress.stage)
         table = grade.lut(settings.lut_size, encoding)
         shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
     timings["grade"] = time.perf_counter() - t0

@@ -142,7 +142,9 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             raise InputError(f"{out}: output path exists and is not a folder")
         if out.exists() and out.resolve() == root.resolve():
             raise InputError(f"{out}: the output folder must differ from the input folder")
-    exts = image_extensions()
+    from wbcgrade.color.raw import RAW_SUFFIXES, output_name
+
+    exts = image_extensions() | RAW_SUFFIXES
     skip_dirs = [Path(p) for p in exclude] + ([out] if out is not None else [])
     plan = BatchPlan(tasks=[])
     for path in files:
@@ -154,7 +156,7 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
         if path.suffix.lower() not in exts:
             plan.ignored.append(rel.as_posix())
             continue
-        task = BatchTask(path, None if out is None else out / rel, rel.as_posix())
+        task = BatchTask(path, None if out is None else out / output_name(rel), rel.as_posix())
         if task.output is None:
             plan.tasks.append(task)
             continue

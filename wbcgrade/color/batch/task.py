@@ -23,6 +23,7 @@ from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, photo_histograms
 from wbcgrade.color.imageio import (
+    WriteOptions,
     check_image_output,
     max_image_pixels,
     read_image,
@@ -53,6 +54,7 @@ class BatchContext:
     overwrite : replace existing outputs and sheets (checked before the run).
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
+    encode : JPEG/WebP quality and bit depth of the outputs.
     """
 
     styles: StyleSet
@@ -64,6 +66,7 @@ class BatchContext:
     write_outputs: bool = True
     overwrite: bool = False
     max_image_pixels: int = field(default_factory=max_image_pixels)
+    encode: WriteOptions = WriteOptions()
 
 
 def run_task(task: BatchTask, context: BatchContext,
@@ -83,7 +86,8 @@ def run_task(task: BatchTask, context: BatchContext,
     set_max_image_pixels(context.max_image_pixels)
     try:
         target = (task.target or task.output) if context.write_outputs else None
-        plan = PhotoPlan(task.source, target, overwrite=context.overwrite)
+        plan = PhotoPlan(task.source, target, overwrite=context.overwrite,
+                         encode=context.encode)
         if target is not None:
             check_image_output(target)  # before any work
             target.parent.mkdir(parents=True, exist_ok=True)

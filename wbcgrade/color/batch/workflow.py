@@ -39,6 +39,7 @@ from wbcgrade.color.lut import (
     check_clf_support,
     check_lut_path,
     check_lut_size,
+    lut_format_of,
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
@@ -95,9 +96,16 @@ def _recorder(out_dir: Path, progress: BatchProgress) -> Callable[[FileResult], 
 def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: bool,
          jobs: int, scheduler: str | None, report_dir: Path | None, write_outputs: bool,
          overwrite: bool, progress: BatchProgress,
-         on_result: Callable[[FileResult], None] | None = None) -> BatchResult:
+         on_result: Callable[[FileResult], None] | None = None, look=None,
+         encode=None) -> BatchResult:
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite)
+    if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
+        from wbcgrade.color.saved_look import look_fit
+
+        context.shared, context.shared_fit = look, look_fit(look)
+    if encode is not None:
+        context.encode = encode
     if report_dir is not None:
         from wbcgrade.color.report import style_pictures
 
@@ -128,8 +136,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                  overwrite: bool = False, jobs: int = 1, scheduler: str | None = None,
                  report_dir: str | os.PathLike | None = None,
                  lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
-                 lut_format: str = "cube",
-                 progress: BatchProgress | None = None) -> BatchResult:
+                 lut_format: str | None = None,
+                 progress: BatchProgress | None = None, look=None,
+                 encode=None) -> BatchResult:
     """``wbcgrade batch``: grade every photo under ``in_dir`` into ``out_dir``.
 
     Outputs are written atomically; a rerun skips photos whose output is
@@ -138,15 +147,22 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     write into ``out_dir``. With ``consistent`` the whole series shares one
     grade, also written as a LUT to ``lut``; with ``report_dir`` the palette
     weight report is written there. Returns the result (``result.lut`` None
-    when no photo was graded, so no series grade was made).
+    when no photo was graded, so no series grade was made). ``look``: a saved
+    grade (:func:`wbcgrade.color.saved_look.load_look`) applied to every photo
+    instead of a fit; ``encode``: JPEG/WebP quality and bit depth of the outputs.
     """
     progress = progress or BatchProgress()
     _check_jobs(jobs)
+    if look is not None:
+        from wbcgrade.color.saved_look import look_batch_options
+
+        options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
     if lut is not None:
         if not consistent:
             raise InputError("--lut needs --consistent (one grade for the series); per-photo "
                              "LUTs come from `wbcgrade apply --lut`")
+        lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
         check_lut_size(lut_size)
         if lut_format == "clf":
@@ -158,6 +174,13 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                                                          " (use --recursive for sub-folders)"))
     if lut is not None:
         lut = plan_outputs([lut], [t.source for t in plan.all_photos], overwrite)[0]
+    if consistent and options.spaces.working is None:  # one working space for the series
+        from dataclasses import replace
+
+        from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
+
+        if any(is_raw(t.source) for t in plan.all_photos):
+            options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))
@@ -168,7 +191,12 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     with lock_folder(out_dir, "batch"):  # one run at a time per output folder
         plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
         start = time.perf_counter()
-        styles = _load(source, options, progress)
+        if look is None:
+            styles = _load(source, options, progress)
+        else:
+            from wbcgrade.color.saved_look import look_styles
+
+            styles = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
@@ -176,7 +204,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                           f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite "
                           "to redo them")
         result = _run(plan, styles, options, consistent, jobs, scheduler, report_dir, True,
-                      overwrite, progress, _recorder(Path(out_dir), progress))
+                      overwrite, progress, _recorder(Path(out_dir), progress), look, encode)
         if result.count("graded"):
             if result.series is not None:
                 settings["series_weights"] = dict(zip(styles.names,

@@ -1,0 +1,127 @@
+"""`--look`: a grade saved by `apply --json` or `apply --lut`, applied again with no fit,
+gives back the same photo (within 1/255); batch and video take it too."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
+from wbcgrade.cli import main
+from wbcgrade.color.imageio import read_image
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def codes(path) -> np.ndarray:
+    return np.round(read_image(path).pixels * 255)
+
+
+@pytest.fixture
+def photo(tmp_path):
+    return small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.png", width=160)
+
+
+@pytest.mark.parametrize("space", [None, "acescct"])
+def test_look_from_json_cube_and_clf_reproduces_the_grade(tmp_path, photo, style_dir, space):
+    spaces = [] if space is None else ["--working-space", space]
+    result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original.png",
+                 "--lut", tmp_path / "grade.cube", "--json", *spaces, *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    (tmp_path / "grade.json").write_text(result.stdout)
+    assert json.loads(result.stdout)["saved_grade"]["format"] == "wbcgrade-look"
+    result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original2.png",
+                 "--lut", tmp_path / "grade.clf", *spaces, *FAST_ARGS)
+    assert result.exit_code == 0, result.output  # the format follows the ending: no --lut-format
+    original = codes(tmp_path / "original.png")
+    other = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.png", width=160)
+    for saved in ("grade.json", "grade.cube", "grade.clf"):
+        out = tmp_path / f"again_{saved}.png"
+        result = run("apply", photo, "--look", tmp_path / saved, "-o", out)
+        assert result.exit_code == 0, result.output
+        assert "no fit" in result.output and "fit " not in result.output.split("time:")[-1]
+        assert np.abs(codes(out) - original).max() <= 1, saved  # within 1/255, regrain too
+        # another photo takes the same grade (nothing is refitted on it)
+        result = run("apply", other, "--look", tmp_path / saved, "-o",
+                     tmp_path / f"coffee_{saved}.png")
+        assert result.exit_code == 0, result.output
+    assert np.abs(codes(tmp_path / "coffee_grade.json.png")
+                  - codes(tmp_path / "coffee_grade.cube.png")).max() <= 1
+
+
+def test_look_flags_and_refusals(tmp_path, photo, style_dir):
+    result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original.png",
+                 "--lut", tmp_path / "grade.cube", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    look = tmp_path / "grade.cube"
+    plain = tmp_path / "plain.png"
+    assert run("apply", photo, "--look", look, "--no-regrain", "-o", plain).exit_code == 0
+    half = tmp_path / "half.png"
+    assert run("apply", photo, "--look", look, "--no-regrain", "--strength", 0.5,
+               "-o", half).exit_code == 0
+    source = codes(photo)
+    # strength 0.5 is half way between the photo and the LUT's grade
+    assert np.abs(codes(half) - (source + codes(plain)) / 2).max() <= 1
+    assert np.abs(codes(plain) - source).mean() > 2
+    for args, word in ((["--preset", "warm"], "--preset"), (["--style", style_dir], "--style")):
+        result = run("apply", photo, "--look", look, *args, "-o", tmp_path / "x.png")
+        assert result.exit_code != 0 and word in result.output
+    damaged = tmp_path / "damaged.json"
+    damaged.write_text('{"saved_grade": {"format": "wbcgrade-look", "map": {"data": "!!"}}}')
+    for bad in (damaged, tmp_path / "missing.json", tmp_path / "grade.txt"):
+        (tmp_path / "grade.txt").write_text("x")
+        result = run("apply", photo, "--look", bad, "-o", tmp_path / "x.png")
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert result.exit_code != 0 and len(lines) == 1 and lines[0].startswith("Error: ")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_batch_takes_a_look(tmp_path, photo, style_dir):
+    result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original.png",
+                 "--json", *FAST_ARGS)
+    assert result.exit_code == 0, result.output
+    (tmp_path / "grade.json").write_text(result.stdout)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    photo.replace(folder / photo.name)
+    result = run("batch", folder, "-o", tmp_path / "out", "--look", tmp_path / "grade.json")
+    assert result.exit_code == 0, result.output
+    assert np.abs(codes(tmp_path / "out" / photo.name)
+                  - codes(tmp_path / "original.png")).max() <= 1
+    result = run("batch", folder, "-o", tmp_path / "out2", "--look", tmp_path / "grade.json",
+                 "--consistent")
+    assert result.exit_code != 0 and "--consistent" in result.output
+
+
+def test_video_takes_a_look(tmp_path):
+    from wbcgrade.color.lut import write_cube
+    from wbcgrade.color.remap import identity_map
+
+    darker = write_cube(tmp_path / "darker.cube", identity_map(9) * np.float32(0.5))
+    out = tmp_path / "clip.mp4"
+    result = run("video", SAMPLES / "clip.mp4", "--look", darker, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert out.stat().st_size > 1000 and "darker 1.000" in result.output
+
+
+def test_cube_files_read_back_as_written(tmp_path, rng):
+    from wbcgrade.color.lut import write_cube
+    from wbcgrade.color.saved_look import SAMPLED_LUT_SIZE, load_look
+
+    table = rng.random((5, 5, 5, 3))
+    path = write_cube(tmp_path / "r.cube", table)
+    look = load_look(path)
+    assert look.color_map.shape == (5, 5, 5, 3)
+    assert np.abs(look.color_map - table).max() < 1e-6  # indexed [r, g, b] as written
+    # another domain: read by colour-science and sampled on the [0, 1] cube
+    text = path.read_text().replace("LUT_3D_SIZE 5",
+                                    "LUT_3D_SIZE 5\nDOMAIN_MIN 0 0 0\nDOMAIN_MAX 2 2 2")
+    (tmp_path / "wide.cube").write_text(text)
+    wide = load_look(tmp_path / "wide.cube")
+    assert wide.color_map.shape == (SAMPLED_LUT_SIZE,) * 3 + (3,)
+    assert np.abs(wide.color_map[-1, -1, -1] - table[2, 2, 2]).max() < 1e-5  # 1.0 is mid-domain

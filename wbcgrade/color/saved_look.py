@@ -1,0 +1,361 @@
+"""Saved grades ("looks"): a grade written once, applied again to other photos with no fit.
+
+A grade is its colour map (a lattice LUT in the working space), the working
+space, the strength and the regrain settings (:class:`~wbcgrade.color.grading.Grade`).
+Two files hold one:
+
+- the JSON that ``wbcgrade apply --json`` prints (or a file holding only its
+  ``"saved_grade"`` entry, :func:`look_dict`): the map itself (16-bit codes,
+  within 0.002/255, compressed: ~150 kB for 33³), its working space,
+  strength, regrain settings, style names and weights. Applied again it
+  gives the same photo, regrain included;
+- a 3-D LUT (``.cube``, ``.clf``, or any LUT colour-science reads:
+  ``.spi3d``, ``.csp``, ...). wbcgrade's own LUTs name the space they
+  work in in their header (``output space: ...``), and the ``.cube``
+  shaper of a logarithmic working space is skipped: the 3-D table is the
+  map. Other LUTs are taken to work on ``working_space`` values (default
+  sRGB-encoded Rec.709, the pixel values of ordinary photos) and are
+  sampled on a 33³ lattice. A LUT has no regrain settings: the caller
+  chooses (``apply`` regrains by default, as a fresh grade does, so a
+  ``.cube`` from ``apply --lut`` gives back the same photo).
+
+:func:`load_look` reads either into a Grade; ``grade.apply`` then moves the
+pixels through it (the remap and regrain stages of a fresh grade, no
+histograms, no fit, no transport).
+
+>>> import numpy as np
+>>> from wbcgrade.color.grading import Grade
+>>> from wbcgrade.color.remap import identity_map
+>>> grade = Grade(("warm",), np.ones(1), identity_map(5) * np.float32(0.9), working="w")
+>>> back = look_from_dict(look_dict(grade), "example")
+>>> float(np.abs(back.color_map - grade.color_map).max()) < 1e-5, back.working, back.names
+(True, 'w', ('warm',))
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import re
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.grading import Grade
+from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.remap import identity_map
+from wbcgrade.errors import InputError
+
+__all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
+           "look_styles", "look_fit", "apply_look", "look_batch_options", "SAMPLED_LUT_SIZE"]
+
+#: The ``format`` tag of a saved grade.
+LOOK_FORMAT = "wbcgrade-look"
+_VERSION = 1
+#: LUT file endings :func:`load_look` reads (besides ``.json``).
+LOOK_SUFFIXES = (".cube", ".clf", ".spi3d", ".spi1d", ".csp", ".3dl")
+#: Lattice size on which a LUT that is not a plain 3-D table is sampled.
+SAMPLED_LUT_SIZE = 33
+
+
+#: Steps of a saved map between its smallest and largest value (16-bit codes).
+_CODES = 65535
+
+
+def _encode_array(values: np.ndarray) -> dict:
+    """An (m, m, m, 3) map as text: 16-bit codes between its extremes (an error below
+    0.002/255 for a map in [0, 1]), differenced along the first two axes, the bytes of
+    each code split into two planes, zlib, base64 (about a third of the float32 bytes)."""
+    data = np.asarray(values, dtype=np.float64)
+    low, high = float(data.min()), float(data.max())
+    span = high - low if high > low else 1.0
+    codes = np.round((data - low) / span * _CODES).astype(np.int32)
+    steps = np.diff(np.diff(codes, axis=0, prepend=0), axis=1, prepend=0)
+    steps = np.mod(steps, 65536).astype("<u2")  # differences modulo 2^16: exact back
+    planes = steps.view(np.uint8).reshape(-1, 2).T.tobytes()
+    return {"shape": list(data.shape), "low": low, "high": high,
+            "encoding": "uint16-delta2-planes-zlib-base64",
+            "data": base64.b64encode(zlib.compress(planes, 9)).decode("ascii")}
+
+
+def _decode_array(entry: dict, where: str) -> np.ndarray:
+    try:
+        shape = tuple(int(n) for n in entry["shape"])
+        if entry.get("encoding") != "uint16-delta2-planes-zlib-base64" or len(shape) != 4:
+            raise ValueError("unknown encoding")
+        low, high = float(entry["low"]), float(entry["high"])
+        count = int(np.prod(shape))
+        planes = zlib.decompress(base64.b64decode(entry["data"]), bufsize=2 * count)
+        steps = np.frombuffer(planes, dtype=np.uint8).reshape(2, count).T.copy()
+        steps = steps.view("<u2").reshape(shape).astype(np.int64)
+        codes = np.mod(np.cumsum(np.cumsum(steps, axis=1), axis=0), 65536)
+        span = high - low if high > low else 1.0
+        values = (low + codes * (span / _CODES)).astype(np.float32)
+    except (KeyError, TypeError, ValueError, zlib.error) as exc:
+        raise InputError(f"{where}: the saved colour map is damaged ({exc})") from None
+    if shape[3] != 3 or not shape[0] == shape[1] == shape[2] >= 2:
+        raise InputError(f"{where}: the saved colour map has shape {shape}, not (m, m, m, 3)")
+    if not np.isfinite(values).all():
+        raise InputError(f"{where}: the saved colour map is damaged")
+    return values
+
+
+def look_dict(grade: Grade) -> dict:
+    """A grade as a JSON-friendly dict that :func:`look_from_dict` turns back into it."""
+    return {"format": LOOK_FORMAT, "version": _VERSION, "working_space": grade.working,
+            "strength": float(grade.strength),
+            "regrain": None if grade.regrain is None else [float(v) for v in grade.regrain],
+            "names": list(grade.names), "weights": [float(w) for w in grade.weights],
+            "loss": None if grade.loss is None else float(grade.loss),
+            "map": _encode_array(grade.color_map)}
+
+
+def look_from_dict(entry: dict, where: str = "look") -> Grade:
+    """The Grade a :func:`look_dict` describes (``where`` names it in errors)."""
+    if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
+        raise InputError(f"{where}: not a saved wbcgrade grade")
+    if int(entry.get("version", 0)) > _VERSION:
+        raise InputError(f"{where}: saved by a newer wbcgrade (format version "
+                         f"{entry.get('version')}); upgrade to read it")
+    color_map = _decode_array(entry.get("map", {}), where)
+    names = tuple(str(n) for n in entry.get("names") or ("look",))
+    weights = np.asarray(entry.get("weights") or [1.0] * len(names), dtype=np.float64)
+    if weights.shape != (len(names),):
+        weights = np.full(len(names), 1.0 / len(names))
+    regrain = entry.get("regrain")
+    try:
+        strength = float(entry.get("strength", 1.0))
+        regrain = None if regrain is None else (float(regrain[0]), float(regrain[1]))
+    except (TypeError, ValueError, IndexError):
+        raise InputError(f"{where}: the saved strength or regrain settings are damaged") \
+            from None
+    loss = entry.get("loss")
+    return Grade(names=names, weights=weights, color_map=color_map,
+                 working=str(entry.get("working_space") or ""), strength=strength,
+                 regrain=regrain, loss=None if loss is None else float(loss),
+                 info={"saved_look": {"file": where, "kind": "json"}})
+
+
+def _header_space(lines: list[str]) -> str | None:
+    """The space a wbcgrade LUT works in: its header's ``output space: NAME``."""
+    for line in lines:
+        found = re.match(r"\s*output space:\s*(.+?)\s*$", str(line))
+        if found:
+            return found.group(1)
+    return None
+
+
+def _resolve(name: str, path: Path, option: str) -> str:
+    from wbcgrade.color.colorspace import resolve_space
+
+    return resolve_space(name, f"{path}: {option}")
+
+
+def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
+    """A ``.cube`` whose 3-D table covers [0, 1] (with no 1-D part, or wbcgrade's shaper),
+    read directly (colour-science takes a second to import); None for any other kind."""
+    try:
+        text = path.read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    comments, rows, size, size_1d = [], [], 0, 0
+    for line in text.splitlines():
+        line = line.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            comments.append(line[1:].strip())
+            continue
+        key = line.split(None, 1)[0]
+        if key[0].isdigit() or key[0] in "-+.":
+            rows.append(line)
+        elif key == "LUT_3D_SIZE":
+            size = int(line.split()[1])
+        elif key == "LUT_1D_SIZE":
+            size_1d = int(line.split()[1])
+        elif key in ("DOMAIN_MIN", "DOMAIN_MAX", "LUT_3D_INPUT_RANGE"):
+            values = [float(v) for v in line.split()[1:]]
+            if values not in ([0.0] * 3, [1.0] * 3, [0.0, 1.0]):
+                return None
+        elif key not in ("TITLE", "LUT_1D_INPUT_RANGE"):
+            return None
+    space = _header_space(comments)
+    if size < 2 or (size_1d and space is None) or len(rows) != size_1d + size ** 3:
+        return None
+    try:
+        values = np.array(" ".join(rows[size_1d:]).split(), dtype=np.float64)
+    except ValueError:
+        return None
+    if values.size != 3 * size ** 3:
+        return None
+    # red varies fastest in a .cube: the rows are [b, g, r] in C order
+    table = values.reshape(size, size, size, 3).transpose(2, 1, 0, 3)
+    return np.ascontiguousarray(table, dtype=np.float32), space
+
+
+def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
+    """(the table on the [0, 1] working cube, the space named in the header or None)."""
+    if path.suffix.lower() == ".cube":
+        plain = _plain_cube(path)
+        if plain is not None:
+            return plain
+    from wbcgrade.color._colour import colour
+
+    try:
+        lut = colour.read_LUT(str(path))
+    except Exception as exc:  # noqa: BLE001 - colour-science raises many kinds
+        why = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: not a readable LUT ({why})") from None
+    parts = list(lut) if isinstance(lut, colour.LUTSequence) else [lut]
+    comments = [c for part in parts for c in (getattr(part, "comments", None) or [])]
+    space = _header_space(comments)
+    last = parts[-1]
+    unit = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    if isinstance(last, colour.LUT3D) and np.allclose(last.domain, unit) and (
+            len(parts) == 1 or space is not None):
+        # a plain table, or wbcgrade's shaper form (the shaper maps the linear partner
+        # into the working space; the table is the map)
+        return np.asarray(last.table, dtype=np.float32), space
+    nodes = identity_map(SAMPLED_LUT_SIZE).astype(np.float64)
+    return np.asarray(lut.apply(nodes), dtype=np.float32), space
+
+
+def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
+    from wbcgrade.color.lut import check_clf_support
+
+    ocio = check_clf_support()
+    try:
+        text = path.read_text("utf-8", errors="replace")
+        group = ocio.Config.CreateRaw().getProcessor(
+            ocio.FileTransform(src=str(path), interpolation=ocio.INTERP_LINEAR)
+        ).createGroupTransform()
+    except Exception as exc:  # noqa: BLE001 - OpenColorIO raises its own Exception
+        raise InputError(f"{path}: not a readable CLF ({str(exc).splitlines()[0]})") from None
+    space = _header_space(re.findall(r"<Description>(.*?)</Description>", text, re.S))
+    transforms = list(group)
+    if space is not None and transforms and isinstance(transforms[-1], ocio.Lut3DTransform):
+        size = transforms[-1].getGridSize()
+        table = np.asarray(transforms[-1].getData(), dtype=np.float32).reshape(size, size,
+                                                                              size, 3)
+        return table, space
+    processor = ocio.Config.CreateRaw().getProcessor(group).getDefaultCPUProcessor()
+    nodes = np.ascontiguousarray(identity_map(SAMPLED_LUT_SIZE), dtype=np.float32)
+    flat = nodes.reshape(-1, 3).copy()
+    processor.applyRGB(flat)
+    return flat.reshape(nodes.shape), space
+
+
+def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grade:
+    """Read a saved grade: a ``.json`` from ``apply --json`` (or its ``"saved_grade"``), or a
+    3-D LUT (:data:`LOOK_SUFFIXES`).
+
+    Parameters
+    ----------
+    path : the file.
+    working_space : the space a LUT without wbcgrade's header works in
+        (default sRGB-encoded Rec.709); a saved JSON names its own.
+
+    Returns
+    -------
+    Grade whose ``color_map`` is the saved map (a LUT's table, strength 1 and
+    no regrain settings: the caller decides), ``working`` the config's name
+    of its space, ``info["saved_look"]`` the file and its kind.
+    """
+    from wbcgrade.color.colorspace import default_working_space
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file" if not path.exists() else
+                         f"{path}: not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        try:
+            data = json.loads(path.read_text("utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            raise InputError(f"{path}: not a readable JSON file ({exc})") from None
+        entry = data.get("saved_grade") if isinstance(data, dict) and "saved_grade" in data \
+            else data
+        if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
+            raise InputError(f"{path}: holds no saved grade (write one with "
+                             "`wbcgrade apply PHOTO ... --json > grade.json`)")
+        grade = look_from_dict(entry, str(path))
+        space = grade.working or default_working_space()
+        return Grade(grade.names, grade.weights, grade.color_map,
+                     _resolve(space, path, "working space"), grade.strength, grade.regrain,
+                     grade.loss, info=grade.info)
+    if suffix not in LOOK_SUFFIXES:
+        raise InputError(f"{path}: a saved grade must end in .json or one of "
+                         f"{', '.join(LOOK_SUFFIXES)}")
+    table, space = _clf_look(path) if suffix == ".clf" else _cube_look(path)
+    if not np.isfinite(table).all():
+        raise InputError(f"{path}: the LUT holds NaN or infinite values")
+    if space is not None:
+        space = _resolve(space, path, "the space its header names")
+    elif working_space:
+        space = _resolve(working_space, path, "--working-space")
+    else:
+        space = default_working_space()
+    kind = suffix.lstrip(".")
+    return Grade(names=(path.stem,), weights=np.ones(1), color_map=table, working=space,
+                 info={"saved_look": {"file": str(path), "kind": kind}})
+
+
+def look_styles(grade: Grade, source: str) -> StyleSet:
+    """A stand-in style set for a saved grade (its names; no histograms: nothing is fitted)."""
+    return StyleSet(names=list(grade.names),
+                    histograms=np.zeros((len(grade.names), 1, 1, 1)), source=source)
+
+
+def look_fit(grade: Grade) -> FitSummary:
+    """The weights of a saved grade, as a fit summary (start "saved": nothing was fitted)."""
+    return FitSummary(np.asarray(grade.weights, dtype=np.float64),
+                      float(grade.loss) if grade.loss is not None else 0.0,
+                      np.zeros(len(grade.names)), "saved", dict(grade.info), 0.0)
+
+
+def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike | None = None,
+               lut: str | os.PathLike | None = None, lut_size: int | None = None,
+               lut_format: str | None = None, overwrite: bool = False,
+               input_space: str | None = None, encode=None, progress=None):
+    """``wbcgrade apply --look``: grade ``photo`` with a saved grade and write it (no fit).
+
+    The outputs are planned and checked first (:func:`wbcgrade.color.workflow.plan_photo`),
+    then the photo is read, encoded into the look's working space, moved
+    through its map (and regrain, when the look has it) and written as a
+    fresh grade is (:func:`~wbcgrade.color.workflow.grade_file`). Returns
+    the :class:`~wbcgrade.color.workflow.GradeReport` (``fit_start`` "saved").
+    """
+    from wbcgrade.color.lut import DEFAULT_LUT_SIZE
+    from wbcgrade.color.options import GradeOptions
+    from wbcgrade.color.workflow import grade_file, plan_photo
+
+    plan = plan_photo(photo, output, lut, lut_size or DEFAULT_LUT_SIZE, lut_format, overwrite,
+                      encode=encode)
+    options = GradeOptions(input_space=input_space, working_space=look.working)
+    source = str(dict(look.info).get("saved_look", {}).get("file", "saved grade"))
+    report = grade_file(plan, look_styles(look, source), options, shared=look,
+                        progress=progress)
+    report.fit = look_fit(look)
+    return report
+
+
+def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
+                       report_dir=None):
+    """The options of a batch (or clip) graded with a saved grade: its working space.
+
+    ``--consistent``, ``--lut`` and ``--report`` make no sense with one (it is
+    already one grade for every photo, and there are no styles): OptionError.
+    """
+    from dataclasses import replace
+
+    from wbcgrade.errors import OptionError
+
+    for given, flag in ((consistent, "--consistent"), (lut is not None, "--lut"),
+                        (report_dir is not None, "--report")):
+        if given:
+            raise OptionError(f"{flag} does not go with --look (a saved grade is already one "
+                              "grade for every photo, with no styles to report)", flag)
+    return replace(options, spaces=replace(options.spaces, working=look.working))
