@@ -1,7 +1,7 @@
 """Latency of ``wbcgrade explore``: from a move of the point to the new LUT (and pixels).
 
     python benchmarks/explore.py [--photo samples/chelsea.jpg] [--presets warm,mixed]
-                                 [--moves 40] [--browser]
+                                 [--moves 40] [--browser] [--baseline REV]
 
 For each preset, starts a studio on the photo (the server and its job worker,
 as ``wbcgrade explore`` does), waits for the exact map of the fitted weights,
@@ -27,7 +27,10 @@ the exact map (the server's preview), the fast map alone; and the time of
 one exact map (which the page shows once the point rests).
 
 Prints the machine's load average too: the 2-core development machine is
-shared, and timings scale with what else runs.
+shared, and timings scale with what else runs. ``--baseline REV`` (a git
+revision, e.g. ``main``) measures that revision's code in the same run: each
+preset is measured in a fresh process for REV (its tree exported from git)
+and for this tree, one after the other, so both see the same load.
 """
 
 from __future__ import annotations
@@ -37,7 +40,9 @@ import http.client
 import json
 import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -194,26 +199,25 @@ def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
             "preview": f"{session.preview.shape[1]}x{session.preview.shape[0]}"}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--photo", default=str(ROOT / "samples" / "chelsea.jpg"))
-    parser.add_argument("--presets", default="warm,mixed")
-    parser.add_argument("--moves", type=int, default=40)
-    parser.add_argument("--browser", action="store_true",
-                        help="also measure move -> pixels in headless Chromium")
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
-    rng = np.random.default_rng(args.seed)
-    load_before = os.getloadavg()
-    cases = [run_case(args.photo, preset, args.moves, args.browser, rng)
-             for preset in args.presets.split(",")]
-    load_after = os.getloadavg()
-    print(f"photo {Path(args.photo).name}, {args.moves} moves per drag, "
-          f"load average {load_before[0]:.1f} -> {load_after[0]:.1f} "
-          f"({os.cpu_count()} cores)")
+def measured_in(tree: Path, args, preset: str) -> dict:
+    """:func:`run_case` in a fresh process on the package in ``tree`` (run from there, so
+    that the studio's job worker, started with ``python -m``, imports it too)."""
+    with tempfile.NamedTemporaryFile(suffix=".json") as out:
+        subprocess.run([sys.executable, str(Path(__file__).resolve()),
+                        "--photo", str(Path(args.photo).resolve()), "--presets", preset,
+                        "--moves", str(args.moves), "--seed", str(args.seed),
+                        *(["--browser"] if args.browser else []), "--json", out.name],
+                       env={**os.environ, "PYTHONPATH": str(tree)}, cwd=tree, check=True)
+        return json.loads(Path(out.name).read_text())[0]
+
+
+def print_tables(cases: list[dict], moves: int, photo: str, load: tuple[float, float]) -> None:
+    print(f"photo {Path(photo).name}, {moves} moves per drag, "
+          f"load average {load[0]:.1f} -> {load[1]:.1f} ({os.cpu_count()} cores)")
     print()
-    print(f"{'preset (styles)':<16} {'measure':<22} {'median':>7} {'p90':>7} {'max':>7}  (ms)")
-    print(f"{'':<16} {'(pixels: ' + cases[0]['preview'] + ' preview)':<22}")
+    print(f"{'preset (styles)':<16} {'code':<10} {'measure':<22} {'median':>7} {'p90':>7} "
+          f"{'max':>7}  (ms)")
+    print(f"{'':<16} {'':<10} {'(pixels: ' + cases[0]['preview'] + ' preview)':<22}")
     for case in cases:
         label = f"{case['preset']} ({case['styles']})"
         rows = [("move -> LUT (server)", case["server"]), ("move -> LUT (HTTP)", case["http"])]
@@ -222,21 +226,54 @@ def main() -> None:
         if case["drawn"]:
             rows.append(("move -> server preview", case["drawn"]))
         for name, values in rows:
-            print(f"{label:<16} {name:<22} {summary(values)}")
+            print(f"{label:<16} {case['code']:<10} {name:<22} {summary(values)}")
             label = ""
     print()
     print("preview vs exact grade on the preview picture (1/255: mean / p99), at an L1 "
           "distance d from the nearest exact map")
-    print(f"{'preset':<10} {'d':>5}  {'extrapolated':>14}  {'fast, corrected':>15}  "
+    print(f"{'preset':<10} {'code':<10} {'d':>5}  {'extrapolated':>14}  {'fast, corrected':>15}  "
           f"{'fast alone':>13}  {'exact map (s)':>13}")
     for case in cases:
         for row in case["accuracy"]:
             cells = "  ".join(f"{row[k][0]:6.2f} / {row[k][1]:5.2f}"
                               for k in ("extrapolated", "corrected", "fast"))
-            print(f"{case['preset']:<10} {row['distance']:5.2f}  {cells}  {row['exact_s']:13.1f}")
-        print(f"{case['preset']:<10} slopes for {case['styles']} styles: "
+            print(f"{case['preset']:<10} {case['code']:<10} {row['distance']:5.2f}  {cells}  "
+                  f"{row['exact_s']:13.1f}")
+        print(f"{case['preset']:<10} {case['code']:<10} slopes for {case['styles']} styles: "
               f"{case['slopes_s']:.1f} s (in the worker, after each exact map)")
     sys.stdout.flush()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--photo", default=str(ROOT / "samples" / "chelsea.jpg"))
+    parser.add_argument("--presets", default="warm,mixed")
+    parser.add_argument("--moves", type=int, default=40)
+    parser.add_argument("--browser", action="store_true",
+                        help="also measure move -> pixels in headless Chromium")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--baseline", metavar="REV",
+                        help="also measure this git revision's code, in the same run")
+    parser.add_argument("--json", help=argparse.SUPPRESS)  # one process's cases, for --baseline
+    args = parser.parse_args()
+    load_before = os.getloadavg()
+    if args.baseline:
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-baseline-") as tree:
+            archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline],
+                                     check=True, capture_output=True).stdout
+            subprocess.run(["tar", "-x", "-C", tree], input=archive, check=True)
+            cases = []
+            for preset in args.presets.split(","):
+                for code, where in ((args.baseline, Path(tree)), ("this tree", ROOT)):
+                    cases.append({**measured_in(where, args, preset), "code": code})
+    else:
+        rng = np.random.default_rng(args.seed)
+        cases = [{**run_case(args.photo, preset, args.moves, args.browser, rng),
+                  "code": "this tree"} for preset in args.presets.split(",")]
+    if args.json:
+        Path(args.json).write_text(json.dumps(cases))
+        return
+    print_tables(cases, args.moves, args.photo, (load_before[0], os.getloadavg()[0]))
 
 
 if __name__ == "__main__":

@@ -93,12 +93,27 @@ def test_smooth_map_solves_its_least_squares_problem(size):
     fitted = fit_smooth_map(raw, density, size=size, smoothness=smoothness,
                             stiffness=stiffness)
     assert np.abs(fitted - expected).max() < 2e-5
+    if size ** 3 > smooth_map._DIRECT_NODES:
+        return
+    # the factored fit (explore's preview: one photo, many raw maps, small lattices)
+    # solves the same system, for any raw map of the photo
+    fitter = smooth_map.SmoothMapFitter(density, size, smoothness, stiffness)
+    assert np.abs(fitter.fit(raw) - expected).max() < 2e-5
+    shifted = np.clip(raw + 0.05, 0, 1)
+    assert np.abs(fitter.fit(shifted) - fit_smooth_map(
+        shifted, density, size=size, smoothness=smoothness, stiffness=stiffness)).max() < 2e-5
 
 
 def test_smooth_map_validates_its_input():
+    from wbcgrade.color.smooth_map import SmoothMapFitter
+
     raw, density = _split_map(8)
     with pytest.raises(ValueError):
         fit_smooth_map(raw, density[:4])
+    with pytest.raises(ValueError, match="too large"):
+        SmoothMapFitter(density, 33)
+    with pytest.raises(ValueError):
+        SmoothMapFitter(density, 9).fit(raw[:4, :4, :4])
     with pytest.raises(ValueError):
         fit_smooth_map(raw, density, smoothness=0, stiffness=0)
     with pytest.raises(ValueError):

@@ -50,9 +50,9 @@ def test_command_line_quotes_paths_and_names_every_setting(tmp_path):
     settings = settings_from_json({"weights": [0.5, 0.25, 0.25], "strength": 0.75,
                                    "relaxation": 0.5, "keep_lightness": True}, 3)
     args = shlex.split(session.command_line(settings))
-    assert args == ["wbcgrade", "apply", str(photo), "--preset", PRESET, "--weights",
-                    "0.5,0.25,0.25", "--no-regrain", "--strength", "0.75", "--relax", "0.5",
-                    "--preserve-luminance"]
+    assert args == ["wbcgrade", "apply", str(photo), "--preset", PRESET, "--mode", "palette",
+                    "--weights", "0.5,0.25,0.25", "--no-regrain", "--strength", "0.75",
+                    "--relax", "0.5", "--preserve-luminance"]
     plain = settings_from_json({"weights": [1, 0, 0]}, 3)
     assert shlex.split(session.command_line(plain))[-3:] == ["--weights", "1,0,0",
                                                              "--no-regrain"]

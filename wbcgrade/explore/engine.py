@@ -21,8 +21,9 @@ grade path means changing this file only. It offers:
 The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
 64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
 drag. The preview computes the same steps with the same kernel in colour
-units (sigma = 1/31 of the cube) on 32^3 grids and a 9^3 smooth map (the
-plan to a looser tolerance), then adds the difference between the exact and
+units (sigma = 1/31 of the cube) on 20^3 grids and a 9^3 smooth map (the
+plan to a looser tolerance, the smooth map's system factored once per
+photo), then adds the difference between the exact and
 the fast map at the nearest weights whose exact map is known (a control
 variate): at those weights the preview *is* the exact map, and nearby it
 follows the fast map's change. The fast map is solved from scratch each
@@ -50,8 +51,14 @@ from wbcgrade.explore.settings import Settings, format_number, weights_text
 __all__ = ["Session", "FitResult", "ExactGrader", "load_session", "serve_jobs",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
-#: Bins per axis of the preview's palette, plan and photo histogram.
-PREVIEW_BINS = 32
+#: Bins per axis of the preview's palette, plan and photo histogram (the kernel
+#: stays 1/31 of the cube: 0.6 bins here). On 20^3 a move costs a fifth of 32^3's
+#: CPU time (the palette's 60 barycenter iterations dominate: they scale with
+#: bins^4 and the number of styles), and the corrected preview is as close to the
+#: exact map (measured at L1 distances 0.05-0.4 on two photos and both presets:
+#: mean differences within 0.1/255 of 32^3's, most of them smaller;
+#: ``benchmarks/explore.py``).
+PREVIEW_BINS = 20
 #: Nodes per axis of the preview's smooth map (upsampled to the exact map's lattice).
 PREVIEW_MAP_SIZE = 9
 #: The preview plan's Sinkhorn tolerance (L1 marginal error; ``apply``: 3e-3). Its
@@ -70,10 +77,11 @@ THUMBNAIL_SIDE = 96
 
 
 def _base_options():
-    """``apply``'s defaults with ``--no-regrain``: what a LUT can hold."""
+    """``apply --mode palette --no-regrain``'s settings: the palette transfer (the grade
+    the weights steer, whose fast map the preview follows) and what a LUT can hold."""
     from wbcgrade.color.options import GradeOptions
 
-    return GradeOptions(regrain=False)
+    return GradeOptions(regrain=False, mode="palette")
 
 
 def _options(base, settings: Settings, **changes):
@@ -125,18 +133,30 @@ class FitResult:
 
 
 class _FastGrader:
-    """Colour maps on small grids for the live preview (module docstring); no state."""
+    """Colour maps on small grids for the live preview (module docstring).
+
+    Holds what every move shares: the styles re-binned to the preview grid and
+    the smooth map's factored system (:class:`wbcgrade.color.smooth_map.SmoothMapFitter`:
+    the photo's histogram and the lattice do not change while exploring).
+    """
 
     def __init__(self, styles, photo_hist: np.ndarray, base, encoding) -> None:
         from wbcgrade.color.options import as_options
+        from wbcgrade.color.smooth_map import SmoothMapFitter
 
         self.styles = styles
         self.photo_hist = photo_hist
         self.encoding = encoding
         # the same steps and kernel in colour units (sigma = 1/31 of the cube) as apply,
-        # on the preview grids; the plan to a looser tolerance
+        # on the preview grids; the plan to a looser tolerance; transport_map gives the
+        # raw projection (no smoothing), the factored fit smooths it
+        sigma = base.transfer.width_bins / (base.transfer.bins - 1)  # in units of the cube
         self.base = as_options(base, bins=PREVIEW_BINS, palette_bins=PREVIEW_BINS,
-                               map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL)
+                               transfer_width=sigma * (PREVIEW_BINS - 1),
+                               map_size=PREVIEW_MAP_SIZE, sinkhorn_tol=PREVIEW_SINKHORN_TOL,
+                               smoothness=0.0, stiffness=0.0)
+        self.smooth = SmoothMapFitter(photo_hist, PREVIEW_MAP_SIZE, base.map.smoothness,
+                                      base.map.stiffness)
         styles.at_bins(PREVIEW_BINS)  # re-binned once, not on every move
 
     def solve(self, settings: Settings, weights, tol: float | None = None) -> np.ndarray:
@@ -149,18 +169,31 @@ class _FastGrader:
         options = _options(self.base, settings,
                            **({} if tol is None else {"sinkhorn_tol": tol}))
         weights = np.asarray(weights, dtype=np.float64)
-        color_map, _, _, _ = transport_map(self.photo_hist, self.styles,
-                                           weights / weights.sum(), options)
-        return finish_map(color_map, options, self.encoding)
+        raw, _, _, _ = transport_map(self.photo_hist, self.styles, weights / weights.sum(),
+                                     options)
+        return finish_map(self.smooth.fit(raw), options, self.encoding)
 
 
 def upsample_map(color_map: np.ndarray, size: int) -> np.ndarray:
-    """A colour map sampled on a ``size``^3 lattice (its trilinear interpolation)."""
-    from wbcgrade.color.remap import apply_color_map, identity_map
+    """A colour map sampled on a ``size``^3 lattice (its trilinear interpolation).
 
-    if color_map.shape[0] == size:
+    At lattice nodes trilinear interpolation is separable: a (size, n) linear
+    interpolation along each axis in turn (a millisecond, where a pass over
+    the size^3 nodes as pixels took tens on a busy machine).
+    """
+    n = color_map.shape[0]
+    if n == size:
         return np.asarray(color_map, dtype=np.float32)
-    return apply_color_map(identity_map(size), color_map)
+    position = np.linspace(0.0, n - 1.0, size)
+    low = np.minimum(position.astype(np.int64), n - 2)
+    frac = position - low
+    weights = np.zeros((size, n))
+    weights[np.arange(size), low] = 1.0 - frac
+    weights[np.arange(size), low + 1] += frac
+    out = np.einsum("ai,ijkc->ajkc", weights, np.asarray(color_map, dtype=np.float64))
+    out = np.einsum("bj,ajkc->abkc", weights, out)
+    out = np.einsum("ck,abkd->abcd", weights, out)
+    return out.astype(np.float32)
 
 
 @dataclass
@@ -243,7 +276,8 @@ class Session:
         parts = ["wbcgrade", "apply", self.photo]
         parts += ["--style", self.style_dir] if self.style_dir is not None \
             else ["--preset", self.preset]
-        parts += ["--weights", weights_text(settings.weights), "--no-regrain"]
+        parts += ["--mode", "palette", "--weights", weights_text(settings.weights),
+                  "--no-regrain"]
         if settings.strength != 1.0:
             parts += ["--strength", format_number(settings.strength, 3)]
         if settings.relaxation is not None:
@@ -256,9 +290,8 @@ class Session:
                size: int) -> tuple[str, bytes]:
         """The LUT file of ``color_map`` at ``settings.strength`` -> (file name, bytes).
 
-        Written by the colour library's LUT writer (the header names the
-        spaces and the weights) into a private temporary folder, read back
-        and removed; nothing is written beside the photo.
+        Made by the colour library's LUT writer (the header names the spaces
+        and the weights) in a temporary folder; nothing is written beside the photo.
         """
         from wbcgrade.color.grading import Grade
         from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
@@ -425,8 +458,11 @@ def serve_jobs(connection) -> None:
     Settings) or "losses" (payload: rows of weights); answers ``("ok",
     result, seconds)`` or ``("error", one line, seconds)``.
     """
-    grader = ExactGrader(connection.recv())
-    connection.send(("ready", os.getpid(), 0.0))
+    try:
+        grader = ExactGrader(connection.recv())
+        connection.send(("ready", os.getpid(), 0.0))
+    except (EOFError, OSError):  # the server stopped while this worker was starting
+        return
     while True:
         try:
             kind, payload = connection.recv()
