@@ -19,13 +19,13 @@ def look() -> None:
 @click.option("--preset", default=None, metavar="NAME_OR_FILE",
               help="A shipped preset name or preset file instead of STYLE_DIR.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
-              help="LUT file to write (.cube, or .clf with --lut-format clf).")
+              help="LUT file to write (.cube or .clf: the ending names the format).")
 @click.option("--lut-size", type=click.IntRange(2, 129), default=33, show_default=True,
               help="Nodes per axis of the LUT.")
 @lazy_options(lut_format_option)
 @click.option("--strength", type=click.FloatRange(0.0, 2.0), default=None,
-              help="Scale of the extracted look [default: what `apply --mode look` uses "
-                   "where no style shows the photo's scene].")
+              help="Scale of the extracted look [default: what `apply` uses where no "
+                   "style shows the photo's scene; a preset's own look: all of it].")
 @click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
               metavar="PRESET", help="Preset (.npz) of ungraded photos, the content model "
                                      "[default: the shipped one].")
@@ -66,7 +66,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
                              lambda m: click.echo(f"Warning: {m}", err=True), progress)
     naturals = load_preset(natural) if natural else natural_palettes()
     naturals = styles_in_space(naturals, styles.working_space)
-    strength = SET_LOOK_STRENGTH if strength is None else strength
+    if strength is None:  # a preset's own look is the look itself; an extracted one, as apply
+        strength = 1.0 if styles.meta.get("look") is not None else SET_LOOK_STRENGTH
     from tqdm import tqdm
 
     with tqdm(total=len(styles.names), desc="look", unit="style", leave=False) as bar:
