@@ -538,27 +538,6 @@ class SceneLook:
         return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
 
 
-def _lattice_weights(colors: np.ndarray, nodes: int):
-    """(N, nodes^3) sparse trilinear interpolation weights of colours in [0, 1]."""
-    import scipy.sparse as sparse
-
-    position = np.clip(colors, 0.0, 1.0) * (nodes - 1)
-    base = np.minimum(position.astype(np.int64), nodes - 2)
-    frac = position - base
-    rows, cols, values = [], [], []
-    for corner in np.ndindex(2, 2, 2):
-        weight = np.prod([frac[:, a] if corner[a] else 1.0 - frac[:, a] for a in range(3)],
-                         axis=0)
-        index = ((base[:, 0] + corner[0]) * nodes + base[:, 1] + corner[1]) * nodes \
-            + base[:, 2] + corner[2]
-        rows.append(np.arange(len(colors)))
-        cols.append(index)
-        values.append(weight)
-    return sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows),
-                                                       np.concatenate(cols))),
-                             shape=(len(colors), nodes ** 3))
-
-
 def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
                    nodes: int = 9, smoothness: float = 1e-3, ridge: float = 1e-6) -> np.ndarray:
     """The smooth displacement lattice that best moves ``sources`` onto ``targets``.
@@ -571,8 +550,10 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
+    from wbcgrade.color.smooth_map import _interpolation_matrix
+
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
-    interpolate = _lattice_weights(np.asarray(sources, dtype=np.float64), nodes)
+    interpolate = _interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
     second = sparse.diags([np.ones(nodes - 1), -2.0 * np.ones(nodes), np.ones(nodes - 1)],
                           [-1, 0, 1], shape=(nodes, nodes)).tolil()
     second[0, :] = 0.0

@@ -229,7 +229,10 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     the look the styles were made with, as a lattice LUT in the working space.
     """
     if look is not None:
-        look = _check_look(np.asarray(look), InputError, "look")
+        look = np.asarray(look)
+        problem = _look_problem(look)
+        if problem:
+            raise InputError(f"look: {problem}")
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError(f"{path}: preset file name must end in .npz")
@@ -261,14 +264,15 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
     return path
 
 
-def _check_look(look: np.ndarray, error, where: str) -> np.ndarray:
-    """``look`` when it is an (m, m, m, 3) lattice of finite values in [0, 1], m >= 2."""
+def _look_problem(look: np.ndarray) -> str | None:
+    """What is wrong with a preset's look, or None when it is an (m, m, m, 3) lattice
+    (m >= 2) of finite floats in [0, 1]."""
     if (look.ndim != 4 or look.shape[3] != 3 or not look.shape[0] == look.shape[1]
             == look.shape[2] >= 2 or not np.issubdtype(look.dtype, np.floating)):
-        raise error(f"{where}: the look must be an (m, m, m, 3) lattice")
+        return "the look must be an (m, m, m, 3) lattice"
     if not np.all(np.isfinite(look)) or look.min() < 0 or look.max() > 1:
-        raise error(f"{where}: the look's values must be finite, in [0, 1]")
-    return look
+        return "the look's values must be finite, in [0, 1]"
+    return None
 
 
 def _bad(path: Path, why: str) -> InputError:
@@ -341,8 +345,10 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         hists.append(from_sparse(index[part], values[part], bins))
     meta = dict(header)
     if look is not None:
-        meta["look"] = _check_look(look.astype(np.float32),
-                                   lambda why: _bad(path, why.split(": ", 1)[1]), "look")
+        meta["look"] = look.astype(np.float32)
+        problem = _look_problem(meta["look"])
+        if problem:
+            raise _bad(path, problem)
     return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
                     width=None if width is None else float(width),
                     description=str(header.get("description", "")), meta=meta)

@@ -259,6 +259,12 @@ def _read_style(path: Path, working_space: str) -> SceneImage:
     return scene_image(encoded)
 
 
+#: Style images already prepared in this process, by cache file (whose name says which
+#: file, of which size and time, in which space): a batch grades many photos towards them.
+_IN_MEMORY: dict[Path, SceneImage] = {}
+_IN_MEMORY_MAX = 64
+
+
 def has_style_images(styles) -> bool:
     """Whether a StyleSet names its photos' files or carries their images (a folder's
     does, a preset's does not): whether :func:`style_scene_images` has anything to match."""
@@ -289,7 +295,8 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
             folder = styles.meta.get("cache_dir") if cache else None
             where = (_scene_cache_path(path, styles.working_space, Path(folder))
                      if folder else None)
-            found = _read_cached(where)
+            found = _IN_MEMORY.get(where) if where is not None else None
+            found = found or _read_cached(where)
             if found is None:
                 try:
                     found = _read_style(path, styles.working_space)
@@ -297,6 +304,10 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
                     found = None
                 else:
                     _write_cached(where, found)
+            if found is not None and where is not None:  # a batch reads each style once
+                if len(_IN_MEMORY) >= _IN_MEMORY_MAX:
+                    _IN_MEMORY.pop(next(iter(_IN_MEMORY)))
+                _IN_MEMORY[where] = found
         out.append(found)
         if progress is not None:
             progress(i + 1, n)
