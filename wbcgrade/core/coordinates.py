@@ -13,7 +13,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core import _validation
@@ -178,6 +177,8 @@ def barycentric_coordinates(
             time.perf_counter() - start, solver.last_backend,
         )
 
+    import scipy.optimize  # here, not at import: it costs ~0.3 s of every command's start
+
     result = scipy.optimize.minimize(
         energy,
         alpha0,
@@ -242,6 +243,8 @@ def mixture_coordinates(
             callback(len(history), weights, float(value))
         scale.setdefault("scale", abs(value) if value != 0 else 1.0)
         return value / scale["scale"], grad / scale["scale"]
+
+    import scipy.optimize  # here, not at import: it costs ~0.3 s of every command's start
 
     result = scipy.optimize.minimize(
         energy,
