@@ -57,5 +57,38 @@ def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse
     b_full = np.einsum("yi,xj,ijc->yxc", wy, wx, b)
     expected = np.clip(source + np.einsum("yxac,yxa->yxc", A_full, source) + b_full, 0, 1)
     out = np.empty_like(source)
-    regrain_module._apply_upsampled(source, A, b, step, out)
+    coefficients = np.concatenate([A.reshape(*coarse, 9), b], axis=-1)
+    regrain_module._apply_upsampled(source, coefficients, step, out)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape, radius", [((37, 53, 5), 3), ((7, 5, 2), 9), ((1, 6, 3), 2),
+                                           ((6, 1, 1), 4), ((70, 40, 12), 1)])
+def test_box_means_are_scipys_uniform_filter(rng, shape, radius):
+    """The compiled box filter (wider than the image too: mirrored again and again) gives
+    scipy.ndimage's reflect-mode uniform filter on every channel, to float32 rounding."""
+    from scipy import ndimage
+
+    x = rng.random(shape).astype(np.float32) * 2 - 0.5
+    expected = np.stack([ndimage.uniform_filter(x[..., k], size=2 * radius + 1, mode="reflect")
+                         for k in range(shape[2])], axis=-1)
+    np.testing.assert_allclose(regrain_module._box(x, radius), expected, rtol=0, atol=1e-6)
+
+
+def test_window_models_solve_the_regularised_local_fit(rng):
+    """Each window's A, b are the ridge regression of the change on the guide over the
+    window (the covariances of every pixel in it, numpy's solver), at an inner pixel."""
+    guide = rng.random((15, 17, 3)).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1
+              + 0.02 * rng.standard_normal(guide.shape)).astype(np.float32)
+    radius, eps, y, x = 2, 0.01, 7, 9
+    models = regrain_module._window_models(guide, change, radius, eps)
+    window = np.s_[y - radius:y + radius + 1, x - radius:x + radius + 1]
+    g = guide[window].reshape(-1, 3).astype(np.float64)
+    d = change[window].reshape(-1, 3).astype(np.float64)
+    g_centred, d_centred = g - g.mean(0), d - d.mean(0)
+    A = np.linalg.solve(g_centred.T @ g_centred / len(g) + eps * np.eye(3),
+                        g_centred.T @ d_centred / len(g))
+    b = d.mean(0) - A.T @ g.mean(0)
+    np.testing.assert_allclose(models[y, x, :9].reshape(3, 3), A, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(models[y, x, 9:], b, rtol=0, atol=2e-5)

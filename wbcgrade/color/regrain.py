@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy import ndimage
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
@@ -39,76 +38,210 @@ __all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_
 _MAX_SOLVE_PIXELS = 1_500_000
 
 
-def _box(x: np.ndarray, radius: int) -> np.ndarray:
-    return ndimage.uniform_filter(x, size=(2 * radius + 1, 2 * radius + 1), mode="reflect")
+@compiled(cache=True)
+def _reflect(i: int, n: int) -> int:  # pragma: no cover - compiled
+    """Index ``i`` of a line of ``n`` extended by mirroring (d c b a | a b c d | d c b a)."""
+    m = i % (2 * n)
+    return 2 * n - 1 - m if m >= n else m
 
 
-def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int,
-                  eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Box-averaged (H, W, 3, 3) A and (H, W, 3) b of the local model change = A^T guide + b."""
-    h, w = guide.shape[:2]
-    mean_i = np.stack([_box(guide[..., c], radius) for c in range(3)], axis=-1)
-    mean_d = np.stack([_box(change[..., c], radius) for c in range(3)], axis=-1)
-    # Symmetric 3x3 covariance of the guide (+ eps), inverted in closed form.
-    def cov(a, c, x, mean_x):
-        return _box(guide[..., a] * x[..., c], radius) - mean_i[..., a] * mean_x[..., c]
+@compiled(cache=True)
+def _running_mean(line: np.ndarray, radius: int, out: np.ndarray) -> None:  # pragma: no cover
+    """``out[i] = mean(line[i - radius : i + radius + 1])`` over the (n, K) ``line`` mirrored
+    at its ends: a running sum in float64 (as ``scipy.ndimage.uniform_filter1d``)."""
+    n, k = line.shape
+    inv = 1.0 / (2 * radius + 1)
+    acc = np.zeros(k, np.float64)
+    for i in range(-radius, radius + 1):
+        j = _reflect(i, n)
+        for c in range(k):
+            acc[c] += line[j, c]
+    for i in range(n):
+        for c in range(k):
+            out[i, c] = acc[c] * inv
+        enter = _reflect(i + radius + 1, n)
+        leave = _reflect(i - radius, n)
+        for c in range(k):
+            acc[c] += line[enter, c] - line[leave, c]
 
-    s00, s01, s02 = cov(0, 0, guide, mean_i) + eps, cov(0, 1, guide, mean_i), \
-        cov(0, 2, guide, mean_i)
-    s11, s12, s22 = cov(1, 1, guide, mean_i) + eps, cov(1, 2, guide, mean_i), \
-        cov(2, 2, guide, mean_i) + eps
-    i00, i01, i02 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
-    i11, i12, i22 = s00 * s22 - s02 * s02, s01 * s02 - s00 * s12, s00 * s11 - s01 * s01
-    det = s00 * i00 + s01 * i01 + s02 * i02
-    inverse = [[i00, i01, i02], [i01, i11, i12], [i02, i12, i22]]
-    cross = [[cov(a, c, change, mean_d) for c in range(3)] for a in range(3)]
-    A = np.empty((h, w, 3, 3), np.float32)
-    for a in range(3):
-        for c in range(3):
-            A[..., a, c] = (inverse[a][0] * cross[0][c] + inverse[a][1] * cross[1][c]
-                            + inverse[a][2] * cross[2][c]) / det
-    b = mean_d - np.einsum("hwac,hwa->hwc", A, mean_i)
-    for a in range(3):
-        for c in range(3):
-            A[..., a, c] = _box(A[..., a, c], radius)
-    b = np.stack([_box(b[..., c], radius) for c in range(3)], axis=-1)
-    return A, b
+
+#: Pixel columns of one task of the vertical pass (its running sums stay in the cache).
+_COLUMN_BLOCK = 32
+
+
+@compiled(cache=True)
+def _column_blocks(w: int) -> int:  # pragma: no cover - compiled
+    return (w + _COLUMN_BLOCK - 1) // _COLUMN_BLOCK
 
 
 @compiled(parallel=True, cache=True)
-def _apply_upsampled(source: np.ndarray, A: np.ndarray, b: np.ndarray, step: float,
+def _box(x: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
+    the borders: ``scipy.ndimage.uniform_filter(mode="reflect")`` on each channel, to
+    float32 rounding (rows, then blocks of columns, in parallel; running sums in float64)."""
+    h, w, k = x.shape
+    rows = np.empty((h, w, k), np.float32)
+    for y in numba.prange(h):
+        _running_mean(x[y], radius, rows[y])
+    out = np.empty((h, w, k), np.float32)
+    inv = 1.0 / (2 * radius + 1)
+    for block in numba.prange(_column_blocks(w)):
+        lo = block * _COLUMN_BLOCK
+        hi = min(lo + _COLUMN_BLOCK, w)
+        acc = np.zeros((hi - lo, k), np.float64)
+        for i in range(-radius, radius + 1):
+            row = _reflect(i, h)
+            for x_ in range(lo, hi):
+                for c in range(k):
+                    acc[x_ - lo, c] += rows[row, x_, c]
+        for y in range(h):
+            enter = _reflect(y + radius + 1, h)
+            leave = _reflect(y - radius, h)
+            for x_ in range(lo, hi):
+                for c in range(k):
+                    out[y, x_, c] = acc[x_ - lo, c] * inv
+                    acc[x_ - lo, c] += rows[enter, x_, c] - rows[leave, x_, c]
+    return out
+
+
+#: Per-pixel quantities whose window means give the local model: the guide I (3), the
+#: change d (3), the guide's products I_a I_c (a <= c: 6) and the cross products I_a d_c (9).
+_N_MOMENTS = 21
+
+
+@compiled(cache=True)
+def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndarray,
+                  out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """One window's A (row-major, [a, c] at 3 a + c) and b into ``out`` (12,) from the
+    window means ``m`` (21,) of the moments: ``A = (Cov(I) + eps Id)^-1 Cov(I, d)``,
+    ``b = mean(d) - A^T mean(I)``; ``inverse``, ``cross``: (3, 3) scratch."""
+    # symmetric covariance of the guide (+ eps), inverted in closed form
+    s00 = m[6] - m[0] * m[0] + eps
+    s01 = m[7] - m[0] * m[1]
+    s02 = m[8] - m[0] * m[2]
+    s11 = m[9] - m[1] * m[1] + eps
+    s12 = m[10] - m[1] * m[2]
+    s22 = m[11] - m[2] * m[2] + eps
+    inverse[0, 0] = s11 * s22 - s12 * s12
+    inverse[0, 1] = s02 * s12 - s01 * s22
+    inverse[0, 2] = s01 * s12 - s02 * s11
+    inverse[1, 1] = s00 * s22 - s02 * s02
+    inverse[1, 2] = s01 * s02 - s00 * s12
+    inverse[2, 2] = s00 * s11 - s01 * s01
+    inverse[1, 0] = inverse[0, 1]
+    inverse[2, 0] = inverse[0, 2]
+    inverse[2, 1] = inverse[1, 2]
+    det = s00 * inverse[0, 0] + s01 * inverse[0, 1] + s02 * inverse[0, 2]
+    for a in range(3):
+        for c in range(3):
+            cross[a, c] = m[12 + 3 * a + c] - m[a] * m[3 + c]
+    for c in range(3):
+        offset = m[3 + c]
+        for a in range(3):
+            value = np.float32((inverse[a, 0] * cross[0, c] + inverse[a, 1] * cross[1, c]
+                                + inverse[a, 2] * cross[2, c]) / det)
+            out[3 * a + c] = value
+            offset -= value * m[a]
+        out[9 + c] = offset
+
+
+@compiled(parallel=True, cache=True)
+def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
+                   eps: float) -> np.ndarray:
+    """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
+    window means (rows, then blocks of columns, as :func:`_box`), solved as they come."""
+    h, w = guide.shape[:2]
+    rows = np.empty((h, w, _N_MOMENTS), np.float32)
+    for y in numba.prange(h):
+        moments = np.empty((w, _N_MOMENTS), np.float32)
+        for x in range(w):
+            for c in range(3):
+                moments[x, c] = guide[y, x, c]
+                moments[x, 3 + c] = change[y, x, c]
+            n = 6
+            for a in range(3):
+                for c in range(a, 3):
+                    moments[x, n] = guide[y, x, a] * guide[y, x, c]
+                    n += 1
+            for a in range(3):
+                for c in range(3):
+                    moments[x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
+        _running_mean(moments, radius, rows[y])
+    out = np.empty((h, w, 12), np.float32)
+    inv = 1.0 / (2 * radius + 1)
+    for block in numba.prange(_column_blocks(w)):
+        lo = block * _COLUMN_BLOCK
+        hi = min(lo + _COLUMN_BLOCK, w)
+        acc = np.zeros((hi - lo, _N_MOMENTS), np.float64)
+        means = np.empty(_N_MOMENTS, np.float64)
+        inverse = np.empty((3, 3))
+        cross = np.empty((3, 3))
+        for i in range(-radius, radius + 1):
+            row = _reflect(i, h)
+            for x in range(lo, hi):
+                for c in range(_N_MOMENTS):
+                    acc[x - lo, c] += rows[row, x, c]
+        for y in range(h):
+            enter = _reflect(y + radius + 1, h)
+            leave = _reflect(y - radius, h)
+            for x in range(lo, hi):
+                for c in range(_N_MOMENTS):
+                    means[c] = acc[x - lo, c] * inv
+                    acc[x - lo, c] += rows[enter, x, c] - rows[leave, x, c]
+                _solve_window(means, eps, inverse, cross, out[y, x])
+    return out
+
+
+def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float) -> np.ndarray:
+    """(H, W, 12) float32 box-averaged coefficients of the local model
+    ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``."""
+    guide = np.ascontiguousarray(guide, dtype=np.float32)
+    change = np.ascontiguousarray(change, dtype=np.float32)
+    return _box(_window_models(guide, change, int(radius), float(eps)), int(radius))
+
+
+@compiled(parallel=True, cache=True)
+def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
                      out: np.ndarray) -> None:
-    """``out = clip(source + A(x)^T source + b(x))`` with ``A, b`` bilinearly interpolated
-    from the coarse grid: each output row first blends its two coarse rows (12
-    coefficients a node), then each pixel blends two nodes of that row."""
+    """``out = clip(source + A(x)^T source + b(x))`` with the (lh, lw, 12) ``A, b`` of
+    :func:`_coefficients` bilinearly interpolated from the coarse grid (pixel centres,
+    edges clamped): each output row first blends its two coarse rows, then each pixel
+    blends two nodes of that row (the column weights are the same for every row)."""
     h, w = source.shape[:2]
-    lh, lw = A.shape[:2]
+    lh, lw = coefficients.shape[:2]
+    left = np.empty(w, np.int64)
+    right = np.empty(w, np.int64)
+    weight = np.empty(w, np.float32)
+    for x in range(w):
+        fx = min(max((x + 0.5) / step - 0.5, 0.0), lw - 1.0)
+        x0 = min(int(fx), lw - 2) if lw > 1 else 0
+        left[x] = x0
+        right[x] = min(x0 + 1, lw - 1)
+        weight[x] = fx - x0
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
     for y in numba.prange(h):
         fy = min(max((y + 0.5) / step - 0.5, 0.0), lh - 1.0)
         y0 = min(int(fy), lh - 2) if lh > 1 else 0
-        ty = fy - y0
+        ty = np.float32(fy - y0)
         y1 = min(y0 + 1, lh - 1)
-        row = np.empty((lw, 12))  # this output row's coefficients at the coarse columns
+        row = np.empty((lw, 12), np.float32)  # this output row's coefficients, coarse columns
         for x in range(lw):
-            for a in range(3):
-                for c in range(3):
-                    row[x, 3 * a + c] = (1 - ty) * A[y0, x, a, c] + ty * A[y1, x, a, c]
-            for c in range(3):
-                row[x, 9 + c] = (1 - ty) * b[y0, x, c] + ty * b[y1, x, c]
+            for k in range(12):
+                row[x, k] = (one - ty) * coefficients[y0, x, k] + ty * coefficients[y1, x, k]
         for x in range(w):
-            fx = min(max((x + 0.5) / step - 0.5, 0.0), lw - 1.0)
-            x0 = min(int(fx), lw - 2) if lw > 1 else 0
-            tx = fx - x0
-            x1 = min(x0 + 1, lw - 1)
+            x0 = left[x]
+            x1 = right[x]
+            tx = weight[x]
             s0 = source[y, x, 0]
             s1 = source[y, x, 1]
             s2 = source[y, x, 2]
             for c in range(3):
-                value = source[y, x, c] + (1 - tx) * row[x0, 9 + c] + tx * row[x1, 9 + c]
-                value += ((1 - tx) * row[x0, c] + tx * row[x1, c]) * s0
-                value += ((1 - tx) * row[x0, 3 + c] + tx * row[x1, 3 + c]) * s1
-                value += ((1 - tx) * row[x0, 6 + c] + tx * row[x1, 6 + c]) * s2
-                out[y, x, c] = min(max(value, 0.0), 1.0)
+                value = (one - tx) * (row[x0, 9 + c] + row[x0, c] * s0 + row[x0, 3 + c] * s1
+                                      + row[x0, 6 + c] * s2) \
+                    + tx * (row[x1, 9 + c] + row[x1, c] * s0 + row[x1, 3 + c] * s1
+                            + row[x1, 6 + c] * s2)
+                out[y, x, c] = min(max(source[y, x, c] + value, zero), one)
 
 
 @compiled(parallel=True, cache=True)
@@ -156,9 +289,9 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
     step = _step(h, w)
     if step == 1:
         pixels = max(1, int(round(radius * max(h, w))))
-        A, b = _coefficients(source, graded - source, pixels, eps)
-        out = source + np.einsum("hwac,hwa->hwc", A, source) + b
-        return np.clip(out, 0.0, 1.0)
+        out = np.empty_like(source)
+        _apply_upsampled(source, _coefficients(source, graded - source, pixels, eps), 1.0, out)
+        return out
     small = _downsample(source, step)
     change = _downsample(graded, step) - small
     return _regrain_upsampled(source, small, change, step, radius, eps)
@@ -198,7 +331,6 @@ def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray
                        radius: float, eps: float) -> np.ndarray:
     h, w = source.shape[:2]
     pixels = max(1, int(round(radius * max(h, w) / step)))
-    A, b = _coefficients(small, change, pixels, eps)
     out = np.empty_like(source)
-    _apply_upsampled(source, np.ascontiguousarray(A), np.ascontiguousarray(b), float(step), out)
+    _apply_upsampled(source, _coefficients(small, change, pixels, eps), float(step), out)
     return out
