@@ -61,7 +61,6 @@ from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
-from wbcgrade.color.transfer import transport_map
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
@@ -212,6 +211,10 @@ class BuiltMap(NamedTuple):
 def palette_map(request: MapRequest) -> BuiltMap:
     """The "palette" builder: the weights (never worse than one style alone), then the
     map onto their barycenter palette (:func:`wbcgrade.color.transfer.transport_map`)."""
+    # imported here: the transport and its smooth map (scipy.sparse, ~0.1 s) are needed to
+    # build a palette grade, not to apply a saved one
+    from wbcgrade.color.transfer import transport_map
+
     options, styles = request.options, request.styles
     request.stage("fit")
     fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
