@@ -24,6 +24,9 @@ def test_block_means_of_the_mapped_image(rng, step, strength):
     rgb, table = _image_and_map(rng)
     expected = regrain_module._downsample(apply_color_map(rgb, table, strength), step)
     assert np.array_equal(block_means_mapped(rgb, table, strength, step), expected)
+    mapped, source = block_means_mapped(rgb, table, strength, step, with_source=True)
+    assert np.array_equal(mapped, expected)
+    assert np.array_equal(source, regrain_module._downsample(rgb, step))
 
 
 @pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled

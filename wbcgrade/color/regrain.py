@@ -304,9 +304,9 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
 
     The same numbers; on large images (solved on a subsampled copy) the
     graded image is only needed block-averaged, so the colour map and the
-    block means are one pass (:func:`wbcgrade.color.remap.block_means_mapped`)
-    and the full-size graded image is never made (a pass and ~12 bytes a
-    pixel saved).
+    block means (of the input too) are one pass
+    (:func:`wbcgrade.color.remap.block_means_mapped`) and the full-size graded
+    image is never made (two passes and ~12 bytes a pixel saved).
     """
     if source.ndim != 3 or source.shape[2] != 3:
         raise ValueError("source must be an (H, W, 3) image")
@@ -317,9 +317,8 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     if step == 1:
         return regrain(source, apply_color_map(source, color_map, strength), radius, eps)
     source = np.ascontiguousarray(source, dtype=np.float32)
-    small = _downsample(source, step)
-    change = block_means_mapped(source, color_map, strength, step) - small
-    return _regrain_upsampled(source, small, change, step, radius, eps)
+    mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
+    return _regrain_upsampled(source, small, mapped - small, step, radius, eps)
 
 
 def _step(h: int, w: int) -> int:

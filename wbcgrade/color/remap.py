@@ -53,15 +53,20 @@ def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.n
 
 @compiled(parallel=True, cache=True, fastmath=False)
 def _block_means_mapped(colors: np.ndarray, table: np.ndarray, strength: float,
-                        step: int) -> np.ndarray:
+                        step: int, source_means: np.ndarray) -> np.ndarray:
     """Mean of every step x step block of an (H, W, 3) image moved through the map.
 
     Bit for bit ``regrain._downsample(apply_color_map(colors, table, strength), step)``
     (the same lookup as ``_trilinear``, the block sums in the same order, partial edge
-    blocks dropped) without the full-size graded image.
+    blocks dropped) without the full-size graded image. ``source_means`` (h, w, 3), when
+    it has that shape, receives the blocks' means of ``colors`` themselves in the same pass
+    (bit for bit ``regrain._downsample(colors, step)``); pass a (0, 0, 3) array otherwise.
     """
     h, w = colors.shape[0] // step, colors.shape[1] // step
     out = np.zeros((h, w, 3), np.float32)
+    both = source_means.shape[0] == h and source_means.shape[1] == w and h > 0 and w > 0
+    if both:
+        source_means[:] = 0.0
     inv = 1.0 / (step * step)
     for bi in numba.prange(h):
         mapped = np.empty(3, np.float32)
@@ -74,24 +79,37 @@ def _block_means_mapped(colors: np.ndarray, table: np.ndarray, strength: float,
                             colors[row, col, 2], strength, mapped)
                     for c in range(3):
                         out[bi, bj, c] += mapped[c]
+                    if both:
+                        for c in range(3):
+                            source_means[bi, bj, c] += colors[row, col, c]
         for bj in range(w):
             for c in range(3):
                 out[bi, bj, c] *= inv
+            if both:
+                for c in range(3):
+                    source_means[bi, bj, c] *= inv
     return out
 
 
 def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
-                       step: int) -> np.ndarray:
+                       step: int, with_source: bool = False):
     """Block means (``step`` x ``step``, partial edge blocks dropped) of an (H, W, 3)
     image moved through a colour map: ``apply_color_map`` then the block means, in
-    one pass and without the full-size result (the same float32 numbers)."""
+    one pass and without the full-size result (the same float32 numbers).
+
+    With ``with_source``, a pair: those means and the block means of ``rgb`` itself
+    (float32, as ``regrain._downsample``), read in the same pass.
+    """
     if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1:
         raise ValueError("color_map must be (n, n, n, 3)")
     if rgb.ndim != 3 or rgb.shape[2] != 3 or step < 1:
         raise ValueError("rgb must be (H, W, 3) and step >= 1")
     colors = np.ascontiguousarray(rgb, dtype=np.float32)
     table = np.ascontiguousarray(color_map, dtype=np.float32)
-    return _block_means_mapped(colors, table, np.float32(strength), int(step))
+    shape = (colors.shape[0] // step, colors.shape[1] // step, 3) if with_source else (0, 0, 3)
+    source_means = np.empty(shape, np.float32)
+    mapped = _block_means_mapped(colors, table, np.float32(strength), int(step), source_means)
+    return (mapped, source_means) if with_source else mapped
 
 
 def identity_map(bins: int, dtype=np.float32) -> np.ndarray:
