@@ -220,8 +220,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         if lut is not None and result.series_grade is not None:
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-            result.lut = write_grade_lut(lut, grade, ColorEncoding.of(None, options.spaces.working),
-                                         lut_size, lut_format,
+            # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
+            encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+            result.lut = write_grade_lut(lut, grade, encoding, lut_size, lut_format,
                                          title=f"wbcgrade series {Path(in_dir).name}",
                                          comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
                                          overwrite=overwrite)
