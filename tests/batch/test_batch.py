@@ -168,6 +168,32 @@ def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     assert not np.array_equal(graded_a, left)
 
 
+def test_the_series_lut_is_baked_for_the_photos_input_space(folders, tmp_path):
+    """``--consistent --lut`` with ``--input-space``: the LUT takes the photos' own code
+    values (it was baked for sRGB whatever the input space was), so applying it to a
+    photo gives the batch's graded photo."""
+    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.remap import apply_color_map
+
+    photos, styles = folders
+    series = tmp_path / "series"
+    series.mkdir()
+    _write_png(series / "cat.png", _pixels(photos / "chelsea.jpg"))  # lossless outputs
+    shutil.copy(photos / "astronaut.png", series / "astronaut.png")
+    lut = tmp_path / "series.cube"
+    result = _batch(series, styles, tmp_path / "out", "--consistent", "--lut", str(lut),
+                    "--lut-size", "33", "--no-regrain", "--input-space", "display-p3")
+    assert result.exit_code == 0, result.output
+    header = [line for line in lut.read_text().splitlines() if line.startswith("#")]
+    assert any("input space: sRGB Encoded P3-D65" in line for line in header), header
+    table = read_cube(lut).table
+    for name in ("cat.png", "astronaut.png"):
+        source, graded = _pixels(series / name), _pixels(tmp_path / "out" / name)
+        error = np.abs(apply_color_map(source, table) - graded) * 255
+        assert np.abs(graded - source).mean() * 255 > 2  # it did grade
+        assert error.max() <= 3 and error.mean() < 0.6, (name, error.max(), error.mean())
+
+
 def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     photos, styles = folders

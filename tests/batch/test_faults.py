@@ -81,6 +81,26 @@ def test_a_rerun_removes_the_temporaries_of_a_killed_run(shoot, tmp_path):
     assert not stale.exists() and not old_style.exists()
 
 
+def test_a_rerun_removes_the_record_temporaries_of_a_killed_run(shoot, tmp_path):
+    """A batch killed while recording a photo's result left its temporary in
+    ``.wbcgrade-results/`` for good; the next run removes it (and keeps the records)."""
+    photos, styles = shoot
+    out = tmp_path / "out"
+    assert _batch(photos, styles, out).exit_code == 0
+    records = out / ".wbcgrade-results"
+    target = records / "sub" / "bridge.jpg.json"
+    kept = sorted(p.relative_to(records) for p in records.rglob("*.json"))
+    killed = subprocess.run([sys.executable, "-c", KILLED_WRITER, str(target), "kill"],
+                            capture_output=True, timeout=60)
+    assert killed.returncode == -signal.SIGKILL
+    (stale,) = [p for p in target.parent.iterdir() if TEMP_MARK in p.name]
+    _age(stale)
+    result = _batch(photos, styles, out)
+    assert result.exit_code == 0, result.output
+    assert not stale.exists()
+    assert sorted(p.relative_to(records) for p in records.rglob("*.json")) == kept
+
+
 def _children(pid: int) -> dict[int, str]:
     """pid -> command line of the processes whose parent is ``pid``."""
     found = {}

@@ -27,11 +27,8 @@ def _warn(message: str) -> None:
 
 def _print_report(report, as_json: bool) -> None:
     if as_json:
-        from wbcgrade.color.saved_look import look_dict
-
         # the grade itself rides along: `apply --look` reads this JSON back without a fit
-        click.echo(json.dumps({**report.as_dict(), "saved_grade": look_dict(report.grade)},
-                              indent=2))
+        click.echo(json.dumps(report.as_dict(saved_grade=True), indent=2))
         return
     grade = report.grade
     fit = grade.info.get("fit", {})
@@ -118,22 +115,17 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import bar_callbacks
-    from wbcgrade.color.apply import apply_photo
-    from wbcgrade.color.workflow import Progress
+    from wbcgrade.color.workflow import Progress, apply_photo
 
     encode = take_write_options(kwargs)
     options, source = take_grading_options(kwargs)
     look = take_look(ctx, look_path, kwargs, options)
-    if look is not None:
-        _apply_look(photo, look, output, lut, lut_size, lut_format, overwrite, as_json,
-                    report_dir, options, encode)
-        return
-    if options.fit.bins > 32:
+    if look is None and options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
-    with tqdm(desc="styles", disable=None, leave=False) as bar:
+    with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
-        report = apply_photo(photo, source, options, output, lut, lut_size, lut_format,
-                             overwrite, report_dir, progress, encode)
+        report = apply_photo(photo, source if look is None else look, options, output, lut,
+                             lut_size, lut_format, overwrite, report_dir, progress, encode)
     if "own_style" in report.grade.info:
         from wbcgrade.color.presets import own_style_warning
 
@@ -141,23 +133,3 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")
-
-
-def _apply_look(photo, look, output, lut, lut_size, lut_format, overwrite, as_json, report_dir,
-                options, encode) -> None:
-    """``apply --look``: the saved grade applied as it is (no styles, no fit)."""
-    from tqdm import tqdm
-
-    from wbcgrade.cli._progress import bar_callbacks
-    from wbcgrade.color.saved_look import apply_look
-    from wbcgrade.color.workflow import Progress
-    from wbcgrade.errors import OptionError
-
-    if report_dir is not None:
-        raise OptionError("--report needs styles to compare with; a saved --look has none",
-                          "--report")
-    with tqdm(desc="look", disable=None, leave=False) as bar:
-        progress = Progress(warn=_warn, **bar_callbacks(bar))
-        report = apply_look(photo, look, output, lut, lut_size, lut_format, overwrite,
-                            options.spaces.input, encode, progress)
-    _print_report(report, as_json)

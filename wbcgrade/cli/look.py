@@ -43,47 +43,30 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
     content) moved through one smooth colour map (the look: tone curves and
     a colour matrix); the map is fitted to all style photos at once.
     """
-    import numpy as np
+    from tqdm import tqdm
 
-    from wbcgrade._publish import plan_outputs
     from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grading import Grade
     from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.look import SET_LOOK_STRENGTH, natural_palettes, set_look_map
-    from wbcgrade.color.lut import check_lut_path, write_grade_lut
-    from wbcgrade.color.presets import StyleSource, load_preset, load_styles, styles_in_space
+    from wbcgrade.color.look_extract import extract_look_file
+    from wbcgrade.color.presets import StyleSource
     from wbcgrade.errors import OptionError
 
     if (style_dir is None) == (preset is None):
         raise OptionError("give either STYLE_DIR or --preset", "--preset")
-    check_lut_path(output, lut_format)
-    output = plan_outputs([output], [], overwrite)[0]  # before any work
-    encoding = ColorEncoding.of(None, working_space).within_working()
     source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
-    with style_progress() as progress:
-        styles = load_styles(source, 32, working_space,
-                             lambda m: click.echo(f"Warning: {m}", err=True), progress)
-    naturals = load_preset(natural) if natural else natural_palettes()
-    naturals = styles_in_space(naturals, styles.working_space)
-    if strength is None:  # a preset's own look is the look itself; an extracted one, as apply
-        strength = 1.0 if styles.meta.get("look") is not None else SET_LOOK_STRENGTH
-    from tqdm import tqdm
-
-    with tqdm(total=len(styles.names), desc="look", unit="style", leave=False) as bar:
-        def advance(done: int, total: int) -> None:
+    with style_progress() as on_style, \
+            tqdm(desc="look", unit="style", disable=None, leave=False) as bar:
+        def on_look(done: int, total: int) -> None:
             bar.total = total
             bar.n = done
             bar.refresh()
 
-        lattice, info = set_look_map(styles, naturals, strength, lut_size, advance)
-    grade = Grade(tuple(styles.names), np.full(len(styles.names), 1.0 / len(styles.names)),
-                  lattice, working=encoding.working)
-    path = write_grade_lut(output, grade, encoding, lut_size, lut_format,
-                           title="wbcgrade look", overwrite=overwrite,
-                           comments=[f"look of {len(styles.names)} style photos"])
+        found = extract_look_file(source, output, lut_size, lut_format, strength, natural,
+                                  working_space, overwrite,
+                                  lambda m: click.echo(f"Warning: {m}", err=True), on_style,
+                                  on_look)
     if as_json:
-        click.echo(json.dumps({"lut": str(path), "styles": styles.names, **info}, indent=2))
+        click.echo(json.dumps(found.as_dict(), indent=2))
     else:
-        click.echo(f"wrote {path}: the look of {len(styles.names)} style photos "
-                   f"(mean colour shift {info['amplitude_applied']:.3f} of the cube)")
+        click.echo(f"wrote {found.lut}: the look of {len(found.styles)} style photos "
+                   f"(mean colour shift {found.info['amplitude_applied']:.3f} of the cube)")

@@ -15,10 +15,17 @@ from wbcgrade.cli.grading_options import (
     take_grading_options,
     take_look,
 )
+from wbcgrade.video.defaults import (
+    CODECS,
+    DEFAULT_BLEND,
+    DEFAULT_CODEC,
+    DEFAULT_CRF,
+    DEFAULT_CUT_THRESHOLD,
+    DEFAULT_SAMPLE_EVERY,
+)
 
 #: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
 _NOT_FOR_VIDEO = ("regrain", "regrain_radius", "regrain_eps")
-_CODECS = ("x264", "x265", "prores", "ffv1")
 
 
 def _warn(message: str) -> None:
@@ -60,17 +67,19 @@ def _print_result(result, as_json: bool) -> None:
 @click.option("--per-shot", is_flag=True,
               help="Detect cuts and fit one grade per shot (blended over --blend-frames at "
                    "each cut) instead of one grade for the whole clip.")
-@click.option("--sample-every", type=float, default=1.0, show_default=True, metavar="SECONDS",
+@click.option("--sample-every", type=float, default=DEFAULT_SAMPLE_EVERY, show_default=True,
+              metavar="SECONDS",
               help="Seconds between the frames sampled for the fit.")
-@click.option("--cut-threshold", type=float, default=0.35, show_default=True,
+@click.option("--cut-threshold", type=float, default=DEFAULT_CUT_THRESHOLD, show_default=True,
               help="--per-shot: colour change between consecutive frames (0-1) that "
                    "starts a new shot.")
-@click.option("--blend-frames", type=int, default=8, show_default=True,
+@click.option("--blend-frames", type=int, default=DEFAULT_BLEND, show_default=True,
               help="--per-shot: frames over which the grade changes at a cut (0: switch).")
-@click.option("--codec", type=click.Choice(_CODECS), default="x264", show_default=True,
+@click.option("--codec", type=click.Choice(tuple(CODECS)), default=DEFAULT_CODEC,
+              show_default=True,
               help="Video encoder: x264/x265 (CRF), prores (ProRes 422 HQ, .mov), ffv1 "
                    "(lossless, .mkv). Other streams are copied.")
-@click.option("--crf", type=int, default=18, show_default=True,
+@click.option("--crf", type=int, default=DEFAULT_CRF, show_default=True,
               help="x264/x265 constant rate factor (lower: better, larger).")
 @click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Also write the grade as a 3-D LUT (.cube); with several shots, "

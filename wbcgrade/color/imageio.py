@@ -189,12 +189,12 @@ def set_max_image_pixels(limit: int | None) -> None:
     _max_image_pixels = None if limit is None else int(limit)
 
 
-def _check_pixel_count(path: Path, spec: oiio.ImageSpec) -> None:
-    count = int(spec.width) * int(spec.height) * max(1, int(spec.depth))
+def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> None:
+    count = int(width) * int(height) * max(1, int(depth))
     limit = max_image_pixels()
     if count > limit:
         raise InputError(
-            f"{path}: {spec.width}x{spec.height} is {count / 1e6:.1f} megapixels, over the "
+            f"{path}: {width}x{height} is {count / 1e6:.1f} megapixels, over the "
             f"limit of {limit / 1e6:g} megapixels (a decompression bomb?); raise it with "
             f"--max-image-pixels {count} if the file is trusted")
 
@@ -227,10 +227,10 @@ def read_image(path: str | os.PathLike) -> Image:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
-    from wbcgrade.color.raw import is_raw, read_raw
+    from wbcgrade.color.raw import is_raw
 
     if is_raw(path):
-        return read_raw(path)
+        return _read_raw(path)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
     with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
@@ -242,7 +242,7 @@ def read_image(path: str | os.PathLike) -> Image:
         spec = inp.spec()
         if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
             raise InputError(f"{path}: empty image")
-        _check_pixel_count(path, spec)
+        _check_pixel_count(path, spec.width, spec.height, spec.depth)
         if spec.depth > 1:
             raise InputError(f"{path}: volume images are not supported")
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
@@ -271,6 +271,20 @@ def read_image(path: str | os.PathLike) -> Image:
                          f"{path}: dividing by alpha")
     return Image(pixels=pixels, spec=spec, path=path, alpha_channel=int(alpha),
                  format_name=format_name)
+
+
+def _read_raw(path: Path) -> Image:
+    """A raw camera file as a scene-linear float image tagged with the ACES AP0 primaries
+    (:func:`wbcgrade.color.raw.read_raw`; the pixel limit checked before demosaicing)."""
+    from wbcgrade.color.raw import AP0_CHROMATICITIES, read_raw
+
+    pixels, extra = read_raw(path, lambda width, height: _check_pixel_count(path, width, height))
+    height, width = pixels.shape[:2]
+    spec = oiio.ImageSpec(width, height, 3, oiio.FLOAT)
+    spec.channelnames = ("R", "G", "B")
+    spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), AP0_CHROMATICITIES)
+    return Image(pixels=pixels, spec=spec, path=path, alpha_channel=-1, format_name="raw",
+                 extra=extra)
 
 
 def _icc_bytes(spec: oiio.ImageSpec) -> bytes | None:

@@ -4,10 +4,10 @@ A raw file holds the sensor's mosaic, not an image: LibRaw demosaics it
 (AHD), applies the white balance the camera recorded ("as shot"), and
 converts the camera's RGB into ACES2065-1 (linear, AP0 primaries, D60)
 with the camera's own matrix, with no gamma, no automatic brightening and
-16 bits per channel. :func:`read_raw` returns that as a scene-linear float
-:class:`~wbcgrade.color.imageio.Image` (1.0 = the sensor's white level),
-tagged with the AP0 chromaticities, so the rest of the pipeline treats it
-like a linear EXR: its input space is ACES2065-1 and, unless
+16 bits per channel. :func:`read_raw` returns that as scene-linear float
+pixels (1.0 = the sensor's white level), which
+:func:`wbcgrade.color.imageio.read_image` tags with the AP0 chromaticities,
+so the rest of the pipeline treats it like a linear EXR: its input space is ACES2065-1 and, unless
 ``--working-space`` says otherwise, it is graded in ACEScct
 (:data:`RAW_WORKING_SPACE`), whose cube holds the whole range of a raw.
 
@@ -57,38 +57,36 @@ def output_name(path: Path) -> Path:
     return path.with_suffix(RAW_OUTPUT_SUFFIX) if is_raw(path) else path
 
 
-def read_raw(path: str | os.PathLike):
+def read_raw(path: str | os.PathLike,
+             check_size: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
     """Demosaic a raw camera file into scene-linear ACES2065-1 pixels.
 
     Parameters
     ----------
     path : a raw file LibRaw reads (DNG, CR2, CR3, NEF, ARW, RAF, ORF, RW2, ...).
+    check_size : ``check_size(width, height)`` called with the sensor's size
+        before demosaicing; it raises to refuse the file (a pixel limit).
 
     Returns
     -------
-    :class:`~wbcgrade.color.imageio.Image` with (H, W, 3) float32 linear
-    pixels (0 = black level, 1 = white level; display-oriented), a float
-    spec with the AP0 ``chromaticities``, ``format_name`` "raw" and
-    ``extra["raw"]`` (camera, white balance multipliers, LibRaw version).
+    pixels : (H, W, 3) float32 linear ACES2065-1 (0 = black level, 1 =
+        white level; display-oriented), primaries :data:`AP0_CHROMATICITIES`.
+    extra : ``{"raw": {"white_balance": [...], "libraw": "X.Y.Z"}}``.
+
+    :func:`wbcgrade.color.imageio.read_image` wraps this into an image.
 
     Raises
     ------
     InputError
-        The file is not a raw LibRaw reads, is truncated or corrupt, or has
-        more pixels than :func:`~wbcgrade.color.imageio.max_image_pixels`
-        (checked before demosaicing).
+        The file is not a raw LibRaw reads, or is truncated or corrupt.
     """
-    import OpenImageIO as oiio
     import rawpy
-
-    from wbcgrade.color.imageio import Image, _check_pixel_count
 
     path = Path(path)
     try:
         with _libraw_messages() as said, rawpy.imread(str(path)) as raw:
-            sizes = raw.sizes
-            header = oiio.ImageSpec(int(sizes.width), int(sizes.height), 3, oiio.FLOAT)
-            _check_pixel_count(path, header)
+            if check_size is not None:
+                check_size(int(raw.sizes.width), int(raw.sizes.height))
             multipliers = [float(v) for v in raw.camera_whitebalance]
             rgb = raw.postprocess(output_color=rawpy.ColorSpace.ACES, gamma=(1, 1),
                                   no_auto_bright=True, output_bps=16, use_camera_wb=True,
@@ -100,14 +98,9 @@ def read_raw(path: str | os.PathLike):
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot read the raw file ({first_line(exc)})") from None
     pixels = np.ascontiguousarray(rgb, dtype=np.float32) / np.float32(65535.0)
-    height, width = pixels.shape[:2]
-    spec = oiio.ImageSpec(width, height, 3, oiio.FLOAT)
-    spec.channelnames = ("R", "G", "B")
-    spec.attribute("chromaticities", oiio.TypeDesc("float[8]"), AP0_CHROMATICITIES)
     extra = {"raw": {"white_balance": multipliers, "libraw": ".".join(
         str(v) for v in rawpy.libraw_version)}}
-    return Image(pixels=pixels, spec=spec, path=path, alpha_channel=-1, format_name="raw",
-                 extra=extra)
+    return pixels, extra
 
 
 def _text(exc: BaseException) -> str:

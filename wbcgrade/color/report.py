@@ -29,9 +29,9 @@ from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import NONZERO_THRESHOLD
+from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.workflow import GradeReport, PhotoGrade
 
 __all__ = ["style_pictures", "report_paths", "plan_report", "write_report", "report_entries",
            "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",

@@ -50,7 +50,7 @@ from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
-           "look_styles", "look_fit", "apply_look", "look_batch_options", "SAMPLED_LUT_SIZE"]
+           "look_styles", "look_fit", "look_batch_options", "SAMPLED_LUT_SIZE"]
 
 #: The ``format`` tag of a saved grade.
 LOOK_FORMAT = "wbcgrade-look"
@@ -314,32 +314,6 @@ def look_fit(grade: Grade) -> FitSummary:
     return FitSummary(np.asarray(grade.weights, dtype=np.float64),
                       float(grade.loss) if grade.loss is not None else 0.0,
                       np.zeros(len(grade.names)), "saved", dict(grade.info), 0.0)
-
-
-def apply_look(photo: str | os.PathLike, look: Grade, output: str | os.PathLike | None = None,
-               lut: str | os.PathLike | None = None, lut_size: int | None = None,
-               lut_format: str | None = None, overwrite: bool = False,
-               input_space: str | None = None, encode=None, progress=None):
-    """``wbcgrade apply --look``: grade ``photo`` with a saved grade and write it (no fit).
-
-    The outputs are planned and checked first (:func:`wbcgrade.color.workflow.plan_photo`),
-    then the photo is read, encoded into the look's working space, moved
-    through its map (and regrain, when the look has it) and written as a
-    fresh grade is (:func:`~wbcgrade.color.workflow.grade_file`). Returns
-    the :class:`~wbcgrade.color.workflow.GradeReport` (``fit_start`` "saved").
-    """
-    from wbcgrade.color.lut import DEFAULT_LUT_SIZE
-    from wbcgrade.color.options import GradeOptions
-    from wbcgrade.color.workflow import grade_file, plan_photo
-
-    plan = plan_photo(photo, output, lut, lut_size or DEFAULT_LUT_SIZE, lut_format, overwrite,
-                      encode=encode)
-    options = GradeOptions(input_space=input_space, working_space=look.working)
-    source = str(dict(look.info).get("saved_look", {}).get("file", "saved grade"))
-    report = grade_file(plan, look_styles(look, source), options, shared=look,
-                        progress=progress)
-    report.fit = look_fit(look)
-    return report
 
 
 def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,

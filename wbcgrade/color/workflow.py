@@ -1,9 +1,10 @@
 """One photo file graded end to end: plan the outputs, read, grade, write (``apply``, ``batch``).
 
-This is the library behind ``wbcgrade apply`` (:func:`wbcgrade.color.apply.apply_photo`)
-and behind every photo of ``wbcgrade batch`` (:func:`grade_file`); it knows
-files and colours but no command line (progress and messages go through the
-callbacks of :class:`Progress`). The data flow (docs/architecture.md):
+This is the library behind ``wbcgrade apply`` (:func:`apply_photo`, the one
+call the command makes) and behind every photo of ``wbcgrade batch``
+(:func:`grade_file`); it knows files and colours but no command line
+(progress and messages go through the callbacks of :class:`Progress`). The
+data flow (docs/architecture.md):
 
 1. the outputs are planned and checked once, before any work
    (:func:`plan_photo`, through :func:`wbcgrade._publish.plan_outputs`);
@@ -23,14 +24,14 @@ import contextlib
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.grading import Grade, grade_encoded
 from wbcgrade.color.imageio import (
     Image,
@@ -49,11 +50,11 @@ from wbcgrade.color.lut import (
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet
-from wbcgrade.errors import InputError
+from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
+from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
-           "plan_photo", "graded_pixels", "grade_photo", "grade_file"]
+           "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
 
 
 @dataclass(frozen=True)
@@ -138,31 +139,6 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode)
 
 
-@dataclass
-class PhotoGrade:
-    """A graded photo in memory.
-
-    Attributes
-    ----------
-    image : the decoded input.
-    pixels : (H, W, C') float32 graded pixels (the image's value convention).
-    alpha_channel : index of alpha in ``pixels`` or -1.
-    grade : the grade applied (weights, colour map, palette).
-    fit : weights and single-style comparison (None for a shared series grade
-        whose summary the caller holds).
-    encoding : the photo's input and working colour spaces.
-    timings : seconds per stage.
-    """
-
-    image: Image
-    pixels: np.ndarray
-    alpha_channel: int
-    grade: Grade
-    fit: FitSummary | None
-    encoding: ColorEncoding
-    timings: dict[str, float] = field(default_factory=dict)
-
-
 def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
                   encoded: tuple | None = None) -> tuple[np.ndarray, int]:
     """Graded pixels of a whole image at full resolution.
@@ -226,50 +202,6 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     return PhotoGrade(image, pixels, alpha_channel, grade, fit, encoding, timings)
 
 
-@dataclass
-class GradeReport:
-    """What :func:`grade_file` did, for printing, JSON and the report."""
-
-    photo: Path
-    output: Path | None
-    lut: Path | None
-    grade: Grade
-    styles_source: str
-    graded: PhotoGrade
-    timings: dict[str, float] = field(default_factory=dict)
-    fit: FitSummary | None = None
-    report: Path | None = None
-
-    @property
-    def fit_start(self) -> str:
-        """How the weights were found: "uniform", "vertex-refit", "vertex", "given" or
-        "saved" (a saved grade, ``--look``: nothing fitted)."""
-        return self.fit.start if self.fit is not None else "shared"
-
-    @property
-    def color(self) -> dict:
-        """The colour spaces (JSON-friendly)."""
-        return self.graded.encoding.as_dict()
-
-    def as_dict(self) -> dict:
-        """JSON-friendly summary."""
-        return {
-            "photo": str(self.photo),
-            "output": None if self.output is None else str(self.output),
-            "lut": None if self.lut is None else str(self.lut),
-            "styles": self.styles_source,
-            "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
-            "loss": self.grade.loss,
-            "fitted": self.fit_start not in ("given", "saved"),
-            "fit_start": self.fit_start,
-            "regrain": self.grade.regrain is not None,
-            "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
-            **dict(self.grade.info),
-            "color": self.color,
-            **({"report": str(self.report)} if self.report is not None else {}),
-        }
-
-
 def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
                shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None) -> GradeReport:
@@ -321,3 +253,60 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
     return GradeReport(plan.photo, plan.output, plan.lut, grade, styles.source, graded,
                        timings, graded.fit)
+
+
+def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: GradeOptions,
+                output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
+                lut_size: int = DEFAULT_LUT_SIZE, lut_format: str | None = None,
+                overwrite: bool = False, report_dir: str | os.PathLike | None = None,
+                progress: Progress | None = None,
+                encode: WriteOptions | None = None) -> GradeReport:
+    """``wbcgrade apply``: grade ``photo`` and write it, the LUT and the report.
+
+    Every output (the graded photo, the LUT, the report's files) is planned
+    and checked before any work (:func:`plan_photo`). ``source`` is where
+    the grade comes from:
+
+    - a :class:`~wbcgrade.color.presets.StyleSource`: the styles are loaded
+      and the photo gets its own grade (:func:`grade_file`); with
+      ``report_dir`` the palette weight report is written too;
+    - a :class:`~wbcgrade.color.grading.Grade` (a saved grade,
+      :func:`wbcgrade.color.saved_look.load_look`): applied as it is, in its
+      own working space, nothing fitted (``fit_start`` "saved"); a report
+      needs styles, so ``report_dir`` is an OptionError.
+
+    ``encode``: JPEG/WebP quality and bit depth of the graded photo.
+    """
+    progress = progress or Progress()
+    saved = isinstance(source, Grade)
+    if saved and report_dir is not None:
+        raise OptionError("--report needs styles to compare with; a saved --look has none",
+                          "--report")
+    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode)
+    if report_dir is not None:
+        from wbcgrade.color.report import plan_report
+
+        plan_report(report_dir, [plan.photo.name], [plan.photo], overwrite)
+    if saved:
+        from wbcgrade.color.saved_look import look_fit, look_styles
+
+        spaces = options.spaces
+        if spaces.working != source.working:
+            from dataclasses import replace
+
+            options = replace(options, spaces=replace(spaces, working=source.working))
+        name = str(dict(source.info).get("saved_look", {}).get("file", "saved grade"))
+        report = grade_file(plan, look_styles(source, name), options, shared=source,
+                            progress=progress)
+        report.fit = look_fit(source)
+        return report
+    start = time.perf_counter()
+    styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
+                         progress.styles)
+    report = grade_file(plan, styles, options, progress=progress,
+                        timings={"styles": time.perf_counter() - start})
+    if report_dir is not None:
+        from wbcgrade.color.report import report_from_grade
+
+        report.report = report_from_grade(report_dir, report, styles, options, overwrite)
+    return report

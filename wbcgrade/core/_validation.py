@@ -6,13 +6,21 @@ returned arrays are float64 copies (histograms normalised to sum 1).
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wbcgrade.core.geometry import Geometry
-from wbcgrade.core.losses import Loss
 
 __all__ = ["histograms", "histogram_stack", "weights", "target", "n_iter"]
+
+
+class _TargetRule(Protocol):
+    """What :func:`target` reads of a loss (a :class:`wbcgrade.core.losses.Loss`)."""
+
+    name: str
+    needs_positive_target: bool
 
 
 def histograms(x: ArrayLike, geometry: Geometry, name: str) -> NDArray:
@@ -66,7 +74,8 @@ def weights(w: ArrayLike, n_histograms: int) -> NDArray:
     return np.clip(w, 0.0, None)
 
 
-def target(q: ArrayLike, shape: tuple[int, ...], loss: Loss, geometry: Geometry) -> NDArray:
+def target(q: ArrayLike, shape: tuple[int, ...], loss: _TargetRule,
+           geometry: Geometry) -> NDArray:
     """A loss's target, shape ``shape`` (*batch, *geometry.shape): finite, >= 0, not empty."""
     q = np.array(q, dtype=np.float64)
     if q.shape != shape:

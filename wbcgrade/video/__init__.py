@@ -11,6 +11,7 @@ Layers (each imports only those above it):
 - :mod:`wbcgrade.video.workflow`: :func:`grade_video`, probe to published file.
 - :mod:`wbcgrade.video.report`: contact sheets and ``report.json``.
 - :mod:`wbcgrade.video.command`: :func:`grade_clip`, the ``video`` command.
+- :mod:`wbcgrade.video.defaults`: default settings (light: read by ``--help``).
 
 The grading itself is the colour library's one grade path
 (``color.grading.grade_histograms``; ``Grade.lut`` bakes it in the clip's
@@ -18,7 +19,19 @@ encoding; ``color.lut.write_cube`` writes every LUT); nothing here touches
 pixels of the full-size frames.
 """
 
-from wbcgrade.video.command import grade_clip
-from wbcgrade.video.workflow import VideoResult, VideoSettings, grade_video
+from __future__ import annotations
+
+import importlib
 
 __all__ = ["VideoResult", "VideoSettings", "grade_video", "grade_clip"]
+
+#: public name -> the module that defines it (imported on first use, so that the
+#: command line can read :mod:`wbcgrade.video.defaults` without the colour library)
+_HOMES = {"VideoResult": "workflow", "VideoSettings": "workflow", "grade_video": "workflow",
+          "grade_clip": "command"}
+
+
+def __getattr__(name: str):
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"wbcgrade.video.{_HOMES[name]}"), name)
+    raise AttributeError(f"module 'wbcgrade.video' has no attribute {name!r}")

@@ -28,17 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbcgrade.errors import InputError
+from wbcgrade.video.defaults import DEFAULT_CUT_THRESHOLD, DEFAULT_MIN_SHOT, DEFAULT_SAMPLE_EVERY
 from wbcgrade.video.ffmpeg import VideoInfo, decode_frames
 
 __all__ = ["Samples", "scan", "analysis_size", "DEFAULT_SAMPLE_EVERY", "DEFAULT_CUT_THRESHOLD",
            "DEFAULT_MIN_SHOT", "DEFAULT_MAX_SIDE"]
 
-#: Seconds between sampled frames.
-DEFAULT_SAMPLE_EVERY = 1.0
-#: Colour distance between consecutive frames above which a cut is declared.
-DEFAULT_CUT_THRESHOLD = 0.35
-#: Shortest shot, seconds.
-DEFAULT_MIN_SHOT = 0.5
 #: Long side of the decoded samples, pixels.
 DEFAULT_MAX_SIDE = 256
 

@@ -59,6 +59,16 @@ from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError, WbcgradeError
+from wbcgrade.video.defaults import (
+    ALPHA_CODECS,
+    CODECS,
+    DEFAULT_BLEND,
+    DEFAULT_CODEC,
+    DEFAULT_CRF,
+    DEFAULT_CUT_THRESHOLD,
+    DEFAULT_MIN_SHOT,
+    DEFAULT_SAMPLE_EVERY,
+)
 from wbcgrade.video.ffmpeg import (
     FfmpegError,
     VideoInfo,
@@ -71,35 +81,15 @@ from wbcgrade.video.ffmpeg import (
     run_pass,
     to_rgb_filter,
 )
-from wbcgrade.video.sampling import (
-    DEFAULT_CUT_THRESHOLD,
-    DEFAULT_MIN_SHOT,
-    DEFAULT_SAMPLE_EVERY,
-    Samples,
-    scan,
-)
+from wbcgrade.video.sampling import Samples, scan
 from wbcgrade.video.shots import Segment, lut_schedule
 from wbcgrade.video.spaces import clip_encoding, frame_to_working, lut_comments
 
-__all__ = ["CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings", "VideoProgress",
-           "ShotGrade", "VideoResult", "default_output", "plan_video", "shot_lut_paths",
-           "shot_grade", "grade_video", "grade_planned", "encode_args", "check_encoding",
-           "work_folder", "remove_stale_work_folders", "WORK_PREFIX"]
+__all__ = ["CODECS", "ALPHA_CODECS", "DEFAULT_CRF", "DEFAULT_BLEND", "VideoSettings",
+           "VideoProgress", "ShotGrade", "VideoResult", "default_output", "plan_video",
+           "shot_lut_paths", "shot_grade", "grade_video", "grade_planned", "encode_args",
+           "check_encoding", "work_folder", "remove_stale_work_folders", "WORK_PREFIX"]
 
-#: --codec NAME -> (ffmpeg encoder, containers it may go in).
-CODECS = {
-    "x264": ("libx264", (".mp4", ".m4v", ".mov", ".mkv")),
-    "x265": ("libx265", (".mp4", ".m4v", ".mov", ".mkv")),
-    "prores": ("prores_ks", (".mov", ".mkv")),
-    "ffv1": ("ffv1", (".mkv", ".avi")),
-}
-#: Codecs that store alpha so that ffmpeg reads it back (libx265's yuva420p does not:
-#: the HEVC decoder drops the alpha layer).
-ALPHA_CODECS = ("prores", "ffv1")
-#: x264/x265 constant rate factor (18: visually lossless for x264).
-DEFAULT_CRF = 18
-#: Frames over which the grade changes at a cut (--per-shot).
-DEFAULT_BLEND = 8
 
 
 @dataclass(frozen=True)
@@ -111,7 +101,7 @@ class VideoSettings:
     cut_threshold: float = DEFAULT_CUT_THRESHOLD
     min_shot: float = DEFAULT_MIN_SHOT
     blend: int = DEFAULT_BLEND
-    codec: str = "x264"
+    codec: str = DEFAULT_CODEC
     crf: int = DEFAULT_CRF
     lut_size: int = DEFAULT_LUT_SIZE
 

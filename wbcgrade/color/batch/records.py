@@ -15,10 +15,11 @@ import json
 import os
 from pathlib import Path
 
-from wbcgrade._publish import atomic_path
+from wbcgrade._publish import atomic_path, remove_stale_temporaries
 from wbcgrade.color.batch.results import FileResult
 
-__all__ = ["RESULTS_FOLDER", "record_path", "write_record", "read_record"]
+__all__ = ["RESULTS_FOLDER", "record_path", "write_record", "read_record",
+           "remove_stale_records"]
 
 #: Folder in a batch's output folder holding one JSON record per graded photo.
 RESULTS_FOLDER = ".wbcgrade-results"
@@ -52,3 +53,16 @@ def read_record(out_dir: str | os.PathLike, relative: str) -> FileResult | None:
         return FileResult.from_dict(entry)
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def remove_stale_records(out_dir: str | os.PathLike) -> list[Path]:
+    """Remove the temporary record files a killed batch left in ``out_dir``'s records
+    (those no live process holds locked; see
+    :func:`wbcgrade._publish.remove_stale_temporaries`); -> the removed paths."""
+    root = Path(out_dir) / RESULTS_FOLDER
+    removed: list[Path] = []
+    if not root.is_dir():
+        return removed
+    for folder, _, _ in os.walk(root):
+        removed += remove_stale_temporaries(folder)
+    return removed

@@ -23,7 +23,12 @@ import numpy as np
 
 from wbcgrade._publish import lock_folder, plan_outputs
 from wbcgrade.color.batch.plan import BatchPlan, plan_batch, recheck_plan
-from wbcgrade.color.batch.records import RESULTS_FOLDER, read_record, write_record
+from wbcgrade.color.batch.records import (
+    RESULTS_FOLDER,
+    read_record,
+    remove_stale_records,
+    write_record,
+)
 from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.batch.run import run_batch
 from wbcgrade.color.batch.settings import (
@@ -190,6 +195,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
     with lock_folder(out_dir, "batch"):  # one run at a time per output folder
         plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
+        remove_stale_records(out_dir)  # what a killed run left half-written
         start = time.perf_counter()
         if look is None:
             styles = _load(source, options, progress)
@@ -220,8 +226,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         if lut is not None and result.series_grade is not None:
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-            result.lut = write_grade_lut(lut, grade, ColorEncoding.of(None, options.spaces.working),
-                                         lut_size, lut_format,
+            # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
+            encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+            result.lut = write_grade_lut(lut, grade, encoding, lut_size, lut_format,
                                          title=f"wbcgrade series {Path(in_dir).name}",
                                          comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
                                          overwrite=overwrite)
