@@ -515,11 +515,15 @@ class ColorEncoding:
 
         Float outputs keep values above 1 (the exposure factor is multiplied
         back in the linear partner); integer outputs are clipped by the writer.
+        When the photo is graded in its own space, ``graded`` (float32) itself is
+        returned, not a copy (as :meth:`encode` returns its input).
         """
         working = np.asarray(graded, dtype=np.float32)
         if state.residual is not None:
             working = working + state.residual
         if state.scale is None:
+            if self.input == self.working:
+                return working  # no conversion, no copy (a 16 MP copy: 0.1-0.4 s)
             return convert(working, self.working, self.input)
         linear = convert(working, self.working, self.linear) * state.scale
         return convert(linear, self.linear, self.input)
