@@ -20,9 +20,11 @@ with ``--quality 90`` relative to the input JPEG (target: within 10 %).
 ``--mode`` is passed to the original run (default ``palette``: the fitted grade
 the issue's quarter-of-the-time target is about). With ``--mode look`` and a
 preset that carries its own look (the shipped presets do), the original run
-fits nothing either: it is itself the application of a saved look, so its
-ratio to ``--look`` is about 0.8 by construction (only the histograms and the
-scene check are saved); ``--mode palette look`` prints both rows per photo.
+fits nothing either: it is itself the application of a saved look, so the
+``--look`` runs take about 0.8 of its time by construction (they save only
+reading the preset, the photo's histograms and the own-style check; the read,
+the remap, the regrain and the write are the same work); ``--mode palette
+look`` prints both rows per photo.
 
 Times are the shortest of ``--repeats`` runs, wall and CPU (user + system,
 of the command's process): on a shared machine the CPU ratio is the steadier.
