@@ -50,6 +50,8 @@ def _running_mean(line: np.ndarray, radius: int, out: np.ndarray) -> None:  # pr
     """``out[i] = mean(line[i - radius : i + radius + 1])`` over the (n, K) ``line`` mirrored
     at its ends: a running sum in float64 (as ``scipy.ndimage.uniform_filter1d``)."""
     n, k = line.shape
+    if n == 0:
+        return
     inv = 1.0 / (2 * radius + 1)
     acc = np.zeros(k, np.float64)
     for i in range(-radius, radius + 1):
@@ -74,6 +76,36 @@ def _column_blocks(w: int) -> int:  # pragma: no cover - compiled
     return (w + _COLUMN_BLOCK - 1) // _COLUMN_BLOCK
 
 
+@compiled(cache=True)
+def _column_sums(rows: np.ndarray, radius: int, lo: int, hi: int) -> np.ndarray:  # pragma: no cover
+    """(hi - lo, K) float64 sums of the columns lo:hi of (H, W, K) ``rows`` over the window
+    of output row 0 (mirrored at the top): the start of :func:`_column_means`."""
+    h, k = rows.shape[0], rows.shape[2]
+    acc = np.zeros((hi - lo, k), np.float64)
+    for i in range(-radius, radius + 1):
+        row = _reflect(i, h)
+        for col in range(lo, hi):
+            for c in range(k):
+                acc[col - lo, c] += rows[row, col, c]
+    return acc
+
+
+@compiled(cache=True)
+def _column_means(rows: np.ndarray, radius: int, y: int, lo: int, acc: np.ndarray,
+                  out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``out`` (n, K): the means over the window of output row ``y`` of the columns
+    lo:lo + n of (H, W, K) ``rows``, from their running sums ``acc`` (then moved to row
+    y + 1)."""
+    h, k = rows.shape[0], rows.shape[2]
+    inv = 1.0 / (2 * radius + 1)
+    enter = _reflect(y + radius + 1, h)
+    leave = _reflect(y - radius, h)
+    for i in range(acc.shape[0]):
+        for c in range(k):
+            out[i, c] = acc[i, c] * inv
+            acc[i, c] += rows[enter, lo + i, c] - rows[leave, lo + i, c]
+
+
 @compiled(parallel=True, cache=True)
 def _box(x: np.ndarray, radius: int) -> np.ndarray:
     """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
@@ -84,23 +116,13 @@ def _box(x: np.ndarray, radius: int) -> np.ndarray:
     for y in numba.prange(h):
         _running_mean(x[y], radius, rows[y])
     out = np.empty((h, w, k), np.float32)
-    inv = 1.0 / (2 * radius + 1)
-    for block in numba.prange(_column_blocks(w)):
+    n_blocks = _column_blocks(w) if h > 0 else 0
+    for block in numba.prange(n_blocks):
         lo = block * _COLUMN_BLOCK
         hi = min(lo + _COLUMN_BLOCK, w)
-        acc = np.zeros((hi - lo, k), np.float64)
-        for i in range(-radius, radius + 1):
-            row = _reflect(i, h)
-            for x_ in range(lo, hi):
-                for c in range(k):
-                    acc[x_ - lo, c] += rows[row, x_, c]
+        acc = _column_sums(rows, radius, lo, hi)
         for y in range(h):
-            enter = _reflect(y + radius + 1, h)
-            leave = _reflect(y - radius, h)
-            for x_ in range(lo, hi):
-                for c in range(k):
-                    out[y, x_, c] = acc[x_ - lo, c] * inv
-                    acc[x_ - lo, c] += rows[enter, x_, c] - rows[leave, x_, c]
+            _column_means(rows, radius, y, lo, acc, out[y, lo:hi])
     return out
 
 
@@ -168,27 +190,18 @@ def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
                     moments[x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
         _running_mean(moments, radius, rows[y])
     out = np.empty((h, w, 12), np.float32)
-    inv = 1.0 / (2 * radius + 1)
-    for block in numba.prange(_column_blocks(w)):
+    n_blocks = _column_blocks(w) if h > 0 else 0
+    for block in numba.prange(n_blocks):
         lo = block * _COLUMN_BLOCK
         hi = min(lo + _COLUMN_BLOCK, w)
-        acc = np.zeros((hi - lo, _N_MOMENTS), np.float64)
-        means = np.empty(_N_MOMENTS, np.float64)
+        acc = _column_sums(rows, radius, lo, hi)
+        means = np.empty((hi - lo, _N_MOMENTS), np.float64)
         inverse = np.empty((3, 3))
         cross = np.empty((3, 3))
-        for i in range(-radius, radius + 1):
-            row = _reflect(i, h)
-            for x in range(lo, hi):
-                for c in range(_N_MOMENTS):
-                    acc[x - lo, c] += rows[row, x, c]
         for y in range(h):
-            enter = _reflect(y + radius + 1, h)
-            leave = _reflect(y - radius, h)
+            _column_means(rows, radius, y, lo, acc, means)
             for x in range(lo, hi):
-                for c in range(_N_MOMENTS):
-                    means[c] = acc[x - lo, c] * inv
-                    acc[x - lo, c] += rows[enter, x, c] - rows[leave, x, c]
-                _solve_window(means, eps, inverse, cross, out[y, x])
+                _solve_window(means[x - lo], eps, inverse, cross, out[y, x])
     return out
 
 
