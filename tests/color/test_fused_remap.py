@@ -95,3 +95,22 @@ def test_window_models_solve_the_regularised_local_fit(rng):
     b = d.mean(0) - A.T @ g.mean(0)
     np.testing.assert_allclose(models[y, x, :9].reshape(3, 3), A, rtol=0, atol=2e-5)
     np.testing.assert_allclose(models[y, x, 9:], b, rtol=0, atol=2e-5)
+
+
+@pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled
+def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixels):
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    rgb, table = _image_and_map(rng)
+    rgb = np.clip(rgb, 0.0, 1.0)
+    expected = regrain_map(rgb, table, 0.8, 0.05, 0.01)
+    out = np.full_like(rgb, np.nan)
+    assert regrain_map(rgb, table, 0.8, 0.05, 0.01, out=out) is out
+    assert np.array_equal(out, expected)
+    in_place = rgb.copy()
+    assert regrain_map(in_place, table, 0.8, 0.05, 0.01, out=in_place) is in_place
+    assert np.array_equal(in_place, expected)
+    graded = apply_color_map(rgb, table, 0.8)
+    source = rgb.copy()
+    assert np.array_equal(regrain(source, graded, 0.05, 0.01, out=source), expected)
+    with pytest.raises(ValueError, match="out must be"):
+        regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))

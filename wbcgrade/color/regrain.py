@@ -277,7 +277,7 @@ def _downsample(x: np.ndarray, step: int) -> np.ndarray:
 
 
 def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGRAIN_RADIUS,
-            eps: float = DEFAULT_REGRAIN_EPS) -> np.ndarray:
+            eps: float = DEFAULT_REGRAIN_EPS, out: np.ndarray | None = None) -> np.ndarray:
     """Graded colours with the input's grain and edges (edge-aware local linear model).
 
     Parameters
@@ -287,33 +287,36 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
     radius : window radius as a fraction of the long side (>= 1 pixel is used).
     eps : regulariser, squared encoded units (larger: more of the input's
         detail kept as is, less of the map's local contrast).
+    out : optional (H, W, 3) float32 C-contiguous array the result is written
+        into (it may be ``source`` itself: every pixel is read before it is
+        written), instead of a new one.
 
     Returns
     -------
-    (H, W, 3) float32 in [0, 1].
+    (H, W, 3) float32 in [0, 1] (``out`` when given).
     """
     if source.shape != graded.shape or source.ndim != 3 or source.shape[2] != 3:
         raise ValueError("source and graded must be the same (H, W, 3) shape")
     if not (radius > 0 and eps > 0):
         raise ValueError("radius and eps must be positive")
     h, w = source.shape[:2]
+    out = _output(source, out)
     source = np.ascontiguousarray(source, dtype=np.float32)
     graded = np.ascontiguousarray(graded, dtype=np.float32)
     step = _step(h, w)
     if step == 1:
         pixels = max(1, int(round(radius * max(h, w))))
-        out = np.empty_like(source)
         _apply_upsampled(source, _coefficients(source, graded - source, pixels, eps), 1.0, out)
         return out
     small = _downsample(source, step)
     change = _downsample(graded, step) - small
-    return _regrain_upsampled(source, small, change, step, radius, eps)
+    return _regrain_upsampled(source, small, change, step, radius, eps, out)
 
 
 def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0,
-                radius: float = DEFAULT_REGRAIN_RADIUS,
-                eps: float = DEFAULT_REGRAIN_EPS) -> np.ndarray:
-    """``regrain(source, apply_color_map(source, color_map, strength), radius, eps)``.
+                radius: float = DEFAULT_REGRAIN_RADIUS, eps: float = DEFAULT_REGRAIN_EPS,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """``regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)``.
 
     The same numbers; on large images (solved on a subsampled copy) the
     graded image is only needed block-averaged, so the colour map and the
@@ -328,10 +331,11 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     h, w = source.shape[:2]
     step = _step(h, w)
     if step == 1:
-        return regrain(source, apply_color_map(source, color_map, strength), radius, eps)
+        return regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)
+    out = _output(source, out)
     source = np.ascontiguousarray(source, dtype=np.float32)
     mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
-    return _regrain_upsampled(source, small, mapped - small, step, radius, eps)
+    return _regrain_upsampled(source, small, mapped - small, step, radius, eps, out)
 
 
 def _step(h: int, w: int) -> int:
@@ -339,10 +343,20 @@ def _step(h: int, w: int) -> int:
     return max(1, int(np.ceil(np.sqrt(h * w / _MAX_SOLVE_PIXELS))))
 
 
+def _output(source: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    """The array a regrain writes into: ``out`` checked, or a new one like ``source``."""
+    if out is None:
+        return np.empty(source.shape, np.float32)
+    if out.shape != source.shape or out.dtype != np.float32 or not out.flags.c_contiguous \
+            or not out.flags.writeable:
+        raise ValueError("out must be a writeable C-contiguous float32 array of the "
+                         "source's shape")
+    return out
+
+
 def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray, step: int,
-                       radius: float, eps: float) -> np.ndarray:
+                       radius: float, eps: float, out: np.ndarray) -> np.ndarray:
     h, w = source.shape[:2]
     pixels = max(1, int(round(radius * max(h, w) / step)))
-    out = np.empty_like(source)
     _apply_upsampled(source, _coefficients(small, change, pixels, eps), float(step), out)
     return out
