@@ -71,14 +71,21 @@ def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
     others = [scene(s) for s in range(20, 24)]
     styles = {b: np.stack([image_histogram(warm_look(c), b) for c in contents]) for b in (16, 32)}
     naturals = {b: np.stack([image_histogram(c, b) for c in contents + others]) for b in (16, 32)}
-    result = extract_look(styles, naturals, shrink=False)
+    # the fitted content is right here (the naturals hold the very scenes): used as fitted
+    result = extract_look(styles, naturals, shrink=False, content_shrink=0.0)
     test = scene(99)
     identity = error(LookMap.identity(), warm_look, test)
     assert error(result.look, warm_look, test) < 0.75 * identity
     # shrunk where the styles' own maps disagree: a smaller move, still towards the look
-    shrunk = extract_look(styles, naturals)
+    shrunk = extract_look(styles, naturals, content_shrink=0.0)
     assert shrunk.look.amplitude() < result.look.amplitude()
     assert error(shrunk.look, warm_look, test) < 0.85 * identity
+    # the contents pulled towards the average natural palette (the default): the look
+    # also takes what the contents explained, still towards the look here
+    pulled = extract_look(styles, naturals)
+    assert np.allclose(pulled.weights.sum(axis=1), 1.0)
+    assert pulled.weights.min() >= 0.6 / len(naturals[16]) - 1e-12
+    assert error(pulled.look, warm_look, test) < 0.85 * identity
     # each style's content is found among the natural palettes: its own scene weighs most
     assert np.sum(np.argmax(result.weights, axis=1) == np.arange(6)) >= 4
 
