@@ -38,6 +38,19 @@ def test_an_array_is_graded_as_apply_grades_its_file(scene):
     assert grade.info["fit"]["start"] in ("uniform", "vertex-refit", "vertex")
 
 
+def test_grading_in_place_gives_the_same_pixels_and_keeps_the_input_when_asked(scene):
+    """apply grades a photo's pixels where they are when nothing looks at the ungraded
+    ones afterwards; the result is the same, and by default the input is kept."""
+    _, png, styles, opts = scene
+    kept = grade_photo(png, styles, opts)
+    ungraded = read_image(png).pixels
+    np.testing.assert_array_equal(kept.image.pixels, ungraded)  # the input untouched
+    in_place = grade_photo(png, styles, opts, keep_input=False)
+    np.testing.assert_array_equal(in_place.pixels, kept.pixels)
+    assert np.shares_memory(in_place.pixels, in_place.image.pixels)  # no second array
+    assert not np.array_equal(in_place.image.pixels, ungraded)
+
+
 def test_integer_and_float_arrays_give_the_same_grade(scene):
     pixels, _, styles, opts = scene
     as_int, _ = grade_array(pixels, styles, opts)

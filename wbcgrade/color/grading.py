@@ -104,15 +104,21 @@ class Grade:
     info: Mapping = field(default_factory=dict)
     timings: Mapping = field(default_factory=dict)
 
-    def apply(self, encoded: np.ndarray) -> np.ndarray:
+    def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
 
         An (H, W, 3) image also goes through the regrain step when the grade
         has one; other shapes (lists of colours) get the colour map only.
+        ``out``: a C-contiguous float32 array of that shape to write the result
+        into, which may be ``encoded`` itself (graded in place); returned.
         """
         if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
-            return regrain_map(encoded, self.color_map, self.strength, *self.regrain)
-        return apply_color_map(encoded, self.color_map, self.strength)
+            return regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out)
+        graded = apply_color_map(encoded, self.color_map, self.strength)
+        if out is None:
+            return graded
+        out[...] = graded
+        return out
 
     def lut(self, size: int = 33, encoding: ColorEncoding | None = None) -> np.ndarray:
         """The grade as a (size, size, size, 3) LUT table indexed [r, g, b], in [0, 1].

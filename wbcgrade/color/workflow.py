@@ -140,14 +140,18 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
 
 
 def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
-                  encoded: tuple | None = None) -> tuple[np.ndarray, int]:
+                  encoded: tuple | None = None,
+                  in_place: bool = False) -> tuple[np.ndarray, int]:
     """Graded pixels of a whole image at full resolution.
 
     Colour channels go through the encoding, the grade and back; alpha and
     any extra channels pass through untouched. A grey photo stays grey: the
     luma of its graded colours (:func:`wbcgrade.color.output.grey_of`).
     ``encoded`` may pass the ``(encoded, state)`` of ``encoding.encode`` the
-    caller already has (it is not modified).
+    caller already has (not modified unless ``in_place``). ``in_place``: the
+    encoded colours may be graded where they are, saving a full-size array;
+    they may be the image's own pixels (``encoding.encode`` returns them when
+    the photo is graded in its own space), which then hold the graded colours.
 
     Returns
     -------
@@ -156,7 +160,9 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
     """
     pixels, state = encoded if encoded is not None else encoding.encode(image.rgb(),
                                                                          image.is_float)
-    graded = encoding.decode(grade.apply(pixels), state)
+    writable = (in_place and pixels.dtype == np.float32 and pixels.flags.c_contiguous
+                and pixels.flags.writeable)
+    graded = encoding.decode(grade.apply(pixels, out=pixels if writable else None), state)
     chans = image.color_channels
     if chans == [0, 1, 2] and image.pixels.shape[2] == 3:
         return graded, image.alpha_channel
@@ -172,12 +178,16 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
 
 
 def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
-                shared: Grade | None = None, progress: Progress | None = None) -> PhotoGrade:
+                shared: Grade | None = None, progress: Progress | None = None,
+                keep_input: bool = True) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
     With ``shared`` (a series grade, in the same working space), its colour
     map is applied as it is; otherwise the photo gets its own grade
-    (:func:`wbcgrade.color.grading.grade_encoded`).
+    (:func:`wbcgrade.color.grading.grade_encoded`). ``keep_input`` False:
+    nothing will look at the ungraded pixels afterwards (no report sheet), so
+    a photo graded in its own space is graded in place (the returned
+    ``image.pixels`` then hold graded colours).
     """
     progress = progress or Progress()
     timings: dict[str, float] = {}
@@ -197,28 +207,32 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
         timings.update(grade.timings)
     progress.say("remap")
     start = time.perf_counter()
-    pixels, alpha_channel = graded_pixels(image, grade, encoding, encoded)
+    owned = not np.shares_memory(encoded[0], image.pixels)  # converted: a copy of ours
+    pixels, alpha_channel = graded_pixels(image, grade, encoding, encoded,
+                                          in_place=owned or not keep_input)
     timings["remap"] = time.perf_counter() - start
     return PhotoGrade(image, pixels, alpha_channel, grade, fit, encoding, timings)
 
 
 def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
                shared: Grade | None = None, progress: Progress | None = None,
-               timings: dict[str, float] | None = None) -> GradeReport:
+               timings: dict[str, float] | None = None,
+               keep_input: bool = True) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
 
     The photo and the LUT are published together: when the LUT cannot be
     written, the graded photo is not published either. Files are written
     atomically, the input is never replaced, and an existing file only with
     ``plan.overwrite``. ``timings`` may hold stages timed by the caller (e.g.
-    loading styles); they are kept in the report. Colour spaces:
+    loading styles); they are kept in the report. ``keep_input`` False: the
+    report's ``graded.image`` may hold graded pixels (:func:`grade_photo`). Colour spaces:
     ``options.spaces`` (the input: what the file says unless given; the
     working space: sRGB-encoded Rec.709 unless given); the output is written
     in the input space, the LUT names the spaces it expects and produces.
     """
     progress = progress or Progress()
     timings = dict(timings or {})
-    graded = grade_photo(plan.photo, styles, options, shared, progress)
+    graded = grade_photo(plan.photo, styles, options, shared, progress, keep_input)
     grade = graded.grade
     timings.update(graded.timings)
     if plan.output is not None:
@@ -297,14 +311,15 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
             options = replace(options, spaces=replace(spaces, working=source.working))
         name = str(dict(source.info).get("saved_look", {}).get("file", "saved grade"))
         report = grade_file(plan, look_styles(source, name), options, shared=source,
-                            progress=progress)
+                            progress=progress, keep_input=False)
         report.fit = look_fit(source)
         return report
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles)
     report = grade_file(plan, styles, options, progress=progress,
-                        timings={"styles": time.perf_counter() - start})
+                        timings={"styles": time.perf_counter() - start},
+                        keep_input=report_dir is not None)
     if report_dir is not None:
         from wbcgrade.color.report import report_from_grade
 
