@@ -457,8 +457,6 @@ def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     np.testing.assert_allclose(srgb.luma_weights, [0.299, 0.587, 0.114])
     np.testing.assert_allclose(cct.luma_weights, [0.27, 0.67, 0.06], atol=0.01)
     rgb = read_image(SAMPLES / "chelsea.jpg").rgb()[::8, ::8]
-    # (the final clip of monotone_lightness can still reverse luma at the cube's faces:
-    # up to 1.8e-3 with other style sets, e.g. teal-orange; see the presets branch's report)
     styles = load_preset(resolve_preset("warm"))
     _, grade = grade_array(rgb, styles, GradeOptions(bins=16, fit_bins=8, max_iter=10,
                                                      n_iter=30, map_size=9,

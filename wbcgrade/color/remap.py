@@ -188,8 +188,10 @@ def monotone_lightness(color_map: np.ndarray,
     axis in turn, by the mean of its running maximum from below and its
     running minimum from above (both non-decreasing, and each pass keeps the
     earlier axes' order), and every node's colour is moved by the change
-    along grey (the hue and chroma differences between channels are kept),
-    then clipped.
+    along grey (the hue and chroma differences between channels are kept);
+    where that would leave the cube, the part a clipped channel cannot take
+    goes to the channels that still have room, so every node reaches its
+    target luma and the order holds at the cube's faces too.
 
     Parameters
     ----------
@@ -210,5 +212,14 @@ def monotone_lightness(color_map: np.ndarray,
         falling = np.flip(np.minimum.accumulate(np.flip(target, axis=axis), axis=axis),
                           axis=axis)
         target = 0.5 * (rising + falling)
-    out = table + (target - luma)[..., None]
-    return np.clip(out, 0.0, 1.0).astype(np.float32)
+    out = np.clip(table + (target - luma)[..., None], 0.0, 1.0)
+    for _ in range(3):  # each pass saturates at least one more channel of a node
+        remaining = target - out @ weights
+        room = np.where(remaining[..., None] > 0, out < 1.0, out > 0.0)
+        share = room @ weights
+        movable = (np.abs(remaining) > 1e-12) & (share > 0)
+        if not movable.any():
+            break
+        step = np.where(movable, remaining / np.where(movable, share, 1.0), 0.0)
+        out = np.clip(out + step[..., None] * room, 0.0, 1.0)
+    return out.astype(np.float32)
