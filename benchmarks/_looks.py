@@ -16,6 +16,14 @@ at scene values the LMTs were not built for: the Kodak LMT then paints cyan
 blobs into clouds and a ring round the sun.)
 
 Add a look: write ``def my_look(rgb) -> rgb`` and one line in ``LOOKS``.
+
+Two groups: :data:`TUNED_LOOKS`, the six looks the defaults were chosen on
+(the benchmark's default), and :data:`HELD_OUT_LOOKS`, looks no default was
+chosen on (``--looks held-out``): a real LUT shipped inside colour-science and
+five grades of other families (a cool matte CDL, cross-processing curves,
+sepia toning, day for night, a pastel high key). A change chosen on the tuned
+looks should hold on the held-out ones; where it does not, it was tuned to
+those six looks, not to looks in general.
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Look", "LOOKS", "asc_cdl", "rec709_luma"]
+__all__ = ["Look", "LOOKS", "TUNED_LOOKS", "HELD_OUT_LOOKS", "asc_cdl", "rec709_luma"]
 
 SRGB = "sRGB Encoded Rec.709 (sRGB)"
 ACES = "ACES2065-1"
@@ -125,6 +133,69 @@ def faded_film(rgb: np.ndarray) -> np.ndarray:
     return np.clip(saturate(out, p["saturation"]), 0.0, 1.0)
 
 
+# --------------------------------------------------------------------------- held-out looks
+
+COOL_MATTE = {"slope": (0.92, 0.98, 1.08), "offset": (0.045, 0.05, 0.065),
+              "power": (1.08, 1.04, 0.95), "saturation": 0.8}
+
+
+def cool_matte(rgb: np.ndarray) -> np.ndarray:
+    """A cool ASC CDL grade with matte (lifted) blacks and less colour."""
+    return asc_cdl(rgb, **COOL_MATTE)
+
+
+CROSS_PROCESS = {"red_contrast": 0.6, "green_gamma": 0.85, "blue_black": 0.12,
+                 "blue_white": 0.8, "saturation": 1.1}
+
+
+def cross_process(rgb: np.ndarray) -> np.ndarray:
+    """Cross-processed slide film: a hard red S-curve, brighter greens, blue with lifted
+    blacks and held-down whites (yellow-green highlights, blue shadows)."""
+    p = CROSS_PROCESS
+    x = np.clip(rgb, 0.0, 1.0)
+    red = (1.0 - p["red_contrast"]) * x[..., 0] + p["red_contrast"] * smoothstep(x[..., 0])
+    green = x[..., 1] ** p["green_gamma"]
+    blue = p["blue_black"] + (p["blue_white"] - p["blue_black"]) * x[..., 2]
+    out = np.stack([red, green, blue], axis=-1)
+    return np.clip(saturate(out, p["saturation"]), 0.0, 1.0)
+
+
+SEPIA = {"saturation": 0.15, "shadow": (0.95, 0.9, 0.8), "highlight": (1.05, 0.98, 0.86),
+         "mix": 0.85}
+
+
+def sepia(rgb: np.ndarray) -> np.ndarray:
+    """Sepia toning: nearly monochrome, brown shadows, cream highlights, a trace of colour."""
+    p = SEPIA
+    y = rec709_luma(rgb)[..., None]
+    tint = np.asarray(p["shadow"]) + (np.asarray(p["highlight"]) - np.asarray(p["shadow"])) * y
+    toned = y * tint
+    out = p["mix"] * toned + (1.0 - p["mix"]) * saturate(rgb, p["saturation"])
+    return np.clip(out, 0.0, 1.0)
+
+
+DAY_FOR_NIGHT = {"exposure": 0.55, "gamma": 1.15, "tint": (0.8, 0.95, 1.25), "saturation": 0.5}
+
+
+def day_for_night(rgb: np.ndarray) -> np.ndarray:
+    """Day for night: darker, more contrast in the mids, blue moonlight, little colour."""
+    p = DAY_FOR_NIGHT
+    x = np.clip(rgb, 0.0, 1.0) ** p["gamma"] * p["exposure"]
+    out = saturate(x, p["saturation"]) * np.asarray(p["tint"])
+    return np.clip(out, 0.0, 1.0)
+
+
+PASTEL = {"lift": 0.12, "gain": 0.95, "tint": (1.02, 0.97, 1.03), "saturation": 0.75}
+
+
+def pastel(rgb: np.ndarray) -> np.ndarray:
+    """Pastel high key: lifted, low contrast, a faint magenta cast, softer colour."""
+    p = PASTEL
+    x = p["lift"] + (p["gain"] - p["lift"]) * np.clip(rgb, 0.0, 1.0)
+    out = saturate(x * np.asarray(p["tint"]), p["saturation"])
+    return np.clip(out, 0.0, 1.0)
+
+
 # --------------------------------------------------------------------------- shipped LMTs
 
 
@@ -133,11 +204,12 @@ def _package_file(package: str, relative: str) -> tuple[Path, str]:
     import importlib
     from importlib.metadata import version
 
+    distribution = {"colour": "colour-science"}.get(package, package)
     module = importlib.import_module(package.replace("-", "_"))
     path = Path(module.__file__).parent / relative
     if not path.is_file():
-        raise SystemExit(f"{package} has no {relative} (pip install {package})")
-    return path, version(package)
+        raise SystemExit(f"{package} has no {relative} (pip install {distribution})")
+    return path, version(distribution)
 
 
 @functools.cache
@@ -153,18 +225,33 @@ def _ocio_processor(package: str, relative: str):
     return config.getProcessor(group).getDefaultCPUProcessor()
 
 
-def ocio_look(package: str, relative: str):
-    """A look applying a CLF / .cube file inside ``package`` between sRGB and ACES2065-1."""
+@functools.cache
+def _ocio_file_processor(package: str, relative: str):
+    """A LUT file applied to sRGB-encoded values as they are (a LUT made for them)."""
+    import PyOpenColorIO as ocio
+
+    path, _ = _package_file(package, relative)
+    config = ocio.Config.CreateFromFile("ocio://default")
+    transform = ocio.FileTransform(src=str(path), interpolation=ocio.INTERP_BEST)
+    return config.getProcessor(transform).getDefaultCPUProcessor()
+
+
+def ocio_look(package: str, relative: str, through_aces: bool = True):
+    """A look applying a CLF / .cube file inside ``package``: between sRGB and
+    ACES2065-1 (an LMT), or ``through_aces`` False on the sRGB-encoded values."""
 
     def apply(rgb: np.ndarray) -> np.ndarray:
         pixels = np.ascontiguousarray(rgb, dtype=np.float32).copy()
-        _ocio_processor(package, relative).applyRGB(pixels)
+        processor = (_ocio_processor if through_aces else _ocio_file_processor)(package,
+                                                                                 relative)
+        processor.applyRGB(pixels)
         return np.clip(pixels.astype(np.float64), 0.0, 1.0)
 
     return apply
 
 
-def _shipped(name: str, package: str, relative: str, description: str) -> Look:
+def _shipped(name: str, package: str, relative: str, description: str,
+             through_aces: bool = True) -> Look:
     def source() -> dict:
         import PyOpenColorIO as ocio
 
@@ -173,12 +260,13 @@ def _shipped(name: str, package: str, relative: str, description: str) -> Look:
         except SystemExit:
             pkg_version = "not installed"
         config = ocio.Config.CreateFromFile("ocio://default").getName()
+        way = (f"ocio://default ({config}): {SRGB} -> {ACES} -> file -> {SRGB}"
+               if through_aces else "on the sRGB-encoded values")
         return {"package": package, "version": pkg_version, "path": relative,
                 "applied_with": f"PyOpenColorIO {ocio.__version__} FileTransform; "
-                                f"ocio://default ({config}): {SRGB} -> {ACES} -> file -> "
-                                f"{SRGB}; clipped to [0, 1]"}
+                                f"{way}; clipped to [0, 1]"}
 
-    return Look(name, ocio_look(package, relative), description, source)
+    return Look(name, ocio_look(package, relative, through_aces), description, source)
 
 
 def _defined_here(name: str, apply, description: str, params: dict) -> Look:
@@ -202,5 +290,26 @@ LOOKS: dict[str, Look] = {
                       BLEACH_BYPASS),
         _defined_here("faded-film", faded_film, "faded print: lifted tinted blacks, cream whites",
                       FADED_FILM),
+        # held out: no default was chosen on these
+        _shipped("colour-correct", "colour",
+                 "io/luts/tests/resources/resolve_cube/Colour_Correct.cube",
+                 "a colour-correction 3D LUT (Resolve .cube, colour-science's resources)",
+                 through_aces=False),
+        _defined_here("cool-matte", cool_matte, "ASC CDL: cool, matte blacks, muted",
+                      COOL_MATTE),
+        _defined_here("cross-process", cross_process,
+                      "cross-processed film: red S-curve, bright greens, lifted blue blacks",
+                      CROSS_PROCESS),
+        _defined_here("sepia", sepia, "sepia toning: near monochrome, brown to cream", SEPIA),
+        _defined_here("day-for-night", day_for_night, "day for night: dark, blue, desaturated",
+                      DAY_FOR_NIGHT),
+        _defined_here("pastel", pastel, "pastel high key: lifted, low contrast, soft colour",
+                      PASTEL),
     ]
 }
+
+#: The looks the defaults were chosen on (the benchmark's default set).
+TUNED_LOOKS = ["kodak2383", "arri-k1s1", "cdl-warm", "teal-orange", "bleach-bypass",
+               "faded-film"]
+#: Looks no default was chosen on (``--looks held-out``).
+HELD_OUT_LOOKS = [name for name in LOOKS if name not in TUNED_LOOKS]

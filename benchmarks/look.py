@@ -2,7 +2,8 @@
 
 Run ``python benchmarks/look.py`` (``--quick`` for a short run, ``--help``).
 A look L (``benchmarks/_looks.py``: two ACES LMTs shipped in colour-clf-io and
-applied with OpenColorIO, and looks defined there) is applied to some photos:
+applied with OpenColorIO, and looks defined there; ``--looks held-out`` runs
+the looks no default was chosen on instead) is applied to some photos:
 that is the style set. Other photos are graded towards it; the ground truth
 of each is L(photo). Two protocols:
 
@@ -68,7 +69,7 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.modules.setdefault("look", sys.modules[__name__])  # method files: ``from look import ...``
 
-from _looks import LOOKS  # noqa: E402
+from _looks import HELD_OUT_LOOKS, LOOKS, TUNED_LOOKS  # noqa: E402
 from quality import (  # noqa: E402
     gradient_correlation,
     luma,
@@ -651,9 +652,12 @@ def _run_one(args: tuple) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="looks: " + ", ".join(LOOKS))
+                                     epilog="tuned looks: " + ", ".join(TUNED_LOOKS)
+                                     + "; held-out looks: " + ", ".join(HELD_OUT_LOOKS))
     parser.add_argument("--protocol", choices=["shot", "cross", "both"], default="both")
-    parser.add_argument("--looks", help="comma-separated (default: all; --quick: 3)")
+    parser.add_argument("--looks", help="comma-separated; 'held-out': the looks no default "
+                        "was chosen on, 'all': every look (default: the six tuned looks; "
+                        "--quick: 3 of them)")
     parser.add_argument("--methods", help="comma-separated (default: all registered)")
     parser.add_argument("--method-file", type=Path, action="append", default=[],
                         help="a Python file with its own METHODS dict (repeatable)")
@@ -675,10 +679,12 @@ def main(argv: list[str] | None = None) -> None:
         load_method_file(path)
     size = args.size or (384 if args.quick else 768)
     graded = args.graded or (3 if args.quick else None)
+    groups = {"held-out": HELD_OUT_LOOKS, "all": list(LOOKS), "tuned": TUNED_LOOKS}
     if args.looks:
-        looks = [lk for lk in args.looks.split(",") if lk]
+        looks = [lk for part in args.looks.split(",") if part
+                 for lk in groups.get(part, [part])]
     else:
-        looks = ["kodak2383", "teal-orange", "faded-film"] if args.quick else list(LOOKS)
+        looks = ["kodak2383", "teal-orange", "faded-film"] if args.quick else TUNED_LOOKS
     methods = [m for m in args.methods.split(",") if m] if args.methods else list(METHODS)
     for name, known, what in ((looks, LOOKS, "look"), (methods, METHODS, "method")):
         unknown = [x for x in name if x not in known]
