@@ -11,8 +11,10 @@ from wbcgrade.color.look import (
     extract_look,
     fit_look_map,
     fit_pair,
+    look_reliability,
     photo_look,
     relaxed_correspondences,
+    set_look_base,
 )
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -88,6 +90,74 @@ def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
     assert error(pulled.look, warm_look, test) < 0.85 * identity
     # each style's content is found among the natural palettes: its own scene weighs most
     assert np.sum(np.argmax(result.weights, axis=1) == np.arange(6)) >= 4
+
+
+def cool_look(rgb):
+    """The opposite cast: blue, green-cyan mids, a little more colour."""
+    out = np.clip(rgb * [0.86, 1.0, 1.1] + [0.0, 0.01, 0.03], 0.0, 1.0)
+    luma = (out @ LUMA)[..., None]
+    return np.clip(luma + 1.1 * (out - luma), 0.0, 1.0)
+
+
+def test_reliability_is_the_agreement_of_the_halves_stepped_up_to_the_set():
+    rng = np.random.default_rng(3)
+    colors = rng.random((500, 3))
+    warm = fit_look_map(colors, warm_look(colors), np.ones(500), ridge=1e-6, smoothness=1e-6)
+    cool = fit_look_map(colors, cool_look(colors), np.ones(500), ridge=1e-6, smoothness=1e-6)
+    assert look_reliability(warm, warm, colors) == pytest.approx(1.0)
+    assert look_reliability(warm, cool, colors) == 0.0  # opposite casts: nothing agreed
+    assert look_reliability(warm, LookMap.identity(), colors) == 0.0  # one half moves nothing
+    # part of the displacement shared: cosine r, stepped up to 2 r / (1 + r)
+    other = LookMap(warm.coefficients + 0.8 * cool.coefficients, warm.knots)
+    a, b = warm(colors) - colors, other(colors) - colors
+    r = np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b))
+    assert 0.1 < r < 0.9
+    assert look_reliability(warm, other, colors) == pytest.approx(2 * r / (1 + r))
+
+
+#: Colours of everyday scenes (sky, foliage, skin, grey, white, shadow, wood, haze).
+EVERYDAY = np.array([[0.45, 0.6, 0.85], [0.3, 0.45, 0.2], [0.8, 0.6, 0.5], [0.5, 0.5, 0.5],
+                     [0.9, 0.9, 0.88], [0.15, 0.12, 0.1], [0.6, 0.45, 0.3], [0.7, 0.75, 0.8]])
+
+
+def everyday_scene(seed, size=48):
+    """A synthetic photo whose colours come from one shared prior, as natural photos' do:
+    four bands of four of the :data:`EVERYDAY` colours, a gradient, grain."""
+    rng = np.random.default_rng(seed)
+    colors = np.clip(EVERYDAY[rng.choice(len(EVERYDAY), 4, replace=False)]
+                     + rng.normal(0, 0.05, (4, 3)), 0, 1)
+    cuts = np.sort(rng.choice(np.arange(4, size - 4), 3, replace=False))
+    labels = np.broadcast_to(np.searchsorted(cuts, np.arange(size), side="right"), (size, size))
+    image = colors[labels] * np.linspace(0.8, 1.1, size)[:, None, None]
+    return np.clip(image + rng.normal(0, 0.02, image.shape), 0.0, 1.0)
+
+
+def test_a_look_every_style_shows_is_applied_and_one_the_halves_disagree_on_is_not():
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))],
+                        np.stack([image_histogram(i, 32) for i in images]),
+                        meta={"cache_dir": None})
+
+    contents = [everyday_scene(s) for s in range(10, 14)]
+    naturals = style_set([everyday_scene(s) for s in range(40, 50)])  # other scenes
+    test = everyday_scene(99)
+    photo_hist = image_histogram(test, 32)
+    identity = error(LookMap.identity(), warm_look, test)
+    shared = style_set([warm_look(c) for c in contents])
+    base, extracted, strength = set_look_base(shared, naturals, photo_hist=photo_hist)
+    assert strength > 0.7
+    assert error(base, warm_look, test) < 0.6 * identity
+    # styles 0 and 2 warm, 1 and 3 cool: the halves disagree, the look is not applied
+    mixed = style_set([(warm_look if i % 2 == 0 else cool_look)(c)
+                       for i, c in enumerate(contents)])
+    base, extracted, strength = set_look_base(mixed, naturals, photo_hist=photo_hist)
+    assert extracted.look.amplitude() > 0.05  # the pooled look moves colours...
+    assert strength < 0.2  # ...which the halves do not agree on
+    assert base.amplitude() <= 0.2 * extracted.look.amplitude() + 1e-12
+    # a fixed strength is taken as it is
+    assert set_look_base(mixed, naturals, 0.5)[2] == 0.5
 
 
 def sample(name, width=96):
@@ -212,3 +282,26 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
     broken[0, 0, 0, 0] = np.nan
     with pytest.raises(InputError, match="finite"):
         save_preset(tmp_path / "bad.npz", styles, look=broken)
+
+
+def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypatch):
+    """The disk cache is keyed by the extraction's settings as well as the histograms."""
+    from wbcgrade.color import look
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))],
+                        np.stack([image_histogram(i, 32) for i in images]),
+                        meta={"cache_dir": str(tmp_path)})
+
+    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)])
+    naturals = style_set([everyday_scene(s) for s in range(40, 44)])
+    first = look.set_look(styles, naturals)
+    assert len(list((tmp_path / "looks").glob("*.npz"))) == 1
+    monkeypatch.setattr(look, "_SET_LOOKS", {})  # a new process: only the disk cache is left
+    assert look.set_look(styles, naturals).info == first.info  # read back from disk
+    monkeypatch.setattr(look, "_SET_LOOKS", {})
+    monkeypatch.setattr(look, "SET_RELAXATION", 0.5)
+    other = look.set_look(styles, naturals)
+    assert len(list((tmp_path / "looks").glob("*.npz"))) == 2
+    assert other.info["relaxation"] == 0.5 != first.info["relaxation"]

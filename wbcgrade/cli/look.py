@@ -24,8 +24,8 @@ def look() -> None:
               help="Nodes per axis of the LUT.")
 @lazy_options(lut_format_option)
 @click.option("--strength", type=click.FloatRange(0.0, 2.0), default=None,
-              help="Scale of the extracted look [default: what `apply` uses where no "
-                   "style shows the photo's scene; a preset's own look: all of it].")
+              help="Scale of the extracted look [default: how far the two halves of "
+                   "the set agree on it; a preset's own look: all of it].")
 @click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
               metavar="PRESET", help="Preset (.npz) of ungraded photos, the content model "
                                      "[default: the shipped one].")

@@ -274,7 +274,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     naturals = styles_in_space(naturals, styles.working_space)
     n_styles = len(styles.names)
     if request.photo.pixels is not None:
-        base, extracted = set_look_base(styles, naturals)
+        base, extracted, strength = set_look_base(styles, naturals, None, photo_hist)
         timings["look"] = time.perf_counter() - start
         say("scene")
         start = time.perf_counter()
@@ -290,6 +290,7 @@ def look_map(request: MapRequest) -> BuiltMap:
                 weights[index] += scene.confidence * inliers / total
             best = max(scene.matches, key=scene.matches.get)
             info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                             "set_strength": strength,
                              "match": styles.names[best], "confidence": scene.confidence,
                              "scene": {styles.names[i]: n for i, n in scene.matches.items()},
                              "scene_residual": scene.residual, "pairs": scene.pairs,
@@ -304,7 +305,8 @@ def look_map(request: MapRequest) -> BuiltMap:
         if has_style_images(styles):
             # the style photos were looked at and none shows this scene: the set's look
             # (a palette that merely resembles the photo's is no better sign of its scene)
-            info = {"look": {"set_amplitude": extracted.look.amplitude(), "match": None,
+            info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                             "set_strength": strength, "match": None,
                              "confidence": 0.0, **extracted.info}}
             fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
                              "look", {"start": "look", "match": None, "confidence": 0.0},

@@ -19,7 +19,7 @@ import numpy as np
 from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import Grade
-from wbcgrade.color.look import SET_LOOK_STRENGTH, natural_palettes, set_look_map
+from wbcgrade.color.look import natural_palettes, set_look_map
 from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
 from wbcgrade.color.presets import StyleSource, load_preset, load_styles, styles_in_space
 
@@ -68,8 +68,8 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: 
         one, is the look itself).
     output : the LUT file (.cube or .clf; ``lut_format`` names it, else its ending).
     lut_size : nodes per axis.
-    strength : scale of the look; None: all of a preset's own look, else the
-        strength ``apply`` gives a set's look.
+    strength : scale of the look; None: all of a preset's own look, an extracted
+        one at its reliability (how far the two halves of the set agree).
     natural : a preset (.npz) of ungraded photos, the content model (None:
         the shipped one).
     working_space : where the look is extracted and the LUT applied (None:
@@ -89,9 +89,9 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: 
     styles = load_styles(source, STYLE_BINS, working_space, warn, on_style)
     naturals = load_preset(natural) if natural else natural_palettes()
     naturals = styles_in_space(naturals, styles.working_space)
-    if strength is None:  # a preset's own look is the look itself; an extracted one, as apply
-        strength = 1.0 if styles.meta.get("look") is not None else SET_LOOK_STRENGTH
+    # strength None: a preset's own look in full, an extracted one at its reliability
     lattice, info = set_look_map(styles, naturals, strength, lut_size, on_look)
+    strength = info["strength"]
     grade = Grade(tuple(styles.names), np.full(len(styles.names), 1.0 / len(styles.names)),
                   lattice, working=encoding.working)
     path = write_grade_lut(output, grade, encoding, lut_size, lut_format,
