@@ -147,8 +147,11 @@ def test_a_look_every_style_shows_is_applied_and_one_the_halves_disagree_on_is_n
     identity = error(LookMap.identity(), warm_look, test)
     shared = style_set([warm_look(c) for c in contents])
     base, extracted, strength = set_look_base(shared, naturals, photo_hist=photo_hist)
-    assert strength > 0.7
+    assert strength > 0.5
     assert error(base, warm_look, test) < 0.6 * identity
+    # ungraded photos: what content alone makes of a look is hardly applied
+    ungraded = style_set(contents)
+    assert set_look_base(ungraded, naturals, photo_hist=photo_hist)[2] < 0.5 * strength
     # styles 0 and 2 warm, 1 and 3 cool: the halves disagree, the look is not applied
     mixed = style_set([(warm_look if i % 2 == 0 else cool_look)(c)
                        for i, c in enumerate(contents)])

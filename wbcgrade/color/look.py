@@ -865,17 +865,30 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
             pass
 
 
+#: Size (rms displacement on a photo's colours) of the look :func:`extract_look` finds
+#: in sets of UNGRADED photos: what content alone makes of a look, the part of any
+#: extracted look that both halves of a set share without its being a look. Measured
+#: on ``benchmarks/look.py``'s 12 cross-content partitions with the looks left off:
+#: 0.035-0.073, median 0.05 (the looks themselves: 0.10-0.43). A look not clearly
+#: larger is applied the less (:func:`set_look_base`): on the 12 looks' cross-content
+#: quick runs the worst photo went from -0.49 to -0.27, the mean from +0.27 to +0.25.
+NULL_LOOK_SIZE = 0.05
+
+
 def set_look_base(styles, naturals=None, strength: float | None = None,
                   photo_hist: np.ndarray | None = None) -> tuple[LookMap, LookResult, float]:
     """The set's look at ``strength`` (what a photo of another scene gets), and the extraction.
 
     ``strength`` None: the look's split-half reliability (:func:`look_reliability`
     of :func:`set_look_halves`) on the photo's colours (``photo_hist``, any
-    (n, n, n) grid) or, without a photo, on the average natural palette's; a
-    single style: :data:`SET_LOOK_STRENGTH`. Measured on ``benchmarks/look.py``
-    (cross-content, 384 px; see the README): a look every style shows (a
-    sepia, a day for night, a bleach bypass) is applied nearly in full, one
-    whose halves disagree (teal-orange across scenes) hardly at all.
+    (n, n, n) grid) or, without a photo, on the average natural palette's,
+    times ``max(0, 1 - b^2 / a^2)`` (``a``: the look's rms displacement on those
+    colours, ``b``: :data:`NULL_LOOK_SIZE`, what content alone makes of a
+    look); a single style: :data:`SET_LOOK_STRENGTH`. Measured on
+    ``benchmarks/look.py`` (cross-content, 384 px; see the README): a large
+    look every style shows (a sepia, a day for night, a bleach bypass) is
+    applied nearly in full, one whose halves disagree (teal-orange across
+    scenes) not at all, a faint one (a mild colour correction) little.
 
     Returns (the look at that strength, the extraction, the strength).
     """
@@ -890,6 +903,9 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
                 photo_hist = naturals.at_bins(MAP_BINS).mean(axis=0)
             colors, weights = _histogram_colors(photo_hist)
             strength = look_reliability(*halves, colors, weights)
+            moved = extracted.look(colors) - colors
+            size2 = float(np.sum(weights * np.sum(moved * moved, axis=1)) / np.sum(weights))
+            strength *= max(0.0, 1.0 - NULL_LOOK_SIZE ** 2 / max(size2, 1e-300))
     look = LookMap(strength * extracted.look.coefficients, extracted.look.knots)
     return look, extracted, float(strength)
 
