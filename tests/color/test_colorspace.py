@@ -275,7 +275,9 @@ def test_style_histograms_are_cached_per_working_space(tmp_path, style_dir):
     assert cct.working_space == cs.resolve_space("acescct")
     assert np.abs(srgb.histograms - cct.histograms).sum() > 0.5  # not the sRGB entries
     again = load_style_folder(style_dir, 16, cache=cache, working_space="ACEScct")
-    np.testing.assert_allclose(again.histograms, cct.histograms, atol=1e-7)  # float32 cache
+    # the first run uses the histograms as the cache keeps them (float32 values), so
+    # every later run computes the same (a set's look, keyed by them, is found again)
+    np.testing.assert_array_equal(again.histograms, cct.histograms)
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 2 * len(srgb.names)
 
 

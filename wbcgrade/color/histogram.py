@@ -194,17 +194,21 @@ class HistogramCache:
             return None
 
     def put(self, path: Path, bins: int, hist: np.ndarray,
-            max_pixels: int = DEFAULT_MAX_PIXELS, space: str = "") -> None:
-        """Store a histogram (failures are logged, not raised)."""
-        if not self.enabled:
-            return
-        if self._unwritable:
-            return
+            max_pixels: int = DEFAULT_MAX_PIXELS, space: str = "") -> np.ndarray:
+        """Store a histogram (failures are logged, not raised) -> the histogram as stored.
+
+        Use the returned histogram: it is what :meth:`get` gives back later (values
+        kept in float32), so a first run and the runs that read the cache compute
+        the same things (a set's look, keyed by its histograms, is found again).
+        """
+        index, values = to_sparse(hist)
+        stored = from_sparse(index, values, bins)
+        if not self.enabled or self._unwritable:
+            return stored
         tmp = None
         try:
             target = self._key(path, bins, max_pixels, space)
             self.folder.mkdir(parents=True, exist_ok=True)
-            index, values = to_sparse(hist)
             data = io.BytesIO()  # the archive is made in memory: a full disk cannot leave
             np.savez_compressed(data, index=index, values=values)  # a half-closed ZipFile
             fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".npz.tmp")
@@ -220,6 +224,7 @@ class HistogramCache:
             if tmp is not None:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
+        return stored
 
 
 class PaletteSum:

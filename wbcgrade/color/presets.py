@@ -186,7 +186,7 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue
-            cache.put(path, bins, hist, max_pixels, space)
+            hist = cache.put(path, bins, hist, max_pixels, space)  # as later runs read it
         names.append(path.stem)
         hists.append(hist)
         used.append(str(path))
