@@ -29,6 +29,7 @@ to a few style photos stays a look.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -874,7 +875,8 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
 #: photos of the tuned looks / 36 of the held-out ones) 0.05 / 0.06 / 0.07 recover
 #: +0.23 / +0.20 / +0.17 and +0.26 / +0.24 / +0.22, worst photo -0.49 / -0.25 /
 #: -0.04 and -0.28 / -0.20 / -0.12 (a look the photo's colours barely show,
-#: e.g. ARRI's on a purple gradient, dE 2.4 from the truth before grading).
+#: e.g. ARRI's on a purple gradient, dE 2.4 from the truth before grading). In
+#: sRGB-encoded units; other working spaces scale it (:func:`_space_scale`).
 NULL_LOOK_SIZE = 0.07
 
 
@@ -886,8 +888,8 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     of :func:`set_look_halves`) on the photo's colours (``photo_hist``, any
     (n, n, n) grid) or, without a photo, on the average natural palette's,
     times ``max(0, 1 - b^2 / a^2)`` (``a``: the look's rms displacement on those
-    colours, ``b``: :data:`NULL_LOOK_SIZE`, what content alone makes of a
-    look); a single style: :data:`SET_LOOK_STRENGTH`. Measured on
+    colours, ``b``: :data:`NULL_LOOK_SIZE` in the working space's units, what
+    content alone makes of a look); a single style: :data:`SET_LOOK_STRENGTH`. Measured on
     ``benchmarks/look.py`` (cross-content, 384 px; see the README): a large
     look every style shows (a sepia, a day for night, a bleach bypass) is
     applied nearly in full, one whose halves disagree (teal-orange across
@@ -908,9 +910,29 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
             strength = look_reliability(*halves, colors, weights)
             moved = extracted.look(colors) - colors
             size2 = float(np.sum(weights * np.sum(moved * moved, axis=1)) / np.sum(weights))
-            strength *= max(0.0, 1.0 - NULL_LOOK_SIZE ** 2 / max(size2, 1e-300))
+            null = NULL_LOOK_SIZE * _space_scale(styles.working_space)
+            strength *= max(0.0, 1.0 - null ** 2 / max(size2, 1e-300))
     look = LookMap(strength * extracted.look.coefficients, extracted.look.knots)
     return look, extracted, float(strength)
+
+
+@functools.cache
+def _space_scale(working_space: str) -> float:
+    """How large colour differences are in ``working_space``'s unit cube against the
+    sRGB-encoded one (where :data:`NULL_LOOK_SIZE` was measured): the rms spread of
+    the shipped natural palettes' colours there over their spread in sRGB (1 in the
+    default space; about 0.5 in ACEScct, which packs sRGB into 0.07-0.55)."""
+    from wbcgrade.color.presets import styles_in_space
+
+    def spread(hist: np.ndarray) -> float:
+        colors, weights = _histogram_colors(hist)
+        mean = weights @ colors / weights.sum()
+        return float(np.sqrt(weights @ np.sum((colors - mean) ** 2, axis=1) / weights.sum()))
+
+    naturals = natural_palettes()
+    srgb = spread(naturals.at_bins(MAP_BINS).mean(axis=0))
+    there = styles_in_space(naturals, working_space).at_bins(MAP_BINS).mean(axis=0)
+    return spread(there) / srgb
 
 
 def _histogram_colors(hist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
