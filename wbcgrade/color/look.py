@@ -812,7 +812,7 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
     if not norms > 0:
         return 0.0
     r = float(np.sum(w * np.sum(a * b, axis=1)) / norms)
-    return max(0.0, 2.0 * r / (1.0 + r)) if r > 0 else 0.0
+    return 2.0 * r / (1.0 + r) if r > 0 else 0.0
 
 
 def _look_cache_path(key: str, styles=None):
@@ -881,7 +881,9 @@ NULL_LOOK_SIZE = 0.07
 
 
 def set_look_base(styles, naturals=None, strength: float | None = None,
-                  photo_hist: np.ndarray | None = None) -> tuple[LookMap, LookResult, float]:
+                  photo_hist: np.ndarray | None = None,
+                  progress: Callable[[int, int], None] | None = None
+                  ) -> tuple[LookMap, LookResult, float]:
     """The set's look at ``strength`` (what a photo of another scene gets), and the extraction.
 
     ``strength`` None: the look's split-half reliability (:func:`look_reliability`
@@ -895,9 +897,11 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     applied nearly in full, one whose halves disagree (teal-orange across
     scenes) not at all, a faint one (a mild colour correction) little.
 
+    ``progress``: the whole set's extraction (:func:`set_look`).
+
     Returns (the look at that strength, the extraction, the strength).
     """
-    extracted = set_look(styles, naturals)
+    extracted = set_look(styles, naturals, progress)
     if strength is None:
         halves = set_look_halves(styles, naturals)
         if halves is None:
@@ -1011,11 +1015,14 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
         return ((identity + moved).astype(np.float32),
                 {"source": "preset", "strength": strength,
                  "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))})
-    extracted = set_look(styles, naturals, progress)
-    look, _, strength = set_look_base(styles, naturals, strength)
+    look, extracted, strength = set_look_base(styles, naturals, strength, progress=progress)
     names = (naturals if naturals is not None else natural_palettes()).names
-    content = {style: {names[k]: round(float(w), 3) for k, w in enumerate(row) if w >= 0.05}
-               for style, row in zip(styles.names, extracted.weights)}
+    if extracted.info.get("content_shrink", 0.0) >= 1.0:  # not fitted: the average of all
+        content = {style: "the natural palettes' barycenter" for style in styles.names}
+    else:
+        content = {style: {names[k]: round(float(w), 3) for k, w in enumerate(row)
+                           if w >= 0.05}
+                   for style, row in zip(styles.names, extracted.weights)}
     info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
             "content": content}
     return look.lattice(map_size), info
