@@ -162,3 +162,35 @@ def test_the_grade_applies_the_statistics_look_of_a_style_set_in_full():
     assert extracted.info["monochrome"]
     lattice = look.set_look_map(style_set([black_and_white(c) for c in contents]), naturals)[0]
     assert monochrome_toning(lattice) is not None  # exactly black and white as a LUT too
+
+
+def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tmp_path):
+    """A collection whose every photo is warm (its camera, its light): graded photos of it
+    with no look are no warm look against the user's own photos, and are against others."""
+    warm = np.array([0.06, 0.0, -0.06])
+
+    def collection(seeds):
+        return [np.clip(natural_photo(s) + warm, 0, 1) for s in seeds]
+
+    styles = tinted_statistics(hists(collection(range(12))), NATURALS)
+    against_others = statistics_look(styles, NATURALS, content_bias=0.0)
+    own = palette_statistics(hists(collection(range(300, 320))))
+    against_own = statistics_look(styles, NATURALS, reference=own)
+    test = np.concatenate(collection(range(200, 204)))
+    red_blue = np.array([1.0, 0.0, -1.0])  # the warmth each adds
+    warmer_others = np.mean((against_others(test) - test) @ red_blue)
+    assert warmer_others > 0.015
+    assert abs(np.mean((against_own(test) - test) @ red_blue)) < 0.5 * warmer_others
+
+    # a folder of them as --natural: the shipped palettes' spread, the folder's centre
+    import OpenImageIO as oiio
+
+    from wbcgrade.color.look import load_naturals
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    for i, image in enumerate(collection(range(300, 303))):
+        oiio.ImageBuf(np.ascontiguousarray(image, dtype=np.float32)).write(
+            str(folder / f"p{i}.png"))
+    naturals = load_naturals(str(folder), "sRGB Encoded Rec.709 (sRGB)")
+    assert len(naturals.meta["own"].names) == 3 and len(naturals.names) > 3

@@ -258,11 +258,10 @@ def look_map(request: MapRequest) -> BuiltMap:
         SCENE_LOSS,
         SCENE_RELAXATION,
         find_scene_look,
+        load_naturals,
         look_color_map,
-        natural_palettes,
         set_look_base,
     )
-    from wbcgrade.color.presets import load_preset
     from wbcgrade.color.scene import has_style_images
 
     options, styles, say = request.options, request.styles, request.stage
@@ -283,8 +282,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     timings["histograms"] = time.perf_counter() - start
     say("look")
     start = time.perf_counter()
-    naturals = load_preset(options.map.natural) if options.map.natural else natural_palettes()
-    naturals = styles_in_space(naturals, styles.working_space)
+    naturals = load_naturals(options.map.natural, styles.working_space)
     n_styles = len(styles.names)
     if request.photo.pixels is not None:
         base, extracted, strength = set_look_base(styles, naturals, None, photo_hist)

@@ -698,6 +698,28 @@ FIT_BINS = 16
 MAP_BINS = 32
 
 
+def load_naturals(natural: str | None, working_space: str):
+    """The content model a command names: ``natural`` a preset file (.npz) of natural
+    palettes, a folder of the user's own ungraded photos (their statistics say what
+    content looks like in their collection; the shipped palettes how much it varies:
+    ``meta["own"]``), or None (the shipped palettes); in ``working_space``."""
+    from pathlib import Path
+
+    from wbcgrade.color.presets import load_preset, load_style_folder, styles_in_space
+
+    if natural is not None and Path(natural).is_dir():
+        from wbcgrade.color.histogram import HistogramCache
+
+        own = load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
+                                working_space=working_space)
+        naturals = styles_in_space(natural_palettes(), working_space)
+        return type(naturals)(naturals.names, naturals.histograms, naturals.source,
+                              naturals.width, naturals.description,
+                              {**naturals.meta, "own": own})
+    naturals = load_preset(natural) if natural else natural_palettes()
+    return styles_in_space(naturals, working_space)
+
+
 def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     """The shipped palettes of ungraded photos (a :class:`~wbcgrade.color.presets.StyleSet`).
 
@@ -742,7 +764,9 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
     naturals = naturals if naturals is not None else natural_palettes()
     digest = hashlib.sha1()
-    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS)):
+    own = naturals.meta.get("own")
+    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS),
+                  *([own.at_bins(FIT_BINS)] if own is not None else [])):
         digest.update(np.ascontiguousarray(hists, dtype=np.float64).tobytes())
     # the settings too: a look cached under other settings (an experiment's) is not reused
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS, SET_RELAXATION, SET_RIDGE,
@@ -811,11 +835,18 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     styles, naturals : StyleSets in one working space.
     """
     from wbcgrade.color.histogram import resample_histogram
-    from wbcgrade.color.look_statistics import statistics_look, tinted_statistics
+    from wbcgrade.color.look_statistics import (
+        palette_statistics,
+        statistics_look,
+        tinted_statistics,
+    )
 
     natural_stats = _natural_statistics(naturals)
-    model = statistics_look(tinted_statistics(styles.at_bins(MAP_BINS), natural_stats),
-                            natural_stats, _space_scale(styles.working_space))
+    own = naturals.meta.get("own")
+    reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
+    model = statistics_look(tinted_statistics(styles.at_bins(MAP_BINS), natural_stats, reference),
+                            natural_stats, _space_scale(styles.working_space),
+                            reference=reference)
     size = 17
     points = grid_points(size)
     density = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), size).ravel()

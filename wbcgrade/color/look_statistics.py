@@ -157,13 +157,15 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
     return PaletteStatistics(quantiles, mass, mean, spread, whole, neutral)
 
 
-def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics) -> PaletteStatistics:
+def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
+                      reference: PaletteStatistics | None = None) -> PaletteStatistics:
     """:func:`palette_statistics` of a style set, its neutral tints measured from the set's
     rough tint (the median band means' departure from the natural ones): a tint every
     style shows moves what was grey, and the least colourful colours of a strongly
     tinted photo are not what was grey."""
     first = palette_statistics(hists)
-    rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(naturals.band_mean, axis=0)
+    centre = reference if reference is not None else naturals
+    rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(centre.band_mean, axis=0)
     sd = _robust_sd(naturals.band_mean)
     sigma = np.sqrt((MEDIAN_SE * sd) ** 2 / len(first.quantiles) + (CONTENT_BIAS * sd) ** 2)
     return palette_statistics(hists, _shrink(rough, sigma))
@@ -237,8 +239,8 @@ class StatisticsLook:
 
 
 def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
-                    space_scale: float = 1.0, content_bias: float | None = None
-                    ) -> StatisticsLook:
+                    space_scale: float = 1.0, content_bias: float | None = None,
+                    reference: PaletteStatistics | None = None) -> StatisticsLook:
     """The look the styles' statistics show beyond what natural content varies by.
 
     Parameters
@@ -249,20 +251,30 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
         (scales :data:`MONOCHROME_SPREAD`).
     content_bias : share of the natural spread added to each statistic's uncertainty
         (default :data:`CONTENT_BIAS`; the tone curve's :data:`TONE_BIAS`).
+    reference : statistics of the user's own ungraded photos: what content looks like
+        in this collection (their medians replace the natural ones, which then only say
+        how much each statistic varies; no collection bias is added, their own
+        sampling error is).
     """
     n_styles = len(styles.quantiles)
     bias = CONTENT_BIAS if content_bias is None else content_bias
     tone_bias = TONE_BIAS if content_bias is None else content_bias
+    n_reference = 0
+    if reference is not None:  # the collection's own content: no bias, its sampling error
+        bias = tone_bias = 0.0
+        n_reference = len(reference.quantiles)
+    centre_of = reference if reference is not None else naturals
 
     def sigma(natural_values: np.ndarray, count: np.ndarray | int,
               share: float | None = None) -> np.ndarray:
         sd = _robust_sd(natural_values)
         count = np.maximum(np.asarray(count, dtype=np.float64), 1.0)
         share = bias if share is None else share
-        return np.sqrt((MEDIAN_SE * sd) ** 2 / count + (share * sd) ** 2)
+        own = (MEDIAN_SE * sd) ** 2 / n_reference if n_reference else 0.0
+        return np.sqrt((MEDIAN_SE * sd) ** 2 / count + (share * sd) ** 2 + own)
 
     # tone curve: natural median quantiles -> the styles' median quantiles, shrunk
-    nat_q = np.median(naturals.quantiles, axis=0)
+    nat_q = np.median(centre_of.quantiles, axis=0)
     sty_q = np.median(styles.quantiles, axis=0)
     tone_shift = _shrink(sty_q - nat_q, sigma(naturals.quantiles, n_styles, tone_bias))
     tone_out = np.maximum.accumulate(np.clip(nat_q + tone_shift, 0.0, 1.0))
@@ -284,7 +296,7 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
                          for row in values])
 
     sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
-    nat_spread = _nanmedian(naturals.band_spread, axis=0)
+    nat_spread = _nanmedian(centre_of.band_spread, axis=0)
     log_nat = np.log(np.maximum(naturals.band_spread, 1e-4))
     log_ratio = np.log(np.maximum(sty_spread, 1e-4)) - np.log(np.maximum(nat_spread, 1e-4))
     log_ratio = _shrink(log_ratio, sigma(log_nat, valid_styles))
@@ -293,14 +305,14 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
 
     sty_mean = np.stack([_nanmedian(at_mapped(styles.band_mean[..., c]), axis=0)
                          for c in range(3)], axis=-1)               # (B, 3)
-    nat_mean = _nanmedian(naturals.band_mean, axis=0)             # (B, 3)
+    nat_mean = _nanmedian(centre_of.band_mean, axis=0)            # (B, 3)
     nat_mean = np.stack([_fill(nat_mean[:, c], centres) for c in range(3)], axis=-1)
     if monochrome:  # the toning itself: what every style shows (a trace is black and white)
         tint = _shrink(sty_mean, np.full(sty_mean.shape, 0.004 * space_scale))
     elif TINT_FROM == "neutral":  # how the least colourful colours moved
         sty_neutral = np.stack([_nanmedian(at_mapped(styles.band_neutral[..., c]), axis=0)
                                 for c in range(3)], axis=-1)
-        nat_neutral = _nanmedian(naturals.band_neutral, axis=0)
+        nat_neutral = _nanmedian(centre_of.band_neutral, axis=0)
         tint = _shrink(sty_neutral - nat_neutral,
                        sigma(naturals.band_neutral, valid_styles[:, None]))
     else:
