@@ -1,15 +1,15 @@
 """Re-gather the natural-palette photo corpus from the package registries.
 
 The corpus (presets/natural_corpus.csv, one row a photo) names, for every photo,
-the package and version it comes from (Debian bookworm or PyPI), the file inside
+the package and version it comes from (Debian bookworm), the file inside
 that package, its author and licence. This script downloads those packages with
-their ordinary clients (``apt-get download``, ``pip download``), unpacks them,
+their ordinary client (``apt-get download``), unpacks them,
 and writes every photo downscaled to a long side of at most 1024 px (JPEG quality
 92) as ``OUT/photos/NAME.jpg``, with ``OUT/ATTRIBUTION.csv`` beside them.
 
 Usage (from the repository root, as a user who may run apt-get)::
 
-    python presets/gather_natural.py OUT [--cache DIR]
+    python presets/gather_natural.py OUT [--cache DIR] [--table wbcgrade/color/data/NATURAL.md]
     sh presets/build_natural.sh OUT/photos
 
 An ``original_file`` of the form ``PATH.rcc:INNER`` is a file inside a Qt resource
@@ -76,7 +76,8 @@ def rcc_member(bundle: bytes, inner: str) -> bytes:
             raise KeyError("/".join(parts))
         count, first = struct.unpack(">II", bundle[node + 6:node + 14])
         for child in range(first, first + count):
-            (name_offset,) = struct.unpack(">I", bundle[tree + child * node_size:tree + child * node_size + 4])
+            start = tree + child * node_size
+            (name_offset,) = struct.unpack(">I", bundle[start:start + 4])
             if name(name_offset) == parts[0]:
                 return find(child, parts[1:])
         raise KeyError("/".join(parts))
@@ -104,37 +105,11 @@ def fetch_debian(package: str, cache: Path) -> Path:
     return tree
 
 
-def fetch_pypi(package: str, cache: Path) -> Path:
-    """Unpacked tree of a PyPI wheel (``name==version``), downloaded once."""
-    import zipfile
-
-    tree = cache / "tree" / package.replace("==", "-")
-    if tree.is_dir():
-        return tree
-    wheels = cache / "wheels"
-    wheels.mkdir(parents=True, exist_ok=True)
-    name = package.split("==")[0].replace("-", "_").lower()
-    found = [w for w in wheels.glob("*.whl") if w.name.lower().startswith(name + "-" + package.split("==")[1])]
-    if not found:
-        subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
-                        "-d", str(wheels), package], check=True)
-        found = [w for w in wheels.glob("*.whl") if w.name.lower().startswith(name + "-")]
-    tmp = Path(tempfile.mkdtemp(dir=cache))
-    with zipfile.ZipFile(found[0]) as z:
-        z.extractall(tmp)
-    tree.parent.mkdir(parents=True, exist_ok=True)
-    os.replace(tmp, tree)
-    return tree
-
-
 def load_photo(row: dict[str, str], cache: Path) -> Image.Image:
     """The row's original image, as an RGB PIL image."""
-    if row["source_registry"].startswith("Debian"):
-        tree = fetch_debian(row["source_package"], cache)
-    elif row["source_registry"] == "PyPI":
-        tree = fetch_pypi(row["source_package"], cache)
-    else:
+    if not row["source_registry"].startswith("Debian"):
         raise ValueError(f"unknown registry {row['source_registry']!r}")
+    tree = fetch_debian(row["source_package"], cache)
     path, _, inner = row["original_file"].partition(":")
     if path.endswith(".rcc"):
         blob = rcc_member((tree / path).read_bytes(), inner)
@@ -158,8 +133,8 @@ def write_photo(image: Image.Image, target: Path) -> None:
     """Downscale to a long side of at most 1024 px and write atomically (JPEG q92)."""
     if max(image.size) > LONG_SIDE:
         scale = LONG_SIDE / max(image.size)
-        image = image.resize((max(1, round(image.width * scale)), max(1, round(image.height * scale))),
-                             Image.LANCZOS)
+        size = (max(1, round(image.width * scale)), max(1, round(image.height * scale)))
+        image = image.resize(size, Image.LANCZOS)
     tmp = target.with_name("." + target.name + ".tmp")
     image.save(tmp, "JPEG", quality=QUALITY)
     os.replace(tmp, target)
@@ -175,16 +150,62 @@ def write_attribution(rows: list[dict[str, str]], target: Path) -> None:
     os.replace(tmp, target)
 
 
+TABLE_HEAD = """# Natural palettes
+
+`natural.npz` holds the colour histograms (32³ bins, sRGB-encoded, stored
+compact: 16-bit bins) of the {count} ungraded photos below. Look extraction
+(`wbcgrade/color/look.py`) uses them as its model of what ungraded palettes look
+like. Only the histograms are shipped, never the photos.
+
+The photos come from Debian (bookworm) packages; `presets/natural_corpus.csv`
+names each one's package, version and file, and `presets/gather_natural.py`
+fetches them again (then `sh presets/build_natural.sh CORPUS/photos` rebuilds
+the file). Licences are those the packages' `debian/copyright` (or, for KDE
+Plasma wallpapers, their `metadata` files) give for each file; where a package
+gives no per-file credit, the package's own licence and authors are named.
+
+None of them is one of the sample photos in `samples/` (nor of the photos the
+look benchmark grades), so no look is ever learnt from the photos it is measured
+on. The 21 photos of the earlier, smaller set are no longer used: astronaut,
+coffee, chelsea, rocket, hubble_deep_field, grace_hopper, china, flower,
+aitzgorri, picosdeeuropa, life, sunset, friends, fig, brushes, wine, seeding,
+bridge, dragonfly, kleiber, infinite_sea.
+
+| photo | author | licence | source package | file |
+|---|---|---|---|---|
+"""
+
+
+def write_table(rows: list[dict[str, str]], target: Path) -> None:
+    """The provenance table (wbcgrade/color/data/NATURAL.md) of the corpus rows."""
+    def cell(text: str) -> str:
+        return text.replace("|", "/").strip()
+
+    lines = [TABLE_HEAD.format(count=len(rows))]
+    for row in rows:
+        lines.append(f"| {row['name']} | {cell(row['author'])} | {cell(row['licence'])} | "
+                     f"{cell(row['source_package'])} | {cell(row['original_file'])} |\n")
+    tmp = target.with_name("." + target.name + ".tmp")
+    tmp.write_text("".join(lines), encoding="utf-8")
+    os.replace(tmp, target)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path, help="folder to write photos/ and ATTRIBUTION.csv into")
-    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "wbcgrade-natural-cache",
+    parser.add_argument("--cache", type=Path,
+                        default=Path(tempfile.gettempdir()) / "wbcgrade-natural-cache",
                         help="where downloaded packages are kept between runs")
     parser.add_argument("--manifest", type=Path, default=MANIFEST)
     parser.add_argument("--force", action="store_true", help="rewrite photos that already exist")
-    parser.add_argument("--prune", action="store_true", help="remove photos/*.jpg that the manifest does not list")
+    parser.add_argument("--prune", action="store_true",
+                        help="remove photos/*.jpg that the manifest does not list")
+    parser.add_argument("--table", type=Path,
+                        help="also write the provenance table (NATURAL.md) here")
     args = parser.parse_args(argv)
     rows = read_manifest(args.manifest)
+    if args.table:
+        write_table(rows, args.table)
     photos = args.out / "photos"
     photos.mkdir(parents=True, exist_ok=True)
     args.cache.mkdir(parents=True, exist_ok=True)
