@@ -318,7 +318,8 @@ def natural_preset(context: Context) -> str:
     key = ("natural", tuple(allowed))
     if key not in context.memo:
         shipped = natural_palettes()
-        benchmark = set(context._photos.names()) if context._photos is not None else set(shipped.names)
+        photos = context._photos
+        benchmark = set(photos.names()) if photos is not None else set(shipped.names)
         held_out = (set(shipped.names) & benchmark) - set(allowed)
         digest = hashlib.sha1(",".join(allowed).encode()).hexdigest()[:16]
         path = Path(context.cache_dir) / f"natural-{digest}.npz"
