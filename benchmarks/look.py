@@ -330,9 +330,10 @@ def natural_preset(context: Context) -> str:
     """A preset file of the shipped natural palettes this case may learn from
     (``--natural``'s file instead, when given).
 
-    The shipped palettes (``wbcgrade/color/data/natural.npz``) are built from
-    the benchmark's photos; the case's graded photos and the sources of its
-    style images are left out (held out), so a look is never learnt from them.
+    The shipped palettes (``wbcgrade/color/data/natural.npz``) come from photos
+    other than the benchmark's; should one of the benchmark's photos be among
+    them, it is left out (held out) unless the case allows it, so a look is
+    never learnt from the case's graded photos or the sources of its style images.
     """
     from wbcgrade.color.look import natural_palettes
     from wbcgrade.color.presets import save_preset
@@ -343,7 +344,9 @@ def natural_preset(context: Context) -> str:
     key = ("natural", tuple(allowed))
     if key not in context.memo:
         shipped = natural_palettes()
-        held_out = set(shipped.names) - set(allowed)
+        photos = context._photos
+        benchmark = set(photos.names()) if photos is not None else set(shipped.names)
+        held_out = (set(shipped.names) & benchmark) - set(allowed)
         digest = hashlib.sha1(",".join(allowed).encode()).hexdigest()[:16]
         path = Path(context.cache_dir) / f"natural-{digest}.npz"
         if not path.exists():

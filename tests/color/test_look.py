@@ -317,3 +317,35 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
     other = look.set_look(styles, naturals)
     assert len(list((tmp_path / "looks").glob("*.npz"))) == 2
     assert other.info != first.info
+
+
+def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
+    """The naturals' barycenter (the default content) is computed once, not per extraction."""
+    import wbcgrade.core
+    from wbcgrade.color import look
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))],
+                        np.stack([image_histogram(i, 32) for i in images]),
+                        meta={"cache_dir": None})
+
+    sizes = []
+    real = wbcgrade.core.barycenter
+
+    def counted(histograms, *args, **kwargs):
+        sizes.append(len(histograms))
+        return real(histograms, *args, **kwargs)
+
+    monkeypatch.setattr(wbcgrade.core, "barycenter", counted)
+    monkeypatch.setattr(look, "SET_LOOK_METHOD", "transport")  # the one that takes it
+    monkeypatch.setattr(look, "_SET_LOOKS", {})
+    monkeypatch.setattr(look, "_AVERAGE_CONTENTS", {}, raising=False)
+    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 14)])
+    naturals = style_set([everyday_scene(s) for s in range(40, 45)])
+    whole = look.set_look(styles, naturals, cache=False)
+    assert look.set_look_halves(styles, naturals) is not None
+    assert sizes.count(len(naturals.names)) == 1  # three extractions, one barycenter
+    monkeypatch.setattr(look, "_SET_LOOKS", {})
+    assert look.set_look(styles, naturals, cache=False).info == whole.info
+    assert sizes.count(len(naturals.names)) == 1

@@ -341,8 +341,7 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
     if average:
         all_weights[:] = 1.0 / len(natural_map)
         losses[:] = np.nan
-        average_content = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map]),
-                                     all_weights[0], geometry, 60)
+        average_content = _average_content(natural_map, geometry)
     for round_ in range(rounds):
         if not average:
             pushed = np.stack([push_histogram(h, look, fit_bins) for h in naturals[fit_bins]])
@@ -375,6 +374,28 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
             "smoothness": smoothness, "ridge": ridge, "knots": knots,
             "fit_bins": fit_bins, "map_bins": map_bins, "amplitude": look.amplitude()}
     return LookResult(look, all_weights, losses, info)
+
+
+#: The natural palettes' barycenter by a digest of the palettes: a style set and its two
+#: halves (and every set graded against the same palettes) share it, and with hundreds
+#: of palettes it is most of an extraction's time.
+_AVERAGE_CONTENTS: dict[str, np.ndarray] = {}
+
+
+def _average_content(natural_map: np.ndarray, geometry) -> np.ndarray:
+    """The uniform Wasserstein barycenter of the natural palettes (n, b, b, b), computed once."""
+    import hashlib
+
+    from wbcgrade.core import barycenter
+
+    digest = hashlib.sha1(np.ascontiguousarray(natural_map, dtype=np.float64).tobytes())
+    digest.update(repr(natural_map.shape).encode())
+    key = digest.hexdigest()
+    if key not in _AVERAGE_CONTENTS:
+        weights = np.full(len(natural_map), 1.0 / len(natural_map))
+        _AVERAGE_CONTENTS[key] = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map]),
+                                            weights, geometry, 60)
+    return _AVERAGE_CONTENTS[key]
 
 
 def _shrunk(pooled: LookMap, each: list[LookMap], size: int = 17) -> LookMap:
