@@ -786,9 +786,9 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     naturals = naturals if naturals is not None else natural_palettes()
     digest = hashlib.sha1()
     own = naturals.meta.get("own")
-    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS),
-                  *([own.at_bins(FIT_BINS)] if own is not None else [])):
-        digest.update(np.ascontiguousarray(hists, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(styles.at_bins(FIT_BINS), dtype=np.float64).tobytes())
+    for palettes in (naturals, *([own] if own is not None else [])):
+        digest.update(_palettes_digest(palettes).encode())
     # the settings too: a look cached under other settings (an experiment's) is not reused
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS, SET_RELAXATION, SET_RIDGE,
                         DEFAULT_CONTENT_SHRINK, DEFAULT_WIDTH, DEFAULT_SMOOTHNESS,
@@ -832,18 +832,59 @@ def statistics_settings() -> tuple:
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS)
 
 
-def _natural_statistics(naturals):
-    """:func:`~wbcgrade.color.look_statistics.palette_statistics` of the natural palettes,
-    once per process and set of palettes."""
+_DIGESTS: dict[int, tuple[object, str]] = {}
+_STAT_FIELDS = ("quantiles", "band_mass", "band_mean", "band_spread", "spread", "band_neutral")
+
+
+def _palettes_digest(palettes) -> str:
+    """A digest of a StyleSet's histograms (as stored: no re-binning), once per array."""
     import hashlib
 
-    from wbcgrade.color.look_statistics import palette_statistics
+    hists = palettes.histograms
+    known = _DIGESTS.get(id(hists))
+    if known is None or known[0] is not hists:
+        digest = hashlib.sha1(repr((hists.shape, str(hists.dtype))).encode())
+        digest.update(np.ascontiguousarray(hists).tobytes())
+        known = _DIGESTS[id(hists)] = (hists, digest.hexdigest())
+    return known[1]
 
-    hists = naturals.at_bins(MAP_BINS)
-    key = hashlib.sha1(np.ascontiguousarray(hists, dtype=np.float32).tobytes()).hexdigest()
-    if key not in _NATURAL_STATISTICS:
-        _NATURAL_STATISTICS[key] = palette_statistics(hists)
-    return _NATURAL_STATISTICS[key]
+
+def _natural_statistics(naturals, cache_from=None):
+    """:func:`~wbcgrade.color.look_statistics.palette_statistics` of the natural palettes,
+    once per process and set of palettes, and kept on disk in the looks' cache folder
+    (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
+    from wbcgrade.color.look_statistics import PaletteStatistics, palette_statistics
+
+    key = _palettes_digest(naturals) + repr(statistics_settings())
+    if key in _NATURAL_STATISTICS:
+        return _NATURAL_STATISTICS[key]
+    import hashlib
+
+    name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
+    path = _look_cache_path(name, cache_from)
+    found = None
+    if path is not None and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                found = PaletteStatistics(**{f: np.array(data[f]) for f in _STAT_FIELDS})
+        except (OSError, ValueError, KeyError, TypeError, EOFError):
+            found = None
+    if found is None:
+        found = palette_statistics(naturals.at_bins(MAP_BINS))
+        if path is not None:
+            import os
+            import tempfile
+
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
+                with os.fdopen(handle, "wb") as out:
+                    np.savez(out, **{f: getattr(found, f) for f in _STAT_FIELDS})
+                os.replace(tmp, path)
+            except OSError:
+                pass
+    _NATURAL_STATISTICS[key] = found
+    return found
 
 
 def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookResult:
@@ -862,7 +903,7 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
         tinted_statistics,
     )
 
-    natural_stats = _natural_statistics(naturals)
+    natural_stats = _natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
     reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
     model = statistics_look(tinted_statistics(styles.at_bins(MAP_BINS), natural_stats, reference),

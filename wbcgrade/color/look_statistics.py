@@ -114,7 +114,9 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
     k, n = len(hists), hists.shape[1]
     flat = hists.reshape(k, -1)
     flat = flat / np.maximum(flat.sum(axis=1, keepdims=True), 1e-300)
-    points = grid_points(n)
+    used = np.flatnonzero(flat.max(axis=0) > 0)  # bins some palette holds
+    flat = np.ascontiguousarray(flat[:, used])
+    points = grid_points(n)[used]
     luma = points @ LUMA
     chroma = points - luma[:, None]
     # luma quantiles: the cumulative mass in luma order, interpolated
@@ -122,12 +124,13 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
     sorted_luma = luma[order]
     cumulative = np.cumsum(flat[:, order], axis=1)
     quantiles = np.stack([np.interp(QUANTILES, c, sorted_luma) for c in cumulative])
-    # chroma per lightness band
+    # chroma per lightness band (matrix products: K palettes x N bins)
     member = _bands(luma)                                           # (N, B)
     mass = flat @ member                                            # (K, B)
     safe = np.maximum(mass, 1e-300)
-    mean = np.einsum("kn,nb,nc->kbc", flat, member, chroma) / safe[..., None]
-    second = np.einsum("kn,nb,n->kb", flat, member, np.sum(chroma ** 2, axis=1)) / safe
+    weighted = (member[:, :, None] * chroma[:, None, :]).reshape(len(used), -1)
+    mean = (flat @ weighted).reshape(k, BANDS, 3) / safe[..., None]
+    second = (flat @ (member * np.sum(chroma ** 2, axis=1)[:, None])) / safe
     # soft binning spreads each channel by f (1 - f) / (n - 1)^2 (f: where a colour falls
     # between two nodes; 1/6 on average), independently, which chroma (summed over its three
     # components) takes 1 + 3 |luma weights|^2 times
