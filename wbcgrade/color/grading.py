@@ -58,6 +58,7 @@ from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
+from wbcgrade.color.outcome import GradeOutcome, GradeSource, PaletteFit, map_change
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
@@ -65,7 +66,7 @@ from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
            "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
-           "grade_histograms", "grade_encoded", "grade_array"]
+           "grade_histograms", "grade_outcome", "outcome_on_photo", "grade_encoded", "grade_array"]
 
 FitCallback = Callable[[int, np.ndarray, float], None]
 
@@ -91,6 +92,8 @@ class Grade:
     barycenter : (n, n, n) the target palette on the transfer grid, or None.
     info : fit, palette, Sinkhorn and map diagnostics (JSON-friendly).
     timings : seconds per stage.
+    outcome : what the grade did, in plain terms (source, strength, size, the
+        photo's change; :class:`wbcgrade.color.outcome.GradeOutcome`), or None.
     """
 
     names: tuple[str, ...]
@@ -103,6 +106,7 @@ class Grade:
     barycenter: np.ndarray | None = None
     info: Mapping = field(default_factory=dict)
     timings: Mapping = field(default_factory=dict)
+    outcome: GradeOutcome | None = field(default=None, compare=False)
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -406,7 +410,73 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
                   strength=options.map.strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
-    return grade, built.fit
+    outcome = grade_outcome(grade, built.fit, photo.fit, name)
+    return replace(grade, outcome=outcome), built.fit
+
+
+def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
+    """The outcome of an existing grade (a series' shared grade, a saved one) on a photo
+    whose (n, n, n) working-space histogram is ``photo_hist``."""
+    change = map_change(grade.color_map, grade.strength, grade.working, photo_hist)
+    if grade.outcome is not None:
+        return grade.outcome.on_photo(change)
+    if "saved_look" in dict(grade.info):
+        from wbcgrade.color.saved_look import look_fit
+
+        return grade_outcome(grade, look_fit(grade), photo_hist)
+    return grade_outcome(grade, FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0),
+                                           np.zeros(0), "given"), photo_hist, "palette")
+
+
+def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
+                  builder: str = "look") -> GradeOutcome:
+    """What ``grade`` does to a photo whose histogram (any (n, n, n) grid of working-space
+    colours) is ``photo_hist`` (None: judged on the whole colour cube).
+
+    The source follows how the builder found the map (``fit.start``: "preset",
+    "scene", "look", else a palette fit); the look's strength and match come
+    from the look builder's diagnostics (``grade.info["look"]``).
+    """
+    look = dict(grade.info.get("look", {}) or {})
+    n_styles = len(grade.names)
+    look_size = map_change(grade.color_map, grade.strength, grade.working)
+    mean_change = (look_size if photo_hist is None else
+                   map_change(grade.color_map, grade.strength, grade.working, photo_hist))
+    start = fit.start
+    if start == "saved":
+        saved = dict(grade.info.get("saved_look", {}) or {})
+        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, float(grade.strength),
+                                  look_size, mean_change, file=saved.get("file"))
+    if start == "preset":
+        return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
+                                  float(grade.strength), look_size, mean_change)
+    if start in ("scene", "look") or (builder != "palette" and grade.barycenter is None
+                                      and start not in ("given", "uniform", "vertex",
+                                                        "vertex-refit")):
+        set_strength = float(look.get("set_strength", 1.0))
+        confidence = float(look.get("confidence", 0.0) or 0.0)
+        strength = confidence + (1.0 - confidence) * set_strength
+        why = None
+        if set_strength < 0.05 and confidence <= 0:
+            why = (f"these {n_styles} style photos share no look that can be told apart "
+                   "from their content" if n_styles > 1 else
+                   "the style photo's look cannot be told apart from its content")
+        source = GradeSource.OWN_SCENE if start == "scene" else GradeSource.SET_LOOK
+        return GradeOutcome.judge(source, n_styles, strength, float(grade.strength),
+                                  look_size, mean_change, why, match=look.get("match"),
+                                  confidence=confidence,
+                                  extra={"set_strength": set_strength})
+    order = np.argsort(-np.asarray(fit.weights), kind="stable")
+    best = fit.best_vertex if len(fit.vertex_losses) else None
+    fit_info = dict(fit.info or {})
+    palette = PaletteFit(tuple(grade.names[i] for i in order),
+                         tuple(float(fit.weights[i]) for i in order), float(fit.loss),
+                         None if best is None or start == "given"
+                         else (grade.names[best], float(fit.vertex_losses[best])),
+                         start, int(fit_info.get("evaluations", 0)),
+                         bool(fit_info.get("converged", True)))
+    return GradeOutcome.judge(GradeSource.PALETTE, n_styles, 1.0, float(grade.strength),
+                              look_size, mean_change, palette=palette)
 
 
 def grade_encoded(encoded: np.ndarray, styles: StyleSet, options: GradeOptions,

@@ -199,8 +199,14 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     encoded = encoding.encode(rgb, image.is_float)
     timings["read"] = time.perf_counter() - start
     fit = None
-    if shared is not None:
-        grade = shared
+    if shared is not None:  # what the shared (series or saved) grade does to this photo
+        from dataclasses import replace
+
+        from wbcgrade.color.grading import outcome_on_photo
+        from wbcgrade.color.histogram import image_histogram
+
+        hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
+        grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
         grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
                                    progress.fit, progress.stage)
