@@ -62,7 +62,8 @@ def _options() -> list:
                      help="Use these style weights and skip the fit (order: sorted file names of "
                           "--style DIR, or the preset's order shown by `preset list`)."),
         click.option("--strength", type=float, default=1.0, show_default=True,
-                     help="Blend: x -> (1-t) x + t T(x)."),
+                     help="How much of the grade: 0 none, 1 in full (x -> (1-t) x + t T(x)); "
+                          "up to 4 makes a faint grade stronger."),
         click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
                      metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
                      "(unbalanced transport: palette colours the photo has no use for are left "
@@ -134,10 +135,10 @@ def look_option() -> list:
     """``--look FILE``: apply a saved grade, no fit (for :func:`lazy_options`)."""
     return [click.option("--look", "look_path", type=click.Path(dir_okay=False, path_type=str),
                          default=None, metavar="FILE",
-                         help="Apply a saved grade instead of fitting one: the JSON printed by "
-                              "`apply --json` (regrain as it was) or a 3-D LUT (.cube from "
-                              "--lut, .clf, ...; regrained unless --no-regrain). Replaces "
-                              "--style/--preset; the fit options are not used.")]
+                         help="Apply a saved grade instead of fitting one: the JSON written "
+                              "by `apply --save-grade FILE` (regrain as it was) or a 3-D LUT "
+                              "(.cube from --lut, .clf, ...; regrained unless --no-regrain). "
+                              "Replaces --style/--preset; the fit options are not used.")]
 
 
 def write_options() -> list:
@@ -191,7 +192,10 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     if regrain_given or not is_json:
         changes["regrain"] = options.regrain.settings
     if given("strength"):
-        changes["strength"] = options.map.strength
+        from wbcgrade.color.grading import strengthened
+
+        changes["color_map"], changes["strength"] = strengthened(look.color_map,
+                                                                 options.map.strength)
     return replace(look, **changes) if changes else look
 
 

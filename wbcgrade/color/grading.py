@@ -58,7 +58,14 @@ from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
-from wbcgrade.color.outcome import GradeOutcome, GradeSource, PaletteFit, map_change
+from wbcgrade.color.outcome import (
+    FAINT_STRENGTH,
+    UNCHANGED_STRENGTH,
+    GradeOutcome,
+    GradeSource,
+    PaletteFit,
+    map_change,
+)
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
@@ -66,7 +73,8 @@ from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
            "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
-           "grade_histograms", "grade_outcome", "outcome_on_photo", "grade_encoded", "grade_array"]
+           "grade_histograms", "grade_outcome", "outcome_on_photo", "strengthened",
+           "grade_encoded", "grade_array"]
 
 FitCallback = Callable[[int, np.ndarray, float], None]
 
@@ -405,13 +413,24 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                       built.fit.weights)
     if found is not None:  # the photo is one of the styles (the CLI warns)
         info["own_style"] = found
+    color_map, strength = strengthened(color_map, options.map.strength)
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
-                  strength=options.map.strength, regrain=options.regrain.settings,
+                  strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
-    outcome = grade_outcome(grade, built.fit, photo.fit, name)
+    outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
+
+
+def strengthened(color_map: np.ndarray, strength: float) -> tuple[np.ndarray, float]:
+    """A map and the blend that apply it at ``strength``: up to 1 the map as it is and
+    that blend; above 1 the map's displacement scaled by ``strength`` (clipped to the
+    unit cube) and blend 1. (m, m, m, 3) -> same shape, float32."""
+    if strength <= 1.0:
+        return color_map, float(strength)
+    nodes = identity_map(color_map.shape[0])
+    return np.clip(nodes + strength * (color_map - nodes), 0.0, 1.0).astype(np.float32), 1.0
 
 
 def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
@@ -429,14 +448,16 @@ def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
 
 
 def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
-                  builder: str = "look") -> GradeOutcome:
+                  builder: str = "look", blend: float | None = None) -> GradeOutcome:
     """What ``grade`` does to a photo whose histogram (any (n, n, n) grid of working-space
     colours) is ``photo_hist`` (None: judged on the whole colour cube).
 
     The source follows how the builder found the map (``fit.start``: "preset",
     "scene", "look", else a palette fit); the look's strength and match come
-    from the look builder's diagnostics (``grade.info["look"]``).
+    from the look builder's diagnostics (``grade.info["look"]``). ``blend``: the
+    ``--strength`` asked for (default the grade's own blend; above 1 the map was scaled).
     """
+    blend = float(grade.strength if blend is None else blend)
     look = dict(grade.info.get("look", {}) or {})
     n_styles = len(grade.names)
     look_size = map_change(grade.color_map, grade.strength, grade.working)
@@ -445,11 +466,11 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
     start = fit.start
     if start == "saved":
         saved = dict(grade.info.get("saved_look", {}) or {})
-        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, float(grade.strength),
+        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend,
                                   look_size, mean_change, file=saved.get("file"))
     if start == "preset":
         return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
-                                  float(grade.strength), look_size, mean_change)
+                                  blend, look_size, mean_change)
     if start in ("scene", "look") or (builder != "palette" and grade.barycenter is None
                                       and start not in ("given", "uniform", "vertex",
                                                         "vertex-refit")):
@@ -457,12 +478,13 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
         confidence = float(look.get("confidence", 0.0) or 0.0)
         strength = confidence + (1.0 - confidence) * set_strength
         why = None
-        if set_strength < 0.05 and confidence <= 0:
-            why = (f"these {n_styles} style photos share no look that can be told apart "
+        if set_strength < FAINT_STRENGTH and confidence <= 0:
+            how = "no" if set_strength < UNCHANGED_STRENGTH else "little"
+            why = (f"these {n_styles} style photos share {how} look that can be told apart "
                    "from their content" if n_styles > 1 else
-                   "the style photo's look cannot be told apart from its content")
+                   f"the style photo shows {how} look that can be told apart from its content")
         source = GradeSource.OWN_SCENE if start == "scene" else GradeSource.SET_LOOK
-        return GradeOutcome.judge(source, n_styles, strength, float(grade.strength),
+        return GradeOutcome.judge(source, n_styles, strength, blend,
                                   look_size, mean_change, why, match=look.get("match"),
                                   confidence=confidence,
                                   extra={"set_strength": set_strength})
@@ -475,7 +497,7 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
                          else (grade.names[best], float(fit.vertex_losses[best])),
                          start, int(fit_info.get("evaluations", 0)),
                          bool(fit_info.get("converged", True)))
-    return GradeOutcome.judge(GradeSource.PALETTE, n_styles, 1.0, float(grade.strength),
+    return GradeOutcome.judge(GradeSource.PALETTE, n_styles, 1.0, blend,
                               look_size, mean_change, palette=palette)
 
 

@@ -26,13 +26,17 @@ from enum import Enum
 import numpy as np
 
 __all__ = ["GradeSource", "PaletteFit", "GradeOutcome", "UNCHANGED_CHANGE",
-           "UNCHANGED_STRENGTH", "map_change", "unchanged_advice"]
+           "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice"]
 
 #: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
 #: photo is "essentially unchanged".
 UNCHANGED_CHANGE = 1.0
 #: Below this strength (the look's own strength times ``--strength``) a look is not applied.
 UNCHANGED_STRENGTH = 0.05
+#: Below this mean change (1/255 of the sRGB cube), or this strength, a grade is "faint":
+#: it changed the photo, but hardly visibly; the terminal says so and what to do.
+FAINT_CHANGE = 3.0
+FAINT_STRENGTH = 0.25
 
 
 class GradeSource(str, Enum):
@@ -105,13 +109,15 @@ class GradeOutcome:
     mean_change : mean per-channel change of the photo's colours, 1/255 (sRGB cube).
     unchanged : the photo is essentially unchanged (strength under
         :data:`UNCHANGED_STRENGTH` or ``mean_change`` under :data:`UNCHANGED_CHANGE`).
-    reason : why it is unchanged, in words (None when it changed).
-    advice : what the user can do about it (None when it changed).
+    reason : why it is unchanged or faint, in words (None when it visibly changed).
+    advice : what the user can do about it (None when it visibly changed).
     match : the style the grade leans on (the scene's style photo, or the
         palette grade a set look was moved towards), or None.
     confidence : how sure the grade is of ``match`` (0-1).
     palette : the weights and loss, for a palette grade only.
     file : the saved grade's file, for a saved grade.
+    faint : changed, but hardly visibly (strength under :data:`FAINT_STRENGTH` or
+        ``mean_change`` under :data:`FAINT_CHANGE`); ``reason`` says why.
     """
 
     source: GradeSource
@@ -127,6 +133,7 @@ class GradeOutcome:
     confidence: float = 0.0
     palette: PaletteFit | None = None
     file: str | None = None
+    faint: bool = False
     extra: dict = field(default_factory=dict, compare=False)
 
     @property
@@ -153,8 +160,10 @@ class GradeOutcome:
         lines = [self.headline()]
         if self.unchanged:
             lines.append(f"the photo is essentially unchanged: {self.reason}")
-            if self.advice:
-                lines.append(self.advice)
+        elif self.faint:
+            lines.append(f"a faint grade: {self.reason}")
+        if (self.unchanged or self.faint) and self.advice:
+            lines.append(self.advice)
         return lines
 
     def as_dict(self) -> dict:
@@ -165,6 +174,7 @@ class GradeOutcome:
                else round(self.look_strength, 4),
                "blend": self.blend, "look_size_255": round(self.look_size, 3),
                "mean_change_255": round(self.mean_change, 3), "unchanged": self.unchanged,
+               "faint": self.faint,
                "reason": self.reason, "advice": self.advice, "match": self.match,
                "confidence": round(self.confidence, 4)}
         if self.file is not None:
@@ -192,7 +202,7 @@ class GradeOutcome:
                    float(entry.get("look_size_255", 0)), float(entry.get("mean_change_255", 0)),
                    bool(entry.get("unchanged", False)), entry.get("reason"),
                    entry.get("advice"), entry.get("match"), float(entry.get("confidence", 0)),
-                   palette, entry.get("file"))
+                   palette, entry.get("file"), bool(entry.get("faint", False)))
 
     @classmethod
     def judge(cls, source: GradeSource, n_styles: int, look_strength: float | None,
@@ -205,7 +215,13 @@ class GradeOutcome:
         """
         strength = (1.0 if look_strength is None else look_strength) * blend
         unchanged = strength < UNCHANGED_STRENGTH or mean_change < UNCHANGED_CHANGE
+        faint = not unchanged and (strength < FAINT_STRENGTH or mean_change < FAINT_CHANGE)
         reason = advice = None
+        if faint:
+            reason = f"this photo's colours move by {mean_change:.1f}/255 on average"
+            if strength < FAINT_STRENGTH and why_weak is not None:
+                reason += f"; the look is applied at strength {strength:.2f}: {why_weak}"
+            advice = unchanged_advice(source, blend)
         if unchanged:
             if blend < UNCHANGED_STRENGTH:
                 reason = f"--strength {blend:g} applies almost none of the grade"
@@ -217,6 +233,7 @@ class GradeOutcome:
                 reason = (f"the grade moves this photo's colours by only {mean_change:.1f}/255 "
                           "on average (it changes other colours more)")
             advice = unchanged_advice(source, blend)
+        more["faint"] = faint
         if why_weak is not None:
             more["extra"] = {**more.get("extra", {}), "why_weak": why_weak}
         return cls(source, n_styles, look_strength, blend, look_size, mean_change, unchanged,
