@@ -78,6 +78,12 @@ __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
 
 FitCallback = Callable[[int, np.ndarray, float], None]
 
+#: Nodes per axis (at least) of a preset's look converted into another working space
+#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills 0.07-0.55 of ACEScct's
+#: cube, where 33 nodes left a JPEG graded in ACEScct 1.2/255 from the sRGB grade on
+#: average (99th percentile 8.5), 65 nodes 0.36 (3.8) (kodak-2383 on samples/coffee.jpg).
+CONVERTED_LOOK_SIZE = 65
+
 
 def _quiet(name: str) -> None:
     """A stage callback that says nothing."""
@@ -273,7 +279,10 @@ def look_map(request: MapRequest) -> BuiltMap:
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
                          {"start": "preset", "look": "the preset's own"}, 0.0)
-        return BuiltMap(resample_lattice(styles.meta["look"], options.map.size), None,
+        size = options.map.size
+        if styles.meta.get("converted_from"):  # converted from the preset's own space: finer,
+            size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
+        return BuiltMap(resample_lattice(styles.meta["look"], size), None,
                         {"look": {"source": "preset"}}, {}, fit)
     timings: dict[str, float] = {}
     start = time.perf_counter()
@@ -404,7 +413,13 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     built = MAP_BUILDERS[name](MapRequest(photo, styles, options, encoding, callback,
                                           stage or _quiet))
     start = time.perf_counter()
-    color_map = finish_map(built.color_map, options, encoding)
+    finish = options
+    if built.fit.start == "preset" and options.map.monotone:
+        # a preset's look is applied as it was made (monotone in its own space already):
+        # the lattice of its conversion into another space also covers colours outside
+        # the preset's gamut, where a monotone pass would drag the look inside it
+        finish = replace(options, map=replace(options.map, monotone=False))
+    color_map = finish_map(built.color_map, finish, encoding)
     timings = {**built.timings, "finish": time.perf_counter() - start}
     info = {"fit": built.fit.info, **built.info}
     info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
