@@ -3,12 +3,15 @@
 Folder layout (REPORT_DIR)::
 
     report.json        the clip, the encoding, the cuts, and per shot its frames,
-                       sampled frames, ranked weights, loss against the best
-                       single style and timings (VideoResult.as_dict)
+                       sampled frames, what its grade did (``outcome``: source,
+                       strength, change), for a palette grade its ranked weights
+                       and loss against the best single style, and timings
+                       (VideoResult.as_dict)
     shot-NN.png        per shot: up to six sampled frames before and after its
-                       LUT (a grid each), the contributing styles with their
-                       weights, palettes of the frames, the barycenter and the
-                       graded frames (the photo sheet's layout, wbcgrade.color.sheet)
+                       LUT (a grid each), what the grade did, the styles (with
+                       their weights for a palette grade), palettes of the
+                       frames, the barycenter and the graded frames (the photo
+                       sheet's layout, wbcgrade.color.sheet)
 
 The "after" pictures are the sampled frames through the shot's LUT
 (trilinear, in the library), which is what ffmpeg's ``lut3d`` gives to
@@ -76,6 +79,20 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     before = [encoding.to_display(frame) for frame in before]  # pictures in sRGB
     after = [encoding.to_display(frame) for frame in after]
     weights, names = shot.grade.weights, shot.grade.names
+    outcome = shot.grade.outcome
+    if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
+        title = (f"{safe_text(result.input.name)}  shot {number} of {len(result.shots)}: "
+                 f"frames {shot.first}-{shot.last}, {len(shot.samples)} sampled")
+        subtitle = outcome.headline().removeprefix("grade: ")
+        if outcome.unchanged:
+            subtitle += f"  |  essentially unchanged: {outcome.reason}"
+        palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
+                    ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
+        tiles = [StyleTile(name, 0.0, pictures[name]) for name in names if name in pictures]
+        return SheetContent(title=title, subtitle=subtitle, before=contact_grid(before),
+                            after=contact_grid(after), styles=tiles, palettes=palettes,
+                            styles_label=f"styles ({outcome.source.describe(len(names))}; "
+                                         "a look has no weights)")
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]
