@@ -27,11 +27,9 @@ are installed with the package.
 
 from __future__ import annotations
 
-import io
 import json
 import logging
 import os
-import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +54,7 @@ from wbcgrade.color.histogram import (
 )
 from wbcgrade.color.imageio import read_image
 from wbcgrade.errors import InputError
+from wbcgrade.limits import check_histogram_cells, read_npz
 
 __all__ = [
     "StyleSet",
@@ -286,22 +285,20 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise InputError(f"{path}: no such preset file")
     try:
         raw = path.read_bytes()
-        if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
-            raise _bad(path, "unreadable archive: not a zip (.npz) file")
-        with np.load(io.BytesIO(raw), allow_pickle=False) as data:
-            missing = {"header", "index", "values", "offsets"} - set(data.files)
-            if missing:
-                raise _bad(path, f"missing {', '.join(sorted(missing))}")
-            header_bytes = data["header"]
-            index, values, offsets = data["index"], data["values"], data["offsets"]
-            look = data["look"] if "look" in data.files else None
-    except InputError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if "allow_pickle" in detail:  # numpy's hint names an option no user has
-            detail = "it holds pickled Python objects, which are never loaded"
-        raise _bad(path, f"unreadable archive: {detail}") from None
+    except OSError as exc:
+        raise _bad(path, f"unreadable file: {exc.strerror or exc}") from None
+    if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
+        raise _bad(path, "unreadable archive: not a zip (.npz) file")
+    try:
+        data = read_npz(raw, path)
+    except InputError as exc:
+        raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
+    missing = {"header", "index", "values", "offsets"} - set(data)
+    if missing:
+        raise _bad(path, f"missing {', '.join(sorted(missing))}")
+    header_bytes = data["header"]
+    index, values, offsets = data["index"], data["values"], data["offsets"]
+    look = data.get("look")
     try:
         if header_bytes.dtype != np.uint8:
             raise ValueError
@@ -321,18 +318,20 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     if (not isinstance(names, list) or not names
             or not all(isinstance(n, str) and n for n in names)):
         raise _bad(path, "bad style names")
+    check_histogram_cells(len(names), bins, path)
     width = header.get("width")
     if width is not None and not (isinstance(width, (int, float)) and width > 0):
         raise _bad(path, "bad kernel width")
     working = header.get("working_space")
     if working is not None and not (isinstance(working, str) and working):
         raise _bad(path, "bad working space")
+    if not (np.issubdtype(index.dtype, np.integer) and np.issubdtype(values.dtype, np.floating)
+            and np.issubdtype(offsets.dtype, np.integer)):
+        raise _bad(path, "wrong array types")
     if (offsets.ndim != 1 or len(offsets) != len(names) + 1 or offsets[0] != 0
             or np.any(np.diff(offsets) <= 0) or offsets[-1] != len(index)
             or index.shape != values.shape or index.ndim != 1):
         raise _bad(path, "inconsistent histogram arrays")
-    if not np.issubdtype(index.dtype, np.integer) or not np.issubdtype(values.dtype, np.floating):
-        raise _bad(path, "wrong array types")
     if len(index) and (index.min() < 0 or index.max() >= bins ** 3):
         raise _bad(path, "bin index out of range")
     if not np.all(np.isfinite(values)) or np.any(values < 0):
