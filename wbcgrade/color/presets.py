@@ -59,6 +59,7 @@ from wbcgrade.limits import check_histogram_cells, read_npz
 __all__ = [
     "StyleSet",
     "StyleSource",
+    "source_files",
     "load_styles",
     "load_style_folder",
     "save_preset",
@@ -467,6 +468,36 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space)
+
+
+def source_files(source: StyleSource | None = None, natural: str | os.PathLike | None = None,
+                 look=None) -> list[Path]:
+    """Every file a grade reads besides the photo: the style folder's files (or the preset),
+    the natural palettes (``natural``, else the shipped ones) and a saved ``look``'s file.
+
+    They are inputs: an output naming one of them is refused, ``--overwrite`` or not
+    (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
+    adds nothing (loading it reports that).
+    """
+    files: list[Path] = []
+    if source is not None and source.style_dir is not None:
+        folder = Path(source.style_dir)
+        if folder.is_dir():
+            files += [p for p in folder.iterdir() if p.is_file()]
+    elif source is not None and source.preset is not None:
+        try:
+            files.append(resolve_preset(source.preset))
+        except InputError:
+            pass
+    if natural is not None:
+        files.append(Path(natural))
+    else:
+        files.append(Path(__file__).with_name("data") / "natural.npz")
+    if look is not None:
+        saved = dict(getattr(look, "info", {}) or {}).get("saved_look", {})
+        if saved.get("file"):
+            files.append(Path(saved["file"]))
+    return files
 
 
 #: A photo is graded towards itself when one style holds at least this weight ...

@@ -43,7 +43,7 @@ import os
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -198,14 +198,16 @@ def default_output(source: str | os.PathLike, codec: str = "x264") -> Path:
 
 def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
                lut: str | os.PathLike | None, settings: VideoSettings,
-               overwrite: bool = False) -> tuple[Path, Path, Path | None]:
+               overwrite: bool = False,
+               reads: Iterable[str | os.PathLike] = ()) -> tuple[Path, Path, Path | None]:
     """Check, before any work, that the outputs may be written -> (source, output, lut).
 
     The output (default :func:`default_output`) must be a container that
     holds the codec; the LUT a ``.cube``; both then pass
     :func:`wbcgrade._publish.plan_outputs` (never the input, never an
     existing file unless ``overwrite``, a regular file in a writable folder,
-    two different files). Resolved paths are returned.
+    two different files). Resolved paths are returned. ``reads``: the other files
+    the grade reads (styles, presets, a saved look), never replaced either.
     """
     source = Path(source)
     if not source.exists():
@@ -217,7 +219,7 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
                          f"{', '.join(containers)} as the output's extension")
     if lut is not None and Path(lut).suffix.lower() != ".cube":
         raise InputError(f"{lut}: LUT file name must end in .cube")
-    output, lut = plan_outputs([output, lut], [source], overwrite)
+    output, lut = plan_outputs([output, lut], [source, *reads], overwrite)
     return source, output, lut
 
 

@@ -114,19 +114,23 @@ def output_is_complete(source: Path, output: Path) -> bool:
 def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
                recursive: bool = False, overwrite: bool = False,
                exclude: Iterable[str | os.PathLike] = (), *,
-               force: bool | None = None) -> BatchPlan:
+               force: bool | None = None,
+               reads: Iterable[str | os.PathLike] = ()) -> BatchPlan:
     """List the photos under ``in_path`` (a folder, or one photo) and their outputs.
 
     Hidden files and anything inside ``out_dir`` or an ``exclude`` folder
     (e.g. a report folder) are left out. With
     ``out_dir`` None (a report only), nothing is written and nothing is
     skipped. Raises InputError when the folder is missing or the output
-    folder is the input folder. ``overwrite`` plans every photo, finished
+    folder is the input folder. ``reads``: the other files the grade reads (style
+    photos, presets, a saved look): an output naming one is refused, as one naming
+    its own photo is. ``overwrite`` plans every photo, finished
     outputs included (``force`` is its former name, deprecated). Each
     output is resolved and checked (see the module docstring); a photo whose
     output may not be written is ``refused``.
     """
     overwrite = _overwrite(overwrite, force)
+    reads = list(reads)
     in_path = Path(in_path)
     if not in_path.exists():
         raise InputError(f"{in_path}: no such file or folder")
@@ -161,11 +165,11 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             plan.tasks.append(task)
             continue
         try:  # links and inputs first: a link into the input tree is never "complete"
-            check_output_path(task.output, [path], True, root=out, make_folders=True)
+            check_output_path(task.output, [path, *reads], True, root=out, make_folders=True)
             if not overwrite and output_is_complete(path, task.output):
                 plan.done.append(task)
                 continue
-            resolved = check_output_path(task.output, [path], overwrite, root=out,
+            resolved = check_output_path(task.output, [path, *reads], overwrite, root=out,
                                          make_folders=True)
         except InputError as exc:
             plan.refused.append((task, str(exc)))

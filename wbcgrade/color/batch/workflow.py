@@ -48,7 +48,7 @@ from wbcgrade.color.lut import (
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
+from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError
 
@@ -172,13 +172,14 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
+    reads = source_files(None if look is not None else source, options.map.natural, look)
     plan = plan_batch(in_dir, out_dir, recursive=recursive, overwrite=overwrite,
-                      exclude=[report_dir] if report_dir else [])
+                      exclude=[report_dir] if report_dir else [], reads=reads)
     if not plan.tasks and not plan.done and not plan.refused:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
                                                          " (use --recursive for sub-folders)"))
     if lut is not None:
-        lut = plan_outputs([lut], [t.source for t in plan.all_photos], overwrite)[0]
+        lut = plan_outputs([lut], [*(t.source for t in plan.all_photos), *reads], overwrite)[0]
     if consistent and options.spaces.working is None:  # one working space for the series
         from dataclasses import replace
 
