@@ -319,7 +319,10 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     if (not isinstance(names, list) or not names
             or not all(isinstance(n, str) and n for n in names)):
         raise _bad(path, "bad style names")
-    check_histogram_cells(len(names), bins, path)
+    try:
+        check_histogram_cells(len(names), bins, path)
+    except InputError as exc:
+        raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
     width = header.get("width")
     if width is not None and not (isinstance(width, (int, float)) and width > 0):
         raise _bad(path, "bad kernel width")
