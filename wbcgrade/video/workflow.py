@@ -41,6 +41,7 @@ import contextlib
 import fcntl
 import os
 import shutil
+import signal
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -481,20 +482,41 @@ def work_folder() -> Iterator[Path]:
     """
     base = Path(tempfile.gettempdir())
     remove_stale_work_folders(base)
+    folder = lock = None
     try:
-        folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX, dir=base))
-    except OSError as exc:
-        raise InputError(f"{base}: cannot create a temporary folder here ({exc.strerror}); "
-                         "set TMPDIR to a folder with space") from None
-    lock = None
-    try:
+        with _ending_signals_held():  # a signal right after mkdtemp: the folder is known
+            try:
+                folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX, dir=base))
+            except OSError as exc:
+                raise InputError(f"{base}: cannot create a temporary folder here "
+                                 f"({exc.strerror}); set TMPDIR to a folder with space") \
+                    from None
         lock = os.open(folder / WORK_LOCK, os.O_RDWR | os.O_CREAT, 0o600)
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         yield folder
     finally:
         if lock is not None:
             os.close(lock)
-        shutil.rmtree(folder, ignore_errors=True)
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _ending_signals_held() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP held back (in this thread) while the block runs: a signal
+    that arrives meanwhile is handled right after it, once what it made is known to the
+    clean-up. The work folder used to be left behind when SIGTERM came between its
+    creation and the ``try`` that removes it (tests/video/test_hostile.py, now and then)."""
+    signals = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
+    try:
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    except (AttributeError, OSError, ValueError):  # not POSIX
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager

@@ -195,7 +195,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     except OSError as exc:
         raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
     with lock_folder(out_dir, "batch"):  # one run at a time per output folder
-        plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
+        # a run that held the lock may have finished some
+        plan = recheck_plan(plan, overwrite, out_dir=out_dir)
         remove_stale_records(out_dir)  # what a killed run left half-written
         start = time.perf_counter()
         if look is None:
