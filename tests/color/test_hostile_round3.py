@@ -167,12 +167,14 @@ def test_the_look_file_is_never_replaced_by_lut(tmp_path, photo):
     assert look.read_bytes() == before
 
 
-def test_an_output_naming_the_preset_is_refused(tmp_path, photo):
+def test_an_output_leading_to_the_preset_is_refused(tmp_path, photo):
+    """An output can only name a preset (.npz) through a link: it is resolved first."""
     preset = tmp_path / "mine.npz"
     preset.write_bytes((REPO / "tests" / "data" / "three_samples.npz").read_bytes())
     before = preset.read_bytes()
-    refused(run("apply", photo, "--preset", preset, "-o", tmp_path / "x.png",
-                "--lut", tmp_path / "mine.npz", "--overwrite", *FAST_ARGS))
+    (tmp_path / "out.png").symlink_to(preset)
+    refused(run("apply", photo, "--preset", preset, "-o", tmp_path / "out.png", "--overwrite",
+                *FAST_ARGS), "out.png", "input")
     assert preset.read_bytes() == before
 
 

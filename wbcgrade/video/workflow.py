@@ -40,8 +40,8 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import secrets
 import shutil
-import signal
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -484,10 +484,17 @@ def work_folder() -> Iterator[Path]:
     remove_stale_work_folders(base)
     folder = lock = None
     try:
-        with _ending_signals_held():  # a signal right after mkdtemp: the folder is known
+        for _ in range(100):
+            # the name is known before the folder exists: a signal at any moment after
+            # (SIGTERM right after mkdtemp left it behind) finds it in ``folder``
+            folder = base / f"{WORK_PREFIX}{secrets.token_hex(6)}"
             try:
-                folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX, dir=base))
+                os.mkdir(folder, 0o700)
+                break
+            except FileExistsError:
+                continue
             except OSError as exc:
+                folder = None
                 raise InputError(f"{base}: cannot create a temporary folder here "
                                  f"({exc.strerror}); set TMPDIR to a folder with space") \
                     from None
@@ -499,24 +506,6 @@ def work_folder() -> Iterator[Path]:
             os.close(lock)
         if folder is not None:
             shutil.rmtree(folder, ignore_errors=True)
-
-
-@contextlib.contextmanager
-def _ending_signals_held() -> Iterator[None]:
-    """SIGINT, SIGTERM and SIGHUP held back (in this thread) while the block runs: a signal
-    that arrives meanwhile is handled right after it, once what it made is known to the
-    clean-up. The work folder used to be left behind when SIGTERM came between its
-    creation and the ``try`` that removes it (tests/video/test_hostile.py, now and then)."""
-    signals = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
-    try:
-        previous = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
-    except (AttributeError, OSError, ValueError):  # not POSIX
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager
