@@ -32,7 +32,7 @@ from wbcgrade.errors import InputError
 __all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
            "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
            "check_count", "check_lut_entries", "check_histogram_cells", "read_npz",
-           "read_cache_entry", "key_bytes"]
+           "read_cache_entry", "key_bytes", "read_npy"]
 
 #: Nodes per axis of any 3-D LUT or colour map read or written (256^3 x 3 float32: 200 MB).
 MAX_LUT_SIZE = 256
@@ -122,6 +122,20 @@ def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None 
         detail = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{where}: not a readable .npz archive ({detail})") from None
     return arrays
+
+
+def read_npy(path: str | os.PathLike, max_bytes: int = MAX_ARRAY_BYTES) -> np.ndarray:
+    """The array of a ``.npy`` file, its header checked first (as :func:`read_npz`'s members):
+    a header claiming more bytes than ``max_bytes`` (or than the file holds: 7 TiB in a
+    few bytes) is an InputError naming the file, before any allocation."""
+    try:
+        with open(path, "rb") as handle:
+            return _read_member(handle, Path(path).name, path, max_bytes)
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: not a readable .npy file ({detail})") from None
 
 
 def _read_member(member, name: str, where, max_bytes: int) -> np.ndarray:
