@@ -108,7 +108,9 @@ def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None 
     try:
         with zipfile.ZipFile(handle) as archive:
             for info in archive.infolist():
-                name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+                if not info.filename.endswith(".npy"):
+                    continue  # not an array (numpy writes none such)
+                name = info.filename[:-4]
                 if info.file_size > max_bytes + 4096:
                     raise InputError(f"{where}: its array {name!r} would take "
                                      f"{info.file_size} bytes, more than the {max_bytes} "
@@ -147,8 +149,10 @@ def _read_member(member, name: str, where, max_bytes: int) -> np.ndarray:
         shape, fortran, dtype = fmt.read_array_header_2_0(member)
     else:
         raise InputError(f"{where}: its array {name!r} has an unknown .npy version {version}")
-    if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None \
-            or dtype.kind not in "biufcSU":
+    if dtype.hasobject:
+        raise InputError(f"{where}: its array {name!r} holds pickled Python objects, which "
+                         "are never loaded")
+    if dtype.fields is not None or dtype.subdtype is not None or dtype.kind not in "biufcSU":
         raise InputError(f"{where}: its array {name!r} has the type {dtype}, not plain numbers")
     count = int(np.prod(shape, dtype=object))
     if count * dtype.itemsize > max_bytes:

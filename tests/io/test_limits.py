@@ -46,7 +46,7 @@ def test_plain_arrays_read_back(tmp_path):
     (TIB, "more than"),
     ({"descr": [("a", "<i8"), ("b", "<f8")], "fortran_order": False, "shape": (3,)},
      "not plain numbers"),
-    ({"descr": "|O", "fortran_order": False, "shape": (3,)}, "not plain numbers"),
+    ({"descr": "|O", "fortran_order": False, "shape": (3,)}, "pickled Python objects"),
 ])
 def test_a_lying_or_foreign_npy_header_is_refused_before_allocation(tmp_path, header, words):
     path = tmp_path / "bomb.npy"

@@ -293,7 +293,8 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     try:
         data = read_npz(raw, path)
     except InputError as exc:
-        raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
+        raise _bad(path, "unreadable archive: " + str(exc).removeprefix(f"{path}: ")) \
+            from None
     missing = {"header", "index", "values", "offsets"} - set(data)
     if missing:
         raise _bad(path, f"missing {', '.join(sorted(missing))}")
