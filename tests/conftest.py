@@ -1,7 +1,39 @@
 """Shared test fixtures."""
 
+import os
+import shutil
+import tempfile
+
 import numpy as np
 import pytest
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """A passing session's temporary folder is removed at its end (not each test's as it
+    passes, as ``tmp_path_retention_policy = "failed"`` does: a later test then gets the
+    same path, and OpenColorIO's file cache, keyed by path, served it the former file)."""
+    factory = getattr(session.config, "_tmp_path_factory", None)
+    basetemp = getattr(factory, "_basetemp", None)
+    if exitstatus == 0 and basetemp is not None and getattr(factory, "_given_basetemp",
+                                                            None) is None:
+        shutil.rmtree(basetemp, ignore_errors=True)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _system_temporary_folder_in_basetemp(tmp_path_factory):
+    """Every temporary file of the session (``tempfile``, and ``$TMPDIR`` for the commands
+    the tests start) goes under pytest's own folder, removed when every test passed
+    (:func:`pytest_sessionfinish`): a run of the suite leaves nothing in the system's
+    temporary folder (issue 31: it left about 590 MB there)."""
+    folder = tmp_path_factory.mktemp("system-tmp")
+    before_env, before = os.environ.get("TMPDIR"), tempfile.tempdir
+    os.environ["TMPDIR"], tempfile.tempdir = str(folder), str(folder)
+    yield folder
+    tempfile.tempdir = before
+    if before_env is None:
+        os.environ.pop("TMPDIR", None)
+    else:
+        os.environ["TMPDIR"] = before_env
 
 
 @pytest.fixture

@@ -204,9 +204,32 @@ class Executor:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if self.pool is not None:
+            if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+                self._stop_workers()
             self.pool.shutdown(wait=True, cancel_futures=True)
         if self.client is not None:
             self.client.close()
+
+    def _stop_workers(self, grace_s: float = 1.0) -> None:
+        """End the pool's workers now: the run was interrupted (Ctrl-C, SIGTERM).
+
+        A worker that only the parent was told to stop (SIGTERM to the parent, not
+        to its process group) would otherwise finish its photo and start the ones
+        queued for it, publishing outputs after the signal that no result records
+        (the pool's shutdown waited for them: 23 s). Each gets SIGTERM, then
+        SIGKILL after ``grace_s``; the caller removes what they had half-written.
+        """
+        processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        for process in processes:
+            with contextlib.suppress(Exception):
+                process.terminate()
+        deadline = time.monotonic() + grace_s
+        for process in processes:
+            with contextlib.suppress(Exception):
+                process.join(max(0.0, deadline - time.monotonic()))
+                if process.is_alive():
+                    process.kill()
+                    process.join(1.0)
 
     def set_context(self, context: Any) -> None:
         """Replace the context (local workers are restarted, Dask gets it again)."""

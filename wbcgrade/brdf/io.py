@@ -25,6 +25,7 @@ from wbcgrade.brdf import merl
 from wbcgrade.brdf.sampled import check_values, interpolate
 from wbcgrade.brdf.sampling import same_sampling
 from wbcgrade.errors import InputError
+from wbcgrade.limits import read_npz
 
 SAMPLED_FORMAT = "wbcgrade-brdf-sampled-1"
 MERL_SUFFIXES = (".binary", ".merl")
@@ -41,18 +42,16 @@ def read_sampled(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     directions : ndarray, shape (N, 3)
     """
     path = Path(path)
+    archive = read_npz(path)  # every member's size and type checked before it is read
+    fmt = str(archive["format"]) if "format" in archive else None
+    if fmt != SAMPLED_FORMAT or "values" not in archive or "directions" not in archive:
+        raise InputError(f"{path}: not a wbcgrade sampled BRDF (.npz with format "
+                         f"{SAMPLED_FORMAT!r}, values and directions)")
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            fmt = str(archive["format"]) if "format" in archive else None
-            if fmt != SAMPLED_FORMAT or "values" not in archive or "directions" not in archive:
-                raise InputError(f"{path}: not a wbcgrade sampled BRDF (.npz with format "
-                                 f"{SAMPLED_FORMAT!r}, values and directions)")
-            values = np.asarray(archive["values"], dtype=np.float64)
-            directions = np.asarray(archive["directions"], dtype=np.float64)
-    except (OSError, ValueError, EOFError) as exc:
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{path}: unreadable sampled BRDF ({exc})") from exc
+        values = np.asarray(archive["values"], dtype=np.float64)
+        directions = np.asarray(archive["directions"], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{path}: unreadable sampled BRDF ({exc})") from None
     if directions.ndim != 2 or directions.shape[1] != 3 or not np.isfinite(directions).all():
         raise InputError(f"{path}: directions must be finite with shape (N, 3), "
                          f"got {directions.shape}")

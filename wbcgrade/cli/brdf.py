@@ -22,6 +22,7 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_WIDTH,
 )
 from wbcgrade.errors import OptionError
+from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
 
 
 @click.group("brdf")
@@ -106,7 +107,7 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
               type=click.FloatRange(0.1, 20.0),
               help="Kernel width in sample spacings (sets gamma).")
 @click.option("--iterations", "--n-iter", "n_iter", default=DEFAULT_N_ITER, show_default=True,
-              type=click.IntRange(1, 10000),
+              type=click.IntRange(1, MAX_BARYCENTER_ITERATIONS),
               help="Barycenter iterations L (--n-iter: its former name).")
 @click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
               type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 
+from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
 from wbcgrade.shape.defaults import DEFAULT_LOSS, LOSS_NAMES
 
 _LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
@@ -80,7 +81,8 @@ _common_options = [
                  help="Fit a linear mixture of the database instead (for comparison)."),
     click.option("--width", type=click.FloatRange(min=0.5), default=None,
                  help="Kernel standard deviation in voxels (default 1 at 64^3, scaled)."),
-    click.option("--iterations", type=click.IntRange(min=1), default=60, show_default=True,
+    click.option("--iterations", type=click.IntRange(1, MAX_BARYCENTER_ITERATIONS), default=60,
+                 show_default=True,
                  help="Barycenter iterations L."),
     click.option("--max-iter", type=click.IntRange(min=1), default=15, show_default=True,
                  help="Optimiser iterations at most."),

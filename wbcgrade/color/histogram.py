@@ -20,6 +20,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
 from wbcgrade.errors import InputError
+from wbcgrade.limits import key_bytes, read_cache_entry
 
 __all__ = [
     "soft_histogram",
@@ -180,7 +181,7 @@ class HistogramCache:
         stat = path.stat()
         text = (f"{self.VERSION}|{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
                 f"|{bins}|{max_pixels}" + (f"|{space}" if space else ""))
-        return self.folder / (hashlib.sha256(text.encode()).hexdigest()[:32] + ".npz")
+        return self.folder / (hashlib.sha256(key_bytes(text)).hexdigest()[:32] + ".npz")
 
     def get(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS,
             space: str = "") -> np.ndarray | None:
@@ -188,9 +189,13 @@ class HistogramCache:
         if not self.enabled:
             return None
         try:
-            with np.load(self._key(path, bins, max_pixels, space), allow_pickle=False) as data:
-                return from_sparse(data["index"], data["values"], bins)
-        except (OSError, KeyError, ValueError):
+            entry = self._key(path, bins, max_pixels, space)
+        except OSError:
+            return None
+        data = read_cache_entry(entry)
+        try:
+            return from_sparse(data["index"], data["values"], bins)
+        except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
             return None
 
     def put(self, path: Path, bins: int, hist: np.ndarray,

@@ -986,12 +986,17 @@ def _read_cached_look(key: str, styles=None) -> LookResult | None:
     path = _look_cache_path(key, styles)
     if path is None:
         return None
+    from wbcgrade.limits import read_cache_entry
+
+    data = read_cache_entry(path)  # a damaged entry: removed, the look extracted again
     try:
-        with np.load(path, allow_pickle=False) as data:
-            look = LookMap(np.array(data["coefficients"]), int(data["knots"]))
-            return LookResult(look, np.array(data["weights"]), np.array(data["losses"]),
-                              json.loads(str(data["info"])))
-    except (OSError, KeyError, ValueError):
+        look = LookMap(np.array(data["coefficients"], dtype=np.float64), int(data["knots"]))
+        if look.coefficients.shape != (3, 4 * look.knots) \
+                or not np.isfinite(look.coefficients).all():
+            return None
+        return LookResult(look, np.array(data["weights"]), np.array(data["losses"]),
+                          json.loads(str(data["info"])))
+    except Exception:  # noqa: BLE001 - a cache never fails a run: any damage is a miss
         return None
 
 

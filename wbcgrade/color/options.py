@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 from wbcgrade.errors import OptionError
+from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS, MAX_REGRAIN_RADIUS
 
 __all__ = ["LOSSES", "MODES", "FitOptions", "TransferOptions", "MapOptions", "RegrainOptions",
            "SpaceOptions", "GradeOptions", "FLAT_FIELDS", "flat_defaults", "as_options",
@@ -138,6 +139,7 @@ class FitOptions:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise _fail(f"fit.{name}", "must be at least 1")
+        _int_in("fit", "n_iter", self.n_iter, 1, MAX_BARYCENTER_ITERATIONS)
         _positive("fit", "tol", self.tol)
         _fraction("fit", "floor", self.floor, closed=False)
         if self.weights is not None:
@@ -279,6 +281,9 @@ class RegrainOptions:
 
     def __post_init__(self) -> None:
         _positive("regrain", "radius", self.radius)
+        if self.radius > MAX_REGRAIN_RADIUS:
+            raise _fail("regrain.radius", f"must be at most {MAX_REGRAIN_RADIUS:g} (a fraction "
+                                          "of the photo's long side)")
         _positive("regrain", "eps", self.eps)
 
     @property

@@ -30,11 +30,9 @@ are installed with the package.
 
 from __future__ import annotations
 
-import io
 import json
 import logging
 import os
-import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,11 +57,13 @@ from wbcgrade.color.histogram import (
 )
 from wbcgrade.color.imageio import read_image
 from wbcgrade.errors import InputError
+from wbcgrade.limits import check_histogram_cells, read_npz
 
 __all__ = [
     "StyleSet",
     "StyleSource",
     "look_in_space",
+    "source_files",
     "load_styles",
     "load_style_folder",
     "save_preset",
@@ -298,22 +298,21 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise InputError(f"{path}: no such preset file")
     try:
         raw = path.read_bytes()
-        if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
-            raise _bad(path, "unreadable archive: not a zip (.npz) file")
-        with np.load(io.BytesIO(raw), allow_pickle=False) as data:
-            missing = {"header", "index", "values", "offsets"} - set(data.files)
-            if missing:
-                raise _bad(path, f"missing {', '.join(sorted(missing))}")
-            header_bytes = data["header"]
-            index, values, offsets = data["index"], data["values"], data["offsets"]
-            look = data["look"] if "look" in data.files else None
-    except InputError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if "allow_pickle" in detail:  # numpy's hint names an option no user has
-            detail = "it holds pickled Python objects, which are never loaded"
-        raise _bad(path, f"unreadable archive: {detail}") from None
+    except OSError as exc:
+        raise _bad(path, f"unreadable file: {exc.strerror or exc}") from None
+    if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
+        raise _bad(path, "unreadable archive: not a zip (.npz) file")
+    try:
+        data = read_npz(raw, path)
+    except InputError as exc:
+        raise _bad(path, "unreadable archive: " + str(exc).removeprefix(f"{path}: ")) \
+            from None
+    missing = {"header", "index", "values", "offsets"} - set(data)
+    if missing:
+        raise _bad(path, f"missing {', '.join(sorted(missing))}")
+    header_bytes = data["header"]
+    index, values, offsets = data["index"], data["values"], data["offsets"]
+    look = data.get("look")
     try:
         if header_bytes.dtype != np.uint8:
             raise ValueError
@@ -333,18 +332,23 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     if (not isinstance(names, list) or not names
             or not all(isinstance(n, str) and n for n in names)):
         raise _bad(path, "bad style names")
+    try:
+        check_histogram_cells(len(names), bins, path)
+    except InputError as exc:
+        raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
     width = header.get("width")
     if width is not None and not (isinstance(width, (int, float)) and width > 0):
         raise _bad(path, "bad kernel width")
     working = header.get("working_space")
     if working is not None and not (isinstance(working, str) and working):
         raise _bad(path, "bad working space")
+    if not (np.issubdtype(index.dtype, np.integer) and np.issubdtype(values.dtype, np.floating)
+            and np.issubdtype(offsets.dtype, np.integer)):
+        raise _bad(path, "wrong array types")
     if (offsets.ndim != 1 or len(offsets) != len(names) + 1 or offsets[0] != 0
             or np.any(np.diff(offsets) <= 0) or offsets[-1] != len(index)
             or index.shape != values.shape or index.ndim != 1):
         raise _bad(path, "inconsistent histogram arrays")
-    if not np.issubdtype(index.dtype, np.integer) or not np.issubdtype(values.dtype, np.floating):
-        raise _bad(path, "wrong array types")
     if len(index) and (index.min() < 0 or index.max() >= bins ** 3):
         raise _bad(path, "bin index out of range")
     if not np.all(np.isfinite(values)) or np.any(values < 0):
@@ -516,6 +520,36 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space)
+
+
+def source_files(source: StyleSource | None = None, natural: str | os.PathLike | None = None,
+                 look=None) -> list[Path]:
+    """Every file a grade reads besides the photo: the style folder's files (or the preset),
+    the natural palettes (``natural``, else the shipped ones) and a saved ``look``'s file.
+
+    They are inputs: an output naming one of them is refused, ``--overwrite`` or not
+    (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
+    adds nothing (loading it reports that).
+    """
+    files: list[Path] = []
+    if source is not None and source.style_dir is not None:
+        folder = Path(source.style_dir)
+        if folder.is_dir():
+            files += [p for p in folder.iterdir() if p.is_file()]
+    elif source is not None and source.preset is not None:
+        try:
+            files.append(resolve_preset(source.preset))
+        except InputError:
+            pass
+    if natural is not None:
+        files.append(Path(natural))
+    else:
+        files.append(Path(__file__).with_name("data") / "natural.npz")
+    if look is not None:
+        saved = dict(getattr(look, "info", {}) or {}).get("saved_look", {})
+        if saved.get("file"):
+            files.append(Path(saved["file"]))
+    return files
 
 
 #: A photo is graded towards itself when one style holds at least this weight ...

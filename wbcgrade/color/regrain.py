@@ -463,7 +463,7 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
     graded = np.ascontiguousarray(graded, dtype=np.float32)
     step = _step(h, w)
     if step == 1:
-        pixels = max(1, int(round(radius * max(h, w))))
+        pixels = _window(radius, max(h, w))
         _apply_upsampled(source, _coefficients(source, graded - source, pixels, eps), 1.0, out)
         return out
     small = _downsample(source, step)
@@ -496,6 +496,13 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     return _regrain_upsampled(source, small, mapped - small, step, radius, eps, out)
 
 
+def _window(radius: float, side: float) -> int:
+    """The window radius in pixels of a line of ``side`` pixels: at least 1, at most the
+    line itself (a larger window is the whole, mirrored photo; its summing loops would
+    only run longer: ``radius=1e9`` ran for hours in compiled code, deaf to Ctrl-C)."""
+    return max(1, min(int(round(min(radius, 1.0) * side)), int(np.ceil(side))))
+
+
 def _step(h: int, w: int) -> int:
     """Subsampling step of the coefficients' solve (1: full resolution)."""
     return max(1, int(np.ceil(np.sqrt(h * w / _MAX_SOLVE_PIXELS))))
@@ -515,6 +522,6 @@ def _output(source: np.ndarray, out: np.ndarray | None) -> np.ndarray:
 def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray, step: int,
                        radius: float, eps: float, out: np.ndarray) -> np.ndarray:
     h, w = source.shape[:2]
-    pixels = max(1, int(round(radius * max(h, w) / step)))
+    pixels = _window(radius, max(h, w) / step)
     _apply_upsampled(source, _coefficients(small, change, pixels, eps), float(step), out)
     return out

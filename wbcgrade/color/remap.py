@@ -102,8 +102,9 @@ def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
     With ``with_source``, a pair: those means and the block means of ``rgb`` itself
     (float32, as ``regrain._downsample``), read in the same pass.
     """
-    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1:
-        raise ValueError("color_map must be (n, n, n, 3)")
+    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1 \
+            or color_map.shape[0] < 2:  # n < 2: the interpolation would read past the table
+        raise ValueError("color_map must be (n, n, n, 3) with n >= 2")
     if rgb.ndim != 3 or rgb.shape[2] != 3 or step < 1:
         raise ValueError("rgb must be (H, W, 3) and step >= 1")
     colors = np.ascontiguousarray(rgb, dtype=np.float32)
@@ -142,8 +143,9 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
     -------
     (..., 3) float32 array, values in [0, 1] when the map's are.
     """
-    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1:
-        raise ValueError("color_map must be (n, n, n, 3)")
+    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1 \
+            or color_map.shape[0] < 2:  # n < 2: the interpolation would read past the table
+        raise ValueError("color_map must be (n, n, n, 3) with n >= 2")
     if not 0.0 <= strength <= 1.0:
         raise ValueError("strength must be in [0, 1]")
     shape = rgb.shape

@@ -48,6 +48,13 @@ from wbcgrade.color.grading import Grade
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError
+from wbcgrade.limits import (
+    MAX_LUT_SIZE,
+    MAX_REGRAIN_RADIUS,
+    MAX_STYLES,
+    check_count,
+    check_lut_entries,
+)
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
            "look_styles", "look_fit", "look_batch_options", "SAMPLED_LUT_SIZE"]
@@ -83,24 +90,55 @@ def _encode_array(values: np.ndarray) -> dict:
 
 def _decode_array(entry: dict, where: str) -> np.ndarray:
     try:
-        shape = tuple(int(n) for n in entry["shape"])
+        if not isinstance(entry, dict) or not isinstance(entry.get("shape"), list):
+            raise ValueError("no shape")
+        shape = tuple(_integer(n) for n in entry["shape"])
         if entry.get("encoding") != "uint16-delta2-planes-zlib-base64" or len(shape) != 4:
             raise ValueError("unknown encoding")
-        low, high = float(entry["low"]), float(entry["high"])
+        if shape[3] != 3 or not shape[0] == shape[1] == shape[2] >= 2:
+            raise InputError(f"{where}: the saved colour map has shape {shape}, "
+                             "not (m, m, m, 3)")
+        if shape[0] > MAX_LUT_SIZE:
+            raise InputError(f"{where}: the saved colour map is {shape[0]}^3, larger than "
+                             f"the {MAX_LUT_SIZE}^3 wbcgrade reads")
+        low, high = _number(entry["low"]), _number(entry["high"])
+        if not isinstance(entry["data"], str):
+            raise ValueError("its data is not text")
         count = int(np.prod(shape))
-        planes = zlib.decompress(base64.b64decode(entry["data"]), bufsize=2 * count)
+        inflate = zlib.decompressobj()  # at most the declared size is ever inflated
+        planes = inflate.decompress(base64.b64decode(entry["data"]), 2 * count)
+        if len(planes) != 2 * count or inflate.unconsumed_tail:
+            raise ValueError("its size does not match its shape")
         steps = np.frombuffer(planes, dtype=np.uint8).reshape(2, count).T.copy()
-        steps = steps.view("<u2").reshape(shape).astype(np.int64)
-        codes = np.mod(np.cumsum(np.cumsum(steps, axis=1), axis=0), 65536)
+        steps = steps.view("<u2").reshape(shape)
+        # the sums modulo 2^16, in uint16 (wrapping is exact): a quarter of int64's memory
+        codes = np.cumsum(np.cumsum(steps, axis=1, dtype=np.uint16), axis=0, dtype=np.uint16)
         span = high - low if high > low else 1.0
         values = (low + codes * (span / _CODES)).astype(np.float32)
+    except InputError:
+        raise
     except (KeyError, TypeError, ValueError, zlib.error) as exc:
         raise InputError(f"{where}: the saved colour map is damaged ({exc})") from None
-    if shape[3] != 3 or not shape[0] == shape[1] == shape[2] >= 2:
-        raise InputError(f"{where}: the saved colour map has shape {shape}, not (m, m, m, 3)")
     if not np.isfinite(values).all():
         raise InputError(f"{where}: the saved colour map is damaged")
     return values
+
+
+def _integer(value) -> int:
+    """``value`` when it is a whole number (a JSON int, or a float such as 33.0), else
+    ValueError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not float(value).is_integer():
+        raise ValueError(f"{value!r} is not a whole number")
+    return int(value)
+
+
+def _number(value) -> float:
+    """``value`` as a finite float (a JSON number), else ValueError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not np.isfinite(value):
+        raise ValueError(f"{value!r} is not a finite number")
+    return float(value)
 
 
 def look_dict(grade: Grade) -> dict:
@@ -114,28 +152,63 @@ def look_dict(grade: Grade) -> dict:
 
 
 def look_from_dict(entry: dict, where: str = "look") -> Grade:
-    """The Grade a :func:`look_dict` describes (``where`` names it in errors)."""
+    """The Grade a :func:`look_dict` describes (``where`` names it in errors).
+
+    Every field is checked (type and range) before the map is decoded; a field of
+    the wrong kind is an InputError naming it, never a TypeError.
+    """
     if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
         raise InputError(f"{where}: not a saved wbcgrade grade")
-    if int(entry.get("version", 0)) > _VERSION:
+    version = entry.get("version", 0)
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise InputError(f"{where}: the saved grade's \"version\" must be a whole number, "
+                         f"not {json.dumps(version)}")
+    if version > _VERSION:
         raise InputError(f"{where}: saved by a newer wbcgrade (format version "
-                         f"{entry.get('version')}); upgrade to read it")
-    color_map = _decode_array(entry.get("map", {}), where)
-    names = tuple(str(n) for n in entry.get("names") or ("look",))
-    weights = np.asarray(entry.get("weights") or [1.0] * len(names), dtype=np.float64)
+                         f"{version}); upgrade to read it")
+    names = entry.get("names") or ["look"]
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise InputError(f"{where}: the saved grade's \"names\" must be a list of style "
+                         "names")
+    check_count("style names", len(names), MAX_STYLES, where)
+    weights = entry.get("weights") or [1.0] * len(names)
+    try:
+        if not isinstance(weights, list):
+            raise ValueError
+        weights = np.array([_number(w) for w in weights], dtype=np.float64)
+    except ValueError:
+        raise InputError(f"{where}: the saved grade's \"weights\" must be a list of "
+                         "numbers") from None
     if weights.shape != (len(names),):
         weights = np.full(len(names), 1.0 / len(names))
-    regrain = entry.get("regrain")
+    regrain, strength, loss = entry.get("regrain"), entry.get("strength", 1.0), entry.get("loss")
     try:
-        strength = float(entry.get("strength", 1.0))
-        regrain = None if regrain is None else (float(regrain[0]), float(regrain[1]))
-    except (TypeError, ValueError, IndexError):
-        raise InputError(f"{where}: the saved strength or regrain settings are damaged") \
-            from None
-    loss = entry.get("loss")
-    return Grade(names=names, weights=weights, color_map=color_map,
-                 working=str(entry.get("working_space") or ""), strength=strength,
-                 regrain=regrain, loss=None if loss is None else float(loss),
+        strength = _number(strength)
+        if not 0 <= strength <= 1:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"{where}: the saved strength must be a number in [0, 1]") from None
+    if regrain is not None:
+        try:
+            if not isinstance(regrain, list) or len(regrain) != 2:
+                raise ValueError
+            regrain = (_number(regrain[0]), _number(regrain[1]))
+            if not (0 < regrain[0] <= MAX_REGRAIN_RADIUS and regrain[1] > 0):
+                raise ValueError
+        except ValueError:
+            raise InputError(f"{where}: the saved regrain settings must be [radius, eps] with "
+                             f"0 < radius <= {MAX_REGRAIN_RADIUS:g} (a fraction of the long "
+                             "side) and eps > 0") from None
+    try:
+        loss = None if loss is None else _number(loss)
+    except ValueError:
+        raise InputError(f"{where}: the saved loss must be a number or null") from None
+    working = entry.get("working_space")
+    if working is not None and not isinstance(working, str):
+        raise InputError(f"{where}: the saved working space must be a colour space name")
+    color_map = _decode_array(entry.get("map", {}), where)
+    return Grade(names=tuple(names), weights=weights, color_map=color_map,
+                 working=working or "", strength=strength, regrain=regrain, loss=loss,
                  info={"saved_look": {"file": where, "kind": "json"}})
 
 
@@ -156,44 +229,107 @@ def _resolve(name: str, path: Path, option: str) -> str:
 
 def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
     """A ``.cube`` whose 3-D table covers [0, 1] (with no 1-D part, or wbcgrade's shaper),
-    read directly (colour-science takes a second to import); None for any other kind."""
+    read directly (colour-science takes a second to import); None for any other kind.
+
+    The keywords' values are checked first (InputError naming the file and the line
+    for a missing or unusable one, a size out of range, or a size the file is too
+    small to hold), so colour-science, when it reads the other kinds, never meets
+    a size it would allocate gigabytes for.
+    """
     try:
         text = path.read_text("utf-8")
-    except (OSError, UnicodeDecodeError):
+    except UnicodeDecodeError:
         return None
-    comments, rows, size, size_1d = [], [], 0, 0
-    for line in text.splitlines():
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    comments, rows, size, size_1d, plain = [], [], 0, 0, True
+    for number, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line:
             continue
         if line.startswith("#"):
             comments.append(line[1:].strip())
             continue
-        key = line.split(None, 1)[0]
+        key, *fields = line.split()
         if key[0].isdigit() or key[0] in "-+.":
             rows.append(line)
-        elif key == "LUT_3D_SIZE":
-            size = int(line.split()[1])
-        elif key == "LUT_1D_SIZE":
-            size_1d = int(line.split()[1])
-        elif key in ("DOMAIN_MIN", "DOMAIN_MAX", "LUT_3D_INPUT_RANGE"):
-            values = [float(v) for v in line.split()[1:]]
-            if values not in ([0.0] * 3, [1.0] * 3, [0.0, 1.0]):
-                return None
-        elif key not in ("TITLE", "LUT_1D_INPUT_RANGE"):
-            return None
+        elif key in ("LUT_3D_SIZE", "LUT_1D_SIZE"):
+            if len(fields) != 1 or not fields[0].isascii() or not fields[0].isdigit():
+                raise InputError(f"{path}: line {number}: {key} must be followed by one "
+                                 f"whole number, not {' '.join(fields) or 'nothing'!r}")
+            if key == "LUT_3D_SIZE":
+                size = check_lut_entries(int(fields[0]), path, 3)
+            else:
+                size_1d = check_lut_entries(int(fields[0]), path, 1)
+        elif key in ("DOMAIN_MIN", "DOMAIN_MAX", "LUT_3D_INPUT_RANGE", "LUT_1D_INPUT_RANGE"):
+            try:
+                values = [float(v) for v in fields]
+                if len(values) not in (2, 3) or not np.isfinite(values).all():
+                    raise ValueError
+            except ValueError:
+                raise InputError(f"{path}: line {number}: {key} must be followed by two or "
+                                 f"three finite numbers, not {' '.join(fields) or 'nothing'!r}"
+                                 ) from None
+            if key != "LUT_1D_INPUT_RANGE" and values not in ([0.0] * 3, [1.0] * 3,
+                                                               [0.0, 1.0]):
+                plain = False
+        elif key != "TITLE":
+            plain = False
     space = _header_space(comments)
-    if size < 2 or (size_1d and space is None) or len(rows) != size_1d + size ** 3:
+    if not size:
+        if size_1d and not rows[size_1d:]:
+            raise InputError(f"{path}: a 1-D LUT (LUT_1D_SIZE) with no 3-D table; a look "
+                             "must be a 3-D LUT (LUT_3D_SIZE)")
+        raise InputError(f"{path}: not a 3-D .cube LUT (it has no LUT_3D_SIZE line)")
+    if not plain or (size_1d and space is None):
         return None
+    if len(rows) != size_1d + size ** 3:
+        raise InputError(f"{path}: LUT_3D_SIZE {size}"
+                         + (f" and LUT_1D_SIZE {size_1d}" if size_1d else "")
+                         + f" need {size_1d + size ** 3} rows of three numbers, "
+                         f"the file has {len(rows)}")
     try:
         values = np.array(" ".join(rows[size_1d:]).split(), dtype=np.float64)
     except ValueError:
-        return None
+        raise InputError(f"{path}: the LUT's rows hold something other than numbers") \
+            from None
     if values.size != 3 * size ** 3:
-        return None
+        raise InputError(f"{path}: the LUT's rows must hold three numbers each")
     # red varies fastest in a .cube: the rows are [b, g, r] in C order
     table = values.reshape(size, size, size, 3).transpose(2, 1, 0, 3)
     return np.ascontiguousarray(table, dtype=np.float32), space
+
+
+def _check_declared_size(path: Path) -> None:
+    """InputError when a LUT file colour-science reads declares a table its size cannot hold
+    (a 40-byte ``.spi3d`` declaring 500^3 entries), before colour-science allocates it."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096).decode("ascii", "replace").splitlines()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    suffix = path.suffix.lower()
+    if suffix == ".spi3d" and len(head) >= 3:  # SPILUT 1.0 / 3 3 / n n n
+        sizes = head[2].split()
+        if len(sizes) != 3 or not all(v.isascii() and v.isdigit() for v in sizes):
+            raise InputError(f"{path}: line 3 must give the LUT's three sizes")
+        if len(set(sizes)) != 1:
+            raise InputError(f"{path}: a 3-D LUT must have the same size on every axis, "
+                             f"not {' x '.join(sizes)}")
+        check_lut_entries(int(sizes[0]), path, 3)
+    elif suffix == ".spi1d":
+        for line in head:
+            parts = line.split()
+            if len(parts) == 2 and parts[0] == "Length":
+                if not (parts[1].isascii() and parts[1].isdigit()):
+                    raise InputError(f"{path}: Length must be a whole number")
+                check_lut_entries(int(parts[1]), path, 1)
+    elif suffix == ".csp":  # bounded by the data it holds: its sizes count lines read
+        for line in head:
+            parts = line.split()
+            if len(parts) == 3 and all(v.isascii() and v.isdigit() for v in parts) \
+                    and len(set(parts)) == 1 and int(parts[0]) > 1:
+                check_lut_entries(int(parts[0]), path, 3)
 
 
 def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
@@ -202,6 +338,7 @@ def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
         plain = _plain_cube(path)
         if plain is not None:
             return plain
+    _check_declared_size(path)
     from wbcgrade.color._colour import colour
 
     try:

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.errors import InputError
+from wbcgrade.limits import key_bytes, read_cache_entry
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
            "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
@@ -211,20 +212,19 @@ def _scene_cache_path(path: Path, working_space: str, folder: Path) -> Path | No
         stat = path.stat()
     except OSError:
         return None
-    key = hashlib.sha1(f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{working_space}|"
-                       f"{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|{SCENE_VERSION}".encode()).hexdigest()
+    key = hashlib.sha1(key_bytes(
+        f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{working_space}|"
+        f"{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|{SCENE_VERSION}")).hexdigest()
     return folder / "scenes" / f"{key}.npz"
 
 
 def _read_cached(path: Path | None) -> SceneImage | None:
-    if path is None:
-        return None
+    data = read_cache_entry(path)
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return SceneImage(data["colors"].astype(np.float32),
-                              data["points"].astype(np.float32),
-                              data["descriptors"].astype(np.float32))
-    except (OSError, KeyError, ValueError):
+        return SceneImage(data["colors"].astype(np.float32),
+                          data["points"].astype(np.float32),
+                          data["descriptors"].astype(np.float32))
+    except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
         return None
 
 

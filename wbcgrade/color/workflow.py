@@ -23,7 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +50,7 @@ from wbcgrade.color.lut import (
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
+from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
@@ -110,7 +110,7 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
                lut_format: str | None = None, overwrite: bool = False,
                write: bool = True, encode: WriteOptions | None = None,
                saved_grade: str | os.PathLike | None = None,
-               inputs: tuple = ()) -> PhotoPlan:
+               reads: Iterable[str | os.PathLike] = ()) -> PhotoPlan:
     """Check that the photo exists and its outputs may be written; -> the plan.
 
     Checked before any work: the output's file type can be written, and
@@ -120,8 +120,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     an existing file unless ``overwrite``, not a device, not two outputs in
     one file, a folder that exists and is writable. ``write`` False: nothing
     is written (no output). ``saved_grade``: where the grade itself goes (a JSON
-    file that ``--look`` reads), planned with the others. ``inputs``: other files
-    the run reads (e.g. a saved grade), which no output may replace.
+    file that ``--look`` reads), planned with the others. ``reads``: the other files
+    the grade reads (style photos, presets, a saved look:
+    :func:`~wbcgrade.color.presets.source_files`), inputs too: never replaced.
     """
     photo = Path(photo)
     if not photo.exists():
@@ -140,7 +141,7 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
         check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
-    output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *inputs],
+    output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],
                                             overwrite)
     return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode,
                      saved_grade)
@@ -311,13 +312,14 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     if saved and report_dir is not None:
         raise OptionError("--report needs styles to compare with; a saved --look has none",
                           "--report")
-    look_file = dict(source.info).get("saved_look", {}).get("file") if saved else None
+    reads = source_files(None if saved else source, options.map.natural,
+                         source if saved else None)
     plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode,
-                      saved_grade=save_grade, inputs=(look_file,) if look_file else ())
+                      saved_grade=save_grade, reads=reads)
     if report_dir is not None:
         from wbcgrade.color.report import plan_report
 
-        plan_report(report_dir, [plan.photo.name], [plan.photo], overwrite)
+        plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
     if saved:
         from wbcgrade.color.saved_look import look_fit, look_styles
 

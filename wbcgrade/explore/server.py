@@ -58,6 +58,9 @@ __all__ = ["Studio", "ExploreServer", "make_server", "MAX_BODY", "MAX_LANDSCAPE_
 MAX_BODY = 1 << 20
 #: Most weight rows one landscape request may ask for.
 MAX_LANDSCAPE_ROWS = 1024
+#: Seconds a connection may stay silent while a request is read or its answer written
+#: (a client that sends half a request and stops held a thread each for ever).
+SOCKET_TIMEOUT_S = 30.0
 #: Seconds a request waits for an exact map (an export at most; a view job is
 #: usually replaced long before).
 EXACT_TIMEOUT_S = 900.0
@@ -239,6 +242,7 @@ def _static(name: str) -> bytes:
 
 class _Handler(BaseHTTPRequestHandler):
     server: ExploreServer
+    timeout = SOCKET_TIMEOUT_S  # the socket's, set by StreamRequestHandler.setup
     protocol_version = "HTTP/1.1"
     server_version = "wbcgrade-explore"
     sys_version = ""
@@ -249,8 +253,8 @@ class _Handler(BaseHTTPRequestHandler):
     def handle(self) -> None:
         try:
             super().handle()
-        except (BrokenPipeError, ConnectionResetError):
-            pass  # the page went away (closed, reloaded) before its answer
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            pass  # the page went away (closed, reloaded) or stalled before its answer
 
     # -- answers -------------------------------------------------------------------
     def _send(self, status: int, body: bytes, content_type: str,
@@ -321,10 +325,17 @@ class _Handler(BaseHTTPRequestHandler):
             return None
         raw = self.rfile.read(length)
         try:
-            return json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
+            data = json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
         except (UnicodeDecodeError, ValueError) as exc:
             self._error(400, f"the request body is not valid JSON ({exc})"[:300])
             return None
+        except RecursionError:  # thousands of nested brackets
+            self._error(400, "the request body is nested too deeply")
+            return None
+        if not isinstance(data, dict):  # ``null`` went unanswered
+            self._error(400, "the request body must be a JSON object")
+            return None
+        return data
 
     # -- methods -------------------------------------------------------------------------
     def do_HEAD(self) -> None:  # noqa: N802 - http.server's naming
@@ -341,7 +352,8 @@ class _Handler(BaseHTTPRequestHandler):
         elif route == "photo.png":
             self._send(200, studio.photo_png, "image/png")
         elif route.startswith("style/") and route.endswith(".png") \
-                and route[6:-4].isdigit() and int(route[6:-4]) < len(studio.thumbnails_png):
+                and route[6:-4].isascii() and route[6:-4].isdigit() \
+                and int(route[6:-4]) < len(studio.thumbnails_png):  # '²' is a digit too
             self._send(200, studio.thumbnails_png[int(route[6:-4])], "image/png")
         elif route == "api/state":
             self._json(200, studio.state())
@@ -383,11 +395,11 @@ class _Handler(BaseHTTPRequestHandler):
                                            data.get("size", studio.sizes[0]))
                 plain = "".join(c if c.isascii() and c.isprintable() and c not in '"\\'
                                 else "_" for c in name)
+                raw = name.encode("utf-8", "surrogateescape")  # a non-UTF-8 photo's name
                 self._send(200, body, "application/octet-stream",
                            {"Content-Disposition": f"attachment; filename=\"{plain}\"; "
-                                                   f"filename*=UTF-8''{quote(name)}",
-                            "X-Explore-File": base64.b64encode(
-                                name.encode("utf-8")).decode("ascii")})
+                                                   f"filename*=UTF-8''{quote(raw)}",
+                            "X-Explore-File": base64.b64encode(raw).decode("ascii")})
             else:
                 self._error(404, f"no such action: /{route}"[:200])
         except RequestError as exc:

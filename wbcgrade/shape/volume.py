@@ -16,6 +16,7 @@ import numpy as np
 
 from wbcgrade._publish import publish_bytes
 from wbcgrade.errors import InputError, first_line
+from wbcgrade.limits import read_npy
 
 VOLUME_SUFFIXES = (".npy", ".nii", ".nii.gz")
 """File suffixes read as volumes."""
@@ -51,10 +52,7 @@ def read_volume(path: str | os.PathLike) -> np.ndarray:
         raise InputError(f"{path}: no such volume file")
     suffix = volume_suffix(path)
     if suffix == ".npy":
-        try:
-            data = np.load(path, allow_pickle=False)
-        except Exception as exc:
-            raise InputError(f"{path}: unreadable .npy file ({first_line(exc)})") from exc
+        data = read_npy(path)  # its header's size checked before anything is allocated
     elif suffix in (".nii", ".nii.gz"):
         nibabel = _import_nibabel()
         try:

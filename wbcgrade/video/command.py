@@ -12,7 +12,7 @@ import time
 from dataclasses import replace
 
 from wbcgrade.color.options import GradeOptions, RegrainOptions
-from wbcgrade.color.presets import StyleSource, load_styles
+from wbcgrade.color.presets import StyleSource, load_styles, source_files
 from wbcgrade.video.report import plan_video_report, write_video_report
 from wbcgrade.video.workflow import (
     VideoProgress,
@@ -43,9 +43,10 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     """
     settings = settings or VideoSettings()
     progress = progress or VideoProgress()
-    source, output, lut = plan_video(source, output, lut, settings, overwrite)
+    reads = source_files(None if look is not None else styles, options.map.natural, look)
+    source, output, lut = plan_video(source, output, lut, settings, overwrite, reads)
     if report_dir is not None:
-        plan_video_report(report_dir, [source], overwrite)
+        plan_video_report(report_dir, [source, *reads], overwrite)
     if options.regrain.enabled:
         options = replace(options, regrain=RegrainOptions(enabled=False))
     start = time.perf_counter()

@@ -40,10 +40,11 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import secrets
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -205,14 +206,16 @@ def default_output(source: str | os.PathLike, codec: str = "x264") -> Path:
 
 def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
                lut: str | os.PathLike | None, settings: VideoSettings,
-               overwrite: bool = False) -> tuple[Path, Path, Path | None]:
+               overwrite: bool = False,
+               reads: Iterable[str | os.PathLike] = ()) -> tuple[Path, Path, Path | None]:
     """Check, before any work, that the outputs may be written -> (source, output, lut).
 
     The output (default :func:`default_output`) must be a container that
     holds the codec; the LUT a ``.cube``; both then pass
     :func:`wbcgrade._publish.plan_outputs` (never the input, never an
     existing file unless ``overwrite``, a regular file in a writable folder,
-    two different files). Resolved paths are returned.
+    two different files). Resolved paths are returned. ``reads``: the other files
+    the grade reads (styles, presets, a saved look), never replaced either.
     """
     source = Path(source)
     if not source.exists():
@@ -224,7 +227,7 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
                          f"{', '.join(containers)} as the output's extension")
     if lut is not None and Path(lut).suffix.lower() != ".cube":
         raise InputError(f"{lut}: LUT file name must end in .cube")
-    output, lut = plan_outputs([output, lut], [source], overwrite)
+    output, lut = plan_outputs([output, lut], [source, *reads], overwrite)
     return source, output, lut
 
 
@@ -486,20 +489,30 @@ def work_folder() -> Iterator[Path]:
     """
     base = Path(tempfile.gettempdir())
     remove_stale_work_folders(base)
+    folder = lock = None
     try:
-        folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX, dir=base))
-    except OSError as exc:
-        raise InputError(f"{base}: cannot create a temporary folder here ({exc.strerror}); "
-                         "set TMPDIR to a folder with space") from None
-    lock = None
-    try:
+        for _ in range(100):
+            # the name is known before the folder exists: a signal at any moment after
+            # (SIGTERM right after mkdtemp left it behind) finds it in ``folder``
+            folder = base / f"{WORK_PREFIX}{secrets.token_hex(6)}"
+            try:
+                os.mkdir(folder, 0o700)
+                break
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                folder = None
+                raise InputError(f"{base}: cannot create a temporary folder here "
+                                 f"({exc.strerror}); set TMPDIR to a folder with space") \
+                    from None
         lock = os.open(folder / WORK_LOCK, os.O_RDWR | os.O_CREAT, 0o600)
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         yield folder
     finally:
         if lock is not None:
             os.close(lock)
-        shutil.rmtree(folder, ignore_errors=True)
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 @contextlib.contextmanager

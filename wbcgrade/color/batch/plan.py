@@ -49,6 +49,9 @@ class BatchTask:
     output: Path | None
     relative: str
     target: Path | None = None
+    #: the output is complete but no result records it (a run stopped between the two):
+    #: graded again and replaced, so that the records heal
+    replace: bool = False
 
 
 @dataclass
@@ -114,19 +117,23 @@ def output_is_complete(source: Path, output: Path) -> bool:
 def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
                recursive: bool = False, overwrite: bool = False,
                exclude: Iterable[str | os.PathLike] = (), *,
-               force: bool | None = None) -> BatchPlan:
+               force: bool | None = None,
+               reads: Iterable[str | os.PathLike] = ()) -> BatchPlan:
     """List the photos under ``in_path`` (a folder, or one photo) and their outputs.
 
     Hidden files and anything inside ``out_dir`` or an ``exclude`` folder
     (e.g. a report folder) are left out. With
     ``out_dir`` None (a report only), nothing is written and nothing is
     skipped. Raises InputError when the folder is missing or the output
-    folder is the input folder. ``overwrite`` plans every photo, finished
+    folder is the input folder. ``reads``: the other files the grade reads (style
+    photos, presets, a saved look): an output naming one is refused, as one naming
+    its own photo is. ``overwrite`` plans every photo, finished
     outputs included (``force`` is its former name, deprecated). Each
     output is resolved and checked (see the module docstring); a photo whose
     output may not be written is ``refused``.
     """
     overwrite = _overwrite(overwrite, force)
+    reads = list(reads)
     in_path = Path(in_path)
     if not in_path.exists():
         raise InputError(f"{in_path}: no such file or folder")
@@ -160,32 +167,45 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
         if task.output is None:
             plan.tasks.append(task)
             continue
+        heal = False
         try:  # links and inputs first: a link into the input tree is never "complete"
-            check_output_path(task.output, [path], True, root=out, make_folders=True)
+            check_output_path(task.output, [path, *reads], True, root=out, make_folders=True)
             if not overwrite and output_is_complete(path, task.output):
-                plan.done.append(task)
-                continue
-            resolved = check_output_path(task.output, [path], overwrite, root=out,
-                                         make_folders=True)
+                if _recorded(out, task):
+                    plan.done.append(task)
+                    continue
+                heal = True  # published, never recorded: graded again, records healed
+            resolved = check_output_path(task.output, [path, *reads], overwrite or heal,
+                                         root=out, make_folders=True)
         except InputError as exc:
             plan.refused.append((task, str(exc)))
             continue
-        plan.tasks.append(BatchTask(path, task.output, task.relative, resolved))
+        plan.tasks.append(BatchTask(path, task.output, task.relative, resolved, heal))
     return plan
 
 
+def _recorded(out: Path, task: BatchTask) -> bool:
+    """Whether a batch's result record of ``task`` is there and readable."""
+    from wbcgrade.color.batch.records import read_record
+
+    return read_record(out, task.relative) is not None
+
+
 def recheck_plan(plan: BatchPlan, overwrite: bool = False, *,
-                 force: bool | None = None) -> BatchPlan:
+                 force: bool | None = None,
+                 out_dir: str | os.PathLike | None = None) -> BatchPlan:
     """Move tasks whose output became complete since planning to ``done`` (unless ``overwrite``).
 
     Used once a run holds the output folder's lock: a run that finished in
-    between is not redone.
+    between is not redone. With ``out_dir`` (the batch's output folder) a
+    complete output counts only when its result is recorded there.
     """
     if _overwrite(overwrite, force):
         return plan
     tasks, done = [], list(plan.done)
     for task in plan.tasks:
-        if task.output is not None and output_is_complete(task.source, task.output):
+        if task.output is not None and output_is_complete(task.source, task.output) and (
+                out_dir is None or _recorded(Path(out_dir), task)):
             done.append(task)
         else:
             tasks.append(task)

@@ -94,7 +94,16 @@ class FileResult:
     def from_dict(cls, entry: dict) -> FileResult:
         """The result an :meth:`as_dict` entry describes (weights back in the styles'
         order; rounded as the entry holds them). Raises KeyError, TypeError or
-        ValueError on an entry that is not one."""
+        ValueError on an entry that is not one (any JSON: a record may be damaged)."""
+        if not isinstance(entry, dict):
+            raise TypeError(f"a result record is a JSON object, not {type(entry).__name__}")
+        try:
+            return cls._from_dict(entry)
+        except AttributeError as exc:  # a field of the wrong kind (a list for an object)
+            raise TypeError(str(exc)) from None
+
+    @classmethod
+    def _from_dict(cls, entry: dict) -> FileResult:
         losses = entry.get("single_style_losses") or {}
         weights = {str(w["style"]): float(w["weight"]) for w in entry.get("weights", [])}
         names = list(losses) or list(weights) or [str(n) for n in entry.get("style_names", [])]

@@ -86,7 +86,8 @@ def run_task(task: BatchTask, context: BatchContext,
     set_max_image_pixels(context.max_image_pixels)
     try:
         target = (task.target or task.output) if context.write_outputs else None
-        plan = PhotoPlan(task.source, target, overwrite=context.overwrite,
+        replace = context.overwrite or task.replace  # replace: an unrecorded output healed
+        plan = PhotoPlan(task.source, target, overwrite=replace,
                          encode=context.encode)
         if target is not None:
             check_image_output(target)  # before any work
@@ -112,7 +113,7 @@ def run_task(task: BatchTask, context: BatchContext,
             sheet = sheet_path(task.relative)
             write_sheet(context.sheet_dir / sheet,
                         sheet_content(result, report.graded, context.style_pictures),
-                        overwrite=context.overwrite)
+                        overwrite=replace)
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:

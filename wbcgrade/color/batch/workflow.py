@@ -48,7 +48,7 @@ from wbcgrade.color.lut import (
     write_grade_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles
+from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError
 
@@ -172,13 +172,14 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
+    reads = source_files(None if look is not None else source, options.map.natural, look)
     plan = plan_batch(in_dir, out_dir, recursive=recursive, overwrite=overwrite,
-                      exclude=[report_dir] if report_dir else [])
+                      exclude=[report_dir] if report_dir else [], reads=reads)
     if not plan.tasks and not plan.done and not plan.refused:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
                                                          " (use --recursive for sub-folders)"))
     if lut is not None:
-        lut = plan_outputs([lut], [t.source for t in plan.all_photos], overwrite)[0]
+        lut = plan_outputs([lut], [*(t.source for t in plan.all_photos), *reads], overwrite)[0]
     if consistent and options.spaces.working is None:  # one working space for the series
         from dataclasses import replace
 
@@ -194,7 +195,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     except OSError as exc:
         raise InputError(f"{out_dir}: cannot create the output folder ({exc.strerror})") from None
     with lock_folder(out_dir, "batch"):  # one run at a time per output folder
-        plan = recheck_plan(plan, overwrite)  # a run that held the lock may have finished some
+        # a run that held the lock may have finished some
+        plan = recheck_plan(plan, overwrite, out_dir=out_dir)
         remove_stale_records(out_dir)  # what a killed run left half-written
         start = time.perf_counter()
         if look is None:

@@ -1,0 +1,191 @@
+"""Bounds on every size that a user or a file can set, checked before any work is done.
+
+A small file can declare a huge size: a preset naming 60 styles of 256^3
+bins (5.5 GB of histograms), a ``.spi3d`` declaring 500^3 entries, a
+compressed 400^3 map in a grade JSON, a ``.npy`` header claiming terabytes,
+``--iterations 1000000000``. Every reader and every option checks such sizes
+here, before it allocates, and refuses them with one line naming the file
+(or the option) and the bound. The bounds are far above what wbcgrade makes
+itself, and they keep the memory of a run under about 2 GB for any input
+file under a few megabytes.
+
+>>> check_count("styles", 3, MAX_STYLES, "p.npz")
+3
+>>> check_count("styles", 10**6, MAX_STYLES, "p.npz")
+Traceback (most recent call last):
+...
+wbcgrade.errors.InputError: p.npz: 1000000 styles, more than the 4096 wbcgrade reads
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.errors import InputError
+
+__all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
+           "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
+           "check_count", "check_lut_entries", "check_histogram_cells", "read_npz",
+           "read_cache_entry", "key_bytes", "read_npy"]
+
+#: Nodes per axis of any 3-D LUT or colour map read or written (256^3 x 3 float32: 200 MB).
+MAX_LUT_SIZE = 256
+#: Styles in one preset or style set.
+MAX_STYLES = 4096
+#: Histogram cells of a whole style set (styles x bins^3): 2^25 float64 cells are 256 MB
+#: (e.g. 128 styles of 64^3 bins, or 2 of 256^3).
+MAX_HISTOGRAM_CELLS = 2 ** 25
+#: Bytes of any one array a file holds (a preset's index, a cache entry's values, ...).
+MAX_ARRAY_BYTES = 256 * 2 ** 20
+#: The regrain window's radius, a fraction of the photo's long side (1: the whole photo).
+MAX_REGRAIN_RADIUS = 1.0
+#: Barycenter iterations L (the fit keeps every iteration's state for its gradient).
+MAX_BARYCENTER_ITERATIONS = 1000
+#: The fewest bytes a text LUT can spend on one entry ("0 0 0" and a line end): a file
+#: declaring more entries than its size can hold is refused before its table is made.
+MIN_BYTES_PER_LUT_ENTRY = 6
+
+
+def check_count(what: str, count: int, most: int, where: str | os.PathLike) -> int:
+    """``count`` when it is at most ``most``, else InputError naming ``where``."""
+    if count > most:
+        raise InputError(f"{where}: {count} {what}, more than the {most} wbcgrade reads")
+    return int(count)
+
+
+def check_lut_entries(size: int, path: str | os.PathLike, dims: int = 3) -> int:
+    """``size`` (nodes per axis of a ``dims``-D text LUT ``path``) when it is between 2 and
+    :data:`MAX_LUT_SIZE` (1-D: 65536) and the file is large enough to hold its entries;
+    else InputError naming the file."""
+    most = MAX_LUT_SIZE if dims == 3 else 65536
+    if not 2 <= size <= most:
+        raise InputError(f"{path}: a {dims}-D LUT size of {size}; it must be between 2 and "
+                         f"{most}")
+    try:
+        available = os.path.getsize(path)
+    except OSError:
+        available = None
+    if available is not None and size ** dims * MIN_BYTES_PER_LUT_ENTRY > available:
+        raise InputError(f"{path}: declares a {'x'.join([str(size)] * dims)} LUT, but the file "
+                         f"({available} bytes) cannot hold its {size ** dims} entries")
+    return int(size)
+
+
+def check_histogram_cells(styles: int, bins: int, where: str | os.PathLike) -> None:
+    """InputError unless ``styles`` histograms of ``bins``^3 cells fit
+    :data:`MAX_STYLES` and :data:`MAX_HISTOGRAM_CELLS`."""
+    check_count("styles", styles, MAX_STYLES, where)
+    if styles * bins ** 3 > MAX_HISTOGRAM_CELLS:
+        raise InputError(f"{where}: {styles} styles of {bins}^3 bins are "
+                         f"{styles * bins ** 3} histogram cells, more than the "
+                         f"{MAX_HISTOGRAM_CELLS} wbcgrade reads")
+
+
+def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None = None,
+             max_bytes: int = MAX_ARRAY_BYTES) -> dict[str, np.ndarray]:
+    """Every array of a NumPy ``.npz`` archive (a path or its bytes), checked before it is read.
+
+    Each member's ``.npy`` header is read first: its dtype must be a plain number, bool
+    or string type (no objects, no structured records) and its size at most
+    ``max_bytes`` (so a header claiming terabytes, or a small compressed member
+    that would decompress to gigabytes, is refused before any allocation).
+
+    Returns
+    -------
+    dict name -> array (names without ``.npy``). Raises InputError naming
+    ``where`` (default: the path) for anything else.
+    """
+    where = where if where is not None else (source if not isinstance(source, bytes)
+                                              else "archive")
+    handle = io.BytesIO(source) if isinstance(source, bytes) else Path(source)
+    arrays: dict[str, np.ndarray] = {}
+    try:
+        with zipfile.ZipFile(handle) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue  # not an array (numpy writes none such)
+                name = info.filename[:-4]
+                if info.file_size > max_bytes + 4096:
+                    raise InputError(f"{where}: its array {name!r} would take "
+                                     f"{info.file_size} bytes, more than the {max_bytes} "
+                                     "wbcgrade reads")
+                with archive.open(info) as member:
+                    arrays[name] = _read_member(member, name, where, max_bytes)
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile,
+            NotImplementedError, RuntimeError) as exc:  # RuntimeError: an encrypted member
+        detail = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{where}: not a readable .npz archive ({detail})") from None
+    return arrays
+
+
+def read_npy(path: str | os.PathLike, max_bytes: int = MAX_ARRAY_BYTES) -> np.ndarray:
+    """The array of a ``.npy`` file, its header checked first (as :func:`read_npz`'s members):
+    a header claiming more bytes than ``max_bytes`` (or than the file holds: 7 TiB in a
+    few bytes) is an InputError naming the file, before any allocation."""
+    try:
+        with open(path, "rb") as handle:
+            return _read_member(handle, Path(path).name, path, max_bytes)
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: not a readable .npy file ({detail})") from None
+
+
+def _read_member(member, name: str, where, max_bytes: int) -> np.ndarray:
+    fmt = np.lib.format
+    version = fmt.read_magic(member)
+    if version == (1, 0):
+        shape, fortran, dtype = fmt.read_array_header_1_0(member)
+    elif version == (2, 0):
+        shape, fortran, dtype = fmt.read_array_header_2_0(member)
+    else:
+        raise InputError(f"{where}: its array {name!r} has an unknown .npy version {version}")
+    if dtype.hasobject:
+        raise InputError(f"{where}: its array {name!r} holds pickled Python objects, which "
+                         "are never loaded")
+    if dtype.fields is not None or dtype.subdtype is not None or dtype.kind not in "biufcSU":
+        raise InputError(f"{where}: its array {name!r} has the type {dtype}, not plain numbers")
+    count = int(np.prod(shape, dtype=object))
+    if count * dtype.itemsize > max_bytes:
+        raise InputError(f"{where}: its array {name!r} declares {count * dtype.itemsize} "
+                         f"bytes (shape {shape}), more than the {max_bytes} wbcgrade reads")
+    data = member.read(count * dtype.itemsize)
+    if len(data) != count * dtype.itemsize:
+        raise InputError(f"{where}: its array {name!r} is cut short")
+    array = np.frombuffer(data, dtype=dtype, count=count)
+    array = array.reshape(shape[::-1]).transpose() if fortran else array.reshape(shape)
+    return array.copy()
+
+
+def read_cache_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
+    """The arrays of a cache entry (an ``.npz``), or None when there is none or it is unusable.
+
+    A cache must never make a run fail: an entry that is not a readable archive
+    (garbage, zero bytes, cut short, too large) is removed, so that the caller
+    computes the value again and writes a good entry in its place. Callers
+    still treat any error in using the arrays as a miss.
+    """
+    if path is None:
+        return None
+    try:
+        return read_npz(path)
+    except InputError:
+        if os.path.isfile(path):
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+        return None
+
+
+def key_bytes(text: str) -> bytes:
+    """``text`` as bytes for a cache key: UTF-8, a path's undecodable bytes (``caf\\udce9``,
+    a POSIX name that is not UTF-8) as they were on disk."""
+    return text.encode("utf-8", "surrogateescape")
