@@ -853,7 +853,7 @@ def _natural_statistics(naturals, cache_from=None):
     """:func:`~wbcgrade.color.look_statistics.palette_statistics` of the natural palettes,
     once per process and set of palettes, and kept on disk in the looks' cache folder
     (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
-    from wbcgrade.color.look_statistics import PaletteStatistics, palette_statistics
+    from wbcgrade.color.look_statistics import QUANTILES, PaletteStatistics, palette_statistics
 
     key = _palettes_digest(naturals) + repr(statistics_settings())
     if key in _NATURAL_STATISTICS:
@@ -862,12 +862,17 @@ def _natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
+    from wbcgrade.limits import read_cache_entry
+
     found = None
-    if path is not None and path.is_file():
+    data = read_cache_entry(path) if path is not None and path.is_file() else None
+    if data is not None:
         try:
-            with np.load(path, allow_pickle=False) as data:
-                found = PaletteStatistics(**{f: np.array(data[f]) for f in _STAT_FIELDS})
-        except (OSError, ValueError, KeyError, TypeError, EOFError):
+            found = PaletteStatistics(**{f: np.asarray(data[f], np.float64)
+                                         for f in _STAT_FIELDS})
+            if found.quantiles.shape != (len(naturals.names), len(QUANTILES)):
+                found = None
+        except Exception:  # noqa: BLE001 - a cache never fails a run: any damage is a miss
             found = None
     if found is None:
         found = palette_statistics(naturals.at_bins(MAP_BINS))
