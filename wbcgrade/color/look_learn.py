@@ -53,7 +53,7 @@ from wbcgrade.errors import InputError, first_line
 __all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
-           "PAIRS_PER_PHOTO", "MONO_CHROMA"]
+           "PAIRS_PER_PHOTO", "MONO_CHROMA", "KEYPOINT_SIZE"]
 
 #: Long side (pixels) the photos are registered and sampled at (the scene match's size).
 LEARN_SIZE = 768
@@ -65,6 +65,10 @@ LEARN_FOLDS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
 MONO_CHROMA = 0.02
+#: Long side (pixels) keypoints are found on when the cheap registration fails (crops);
+#: the homography is then scaled to :data:`LEARN_SIZE`. Pairs of one scene under a look
+#: agree on 60 or more keypoints at this size in ``benchmarks/learn.py``.
+KEYPOINT_SIZE = 512
 #: Export endings dropped from an after's stem before pairing (``IMG_1-Edit.tif``).
 _EDIT_ENDING = re.compile(r"[-_ ](edit|edited|copy|final|export)(-?\d+)?$", re.IGNORECASE)
 #: Cheap registration: aspect ratios that agree within this share are tried as one framing;
@@ -255,7 +259,8 @@ class Registration:
     ----------
     homography : (3, 3) from the after's pixels to the original's (both at
         their :class:`PairImages` size).
-    how : "same framing", "rotated 90/180/270 degrees" or "keypoints (N agree)".
+    how : "same framing" or "resized" (either perhaps ", turned 90/180/270 degrees"),
+        or "keypoints (N agree)".
     coverage : share of the original the after covers.
     """
 
@@ -339,12 +344,26 @@ def register_pair(images: PairImages) -> Registration | None:
             continue
         homography = _rotation_homography(after.shape[:2], turns, before.shape[:2])
         if _aligned(before, _warp(after, homography, before.shape[:2])):
-            how = "same framing" if turns == 0 else f"rotated {90 * turns} degrees"
+            how = ("same framing" if after.shape[:2] == (before.shape[:2] if turns % 2 == 0
+                                                         else before.shape[1::-1])
+                   else "resized")
+            how += "" if turns == 0 else f", turned {90 * turns} degrees"
             return Registration(homography, how, 1.0)
-    match = match_scene(scene_image(before), scene_image(after))
+    small_before, small_after = scene_image(before, KEYPOINT_SIZE), scene_image(after,
+                                                                                KEYPOINT_SIZE)
+    match = match_scene(small_before, small_after)
     if match is None:
         return None
-    return Registration(match.homography, f"keypoints ({match.inliers} agree)", match.coverage)
+    homography = (np.linalg.inv(_pixel_scale(before, small_before.colors)) @ match.homography
+                  @ _pixel_scale(after, small_after.colors))
+    return Registration(homography, f"keypoints ({match.inliers} agree)", match.coverage)
+
+
+def _pixel_scale(image: np.ndarray, small: np.ndarray) -> np.ndarray:
+    """(3, 3) from ``image``'s pixels to those of ``small``, a resized copy (pixel centres
+    to pixel centres)."""
+    fx, fy = small.shape[1] / image.shape[1], small.shape[0] / image.shape[0]
+    return np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0.0, 0.0, 1.0]])
 
 
 def pair_colours(images: PairImages, registration: Registration,
@@ -360,9 +379,7 @@ def pair_colours(images: PairImages, registration: Registration,
     if magnified > 1.05:  # a smaller after: the original shrunk to its sharpness
         size = max(16, round(max(before.shape[:2]) / magnified))
         small = _shrink(before, size)
-        fx, fy = small.shape[1] / before.shape[1], small.shape[0] / before.shape[0]
-        shrink = np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0, 0, 1]])
-        before, homography = small, shrink @ homography  # pixel centres to pixel centres
+        before, homography = small, _pixel_scale(before, small) @ homography
     empty = (np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
     return colour_pairs(SceneImage(before, *empty), SceneImage(images.after, *empty),
                         SceneMatch(homography, 0, registration.coverage), max_pairs, seed)
@@ -437,8 +454,8 @@ class PairReport:
     ----------
     name : the pair's name (the original's stem).
     before, after : the files.
-    registered : how the after was laid on the original ("same framing",
-        "rotated 90 degrees", "keypoints (N agree)"), or None.
+    registered : how the after was laid on the original (:attr:`Registration.how`),
+        or None.
     problem : why the pair was not used (unreadable file, another scene), or None.
     coverage : share of the original the after covers.
     monochrome : the after is black and white.
@@ -629,21 +646,21 @@ def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray)
 
 
 def _flag_disagreements(used: list[PairReport], warn: Callable[[str], None]) -> None:
-    """Warn of pairs whose held-out error stands out (another look, a heavy local edit)
-    and of pairs with local edits (many pixels the robust fit left out)."""
-    if len(used) < 3:
-        return
-    held = np.array([r.held_out for r in used])
-    typical = float(np.median(held))
-    shares = np.array([r.edited_share for r in used])
-    for report, error, share in zip(used, held, shares):
-        if error > max(_DISAGREE_FACTOR * typical, typical + _DISAGREE_MARGIN):
+    """Warn of pairs with local edits (many pixels no global map of the pair explains)
+    and, among three or more, of pairs whose held-out error stands out (another look)."""
+    held = [r.held_out for r in used if r.held_out is not None]
+    typical = float(np.median(held)) if len(held) >= 3 else None
+    for report in used:
+        error = report.held_out
+        stands_out = (typical is not None and error is not None
+                      and error > max(_DISAGREE_FACTOR * typical, typical + _DISAGREE_MARGIN))
+        if report.edited_share is not None and report.edited_share > _LOCAL_SHARE:
+            report.warning = (f"local edits: about {100 * report.edited_share:.0f}% of the "
+                              "photo differs from the look the pairs share (those pixels "
+                              "weigh little in the fit)")
+        elif stands_out:
             report.warning = (f"disagrees with the other pairs (held-out CIEDE2000 "
-                              f"{error:.1f} against {typical:.1f} typical): another look, "
-                              "or edits over much of the photo")
-        elif share > _LOCAL_SHARE:
-            report.warning = (f"local edits: about {100 * share:.0f}% of the photo differs "
-                              "from the look the pairs share (left out of the fit)")
+                              f"{error:.1f} against {typical:.1f} typical): another look?")
         if report.warning:
             warn(f"{report.name}: {report.warning}")
 
