@@ -256,3 +256,52 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
     result = learn_look(pairs)
     assert len(result.used) == 1 and result.folds == 0 and result.held_out is None
     assert result.used[0].delta_e < 1.5
+
+
+def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos):
+    from tests.color.test_raw import write_dng
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.imageio import read_image
+
+    before, after = tmp_path / "before", tmp_path / "after"
+    before.mkdir()
+    after.mkdir()
+    for name in ("sunset", "coffee", "flower"):
+        linear = photos[name][:160, :224] ** 2.2
+        mosaic = np.empty(linear.shape[:2])
+        mosaic[0::2, 0::2] = linear[0::2, 0::2, 0]  # RGGB
+        mosaic[0::2, 1::2] = linear[0::2, 1::2, 1]
+        mosaic[1::2, 0::2] = linear[1::2, 0::2, 1]
+        mosaic[1::2, 1::2] = linear[1::2, 1::2, 2]
+        raw = read_image(write_dng(before / f"{name.upper()}.DNG",
+                                   np.round(mosaic * 65535)))
+        shown = ColorEncoding.for_image(raw).to_display(raw.rgb())  # as the camera showed it
+        write(after / f"{name}.jpg", warm_look(shown))
+    result = learn_look_file(before, after, tmp_path / "look.cube")
+    assert len(result.used) == 3 and "ACEScct" in result.working_space
+    assert all(p.registered == "same framing" for p in result.used)
+    assert result.delta_e < 4.0  # the camera's rendering clips what ACEScct keeps
+    graded = tmp_path / "graded.tif"
+    applied = CliRunner().invoke(main, ["apply", str(before / "SUNSET.DNG"), "--look",
+                                        str(tmp_path / "look.cube"), "-o", str(graded)])
+    assert applied.exit_code == 0, applied.output
+
+
+def test_a_black_and_white_lut_is_applied_without_regrain_unless_asked(tmp_path, photos):
+    """`apply --look` regrains a LUT by default; regrain keeps the input's colour edges and
+    put colour back into a learned black-and-white look (chroma up to 68/255 on a photo)."""
+    import OpenImageIO as oiio
+
+    before, after = make_pairs(tmp_path, photos, look=grey)
+    learn_look_file(before, after, tmp_path / "bw.cube", lut_size=17)
+    photo = write(tmp_path / "sunset.png", photos["sunset"])
+    chroma = {}
+    for flags in ((), ("--regrain",)):
+        out = tmp_path / f"graded{len(flags)}.png"
+        result = CliRunner().invoke(main, ["apply", str(photo), "--look", str(tmp_path / "bw.cube"),
+                                           "-o", str(out), *flags])
+        assert result.exit_code == 0, result.output
+        pixels = oiio.ImageBuf(str(out)).get_pixels(oiio.UINT8).astype(int)
+        chroma[flags] = int((pixels.max(-1) - pixels.min(-1)).max())
+    assert chroma[()] == 0
+    assert chroma[("--regrain",)] > 0  # asked for: as before

@@ -726,7 +726,7 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
                          "the lines above)")
     encoding = ColorEncoding.of(result.working_space, result.working_space)
     grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
-                  working=encoding.working)
+                  working=encoding.working)  # no regrain: the look as the pairs show it
     n = len(result.used)
     if kind == "json":
         result.output = output
