@@ -14,6 +14,8 @@ photo is graded):
    (8-bit PNG);
 2. ``look learn BEFORE AFTER -o look.cube`` (the library call the command
    makes, timed: reading, registration, fit, held-out check, writing);
+   Times: wall and CPU seconds (the process's, all threads; the steadier figure on a
+   shared machine);
 3. the written ``.cube`` read back as ``apply --look`` reads it
    (:func:`wbcgrade.color.saved_look.load_look`) and applied, with no regrain, to
    the other photos (9); each output (8-bit) against the look applied to the
@@ -112,7 +114,7 @@ def resized_cropped(rgb: np.ndarray) -> np.ndarray:
 
 
 def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, variant: str):
-    """Write the pairs, learn the look; (the Grade read back, seconds, the report)."""
+    """Write the pairs, learn the look; (the Grade read back, (wall, CPU) seconds, the report)."""
     from wbcgrade.color.look_learn import learn_look_file
     from wbcgrade.color.saved_look import load_look
 
@@ -125,9 +127,9 @@ def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, varia
         write_8bit(after / f"{name}.png", resized_cropped(looked) if variant == "cropped"
                    else looked)
     output = folder / f"{variant}.cube"
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     result = learn_look_file(before, after, output)
-    seconds = time.perf_counter() - start
+    seconds = (time.perf_counter() - start, time.process_time() - cpu)
     return load_look(output), seconds, result
 
 
@@ -151,7 +153,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", nargs="*", default=None, help="looks to run (names)")
     parser.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
     parser.add_argument("--pairs", type=int, default=12, help="before/after pairs learned from")
-    parser.add_argument("--size", type=int, default=1024, help="long side of the photos")
+    parser.add_argument("--size", type=int, default=768, help="long side of the photos")
     parser.add_argument("--no-variant", action="store_true",
                         help="skip the resized + cropped afters")
     parser.add_argument("--json", type=Path, default=None, help="write every number here")
@@ -166,7 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     everything = TUNED + HELD_OUT
     rows = []
     header = (f"{'look':26s} {'group':8s} {'mean':>6s} {'worst':>6s} {'cropped':>7s} "
-              f"{'diff':>5s} {'learn s':>7s} {'crop s':>6s} {'held dE':>7s} {'chroma':>6s}")
+              f"{'diff':>5s} {'learn s':>11s} {'crop s':>11s} {'held dE':>7s} {'chroma':>6s}")
     print(f"{args.pairs} pairs learned, {len(names) - args.pairs} other photos graded "
           f"(long side {args.size})")
     print(header)
@@ -181,21 +183,25 @@ def main(argv: list[str] | None = None) -> None:
             row = {"look": look, "group": "tuned" if look in TUNED else "held-out",
                    "mean": float(np.mean(recovered)), "worst": float(np.min(recovered)),
                    "photos": dict(zip(graded, map(float, recovered))),
-                   "learn_s": seconds, "held_out_delta_e": report.held_out,
+                   "learn_s": seconds[0], "learn_cpu_s": seconds[1],
+                   "held_out_delta_e": report.held_out,
                    "monochrome_learned": report.look.monochrome, "max_chroma": chroma,
                    "pairs_used": len(report.used)}
             if not args.no_variant:
                 grade, seconds, report = learn(Path(tmp), photos, style, table, "cropped")
                 cropped, _ = score(grade, photos, graded, table)
                 row.update({"cropped_mean": float(np.mean(cropped)),
-                            "cropped_worst": float(np.min(cropped)), "cropped_s": seconds,
+                            "cropped_worst": float(np.min(cropped)), "cropped_s": seconds[0],
+                            "cropped_cpu_s": seconds[1],
                             "cropped_pairs_used": len(report.used)})
         rows.append(row)
         crop = row.get("cropped_mean")
         print(f"{look:26s} {row['group']:8s} {row['mean']:+6.3f} {row['worst']:+6.3f} "
               f"{crop if crop is None else format(crop, '+7.3f'):>7} "
               f"{'' if crop is None else format(abs(crop - row['mean']), '5.3f'):>5} "
-              f"{row['learn_s']:7.1f} {row.get('cropped_s', float('nan')):6.1f} "
+              f"{row['learn_s']:5.1f} ({row['learn_cpu_s']:4.1f}) "
+              f"{row.get('cropped_s', float('nan')):5.1f} "
+              f"({row.get('cropped_cpu_s', float('nan')):4.1f}) "
               f"{row['held_out_delta_e']:7.2f} "
               f"{row['max_chroma'] if look in MONOCHROME else '':>6}", flush=True)
     print()
@@ -208,7 +214,10 @@ def main(argv: list[str] | None = None) -> None:
               f"worst photo {min(r['worst'] for r in picked):+.3f}, "
               f"resized+cropped off by at most "
               f"{max(diffs) if diffs else float('nan'):.3f}, "
-              f"learning {max(r['learn_s'] for r in picked):.1f} s at most")
+              f"learning {max(r['learn_s'] for r in picked):.1f} s at most "
+              f"({max(r['learn_cpu_s'] for r in picked):.1f} s CPU; resized+cropped "
+              f"{max(r.get('cropped_s', 0.0) for r in picked):.1f} s, "
+              f"{max(r.get('cropped_cpu_s', 0.0) for r in picked):.1f} s CPU)")
     mono = [r for r in rows if r["look"] in MONOCHROME]
     if mono:
         print("black and white: " + ", ".join(

@@ -93,6 +93,8 @@ def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos)
             return looked[h // 8: h - h // 10, w // 6: w - w // 12]
         if name == "coffee":  # turned a quarter
             return np.rot90(looked, 1)
+        if name == "flower":  # cropped keeping its shape, turned half
+            return np.rot90(looked[h // 10: h - h // 10, w // 10: w - w // 10], 2)
         return looked
 
     plain = learn_look_file(*make_pairs(tmp_path / "plain", photos), tmp_path / "a.cube")
@@ -103,6 +105,8 @@ def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos)
     assert how["aitzgorri"] == "resized"
     assert how["chelsea"].startswith("keypoints")
     assert how["coffee"].endswith("turned 270 degrees")
+    # its shape is the original's, turned or not, but no turn lays it on the original
+    assert how["flower"].startswith("keypoints")
     a, b = load_look(tmp_path / "a.cube"), load_look(tmp_path / "b.cube")
     for other in ("sunset", "bridge"):
         assert abs(photo_error(a, warm_look, photos[other])
@@ -305,3 +309,24 @@ def test_a_black_and_white_lut_is_applied_without_regrain_unless_asked(tmp_path,
         chroma[flags] = int((pixels.max(-1) - pixels.min(-1)).max())
     assert chroma[()] == 0
     assert chroma[("--regrain",)] > 0  # asked for: as before
+
+
+def test_a_crop_of_the_original_shape_is_not_laid_on_it_turned():
+    """A resized crop that keeps the photo's shape goes to keypoints: turned by half, the
+    bridge's repeated structure passed the cheap check (its patches peaked at no shift:
+    the window's own envelope), and the pair taught the look a mirror image of the scene."""
+    import cv2
+
+    from wbcgrade.color.look_learn import PairImages, pair_colours, register_pair
+
+    before = sample("bridge", 480).astype(np.float32)
+    looked = warm_look(before).astype(np.float32)
+    h, w = looked.shape[:2]
+    crop = looked[h // 10: h - h // 20, w // 10: w - w // 20]
+    after = cv2.resize(crop, (round(crop.shape[1] * 0.6), round(crop.shape[0] * 0.6)),
+                       interpolation=cv2.INTER_AREA)
+    images = PairImages("bridge", before, after, False)
+    found = register_pair(images)
+    assert found is not None and found.how.startswith("keypoints"), found
+    sources, targets, _ = pair_colours(images, found)
+    assert np.median(np.abs(warm_look(sources) - targets)) < 0.02

@@ -73,11 +73,16 @@ KEYPOINT_SIZE = 512
 _EDIT_ENDING = re.compile(r"[-_ ](edit|edited|copy|final|export)(-?\d+)?$", re.IGNORECASE)
 #: Cheap registration: aspect ratios that agree within this share are tried as one framing;
 #: patches (of a 4x4 grid) whose phase correlation finds a shift within ``_PATCH_SHIFT``
-#: pixels (at ``_CHECK_SIZE``) agree; at least ``_PATCH_AGREE`` of the textured ones must.
+#: pixels (at ``_CHECK_SIZE``), with a peak above ``_PATCH_RESPONSE``, agree; at least
+#: ``_PATCH_AGREE`` of the textured ones must.
 _ASPECT_TOLERANCE = 0.02
 _CHECK_SIZE = 256
 _PATCH_SHIFT = 1.0
 _PATCH_AGREE = 0.8
+#: Least phase-correlation peak of an agreeing patch. Measured on ``benchmarks/learn.py``'s
+#: photos under a film look: patches of a pair laid right peak at 0.9-1.0; of a pair
+#: turned the wrong way or cropped, at most 3 of 13-16 patches peak above 0.3 near no shift.
+_PATCH_RESPONSE = 0.3
 #: Held-out CIEDE2000 of a pair above both this multiple of the pairs' median and the
 #: median plus ``_DISAGREE_MARGIN``: the pair disagrees with the others.
 _DISAGREE_FACTOR = 2.0
@@ -321,8 +326,9 @@ def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
             if pa.std() < 0.01 or pb.std() < 0.01:
                 continue  # flat (sky, a wall): says nothing about the framing
             textured += 1
-            (dx, dy), response = cv2.phaseCorrelate(pa, pb, window)
-            agree += bool(np.hypot(dx, dy) <= _PATCH_SHIFT and response > 0.05)
+            # the means off: the window's own envelope would peak at no shift
+            (dx, dy), response = cv2.phaseCorrelate(pa - pa.mean(), pb - pb.mean(), window)
+            agree += bool(np.hypot(dx, dy) <= _PATCH_SHIFT and response > _PATCH_RESPONSE)
     return textured >= 4 and agree >= _PATCH_AGREE * textured
 
 
