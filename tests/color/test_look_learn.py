@@ -71,7 +71,16 @@ def photo_error(grade, look, photo):
 
 
 def test_a_known_look_is_learned_from_pairs_and_reproduced_on_another_photo(tmp_path, photos):
+    import OpenImageIO as oiio
+
     before, after = make_pairs(tmp_path, photos)
+    (after / "coffee.png").unlink()  # one edit a 16-bit TIFF
+    data = np.round(np.clip(warm_look(photos["coffee"]), 0, 1) * 65535).astype(np.uint16)
+    out = oiio.ImageOutput.create(str(after / "coffee.tif"))
+    out.open(str(after / "coffee.tif"), oiio.ImageSpec(data.shape[1], data.shape[0], 3,
+                                                       oiio.UINT16))
+    out.write_image(data)
+    out.close()
     result = learn_look_file(before, after, tmp_path / "look.cube")
     assert len(result.used) == len(STYLE)
     assert all(p.registered == "same framing" for p in result.used)
