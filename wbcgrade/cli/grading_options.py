@@ -137,8 +137,7 @@ def look_option() -> list:
                          default=None, metavar="FILE",
                          help="Apply a saved grade instead of fitting one: the JSON printed by "
                               "`apply --json` (regrain as it was) or a 3-D LUT (.cube from "
-                              "--lut, .clf, ...; regrained unless --no-regrain, or unless it "
-                              "makes every colour grey). Replaces "
+                              "--lut, .clf, ...; regrained unless --no-regrain). Replaces "
                               "--style/--preset; the fit options are not used.")]
 
 
@@ -176,7 +175,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
 
     from click.core import ParameterSource
 
-    from wbcgrade.color.saved_look import is_monochrome, load_look
+    from wbcgrade.color.saved_look import load_look
     from wbcgrade.errors import OptionError
 
     def given(name: str) -> bool:
@@ -190,9 +189,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     is_json = dict(look.info).get("saved_look", {}).get("kind") == "json"
     regrain_given = any(given(n) for n in ("regrain", "regrain_radius", "regrain_eps"))
     changes = {}
-    if regrain_given or not (is_json or is_monochrome(look)):
-        # a black-and-white LUT is not regrained unless asked: regrain keeps the input's
-        # colour edges, and would put colour back into it
+    if regrain_given or not is_json:
         changes["regrain"] = options.regrain.settings
     if given("strength"):
         changes["strength"] = options.map.strength

@@ -50,7 +50,7 @@ from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
-           "look_styles", "look_fit", "look_batch_options", "is_monochrome", "SAMPLED_LUT_SIZE"]
+           "look_styles", "look_fit", "look_batch_options", "SAMPLED_LUT_SIZE"]
 
 #: The ``format`` tag of a saved grade.
 LOOK_FORMAT = "wbcgrade-look"
@@ -301,13 +301,6 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     kind = suffix.lstrip(".")
     return Grade(names=(path.stem,), weights=np.ones(1), color_map=table, working=space,
                  info={"saved_look": {"file": str(path), "kind": kind}})
-
-
-def is_monochrome(grade: Grade, tolerance: float = 1e-4) -> bool:
-    """Whether a grade's map turns every colour into a grey (a black-and-white look:
-    every node of its lattice has equal channels, within ``tolerance``)."""
-    table = np.asarray(grade.color_map, dtype=np.float32).reshape(-1, 3)
-    return bool(table.size and float(np.ptp(table, axis=1).max()) <= tolerance)
 
 
 def look_styles(grade: Grade, source: str) -> StyleSet:
