@@ -1,4 +1,5 @@
-"""``wbcgrade look``: the look a folder of graded photos shares, as a LUT."""
+"""``wbcgrade look``: the look a folder of graded photos shares (``extract``), or the look
+a photographer's before/after pairs show (``learn``), as a LUT or a saved grade."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options, lut_f
 
 @click.group("look")
 def look() -> None:
-    """Looks: the colour grade a set of style photos shares, apart from their scenes."""
+    """Looks: the colour grade a set of style photos shares, apart from their scenes
+    (extract), or the one your own before/after edits show (learn)."""
 
 
 @look.command("extract", cls=LazyOptionsCommand)
