@@ -1,4 +1,5 @@
-"""``wbcgrade look``: the look a folder of graded photos shares, as a LUT."""
+"""``wbcgrade look``: the look a folder of graded photos shares (``extract``), or the look
+a photographer's before/after pairs show (``learn``), as a LUT or a saved grade."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options, lut_f
 
 @click.group("look")
 def look() -> None:
-    """Looks: the colour grade a set of style photos shares, apart from their scenes."""
+    """Looks: the colour grade a set of style photos shares, apart from their scenes
+    (extract), or the one your own before/after edits show (learn)."""
 
 
 @look.command("extract", cls=LazyOptionsCommand)
@@ -79,6 +81,62 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
                  else "a faint look")
         click.echo(f"{state}: {outcome.reason}")
         if outcome.source.value == "set-look":
-            click.echo("--strength 1 (up to 2) writes the extracted look in full; "
+            click.echo("--strength above 1 (up to 2) applies more of what was found; "
                        "`wbcgrade apply --mode palette` moves a photo's colours towards "
                        "the style photos' instead")
+
+
+@look.command("learn")
+@click.argument("before", type=click.Path(path_type=str))
+@click.argument("after", type=click.Path(path_type=str))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
+              help="The look to write: .cube or .clf (a LUT) or .json (a saved grade); "
+                   "the ending names the format.")
+@click.option("--lut-size", type=click.IntRange(2, 129), default=33, show_default=True,
+              help="Nodes per axis of the written look.")
+@click.option("--working-space", default=None, metavar="NAME",
+              help="Colour space the look is learned and applied in [default: ACEScct when "
+                   "an original is raw, else sRGB-encoded Rec.709].")
+@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+def learn(before, after, output, lut_size, working_space, overwrite, as_json):
+    """Learn the look of a photographer's edits from BEFORE/AFTER pairs.
+
+    BEFORE and AFTER are two photos, or two folders whose photos pair by
+    file name (IMG_1.CR2 with IMG_1.jpg; an export's -edit or _copy ending
+    does not count). Edited versions may be resized, cropped, turned by 90
+    degrees or of another format. The look (tone curves, colour mixing and a
+    smooth correction; black and white when every edit is) is fitted to the
+    pixels of all pairs and written for `apply --look`, `batch --look` and
+    `video --look`. Each pair that cannot be used is named with the reason;
+    the others are used.
+    """
+    from tqdm import tqdm
+
+    from wbcgrade.color.look_learn import learn_look_file
+
+    with tqdm(desc="pairs", unit="pair", disable=None, leave=False) as bar:
+        def on_pair(done: int, total: int, name: str) -> None:
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name, refresh=True)
+
+        def warn(message: str) -> None:
+            bar.clear()
+            click.echo(f"Warning: {message}", err=True)
+
+        found = learn_look_file(before, after, output, lut_size, working_space, overwrite,
+                                warn, on_pair)
+    if as_json:
+        click.echo(json.dumps(found.as_dict(), indent=2))
+        return
+    for pair in found.used:
+        held = "" if pair.held_out is None else f", {pair.held_out:.1f} held out"
+        click.echo(f"  {pair.name}: {pair.registered}; CIEDE2000 {pair.delta_e:.1f}{held}")
+    n = len(found.used)
+    kind = "black-and-white look" if found.look.monochrome else "look"
+    held = ("" if found.held_out is None else
+            f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
+    click.echo(f"wrote {found.output}: the {kind} of {n} before/after pair{'s' * (n != 1)} "
+               f"(mean CIEDE2000 after vs look(before) {found.delta_e:.1f}{held}; "
+               f"{found.seconds:.1f} s)")

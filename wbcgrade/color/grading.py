@@ -514,8 +514,10 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
         confidence = float(look.get("confidence", 0.0) or 0.0)
         strength = confidence + (1.0 - confidence) * set_strength
         why = None
-        if set_strength < FAINT_STRENGTH and confidence <= 0:
-            how = "no" if set_strength < UNCHANGED_STRENGTH else "little"
+        # the statistics look was shrunk by what content varies by: its size says how much
+        shared = (look_size / 3.0 if look.get("method") == "statistics" else set_strength)
+        if shared < FAINT_STRENGTH and confidence <= 0:
+            how = "no" if shared < UNCHANGED_STRENGTH else "little"
             why = (f"these {n_styles} style photos share {how} look that can be told apart "
                    "from their content" if n_styles > 1 else
                    f"the style photo shows {how} look that can be told apart from its content")

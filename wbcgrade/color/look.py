@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from wbcgrade.color.remap import TONE_LUMA, monochrome_map
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
            "PhotoLook", "photo_look", "SceneLook", "fit_scene_look", "find_scene_look",
-           "fit_correction",
+           "fit_correction", "fit_pairs_look",
            "set_look_base", "set_look_halves", "look_reliability"]
 
 #: Rec.709 luma weights (on encoded values: a lightness proxy, as colourists' luma).
@@ -681,21 +681,54 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
     if not matches or not any(p[2].sum() > 0 for p in parts):
         return None
     sources, targets, weights = (np.concatenate(column) for column in zip(*parts))
-    look, robust = prior, weights
-    for _ in range(rounds):
-        look = fit_look_map(sources, targets, robust, prior, SCENE_SMOOTHNESS, SCENE_RIDGE,
-                            prior.knots)
-        distance = np.linalg.norm(look(sources) - targets, axis=1)
-        scale = max(float(np.median(distance)), 1e-3)
-        robust = weights / (1.0 + (distance / (2.0 * scale)) ** 2)  # Cauchy
-    mapped = look(sources)
-    residual = float(np.median(np.linalg.norm(mapped - targets, axis=1)))
-    sure_of_pairs = float(np.clip((UNSURE_RESIDUAL - residual) / (UNSURE_RESIDUAL - SURE_RESIDUAL),
-                                  0.0, 1.0))
+    fitted, _ = fit_pairs_look(sources, targets, weights, prior, rounds, correct)
+    sure_of_pairs = float(np.clip((UNSURE_RESIDUAL - fitted.residual)
+                                  / (UNSURE_RESIDUAL - SURE_RESIDUAL), 0.0, 1.0))
     sureness = max(match.sureness for match in matches.values())
-    correction = fit_correction(mapped, targets, robust) if correct else None
-    return SceneLook(look, {i: m.inliers for i, m in matches.items()}, sureness * sure_of_pairs,
-                     residual, int(len(sources)), correction)
+    return replace(fitted, matches={i: m.inliers for i, m in matches.items()},
+                   confidence=sureness * sure_of_pairs)
+
+
+def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                   prior: LookMap | None = None, rounds: int = 3, correct: bool = True,
+                   robust: np.ndarray | None = None) -> tuple[SceneLook, np.ndarray]:
+    """The look of colour pairs (before, after): the map family, robustly, and its correction.
+
+    What :func:`fit_scene_look` fits to the pairs of a matched scene (and
+    ``wbcgrade look learn`` to a photographer's before/after pairs): the
+    :class:`LookMap` refitted ``rounds`` times with Cauchy weights (pairs far
+    from the fit, such as content that moved or a local edit, weigh less each
+    round), then the smooth lattice correction (:func:`fit_correction`, 9^3)
+    of what the family cannot hold.
+
+    Parameters
+    ----------
+    sources, targets : (N, 3) colours in [0, 1].
+    weights : (N,) non-negative.
+    prior : the map the ridge pulls towards (default identity).
+    robust : (N,) weights to start from instead of ``weights`` (a previous
+        fit's robust weights: the rounds go on from there).
+
+    Returns
+    -------
+    look : :class:`SceneLook` (no matches, confidence 1).
+    robust : (N,) the final robust weights.
+    """
+    from wbcgrade.core._cpu import fast_cpu
+
+    prior = prior or LookMap.identity()
+    look, robust = prior, (weights if robust is None else robust)
+    with fast_cpu():  # small products: OpenBLAS's threads cost 10-80x on a busy machine
+        for _ in range(rounds):
+            look = fit_look_map(sources, targets, robust, prior, SCENE_SMOOTHNESS, SCENE_RIDGE,
+                                prior.knots)
+            distance = np.linalg.norm(look(sources) - targets, axis=1)
+            scale = max(float(np.median(distance)), 1e-3)
+            robust = weights / (1.0 + (distance / (2.0 * scale)) ** 2)  # Cauchy
+        mapped = look(sources)
+        residual = float(np.median(np.linalg.norm(mapped - targets, axis=1)))
+        correction = fit_correction(mapped, targets, robust) if correct else None
+    return SceneLook(look, {}, 1.0, residual, int(len(sources)), correction), robust
 
 
 # --------------------------------------------------------------------------- grading with looks

@@ -1,0 +1,749 @@
+"""``wbcgrade look learn``: a photographer's before/after pairs become a reusable look.
+
+Originals and the versions the photographer edited hold what no style folder
+gives: every pixel of a pair is a colour before the look and the same
+colour after it. The steps:
+
+1. **Pairing** (:func:`pair_files`): two photos, or two folders whose photos
+   pair by file stem (``IMG_1.CR2`` with ``IMG_1.jpg``; case does not count,
+   and an export's ``-edit``/``_copy``/``-final`` ending is dropped). A stem
+   on one side only is reported and left out.
+2. **Reading** (:func:`read_pair`): both photos through the project's reader
+   (raw originals demosaiced), each from its own colour space into the
+   originals' working space (:func:`learn_space`: ACEScct when an original is
+   raw, else sRGB-encoded Rec.709), shrunk to :data:`LEARN_SIZE` pixels a side.
+3. **Registration** (:func:`register_pair`): an edit may be resized,
+   cropped, rotated by 90 degrees, of another format or bit depth. First the
+   cheap case: an after whose shape is the original's (after one of the
+   four rotations) is resized onto it and checked patch by patch (phase
+   correlation, which tone and colour changes do not disturb); otherwise
+   keypoints and a homography as for a style photo of the photo's own scene
+   (:func:`wbcgrade.color.scene.match_scene`). A pair of different scenes
+   matches neither and is reported.
+4. **Fit** (:func:`learn_look`): colour pairs of each overlap
+   (:func:`wbcgrade.color.scene.colour_pairs`, edges down-weighted), every
+   pair weighing the same, fitted as a scene look is
+   (:func:`wbcgrade.color.look.fit_pairs_look`: tone curves and colour
+   mixing, Cauchy-robust refits so that local edits such as a healed spot
+   or a masked sky weigh little, then a smooth lattice correction). When
+   every after is black and white the look's output is made grey.
+5. **Report**: the mean CIEDE2000 between each after and the look applied
+   to its original, fitted and held out (the pairs split into
+   :data:`LEARN_FOLDS` folds, each fold's pairs predicted by a look fitted
+   without them), and a warning for a pair that disagrees with the others.
+
+:func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
+saved grade (``.json``) that :func:`wbcgrade.color.saved_look.load_look`
+reads: ``apply --look``, ``batch --look`` and ``video --look`` use it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.errors import InputError, first_line
+
+__all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
+           "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
+           "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
+           "PAIRS_PER_PHOTO", "MONO_CHROMA", "KEYPOINT_SIZE"]
+
+#: Long side (pixels) the photos are registered and sampled at (the scene match's size).
+LEARN_SIZE = 768
+#: Colour pairs drawn from each photo pair. Measured on ``benchmarks/learn.py`` (12 pairs,
+#: 16 film looks): 4 000 or 20 000 a pair recover the same (+0.81 either way, within 0.003).
+PAIRS_PER_PHOTO = 5000
+#: Folds of the held-out check (leave-one-out below this many pairs).
+LEARN_FOLDS = 4
+#: An after whose 99th percentile of chroma (largest minus smallest channel, working
+#: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
+MONO_CHROMA = 0.02
+#: Long side (pixels) keypoints are found on when the cheap registration fails (crops);
+#: the homography is then scaled to :data:`LEARN_SIZE`. Pairs of one scene under a look
+#: agree on 60 or more keypoints at this size in ``benchmarks/learn.py``.
+KEYPOINT_SIZE = 512
+#: Export endings dropped from an after's stem before pairing (``IMG_1-Edit.tif``).
+_EDIT_ENDING = re.compile(r"[-_ ](edit|edited|copy|final|export)(-?\d+)?$", re.IGNORECASE)
+#: Cheap registration: aspect ratios that agree within this share are tried as one framing;
+#: patches (of a 4x4 grid) whose phase correlation finds a shift within ``_PATCH_SHIFT``
+#: pixels (at ``_CHECK_SIZE``), with a peak above ``_PATCH_RESPONSE``, agree; at least
+#: ``_PATCH_AGREE`` of the textured ones must.
+_ASPECT_TOLERANCE = 0.02
+_CHECK_SIZE = 256
+_PATCH_SHIFT = 1.0
+_PATCH_AGREE = 0.8
+#: Least phase-correlation peak of an agreeing patch. Measured on ``benchmarks/learn.py``'s
+#: photos under a film look: patches of a pair laid right peak at 0.9-1.0; of a pair
+#: turned the wrong way or cropped, at most 3 of 13-16 patches peak above 0.3 near no shift.
+_PATCH_RESPONSE = 0.3
+#: Held-out CIEDE2000 of a pair above both this multiple of the pairs' median and the
+#: median plus ``_DISAGREE_MARGIN``: the pair disagrees with the others.
+_DISAGREE_FACTOR = 2.0
+_DISAGREE_MARGIN = 2.0
+#: A pixel its own pair's global map misses by more than this (working-space units) was
+#: edited locally (:func:`_edited_share`); a pair with more than ``_LOCAL_SHARE`` of them
+#: is reported as locally edited (measured on 12 pairs of a film look with no edit, resized,
+#: cropped and turned: at most 4.4 % of the flat pixels).
+_LOCAL_DISTANCE = 0.06
+_LOCAL_SHARE = 0.08
+_FLAT = 0.7
+
+
+# --------------------------------------------------------------------------- pairing
+
+
+@dataclass(frozen=True)
+class PairFiles:
+    """A photo and its edited version: ``name`` (the stem), ``before``, ``after``."""
+
+    name: str
+    before: Path
+    after: Path
+
+
+def _image_files(folder: Path) -> list[Path]:
+    from wbcgrade.color.batch.plan import image_extensions
+    from wbcgrade.color.raw import RAW_SUFFIXES
+
+    exts = image_extensions() | RAW_SUFFIXES
+    return sorted(p for p in folder.iterdir()
+                  if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in exts)
+
+
+def _pair_key(path: Path, edited: bool) -> str:
+    stem = path.stem
+    if edited:
+        stem = _EDIT_ENDING.sub("", stem)
+    return stem.casefold()
+
+
+#: Which of several files sharing a stem is taken: raw first, then lossless, then the rest.
+def _preference(path: Path) -> tuple[int, str]:
+    from wbcgrade.color.raw import is_raw
+
+    suffix = path.suffix.lower()
+    rank = 0 if is_raw(path) else 1 if suffix in (".tif", ".tiff", ".exr", ".png", ".dng") \
+        else 3 if suffix in (".jpg", ".jpeg") else 2
+    return rank, path.name
+
+
+def pair_files(before: str | os.PathLike, after: str | os.PathLike
+               ) -> tuple[list[PairFiles], list[tuple[str, str]]]:
+    """The before/after pairs two photos or two folders give, and what could not be paired.
+
+    Parameters
+    ----------
+    before, after : two photo files (one pair, named by the original's stem),
+        or two folders whose photos pair by stem (case-insensitive; an
+        after's ``-edit``, ``_copy``, ``-final``... ending is dropped).
+
+    Returns
+    -------
+    pairs : the pairs, in the order of their names.
+    problems : (name, reason) of each stem found on one side only, and of
+        stems several files share (the raw, else the lossless file is used).
+
+    Raises
+    ------
+    InputError
+        A path is missing, or one is a file and the other a folder.
+    """
+    before, after = Path(before), Path(after)
+    for path, side in ((before, "BEFORE"), (after, "AFTER")):
+        if not path.exists():
+            raise InputError(f"{path}: no such file or folder ({side})")
+    if before.is_file() and after.is_file():
+        return [PairFiles(before.stem, before, after)], []
+    if not (before.is_dir() and after.is_dir()):
+        raise InputError("BEFORE and AFTER must be two photos or two folders "
+                         f"({before} is a {'folder' if before.is_dir() else 'file'}, "
+                         f"{after} a {'folder' if after.is_dir() else 'file'})")
+    if before.resolve() == after.resolve():
+        raise InputError(f"{before}: BEFORE and AFTER are the same folder")
+    problems: list[tuple[str, str]] = []
+    sides = []
+    for folder, edited, side in ((before, False, "originals"), (after, True, "edits")):
+        found: dict[str, list[Path]] = {}
+        for path in _image_files(folder):
+            found.setdefault(_pair_key(path, edited), []).append(path)
+        chosen = {}
+        for key, paths in found.items():
+            paths = sorted(paths, key=_preference)
+            chosen[key] = paths[0]
+            if len(paths) > 1:
+                problems.append((paths[0].stem, f"{len(paths)} {side} share the name "
+                                 f"({', '.join(p.name for p in paths)}); "
+                                 f"{paths[0].name} is used"))
+        sides.append(chosen)
+    originals, edits = sides
+    pairs = [PairFiles(originals[key].stem, originals[key], edits[key])
+             for key in sorted(originals) if key in edits]
+    for key in sorted(set(originals) - set(edits)):
+        problems.append((originals[key].stem, f"no edited version in {after} "
+                         f"(nothing named {originals[key].stem}.*)"))
+    for key in sorted(set(edits) - set(originals)):
+        problems.append((edits[key].stem, f"no original in {before} "
+                         f"(nothing named {edits[key].stem}.*)"))
+    return pairs, problems
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def learn_space(pairs: Sequence[PairFiles], working_space: str | None = None) -> str:
+    """The working space the look is learned in: ``working_space``, else ACEScct when an
+    original is a raw file (the space a raw photo is graded in), else sRGB-encoded Rec.709."""
+    from wbcgrade.color.colorspace import default_working_space, resolve_space
+    from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
+
+    if working_space:
+        return resolve_space(working_space, "--working-space")
+    if any(is_raw(p.before) for p in pairs):
+        return resolve_space(RAW_WORKING_SPACE)
+    return default_working_space()
+
+
+@dataclass(frozen=True)
+class PairImages:
+    """A pair read into the working space.
+
+    Attributes
+    ----------
+    name : the pair's name.
+    before, after : (h, w, 3) float32 working-space colours in [0, 1], long side
+        at most :data:`LEARN_SIZE` (each keeps its own shape).
+    monochrome : whether the after is black and white (:data:`MONO_CHROMA`).
+    """
+
+    name: str
+    before: np.ndarray
+    after: np.ndarray
+    monochrome: bool
+
+
+def _read_small(path: Path, working: str) -> np.ndarray:
+    """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.scene import _shrink
+
+    image = read_image(path)
+    encoding = ColorEncoding.for_image(image, None, working)
+    small = _shrink(image.rgb(), LEARN_SIZE)
+    encoded, _ = encoding.encode(small, image.is_float)
+    return np.ascontiguousarray(encoded, dtype=np.float32)
+
+
+def read_pair(pair: PairFiles, working: str) -> PairImages:
+    """Read both photos of a pair into the working space ``working`` (a config name).
+
+    Raises InputError (naming the file) when either is unreadable.
+    """
+    before = _read_small(pair.before, working)
+    after = _read_small(pair.after, working)
+    chroma = after.max(axis=-1) - after.min(axis=-1)
+    return PairImages(pair.name, before, after,
+                      bool(np.percentile(chroma, 99) < MONO_CHROMA))
+
+
+# --------------------------------------------------------------------------- registration
+
+
+@dataclass(frozen=True)
+class Registration:
+    """Where the after lies on the original.
+
+    Attributes
+    ----------
+    homography : (3, 3) from the after's pixels to the original's (both at
+        their :class:`PairImages` size).
+    how : "same framing" or "resized" (either perhaps ", turned 90/180/270 degrees"),
+        or "keypoints (N agree)".
+    coverage : share of the original the after covers.
+    """
+
+    homography: np.ndarray
+    how: str
+    coverage: float
+
+
+def _luma(colors: np.ndarray) -> np.ndarray:
+    return np.asarray(colors, np.float32) @ np.float32([0.299, 0.587, 0.114])
+
+
+def _rotation_homography(shape_after: tuple[int, int], turns: int,
+                         shape_before: tuple[int, int]) -> np.ndarray:
+    """The map from the after's pixels to the original's when the after, turned
+    ``turns`` times by 90 degrees (as ``np.rot90``), is the original resized."""
+    import cv2
+
+    h, w = shape_after
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rx, ry = np.rot90(xs, turns), np.rot90(ys, turns)  # after's coords at each turned pixel
+    th, tw = rx.shape
+    hb, wb = shape_before
+    corners = [(0, 0), (0, tw - 1), (th - 1, tw - 1), (th - 1, 0)]
+    src = np.float32([(rx[i, j], ry[i, j]) for i, j in corners])
+    dst = np.float32([((j + 0.5) * wb / tw - 0.5, (i + 0.5) * hb / th - 0.5)
+                      for i, j in corners])
+    return cv2.getPerspectiveTransform(src, dst)
+
+
+def _warp(after: np.ndarray, homography: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    return cv2.warpPerspective(np.ascontiguousarray(after), homography, (shape[1], shape[0]),
+                               flags=cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_REPLICATE)
+
+
+def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
+    """Whether ``warped`` lies on ``before`` pixel for pixel: on a 4x4 grid of patches
+    (at :data:`_CHECK_SIZE`), phase correlation finds no shift on most textured ones."""
+    import cv2
+
+    from wbcgrade.color.scene import _shrink
+
+    a = _shrink(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
+    b = _shrink(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
+    h, w = a.shape
+    ph, pw = h // 4, w // 4
+    if ph < 16 or pw < 16:
+        return False
+    window = cv2.createHanningWindow((pw, ph), cv2.CV_32F)
+    textured = agree = 0
+    for i in range(4):
+        for j in range(4):
+            pa = np.ascontiguousarray(a[i * ph:(i + 1) * ph, j * pw:(j + 1) * pw])
+            pb = np.ascontiguousarray(b[i * ph:(i + 1) * ph, j * pw:(j + 1) * pw])
+            if pa.std() < 0.01 or pb.std() < 0.01:
+                continue  # flat (sky, a wall): says nothing about the framing
+            textured += 1
+            # the means off: the window's own envelope would peak at no shift
+            (dx, dy), response = cv2.phaseCorrelate(pa - pa.mean(), pb - pb.mean(), window)
+            agree += bool(np.hypot(dx, dy) <= _PATCH_SHIFT and response > _PATCH_RESPONSE)
+    return textured >= 4 and agree >= _PATCH_AGREE * textured
+
+
+def register_pair(images: PairImages) -> Registration | None:
+    """Lay the after over the original; None when they show different scenes.
+
+    The cheap case first (the after is the original resized, perhaps turned
+    by a multiple of 90 degrees: checked by :func:`_aligned`), then keypoints
+    and a homography (:func:`wbcgrade.color.scene.match_scene`: crops,
+    resized crops, turns).
+    """
+    from wbcgrade.color.scene import match_scene, scene_image
+
+    before, after = images.before, images.after
+    aspect = before.shape[1] / before.shape[0]
+    for turns in range(4):
+        th, tw = (after.shape[:2] if turns % 2 == 0 else after.shape[1::-1])
+        if abs(tw / th / aspect - 1.0) > _ASPECT_TOLERANCE:
+            continue
+        homography = _rotation_homography(after.shape[:2], turns, before.shape[:2])
+        if _aligned(before, _warp(after, homography, before.shape[:2])):
+            how = ("same framing" if after.shape[:2] == (before.shape[:2] if turns % 2 == 0
+                                                         else before.shape[1::-1])
+                   else "resized")
+            how += "" if turns == 0 else f", turned {90 * turns} degrees"
+            return Registration(homography, how, 1.0)
+    small_before, small_after = scene_image(before, KEYPOINT_SIZE), scene_image(after,
+                                                                                KEYPOINT_SIZE)
+    match = match_scene(small_before, small_after)
+    if match is None:
+        return None
+    homography = (np.linalg.inv(_pixel_scale(before, small_before.colors)) @ match.homography
+                  @ _pixel_scale(after, small_after.colors))
+    return Registration(homography, f"keypoints ({match.inliers} agree)", match.coverage)
+
+
+def _pixel_scale(image: np.ndarray, small: np.ndarray) -> np.ndarray:
+    """(3, 3) from ``image``'s pixels to those of ``small``, a resized copy (pixel centres
+    to pixel centres)."""
+    fx, fy = small.shape[1] / image.shape[1], small.shape[0] / image.shape[0]
+    return np.array([[fx, 0.0, 0.5 * fx - 0.5], [0.0, fy, 0.5 * fy - 0.5], [0.0, 0.0, 1.0]])
+
+
+def pair_colours(images: PairImages, registration: Registration,
+                 max_pairs: int = PAIRS_PER_PHOTO, seed: int = 0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Colour pairs of a registered pair: (originals (N, 3), afters (N, 3), weights (N,)),
+    drawn from the overlap by :func:`wbcgrade.color.scene.colour_pairs`."""
+    from wbcgrade.color.scene import SceneImage, SceneMatch, _shrink, colour_pairs
+
+    before, homography = images.before, registration.homography
+    h = homography / homography[2, 2]
+    magnified = float(np.sqrt(abs(np.linalg.det(h[:2, :2]))))
+    if magnified > 1.05:  # a smaller after: the original shrunk to its sharpness
+        size = max(16, round(max(before.shape[:2]) / magnified))
+        small = _shrink(before, size)
+        before, homography = small, _pixel_scale(before, small) @ homography
+    empty = (np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
+    return colour_pairs(SceneImage(before, *empty), SceneImage(images.after, *empty),
+                        SceneMatch(homography, 0, registration.coverage), max_pairs, seed)
+
+
+# --------------------------------------------------------------------------- the look
+
+
+@dataclass(frozen=True)
+class LearnedLook:
+    """The look the pairs share: a scene look (:class:`wbcgrade.color.look.SceneLook`),
+    made grey when every after was black and white.
+
+    Attributes
+    ----------
+    look : the fitted map (tone curves and colour mixing, then the lattice correction).
+    monochrome : the output is grey (the mean of the fitted channels).
+    """
+
+    look: object
+    monochrome: bool = False
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        out = self.look(rgb)
+        if self.monochrome:
+            out = np.repeat(out.mean(axis=-1, keepdims=True), 3, axis=-1)
+        return out
+
+    def lattice(self, size: int = 33) -> np.ndarray:
+        """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
+        from wbcgrade.color.histogram import grid_points
+
+        return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
+
+
+def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome: bool,
+         robust: Sequence[np.ndarray] | None = None, rounds: int = 3
+         ) -> tuple[LearnedLook, list[np.ndarray], float]:
+    """Fit the parts' pairs, each part weighing the same.
+
+    Returns (the look, each part's robust weights, the pooled median distance)."""
+    from wbcgrade.color.look import fit_pairs_look
+
+    sources = np.concatenate([p[0] for p in parts])
+    targets = np.concatenate([p[1] for p in parts])
+    weights = np.concatenate([p[2] / max(float(p[2].sum()), 1e-12) for p in parts])
+    start = None if robust is None else np.concatenate(list(robust))
+    look, final = fit_pairs_look(sources, targets, weights, rounds=rounds, robust=start)
+    split = np.cumsum([len(p[0]) for p in parts])[:-1]
+    return LearnedLook(look, monochrome), np.split(final, split), look.residual
+
+
+def _delta_e(colors: np.ndarray, truth: np.ndarray, encoding) -> np.ndarray:
+    """(N,) CIEDE2000 between two lists of working-space colours (shown as sRGB, D65)."""
+    from wbcgrade.color._colour import colour
+
+    d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+
+    def lab(rgb: np.ndarray) -> np.ndarray:
+        shown = encoding.to_display(rgb, working=True).astype(np.float64)
+        return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(shown, illuminant=d65), d65)
+
+    return np.asarray(colour.delta_E(lab(colors), lab(truth), method="CIE 2000"))
+
+
+@dataclass
+class PairReport:
+    """How one pair went.
+
+    Attributes
+    ----------
+    name : the pair's name (the original's stem).
+    before, after : the files.
+    registered : how the after was laid on the original (:attr:`Registration.how`),
+        or None.
+    problem : why the pair was not used (unreadable file, another scene), or None.
+    coverage : share of the original the after covers.
+    monochrome : the after is black and white.
+    delta_e : mean CIEDE2000 of the after against the look applied to the
+        original (the look fitted on all pairs).
+    held_out : the same with the look fitted without this pair's fold, or None.
+    edited_share : share of the pair's pixels the robust fit left out (local edits).
+    warning : why the pair disagrees with the others, or None.
+    """
+
+    name: str
+    before: str
+    after: str
+    registered: str | None = None
+    problem: str | None = None
+    coverage: float | None = None
+    monochrome: bool = False
+    delta_e: float | None = None
+    held_out: float | None = None
+    edited_share: float | None = None
+    warning: str | None = None
+
+    def as_dict(self) -> dict:
+        """JSON-friendly."""
+        out = dict(self.__dict__)
+        for key in ("coverage", "delta_e", "held_out", "edited_share"):
+            if out[key] is not None:
+                out[key] = round(float(out[key]), 4)
+        return out
+
+
+@dataclass
+class LearnResult:
+    """The learned look and how well it explains the pairs.
+
+    Attributes
+    ----------
+    look : the :class:`LearnedLook` (None when no pair was usable).
+    pairs : a :class:`PairReport` per pair, used or not.
+    problems : (name, reason) of files that could not be paired.
+    working_space : the working space of the look (config name).
+    folds : folds of the held-out check (0: one pair, none).
+    seconds : time taken.
+    """
+
+    look: LearnedLook | None
+    pairs: list[PairReport]
+    problems: list[tuple[str, str]]
+    working_space: str
+    folds: int = 0
+    seconds: float = 0.0
+    output: Path | None = None
+
+    @property
+    def used(self) -> list[PairReport]:
+        return [p for p in self.pairs if p.problem is None]
+
+    def _mean(self, key: str) -> float | None:
+        values = [getattr(p, key) for p in self.used if getattr(p, key) is not None]
+        return float(np.mean(values)) if values else None
+
+    @property
+    def delta_e(self) -> float | None:
+        """Mean over the used pairs of their CIEDE2000 (fitted)."""
+        return self._mean("delta_e")
+
+    @property
+    def held_out(self) -> float | None:
+        """Mean over the used pairs of their held-out CIEDE2000 (None: fewer than two pairs)."""
+        return self._mean("held_out")
+
+    def as_dict(self) -> dict:
+        """JSON-friendly summary (what ``look learn --json`` prints)."""
+        return {"output": None if self.output is None else str(self.output),
+                "working_space": self.working_space,
+                "pairs_used": len(self.used), "pairs_given": len(self.pairs),
+                "monochrome": bool(self.look is not None and self.look.monochrome),
+                "delta_e": None if self.delta_e is None else round(self.delta_e, 4),
+                "held_out_delta_e": None if self.held_out is None else round(self.held_out, 4),
+                "held_out_folds": self.folds,
+                "seconds": round(self.seconds, 3),
+                "pairs": [p.as_dict() for p in self.pairs],
+                "unpaired": [{"name": n, "problem": why} for n, why in self.problems],
+                "warnings": [f"{p.name}: {p.warning}" for p in self.pairs if p.warning]}
+
+
+def _folds(n: int) -> list[np.ndarray]:
+    k = min(n, LEARN_FOLDS)
+    return [np.arange(i, n, k) for i in range(k)] if n >= 2 else []
+
+
+def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
+               problems: Sequence[tuple[str, str]] = (),
+               warn: Callable[[str], None] | None = None,
+               progress: Callable[[int, int, str], None] | None = None) -> LearnResult:
+    """Learn the look before/after pairs share.
+
+    Parameters
+    ----------
+    pairs : the pairs (:func:`pair_files`).
+    working_space : where the look is fitted and applied (None: :func:`learn_space`).
+    problems : what pairing could not pair (carried into the result).
+    warn : called with one line for each pair that cannot be used or disagrees.
+    progress : ``progress(done, total, name)`` as pairs are read.
+
+    Returns
+    -------
+    :class:`LearnResult`; its ``look`` is None when no pair was usable.
+    """
+    import time
+
+    from wbcgrade.color.colorspace import ColorEncoding
+
+    start = time.perf_counter()
+    warn = warn or (lambda message: None)
+    working = learn_space(pairs, working_space)
+    encoding = ColorEncoding.of(working, working)
+    reports, parts = [], []
+    for number, pair in enumerate(pairs):
+        if progress:
+            progress(number, len(pairs), pair.name)
+        report = PairReport(pair.name, str(pair.before), str(pair.after))
+        reports.append(report)
+        try:
+            images = read_pair(pair, working)
+        except (InputError, OSError) as exc:
+            report.problem = f"unreadable: {first_line(exc)}"
+        else:
+            registration = register_pair(images)
+            if registration is None:
+                report.problem = ("the edited photo shows another scene (no framing of it "
+                                  "lies on the original)")
+            else:
+                report.registered = registration.how
+                report.coverage = registration.coverage
+                report.monochrome = images.monochrome
+                parts.append((report, pair_colours(images, registration)))
+        if report.problem:
+            warn(f"{pair.name}: {report.problem}; left out")
+    if progress:
+        progress(len(pairs), len(pairs), "")
+    result = LearnResult(None, reports, list(problems), working)
+    if not parts:
+        result.seconds = time.perf_counter() - start
+        return result
+    used = [report for report, _ in parts]
+    colours = [pair for _, pair in parts]
+    monochrome = all(r.monochrome for r in used)
+    look, robust, _ = _fit(colours, monochrome)
+    for report, (sources, targets, weights) in zip(used, colours):
+        report.delta_e = float(np.mean(_delta_e(look(sources), targets, encoding)))
+        report.edited_share = _edited_share(sources, targets, weights)
+    folds = _folds(len(colours))
+    for held in folds:
+        rest = [i for i in range(len(colours)) if i not in set(held.tolist())]
+        fold_look, _, _ = _fit([colours[i] for i in rest], monochrome,
+                               [robust[i] for i in rest], rounds=1)
+        for i in held:
+            sources, targets, _ = colours[i]
+            used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
+    result.look, result.folds = look, len(folds)
+    _flag_disagreements(used, warn)
+    if not monochrome and any(r.monochrome for r in used):
+        mono = [r.name for r in used if r.monochrome]
+        warn(f"{len(mono)} of the {len(used)} edited photos are black and white "
+             f"({', '.join(mono[:4])}{', ...' if len(mono) > 4 else ''}), the others in "
+             "colour: two looks? the look learned is a colour one")
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> float:
+    """Share of a pair's flat pixels that no global map of that pair alone explains: what
+    a local edit (a healed spot, a masked sky) changed. The pair's own look (robust, no
+    correction) misses them by more than :data:`_LOCAL_DISTANCE` and four times its
+    median distance. Pixels on edges and texture (``weights`` below :data:`_FLAT`, as
+    :func:`wbcgrade.color.scene.colour_pairs` gives them) are not counted: a look applied
+    before or after resizing differs there."""
+    from wbcgrade.color.look import fit_pairs_look
+
+    own, _ = fit_pairs_look(sources, targets, weights, rounds=2, correct=False)
+    distance = np.linalg.norm(own(sources) - targets, axis=1)
+    flat = weights >= _FLAT
+    if not flat.any():
+        return 0.0
+    far = distance > max(_LOCAL_DISTANCE, 4.0 * float(np.median(distance)))
+    return float(np.mean(far[flat]))
+
+
+def _flag_disagreements(used: list[PairReport], warn: Callable[[str], None]) -> None:
+    """Warn of pairs with local edits (many pixels no global map of the pair explains)
+    and, among three or more, of pairs whose held-out error stands out (another look)."""
+    held = [r.held_out for r in used if r.held_out is not None]
+    typical = float(np.median(held)) if len(held) >= 3 else None
+    for report in used:
+        error = report.held_out
+        stands_out = (typical is not None and error is not None
+                      and error > max(_DISAGREE_FACTOR * typical, typical + _DISAGREE_MARGIN))
+        if report.edited_share is not None and report.edited_share > _LOCAL_SHARE:
+            report.warning = (f"local edits: about {100 * report.edited_share:.0f}% of the "
+                              "photo differs from the look the pairs share (those pixels "
+                              "weigh little in the fit)")
+        elif stands_out:
+            report.warning = (f"disagrees with the other pairs (held-out CIEDE2000 "
+                              f"{error:.1f} against {typical:.1f} typical): another look?")
+        if report.warning:
+            warn(f"{report.name}: {report.warning}")
+
+
+# --------------------------------------------------------------------------- the file
+
+
+def _output_kind(output: Path) -> str:
+    suffix = output.suffix.lower()
+    if suffix == ".json":
+        return "json"
+    if suffix in (".cube", ".clf"):
+        return suffix[1:]
+    raise InputError(f"{output}: the look must be written as .cube, .clf or .json "
+                     "(the ending names the format)")
+
+
+def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
+                    output: str | os.PathLike, lut_size: int = 33,
+                    working_space: str | None = None, overwrite: bool = False,
+                    warn: Callable[[str], None] | None = None,
+                    progress: Callable[[int, int, str], None] | None = None) -> LearnResult:
+    """Learn the look of before/after pairs and write it as a LUT or a saved grade.
+
+    Parameters
+    ----------
+    before, after : two photos or two folders (:func:`pair_files`).
+    output : ``.cube`` or ``.clf`` (a LUT whose header names its working
+        space) or ``.json`` (a saved grade: ``{"saved_grade": ..., "learned":
+        the report}``); checked before any work, never an input.
+    lut_size : nodes per axis of the written map.
+    working_space : None: :func:`learn_space`.
+    warn, progress : as :func:`learn_look`; every pair that cannot be paired
+        or used gets one ``warn`` line.
+
+    Raises
+    ------
+    InputError
+        The output may not be written, the paths do not pair, or no pair is
+        usable (each pair's reason went to ``warn`` first).
+    """
+    from wbcgrade._publish import plan_outputs, publish_bytes
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.lut import check_lut_size, write_grade_lut
+    from wbcgrade.color.saved_look import look_dict
+
+    output = Path(output)
+    kind = _output_kind(output)
+    check_lut_size(lut_size)
+    pairs, problems = pair_files(before, after)
+    inputs = [p.before for p in pairs] + [p.after for p in pairs]
+    output = plan_outputs([output], inputs, overwrite)[0]  # before any work
+    warn = warn or (lambda message: None)
+    for name, why in problems:
+        warn(f"{name}: {why}")
+    if not pairs:
+        raise InputError(f"no before/after pairs: no photo in {after} has the name of one "
+                         f"in {before}")
+    result = learn_look(pairs, working_space, problems, warn, progress)
+    if result.look is None:
+        raise InputError(f"no usable before/after pair (all {len(pairs)} left out: see "
+                         "the lines above)")
+    encoding = ColorEncoding.of(result.working_space, result.working_space)
+    grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
+                  working=encoding.working)  # no regrain: the look as the pairs show it
+    n = len(result.used)
+    if kind == "json":
+        result.output = output
+        data = {"saved_grade": look_dict(grade), "learned": result.as_dict()}
+        publish_bytes(output, (json.dumps(data, indent=1) + "\n").encode(), overwrite)
+    else:
+        comments = [f"look learned from {n} before/after pair{'s' if n != 1 else ''}"]
+        if result.held_out is not None:
+            comments.append(f"mean CIEDE2000 on the pairs {result.delta_e:.2f}, "
+                            f"held out {result.held_out:.2f}")
+        result.output = write_grade_lut(output, grade, encoding, lut_size, kind,
+                                        title="wbcgrade learned look", comments=comments,
+                                        overwrite=overwrite)
+    return result
