@@ -30,6 +30,7 @@ are installed with the package.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
@@ -360,6 +361,8 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
             raise _bad(path, f"style {names[s]!r} is empty")
         hists.append(from_sparse(index[part], values[part], bins))
     meta = dict(header)
+    # what the file holds, for keys of what is computed from it (not the dense histograms)
+    meta["file_digest"] = hashlib.sha1(raw).hexdigest()
     if look is not None:
         meta["look"] = look.astype(np.float32)
         problem = _look_problem(meta["look"])
