@@ -58,7 +58,11 @@ def test_no_scene_without_a_match_and_none_from_palettes_alone(photos):
     with_images = StyleSet(["seeding", "coffee"],
                            np.stack([image_histogram(o, 16) for o in others]),
                            meta={"images": [o.astype(np.float32) for o in others]})
-    assert find_scene_look(photos["sunset"].astype(np.float32), with_images) is None
+    why = {}
+    assert find_scene_look(photos["sunset"].astype(np.float32), with_images, why=why) is None
+    # each style's reason, in words (--json's look.no_scene)
+    assert set(why) == {"seeding", "coffee"}
+    assert all("needed" in reason or "framing" in reason for reason in why.values()), why
     palettes_only = StyleSet(["seeding", "coffee"], with_images.histograms)
     assert find_scene_look(photos["coffee"].astype(np.float32), palettes_only) is None
 

@@ -310,7 +310,8 @@ def look_map(request: MapRequest) -> BuiltMap:
         timings["look"] = time.perf_counter() - start
         say("scene")
         start = time.perf_counter()
-        scene = find_scene_look(request.photo.pixels[0], styles, base)
+        no_scene: dict[str, str] = {}
+        scene = find_scene_look(request.photo.pixels[0], styles, base, why=no_scene)
         timings["scene"] = time.perf_counter() - start
         if scene is not None and scene.confidence > 0:
             size = options.map.size
@@ -339,7 +340,8 @@ def look_map(request: MapRequest) -> BuiltMap:
             # (a palette that merely resembles the photo's is no better sign of its scene)
             info = {"look": {"set_amplitude": extracted.look.amplitude(),
                              "set_strength": strength, "match": None,
-                             "confidence": 0.0, **extracted.info}}
+                             "confidence": 0.0, **extracted.info,
+                             "no_scene": no_scene}}
             fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
                              "look", {"start": "look", "match": None, "confidence": 0.0},
                              sum(timings.values()))

@@ -648,7 +648,8 @@ SCENE_SMOOTHNESS = 3e-3
 
 
 def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
-                   rounds: int = 3, correct: bool = True) -> SceneLook | None:
+                   rounds: int = 3, correct: bool = True,
+                   why: dict[int, str] | None = None) -> SceneLook | None:
     """Fit the look on pixel pairs of the style photos that show the photo's scene.
 
     Parameters
@@ -663,6 +664,8 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
         for what the map family cannot hold (measured on ``benchmarks/look.py``'s
         shot matching: +0.05 to +0.2 recovered on film and bleach-bypass looks).
 
+    why : filled with the reason each style (by index) does not show the scene.
+
     Returns None when no style shows the scene.
     """
     from wbcgrade.color.scene import colour_pairs, match_scene
@@ -672,8 +675,11 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
     for index, style in enumerate(styles):
         if style is None:
             continue
-        match = match_scene(photo, style)
+        reasons: list[str] = []
+        match = match_scene(photo, style, why=reasons)
         if match is None:
+            if why is not None and reasons:
+                why[index] = reasons[0]
             continue
         matches[index] = match
         sources, targets, weights = colour_pairs(photo, style, match)
@@ -1149,7 +1155,8 @@ def _histogram_colors(hist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = None,
-                    progress: Callable[[int, int], None] | None = None) -> SceneLook | None:
+                    progress: Callable[[int, int], None] | None = None,
+                    why: dict[str, str] | None = None) -> SceneLook | None:
     """The look read off the style photos that show the photo's own scene, if any do.
 
     Parameters
@@ -1164,7 +1171,11 @@ def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = No
     style_images = style_scene_images(styles, progress)
     if not any(image is not None for image in style_images):
         return None
-    return fit_scene_look(scene_image(photo_colors), style_images, prior)
+    reasons: dict[int, str] = {}
+    found = fit_scene_look(scene_image(photo_colors), style_images, prior, why=reasons)
+    if why is not None:
+        why.update({styles.names[i]: reason for i, reason in reasons.items()})
+    return found
 
 
 def look_color_map(photo_hist: np.ndarray, styles, naturals=None,

@@ -136,27 +136,39 @@ def scene_image(colors: np.ndarray, size: int = MATCH_SIZE) -> SceneImage:
     return SceneImage(small, points, np.asarray(descriptors, dtype=np.float32))
 
 
-def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75) -> SceneMatch | None:
-    """The framing that lays ``style`` over ``photo``, or None when it shows another scene."""
+def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
+                why: list[str] | None = None) -> SceneMatch | None:
+    """The framing that lays ``style`` over ``photo``, or None when it shows another scene
+    (``why``, when given, gets the reason in words)."""
     cv2 = _cv2()
+
+    def no(reason: str) -> None:
+        if why is not None:
+            why.append(reason)
+
     if len(photo.points) < MIN_INLIERS or len(style.points) < MIN_INLIERS:
-        return None
+        return no(f"too little texture: {min(len(photo.points), len(style.points))} "
+                  f"keypoints, {MIN_INLIERS} needed")
     matcher = cv2.BFMatcher(cv2.NORM_L2)
     pairs = matcher.knnMatch(photo.descriptors, style.descriptors, k=2)
     good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < ratio * p[1].distance]
     if len(good) < MIN_INLIERS:
-        return None
+        return no(f"{len(good)} keypoints in common, {MIN_INLIERS} needed")
     src = style.points[[m.trainIdx for m in good]]
     dst = photo.points[[m.queryIdx for m in good]]
     homography, mask = cv2.findHomography(src, dst, cv2.RANSAC, 3.0)
     if homography is None or mask is None:
-        return None
+        return no(f"{len(good)} keypoints in common but no framing fits them")
     inliers = int(mask.sum())
-    if inliers < MIN_INLIERS or not _plausible(homography):
-        return None
+    if inliers < MIN_INLIERS:
+        return no(f"{inliers} keypoints agree on a framing, {MIN_INLIERS} needed")
+    if not _plausible(homography):
+        return no("the keypoints agree only on an implausible framing (mirrored, scaled by "
+                  "over 4 or in strong perspective)")
     coverage = float(_overlap_mask(photo, style, homography, erode=0).mean())
     if coverage < MIN_COVERAGE:
-        return None
+        return no(f"the framings overlap on {coverage:.0%} of the photo, "
+                  f"{MIN_COVERAGE:.0%} needed")
     return SceneMatch(homography, inliers, coverage)
 
 
