@@ -35,7 +35,7 @@ def photo(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def server(photo):
     """A studio on the photo with the preset, served from a thread; closed afterwards."""
-    server = start_studio(str(photo), preset=PRESET)
+    server = start_studio(str(photo), preset=PRESET, prefetch=False)
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
                               daemon=True)
     thread.start()

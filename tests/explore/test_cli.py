@@ -76,6 +76,9 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
         with urllib.request.urlopen(url + "api/state", timeout=60) as answer:
             state = json.load(answer)
         assert state["names"] == ["coffee", "flower", "sunset"]
+        assert state["look"]["command"].startswith("wbcgrade apply ")
+        with urllib.request.urlopen(url + "api/state?palette=1", timeout=120) as answer:
+            assert len(json.load(answer)["fit"]["weights"]) == 3  # the palette mode
         deadline = time.monotonic() + 60
         while not (_workers() - before) and time.monotonic() < deadline:
             time.sleep(0.2)
@@ -87,6 +90,7 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
             process.kill()
     assert process.returncode == 0, err
     assert "Open the address above" in err and "Stopped." in err and "Traceback" not in err
+    assert "grade: " in err and "saves into: " in err
     deadline = time.monotonic() + 10
     while (_workers() - before) and time.monotonic() < deadline:
         time.sleep(0.2)

@@ -48,7 +48,8 @@ import numpy as np
 
 from wbcgrade.explore.settings import Settings, format_number, weights_text
 
-__all__ = ["Session", "FitResult", "ExactGrader", "load_session", "serve_jobs",
+__all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
+           "describe_grade", "serve_jobs",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
 #: Bins per axis of the preview's palette, plan and photo histogram (the kernel
@@ -91,6 +92,14 @@ def _options(base, settings: Settings, **changes):
 
     return as_options(base, relaxation=settings.relaxation,
                       preserve_luminance=settings.keep_lightness, **changes)
+
+
+def _look_options():
+    """``apply --no-regrain``'s settings (the default "look" grade): what the page opens on,
+    the grade of ``apply`` with the same styles, and what a LUT can hold."""
+    from wbcgrade.color.options import GradeOptions
+
+    return GradeOptions(regrain=False)
 
 
 def _apply_weights(settings: Settings) -> tuple[float, ...]:
@@ -225,10 +234,90 @@ class Session:
     thumbnails: list[np.ndarray]
     base: object
     lut_size: int
+    loaded: LoadedPhoto | None = None
 
     def __post_init__(self) -> None:
-        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
-                                 self.encoding)
+        import threading
+
+        self._fast_grader = None
+        self._look = None
+        self._look_lock = threading.Lock()
+
+    @property
+    def _fast(self) -> _FastGrader:
+        """The preview's fast grader (made on the palette mode's first move)."""
+        with self._look_lock:
+            if self._fast_grader is None:
+                self._fast_grader = _FastGrader(self.styles, self.hists[PREVIEW_BINS],
+                                                self.base, self.encoding)
+            return self._fast_grader
+
+    @property
+    def source_args(self) -> list[str]:
+        """The command line's style source: ``--style DIR`` or ``--preset NAME_OR_FILE``."""
+        if self.style_dir is not None:
+            return ["--style", self.style_dir]
+        return ["--preset", self.preset]
+
+    def look_grade(self):
+        """The grade ``apply --no-regrain`` gives this photo with these styles (a
+        ``color.grading.Grade`` at strength 1; computed once, by ``apply``'s own grade path
+        ``color.grading.grade_encoded`` on the full-size photo)."""
+        from wbcgrade.color.grading import grade_encoded
+
+        with self._look_lock:
+            if self._look is None:
+                if self.loaded is None:
+                    raise ValueError("the session was loaded without its photo's pixels")
+                grade, _ = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
+                                         self.encoding, self.loaded.alpha)
+                self._look = grade
+            return self._look
+
+    def palette_grade(self, color_map: np.ndarray, settings: Settings):
+        """The palette grade of ``settings`` whose exact map is ``color_map`` (a Grade)."""
+        from wbcgrade.color.grading import Grade
+
+        return Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
+                     color_map=color_map, working=self.encoding.working,
+                     strength=settings.strength)
+
+    def look_command(self, strength: float) -> str:
+        """The ``wbcgrade apply`` command that gives the look grade at ``strength``."""
+        parts = ["wbcgrade", "apply", self.photo, *self.source_args, "--mode", "look",
+                 "--no-regrain"]
+        if strength != 1.0:
+            parts += ["--strength", format_number(strength, 3)]
+        return " ".join(shlex.quote(p) for p in parts)
+
+    def save(self, grade, folder: str | os.PathLike) -> Path:
+        """Grade the full-size photo with ``grade`` and write it into ``folder``; -> its path.
+
+        ``apply``'s own path (``color.workflow.plan_photo`` and ``grade_file``, the grade
+        given as a series' shared grade): the photo's format, bit depth and metadata, written
+        atomically. The name is ``<stem>_explore_<n><ext>`` with the first ``n`` no file
+        has: never the photo, never a file that exists (one appearing meanwhile is not
+        replaced: the next ``n`` is taken).
+        """
+        from wbcgrade.color.workflow import default_output_path, grade_file, plan_photo
+        from wbcgrade.errors import InputError
+
+        folder = Path(folder)
+        suffix = default_output_path(self.photo).suffix
+        stem = Path(self.photo).stem
+        for number in range(1, 10000):
+            target = folder / f"{stem}_explore_{number}{suffix}"
+            if os.path.lexists(target):
+                continue
+            try:
+                plan = plan_photo(self.photo, target, overwrite=False)
+                grade_file(plan, self.styles, _look_options(), shared=grade, keep_input=False)
+            except InputError:
+                if os.path.lexists(target):  # taken meanwhile: the next number
+                    continue
+                raise
+            return target
+        raise InputError(f"{folder}: no free name for {stem}_explore_N{suffix}")
 
     @property
     def n_styles(self) -> int:
@@ -273,9 +362,7 @@ class Session:
 
     def command_line(self, settings: Settings) -> str:
         """The ``wbcgrade apply`` command that grades the full-size photo as shown."""
-        parts = ["wbcgrade", "apply", self.photo]
-        parts += ["--style", self.style_dir] if self.style_dir is not None \
-            else ["--preset", self.preset]
+        parts = ["wbcgrade", "apply", self.photo, *self.source_args]
         parts += ["--mode", "palette", "--weights", weights_text(settings.weights),
                   "--no-regrain"]
         if settings.strength != 1.0:
@@ -288,27 +375,30 @@ class Session:
 
     def export(self, color_map: np.ndarray, settings: Settings, lut_format: str,
                size: int) -> tuple[str, bytes]:
-        """The LUT file of ``color_map`` at ``settings.strength`` -> (file name, bytes).
+        """The LUT file of the palette map ``color_map`` at ``settings`` -> (file name, bytes)."""
+        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
+            zip(self.names, settings.weights), key=lambda item: -item[1]))
+        return self.export_grade(self.palette_grade(color_map, settings), lut_format, size,
+                                 f"palette weights {ranked}", self.command_line(settings))
 
-        Made by the colour library's LUT writer (the header names the spaces
-        and the weights) in a temporary folder; nothing is written beside the photo.
+    def export_grade(self, grade, lut_format: str, size: int, what: str,
+                     command: str) -> tuple[str, bytes]:
+        """The LUT file of ``grade`` (at its strength) -> (file name, bytes).
+
+        Made by the colour library's LUT writer (the header names the spaces,
+        ``what`` the grade is and the ``command`` that reproduces it) in a temporary
+        folder; nothing is written beside the photo.
         """
-        from wbcgrade.color.grading import Grade
         from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
 
         stem = Path(self.photo).stem
         name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
-        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
-            zip(self.names, settings.weights), key=lambda item: -item[1]))
-        grade = Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
-                      color_map=color_map, working=self.encoding.working,
-                      strength=settings.strength)
         with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
             path = Path(folder) / name
             write_grade_lut(path, grade, self.encoding.within_working(), size, lut_format,
                             title=f"wbcgrade {stem}",
                             comments=[f"wbcgrade explore grade of {Path(self.photo).name}: "
-                                      f"{ranked}", f"reproduce: {self.command_line(settings)}"])
+                                      f"{what}", f"reproduce: {command}"])
             return name, path.read_bytes()
 
     def png(self, pixels: np.ndarray) -> bytes:
@@ -333,21 +423,31 @@ def clf_available() -> bool:
     return True
 
 
-def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
-                 preview_side: int = PREVIEW_SIDE,
-                 warn: Callable[[str], None] | None = None,
-                 progress: Callable[[int, int, str], None] | None = None) -> Session:
-    """Read the photo and the styles as ``apply`` does; nothing is written.
+@dataclass
+class LoadedPhoto:
+    """The photo as ``apply`` reads it, shared by the sessions of every style source.
 
-    ``style_dir`` photos' histograms come from (and go to) the histogram
-    cache, as with ``apply``. Raises InputError on a missing or unreadable
-    photo or style source (one line).
+    Attributes
+    ----------
+    encoding : its colour encoding (``color.colorspace.ColorEncoding``).
+    encoded : (H, W, 3) float32 working-space colours, full size.
+    alpha : (H, W) coverage or None.
+    hists : {bins: (bins, bins, bins)} histograms on the fit, preview and transfer grids.
+    preview : (h, w, 3) uint8 preview picture (working-space colours).
     """
+
+    encoding: object
+    encoded: np.ndarray
+    alpha: np.ndarray | None
+    hists: dict
+    preview: np.ndarray
+
+
+def load_photo(photo: str, preview_side: int = PREVIEW_SIDE) -> LoadedPhoto:
+    """Read the photo as ``apply`` does (colour spaces, histograms); nothing is written."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.histogram import HistogramCache, image_histogram
+    from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
-    from wbcgrade.color.report import style_pictures
     from wbcgrade.color.sheet import thumbnail
     from wbcgrade.errors import InputError
 
@@ -357,23 +457,82 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     image = read_image(photo)
     encoding = ColorEncoding.for_image(image, base.spaces.input, base.spaces.working)
     encoded, _ = encoding.encode(image.rgb(), image.is_float)
+    encoded = np.ascontiguousarray(encoded, dtype=np.float32)
     alpha = image.alpha()
     limit = base.transfer.max_pixels
     hists = {bins: image_histogram(encoded, bins, alpha, limit)
              for bins in (base.fit.bins, PREVIEW_BINS, base.transfer.bins)}
-    source = StyleSource(style_dir, preset, HistogramCache())
-    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
-    styles = styles_in_space(styles, encoding.working)
     height, width = encoded.shape[:2]
     side = min(preview_side, max(height, width))
     small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
     preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
+    return LoadedPhoto(encoding, encoded, alpha, hists, preview)
+
+
+def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
+                 preview_side: int = PREVIEW_SIDE,
+                 warn: Callable[[str], None] | None = None,
+                 progress: Callable[[int, int, str], None] | None = None,
+                 loaded: LoadedPhoto | None = None) -> Session:
+    """Read the photo (unless ``loaded`` holds it) and the styles as ``apply`` does;
+    nothing is written.
+
+    ``style_dir`` photos' histograms come from (and go to) the histogram
+    cache, as with ``apply``. Raises InputError on a missing or unreadable
+    photo or style source (one line).
+    """
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
+    from wbcgrade.color.report import style_pictures
+
+    if loaded is None:
+        loaded = load_photo(photo, preview_side)
+    base = _base_options()
+    source = StyleSource(style_dir, preset, HistogramCache())
+    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
+    styles = styles_in_space(styles, loaded.encoding.working)
     pictures = style_pictures(styles, THUMBNAIL_SIDE)
     return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
-                   preset=preset, names=list(styles.names), styles=styles, encoding=encoding,
-                   hists=hists, preview=preview,
+                   preset=preset, names=list(styles.names), styles=styles,
+                   encoding=loaded.encoding, hists=loaded.hists, preview=loaded.preview,
                    thumbnails=[pictures[name] for name in styles.names], base=base,
-                   lut_size=base.map.size)
+                   lut_size=base.map.size, loaded=loaded)
+
+
+def describe_grade(grade, n_styles: int) -> dict:
+    """What a grade is, in plain words, with its source and strength (JSON-friendly).
+
+    Returns ``{"source": fit start ("preset", "scene", "look", "given", ...),
+    "words": a sentence, "strength": the grade's blend (``--strength``),
+    "look_strength": how much of the set's look the photo gets (None: not a set look),
+    "match": the style showing the photo's scene or None, "confidence": how sure}``.
+    """
+    info = dict(grade.info)
+    fit = dict(info.get("fit", {}))
+    look = dict(info.get("look", {}))
+    source = str(fit.get("start", "")) or "palette"
+    match = look.get("match", fit.get("match"))
+    confidence = float(look.get("confidence", fit.get("confidence", 0.0)) or 0.0)
+    look_strength = look.get("set_strength")
+    if source == "preset":
+        words = "the preset's own look, applied as it is"
+    elif source == "scene":
+        words = (f"the look of the style photo that shows this scene ({match}, confidence "
+                 f"{confidence:.2f})")
+    elif source == "look":
+        words = f"the look the {n_styles} style{'s' if n_styles != 1 else ''} share"
+        if look_strength is not None:
+            words += (f", at {100 * float(look_strength):.0f} % of its full size (as far as "
+                      "the set's two halves agree on it)")
+        if confidence > 0:
+            words += f", moved towards the palette grade of {match} (confidence {confidence:.2f})"
+    else:
+        ranked = ", ".join(f"{name} {weight:.2f}" for name, weight in grade.ranked()[:3])
+        words = ("a palette fit: the photo's colours moved onto a blend of the style palettes "
+                 f"({ranked})")
+    return {"source": source, "words": words, "strength": float(grade.strength),
+            "look_strength": None if look_strength is None else float(look_strength),
+            "match": match, "confidence": confidence}
 
 
 class ExactGrader:

@@ -12,7 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Settings", "RequestError", "settings_from_json", "weights_from_json",
+__all__ = ["Settings", "RequestError", "settings_from_json", "strength_from_json",
+           "weights_from_json",
            "weights_text", "format_number", "WEIGHT_DECIMALS", "MAX_RELAXATION",
            "MIN_RELAXATION"]
 
@@ -110,6 +111,20 @@ def weights_from_json(value, n_styles: int) -> tuple[float, ...]:
     if not max(rounded) > 0:
         raise RequestError("weights must not all be zero")
     return rounded
+
+
+def strength_from_json(data) -> float:
+    """The ``strength`` of a look request (default 1): a number in [0, 1], rounded as
+    :data:`Settings.strength`. Other keys but ``format`` and ``size`` are refused."""
+    if not isinstance(data, dict):
+        raise RequestError("the request body must be a JSON object")
+    unknown = sorted(set(data) - {"strength", "format", "size", "seq", "client"})
+    if unknown:
+        raise RequestError(f"unknown setting {unknown[0]!r} for the look"[:200])
+    strength = _number(data.get("strength", 1.0), "strength")
+    if not 0.0 <= strength <= 1.0:
+        raise RequestError("strength must be between 0 and 1")
+    return round(strength, STRENGTH_DECIMALS)
 
 
 def settings_from_json(data, n_styles: int) -> Settings:

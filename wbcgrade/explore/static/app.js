@@ -1,8 +1,10 @@
 // wbcgrade explore: the page. Plain JavaScript, no build step, no outside resource.
 //
 // The server computes colour maps (3-D LUTs); this page applies them to the
-// preview picture itself (trilinear, as wbcgrade's remap does). A move is
-// shown in three steps, each replacing the one before:
+// preview picture itself (trilinear, as wbcgrade's remap does), at the strength
+// of the slider. It opens on the grade `wbcgrade apply` gives (the "look" mode:
+// one map per style source, fetched when a source is picked). In the palette
+// mode a move of the weights is shown in three steps, each replacing the one before:
 //   1. at once, extrapolated here from the last exact map and the slopes of
 //      the fast map there (a sum of LUTs: no request);
 //   2. the server's fast map, corrected by the nearest exact map (one small
@@ -23,6 +25,12 @@
 
   const state = {
     meta: null,
+    source: 0,                  // the preset picker's entry shown
+    mode: 'look',               // 'look': the grade apply gives; 'palette': a mix of palettes
+    switched: 0,                // the version of the last source or mode switch
+    history: [],                // undo: snapshots of what the page shows, the last is now
+    future: [],                 // redo
+    restoring: false,
     n: 0,
     vertices: [],
     look: {weights: [], strength: 1, relaxation: null, keep_lightness: false},
@@ -44,6 +52,10 @@
   };
   // What a test or benchmark reads: move-to-pixels latencies (ms) and the renders done.
   const probe = {latencies: [], renders: 0, seen: new Set(), shown: () => ({...state.shown}),
+                 mode: () => state.mode, source: () => state.source,
+                 grade: () => state.meta && state.meta.look.grade,
+                 strength: () => state.look.strength,
+                 history: () => [state.history.length, state.future.length],
                  current: () => state.version, weights: () => state.look.weights.slice(),
                  extrapolates: () => Boolean(state.model && state.model.family === family())};
   window.wbcgradeExplore = probe;
@@ -65,7 +77,7 @@
 
   function body() {
     const look = state.look;
-    return {weights: look.weights.slice(), strength: look.strength,
+    return {source: state.source, weights: look.weights.slice(), strength: look.strength,
             relaxation: look.relaxation, keep_lightness: look.keep_lightness};
   }
 
@@ -115,14 +127,15 @@
 
   function showLut(lut, meta, version, kind) {
     const shown = state.shown;
-    if (version < shown.version) return;
+    if (state.mode !== 'palette') return;  // a palette answer after a switch to the look
+    if (version < shown.version || version < state.switched) return;
     if (version === shown.version && RANK[kind] < RANK[shown.kind]) return;
     state.lut = lut;
     state.lutSize = meta.size;
     state.shown = {version, kind, weights: meta.weights, weightsText: meta.weights_text};
     render();
     probe.renders += 1;
-    if (kind === 'exact') {  // moves from here can be shown at once: fetch the slopes
+    if (kind === 'exact' && state.mode === 'palette') {  // moves from here: the slopes
       const settings = {weights: meta.weights, relaxation: meta.relaxation,
                         keep_lightness: meta.keep_lightness};
       const key = meta.weights_text + JSON.stringify([meta.relaxation, meta.keep_lightness]);
@@ -141,7 +154,10 @@
 
   function status(kind, meta) {
     const badge = $('status');
-    if (kind === 'exact') {
+    if (state.mode === 'look') {
+      badge.textContent = 'the grade apply gives: exact';
+      badge.className = 'badge exact';
+    } else if (kind === 'exact') {
       badge.textContent = 'exact grade: what the export holds';
       badge.className = 'badge exact';
     } else if (kind === 'extrapolated') {
@@ -176,7 +192,7 @@
       say(`the server did not answer (${e.message}); is wbcgrade explore still running?`, true);
     }
     state.inFlight = false;
-    if (state.dirty) requestPreview();
+    if (state.dirty && state.mode === 'palette') requestPreview();
   }
 
   async function requestExact() {
@@ -207,7 +223,7 @@
     if (state.slopesAsked === key) return;
     state.slopesAsked = key;
     try {
-      const response = await post('api/slopes', settings);
+      const response = await post('api/slopes', {...settings, source: state.source});
       if (!response.ok) return;  // superseded, or the page moved on
       const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
       const data = new Float32Array(await response.arrayBuffer());
@@ -243,6 +259,7 @@
   }
 
   function changed() {
+    if (state.mode !== 'palette') return;
     state.version += 1;
     state.changedAt.set(state.version, performance.now());
     if (state.changedAt.size > 200) state.changedAt.delete(state.changedAt.keys().next().value);
@@ -256,6 +273,12 @@
   function updateCommand() {
     const meta = state.meta;
     const look = state.look;
+    if (meta && state.mode === 'look') {
+      const parts = [meta.look.command];
+      if (look.strength !== 1) parts.push('--strength', String(look.strength));
+      $('command').textContent = parts.join(' ');
+      return;
+    }
     if (!meta || !state.shown.weightsText) return;
     const parts = [meta.command_prefix, '--weights', state.shown.weightsText, '--no-regrain'];
     if (look.strength !== 1) parts.push('--strength', String(look.strength));
@@ -393,7 +416,7 @@
         out = [d[0] / len, d[1] / len];
       }
       const cx = v[0] + out[0] * 40, cy = v[1] + out[1] * 32;
-      el('image', {href: `style/${i}.png`, x: cx - 28, y: cy - 21, width: 56, height: 42,
+      el('image', {href: `style/${i}.png?source=${state.source}`, x: cx - 28, y: cy - 21, width: 56, height: 42,
                    preserveAspectRatio: 'xMidYMid slice'}, svg);
       el('rect', {class: 'thumb-frame', x: cx - 28, y: cy - 21, width: 56, height: 42}, svg);
       // names on the outer side: above the picture at the top, below it elsewhere
@@ -453,7 +476,7 @@
     });
     svg.addEventListener('pointermove', (event) => { if (dragging) move(event); });
     const stop = () => { dragging = false; };
-    svg.addEventListener('pointerup', stop);
+    svg.addEventListener('pointerup', () => { if (dragging) record(); stop(); });
     svg.addEventListener('pointercancel', stop);
   }
 
@@ -479,7 +502,7 @@
     }
     let result;
     try {
-      const response = await post('api/landscape', {rows});
+      const response = await post('api/landscape', {source: state.source, rows});
       if (!response.ok) { say(await failure(response), true); return; }
       result = await response.json();
     } catch (e) {
@@ -542,7 +565,7 @@
       const row = document.createElement('tr');
       const thumb = document.createElement('td');
       const img = document.createElement('img');
-      img.src = `style/${i}.png`;
+      img.src = `style/${i}.png?source=${state.source}`;
       img.alt = '';
       thumb.appendChild(img);
       const label = document.createElement('td');
@@ -587,6 +610,7 @@
     }
     say('');
     setWeights(weights);
+    record();
   }
 
   // ---------------------------------------------------------------- before / after
@@ -653,6 +677,21 @@
       render();
       updateCommand();
     });
+    strength.addEventListener('change', () => record('strength'));
+    $('mode-look').addEventListener('change', () => switchTo(state.source, 'look'));
+    $('mode-palette').addEventListener('change', () => switchTo(state.source, 'palette'));
+    $('source-pick').addEventListener('change',
+                                      () => switchTo(Number($('source-pick').value), state.mode));
+    $('undo').addEventListener('click', undo);
+    $('redo').addEventListener('click', redo);
+    $('save').addEventListener('click', saveGraded);
+    document.addEventListener('keydown', (event) => {
+      const key = event.key.toLowerCase();
+      if (!(event.ctrlKey || event.metaKey) || event.altKey) return;
+      if (key === 'z' && !event.shiftKey) { event.preventDefault(); undo(); }
+      else if ((key === 'z' && event.shiftKey) || key === 'y') { event.preventDefault(); redo(); }
+      else if (key === 's') { event.preventDefault(); saveGraded(); }
+    });
     const relaxOn = $('relax-on'), relax = $('relax');
     const relaxChanged = () => {
       relax.disabled = !relaxOn.checked;
@@ -661,13 +700,18 @@
       state.look.relaxation = relaxOn.checked ? value : null;
       changed();
     };
-    relaxOn.addEventListener('change', relaxChanged);
+    relaxOn.addEventListener('change', () => { relaxChanged(); record(); });
     relax.addEventListener('input', relaxChanged);
+    relax.addEventListener('change', () => record('relax'));
     $('keep').addEventListener('change', () => {
       state.look.keep_lightness = $('keep').checked;
       changed();
+      record();
     });
-    $('to-fit').addEventListener('click', () => setWeights(state.meta.fitted.weights.slice()));
+    $('to-fit').addEventListener('click', () => {
+      setWeights(state.meta.fitted.weights.slice());
+      record();
+    });
     $('export-cube').addEventListener('click', () => exportLut('cube', $('export-cube')));
     $('export-clf').addEventListener('click', () => exportLut('clf', $('export-clf')));
     if (!state.meta.formats.includes('clf')) {
@@ -693,8 +737,12 @@
   async function exportLut(format, button) {
     const size = Number($('size').value);
     // exactly what is shown: the weights of the picture on screen
-    const request = {...body(), format, size};
-    if (state.shown.weights) request.weights = state.shown.weights.slice();
+    let request = {...body(), format, size};
+    if (state.mode === 'look') {
+      request = {source: state.source, mode: 'look', strength: state.look.strength, format, size};
+    } else if (state.shown.weights) {
+      request.weights = state.shown.weights.slice();
+    }
     button.disabled = true;
     say('computing the exact grade for the export…');
     try {
@@ -721,6 +769,219 @@
     }
   }
 
+  // ---------------------------------------------------------------- save
+  async function saveGraded() {
+    const button = $('save');
+    if (button.disabled) return;
+    let request = {source: state.source, mode: 'look', strength: state.look.strength};
+    if (state.mode === 'palette') {
+      request = {...body(), mode: 'palette'};
+      if (state.shown.weights) request.weights = state.shown.weights.slice();
+    }
+    button.disabled = true;
+    say('grading the full-size photo…');
+    try {
+      const response = await post('api/save', request);
+      if (!response.ok) {
+        say(await failure(response), true);
+        return;
+      }
+      const saved = await response.json();
+      say(`saved ${saved.file} into ${saved.folder}`);
+      document.body.dataset.saved = saved.file;
+      document.body.dataset.savedCommand = saved.command;
+    } catch (e) {
+      say(`the save failed (${e.message})`, true);
+    } finally {
+      button.disabled = false;
+    }
+  }
+
+  // ---------------------------------------------------------------- undo and redo
+  function snapshot() {
+    const look = state.look;
+    return {source: state.source, mode: state.mode, strength: look.strength,
+            weights: state.mode === 'palette' ? look.weights.slice() : null,
+            relaxation: look.relaxation, keep_lightness: look.keep_lightness};
+  }
+
+  // Keep what the page shows now as an undo step. Steps of one control in quick succession
+  // (a slider moved with the arrow keys) make one step.
+  const COALESCE_MS = 1500;
+  function record(control) {
+    if (state.restoring || !state.meta) return;
+    const now = snapshot();
+    const last = state.history[state.history.length - 1];
+    if (last && JSON.stringify(last.snap) === JSON.stringify(now)) return;
+    const at = performance.now();
+    if (last && control && last.control === control && at - last.at < COALESCE_MS
+        && state.history.length > 1) {
+      state.history.pop();
+    }
+    state.history.push({snap: now, control, at});
+    if (state.history.length > 100) state.history.shift();
+    state.future = [];
+    historyButtons();
+  }
+
+  function historyButtons() {
+    $('undo').disabled = state.history.length < 2;
+    $('redo').disabled = state.future.length === 0;
+  }
+
+  async function restore(snap) {
+    state.restoring = true;
+    try {
+      if (snap.source !== state.source || snap.mode !== state.mode) {
+        await switchTo(snap.source, snap.mode, snap.weights);
+      }
+      setStrength(snap.strength);
+      if (snap.mode === 'palette') {
+        state.look.relaxation = snap.relaxation;
+        state.look.keep_lightness = snap.keep_lightness;
+        $('relax-on').checked = snap.relaxation !== null;
+        $('relax').disabled = snap.relaxation === null;
+        if (snap.relaxation !== null) {
+          $('relax').value = String(Math.max(0, RELAX_STEPS.indexOf(snap.relaxation)));
+          $('relax-out').textContent = String(snap.relaxation);
+        }
+        $('keep').checked = snap.keep_lightness;
+        if (snap.weights) setWeights(snap.weights.slice());
+      }
+    } finally {
+      state.restoring = false;
+      historyButtons();
+    }
+  }
+
+  async function undo() {
+    if (state.history.length < 2) return;
+    state.future.push(state.history.pop());
+    await restore(state.history[state.history.length - 1].snap);
+  }
+
+  async function redo() {
+    if (!state.future.length) return;
+    const step = state.future.pop();
+    state.history.push({...step, control: null});
+    await restore(step.snap);
+  }
+
+  function setStrength(value) {
+    state.look.strength = value;
+    $('strength').value = String(Math.round(100 * value));
+    $('strength-out').textContent = `${Math.round(100 * value)} %`;
+    render();
+    updateCommand();
+  }
+
+  // ---------------------------------------------------------------- sources and modes
+  function describe() {
+    const grade = state.meta.look.grade;
+    const box = $('grade-words');
+    box.textContent = '';
+    const lead = document.createElement('b');
+    if (state.mode === 'look') {
+      lead.textContent = `${state.meta.styles}: `;
+      box.append('The grade ', Object.assign(document.createElement('code'),
+                                             {textContent: 'wbcgrade apply'}),
+                 ' gives, with ', lead, grade.words, '.');
+    } else {
+      lead.textContent = `${state.meta.styles}: `;
+      box.append('A palette mix of ', lead, 'the photo\'s colours moved onto the blend of '
+                 + 'style palettes you choose (', Object.assign(
+        document.createElement('code'), {textContent: 'apply'}), ' gives: ', grade.words, ').');
+    }
+    box.dataset.source = grade.source;
+  }
+
+  async function showLook(version) {
+    const response = await post('api/look', {source: state.source, strength: state.look.strength});
+    if (!response.ok) {
+      say(await failure(response), true);
+      return;
+    }
+    const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
+    const lut = new Float32Array(await response.arrayBuffer());
+    if (version !== state.version) return;  // another source or mode meanwhile
+    state.lut = lut;
+    state.lutSize = meta.size;
+    state.shown = {version, kind: 'exact', weights: null, weightsText: ''};
+    render();
+    probe.renders += 1;
+    const asked = state.changedAt.get(version);
+    if (asked !== undefined) probe.latencies.push({ms: performance.now() - asked, kind: 'look',
+                                                   first: true});
+    status('exact', meta);
+    updateCommand();
+  }
+
+  // Show source `index` in `mode` ('look' or 'palette'); `weights`: the palette mix to show
+  // (default: the fitted one).
+  async function switchTo(index, mode, weights) {
+    clearTimeout(state.idle);
+    state.version += 1;
+    state.switched = state.version;
+    state.changedAt.set(state.version, performance.now());
+    const version = state.version;
+    const sourceChanged = index !== state.source || !state.meta;
+    state.source = index;
+    state.mode = mode;
+    $('source-pick').value = String(index);
+    $(mode === 'look' ? 'mode-look' : 'mode-palette').checked = true;
+    for (const id of ['palette-mix', 'palette-adjust', 'palette-weights']) {
+      $(id).hidden = mode !== 'palette';
+    }
+    const badge = $('status');
+    badge.textContent = mode === 'palette' && !(state.meta && state.meta.fit && !sourceChanged)
+      ? 'fitting the palette mix…' : 'loading…';
+    badge.className = 'badge preview';
+    badge.dataset.kind = '';
+    const needPalette = mode === 'palette';
+    if (sourceChanged || (needPalette && !state.meta.fit)) {
+      const response = await fetch(`api/state?source=${index}${needPalette ? '&palette=1' : ''}`);
+      if (!response.ok) {
+        say(await failure(response), true);
+        return;
+      }
+      const meta = await response.json();
+      if (version !== state.version) return;
+      state.meta = meta;
+      state.n = meta.names.length;
+      state.model = null;
+      state.slopesAsked = '';
+      $('source').textContent = `${meta.photo} · ${meta.styles} · ${state.n} style`
+        + `${state.n === 1 ? '' : 's'}`;
+      if (needPalette) {
+        state.vertices = polygon(state.n);
+        buildTable();
+        drawSpace();
+        state.look.weights = (weights || meta.fitted.weights).slice();
+        moveMarks();
+        $('sure').textContent = `${fitSentence()} Measuring how sure the fit is…`;
+        landscape();
+      }
+    }
+    describe();
+    if (mode === 'look') {
+      await showLook(version);
+    } else {
+      if (!sourceChanged && !state.vertices.length) {
+        state.vertices = polygon(state.n);
+        buildTable();
+        drawSpace();
+        landscape();
+      }
+      if (weights) state.look.weights = weights.slice();
+      if (!state.look.weights.length || state.look.weights.length !== state.n) {
+        state.look.weights = state.meta.fitted.weights.slice();
+      }
+      moveMarks();
+      changed();
+    }
+    record();
+  }
+
   // ---------------------------------------------------------------- start
   async function start() {
     const response = await fetch('api/state');
@@ -730,21 +991,21 @@
     }
     state.meta = await response.json();
     state.n = state.meta.names.length;
-    state.vertices = polygon(state.n);
-    $('source').textContent = `${state.meta.photo} · ${state.meta.styles}`
-      + ` · ${state.n} style${state.n === 1 ? '' : 's'}`;
-    buildTable();
-    drawSpace();
+    const pick = $('source-pick');
+    state.meta.sources.forEach((choice, i) => {
+      const option = document.createElement('option');
+      option.value = String(i);
+      option.textContent = choice.label;
+      pick.appendChild(option);
+    });
+    $('save-where').textContent = `into ${state.meta.save_dir} (new files, never replacing one)`;
     bindSpace();
     bindSplit();
     bindControls();
     await loadPhoto();
     fitStage();
-    state.look.weights = state.meta.fitted.weights.slice();
-    moveMarks();
-    changed();
-    $('sure').textContent = `${fitSentence()} Measuring how sure the fit is…`;
-    landscape();
+    state.meta = null;  // loaded again by the switch
+    await switchTo(0, 'look');
   }
 
   start().catch((e) => say(`the page could not start (${e.message})`, true));
