@@ -1,4 +1,4 @@
-"""``wbcgrade apply``: grade a photo towards the closest barycenter of style palettes."""
+"""``wbcgrade apply``: grade a photo with the look of a preset or of style photos."""
 
 from __future__ import annotations
 
@@ -26,37 +26,15 @@ def _warn(message: str) -> None:
 
 
 def _print_report(report, as_json: bool) -> None:
-    if as_json:
-        # the grade itself rides along: `apply --look` reads this JSON back without a fit
-        click.echo(json.dumps(report.as_dict(saved_grade=True), indent=2))
+    if as_json:  # a few KB: the grade itself goes to --save-grade FILE
+        click.echo(json.dumps(report.as_dict(), indent=2, default=float))
         return
-    grade = report.grade
-    fit = grade.info.get("fit", {})
-    start = report.fit_start
-    if start != "preset":  # a preset's own look has no weights to speak of
-        ranked = grade.ranked()
-        width = max(len("style"), *(len(name) for name, _ in ranked))
-        click.echo(f"{'style':<{width}}  weight")
-        click.echo(f"{'-' * width}  ------")
-        for name, weight in ranked:
-            click.echo(f"{name:<{width}}  {weight:6.3f}")
-    if start == "saved":
-        saved = grade.info.get("saved_look", {})
-        regrain = "regrained" if grade.regrain is not None else "no regrain"
-        click.echo(f"grade: {saved.get('file')} applied as saved ({saved.get('kind')}, "
-                   f"{regrain}; no fit)")
-    elif start in ("preset", "scene", "look"):
-        _print_look(start, grade.info.get("look", {}), len(grade.names))
-    elif start == "given":
-        click.echo(f"loss: {grade.loss:.4g} at the weights given with --weights")
-    else:
-        how = {"uniform": "fitted from uniform weights",
-               "vertex-refit": "refitted from the best single style, which beat the fit "
-                               "from uniform weights",
-               "vertex": "the best single style: no fit beat it"}.get(start, start)
-        click.echo(f"loss: {grade.loss:.4g} ({how}; {fit.get('evaluations', 0)} evaluations)")
-        if not fit.get("converged", True):
-            _warn("the weight fit stopped before converging (raise --max-iter)")
+    grade, outcome = report.grade, report.outcome
+    if outcome is not None and outcome.palette is not None:  # weights mean something here
+        print_palette_fit(outcome.palette)
+    if outcome is not None:
+        for line in outcome.lines():
+            click.echo(line)
     sink = grade.info.get("sinkhorn", {})
     if sink and not sink.get("converged", True):
         _warn(f"the transfer Sinkhorn stopped at marginal error {sink['error']:.2g}")
@@ -65,17 +43,25 @@ def _print_report(report, as_json: bool) -> None:
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
 
 
-def _print_look(start: str, look: dict, n_styles: int) -> None:
-    if start == "preset":
-        click.echo("look: the preset's own look, applied as it is")
-    elif start == "scene":
-        click.echo(f"look: read off the style photo of this scene ({look.get('match')}, "
-                   f"confidence {look.get('confidence', 0):.2f})")
-    else:
-        confidence = look.get("confidence", 0.0)
-        towards = (f", moved towards the palette grade of {look.get('match')} "
-                   f"(confidence {confidence:.2f})" if confidence > 0 else "")
-        click.echo(f"look: the look the {n_styles} styles share{towards}")
+def print_palette_fit(palette) -> None:
+    """The weight table and the loss of a palette grade (:class:`PaletteFit`)."""
+    width = max(len("style"), *(len(name) for name in palette.names))
+    click.echo(f"{'style':<{width}}  weight")
+    click.echo(f"{'-' * width}  ------")
+    for name, weight in zip(palette.names, palette.weights):
+        click.echo(f"{name:<{width}}  {weight:6.3f}")
+    if palette.start == "given":
+        click.echo(f"loss: {palette.loss:.4g} at the weights given with --weights")
+        return
+    how = {"uniform": "fitted from uniform weights",
+           "vertex-refit": "refitted from the best single style, which beat the fit "
+                           "from uniform weights",
+           "vertex": "the best single style: no fit beat it"}.get(palette.start, palette.start)
+    best = (f"; best single style {palette.best_single[0]} {palette.best_single[1]:.4g}"
+            if palette.best_single is not None else "")
+    click.echo(f"loss: {palette.loss:.4g} ({how}; {palette.evaluations} evaluations{best})")
+    if not palette.converged:
+        _warn("the weight fit stopped before converging (raise --max-iter)")
 
 
 @click.command("apply", cls=LazyOptionsCommand)
@@ -92,25 +78,34 @@ def _print_look(start: str, look: dict, n_styles: int) -> None:
 @lazy_options(look_option)
 @lazy_options(write_options)
 @click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
-@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the report as JSON (what the grade did; no colour map).")
+@click.option("--save-grade", type=click.Path(dir_okay=False, path_type=str), default=None,
+              metavar="FILE", help="Also write the grade itself to FILE (JSON), which "
+              "--look FILE applies again with no fit.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
               "index.html) into this folder.")
 @click.pass_context
 def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, as_json,
-          report_dir, **kwargs):
-    """Grade PHOTO towards the barycenter of style palettes closest to its own.
+          save_grade, report_dir, **kwargs):
+    """Grade PHOTO with the look of a preset or of a folder of style photos.
 
-    The style palettes come from a folder of photos (--style DIR) or a preset
-    (--preset NAME_OR_FILE). The photo keeps its format, bit depth, EXIF and
+    The look comes from a preset (--preset NAME_OR_FILE) or a folder of style
+    photos (--style DIR): the look they share, or the look of the style photo
+    that shows PHOTO's own scene. --mode palette instead moves PHOTO's
+    colours onto the closest blend of the style palettes (the barycentric
+    weights are reported). The terminal says which source the grade used,
+    its strength, and how much the photo changed (and why, when it is left
+    nearly unchanged). The photo keeps its format, bit depth, EXIF and
     ICC profile. By default 8/16-bit photos are graded as sRGB (or the space
     their ICC profile names, converted) and float (EXR) photos in the
     sRGB-encoded domain; values above 1 keep their intensity and get the
     grade of their hue. --working-space (e.g. acescct) grades elsewhere;
     the output stays in the photo's own space. Raw camera files (DNG, CR2,
     NEF, ARW, ...) are demosaiced by LibRaw and graded in ACEScct. --look
-    FILE applies a saved grade (the JSON of `apply --json`, or a LUT) with
-    no fit.
+    FILE applies a saved grade (the JSON of `apply --save-grade`, or a LUT)
+    with no fit.
     """
     from tqdm import tqdm
 
@@ -125,7 +120,8 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source if look is None else look, options, output, lut,
-                             lut_size, lut_format, overwrite, report_dir, progress, encode)
+                             lut_size, lut_format, overwrite, report_dir, progress, encode,
+                             save_grade)
     if "own_style" in report.grade.info:
         from wbcgrade.color.presets import own_style_warning
 
@@ -133,3 +129,5 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")
+    if save_grade is not None and not as_json:
+        click.echo(f"grade saved: {save_grade}")

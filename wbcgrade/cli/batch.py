@@ -43,6 +43,13 @@ def photo_line(result: FileResult) -> str:
         return f"skipped  {result.relative} (its output is complete)"
     if result.status != "graded":
         return f"{result.status:<8} {result.relative}: {result.error}"
+    outcome = result.grade_outcome
+    if outcome is not None and outcome.palette is None:  # a look: no weights to show
+        said = (f"{outcome.source.describe(outcome.n_styles)}, strength {outcome.strength:.2f}, "
+                f"change {outcome.mean_change:.1f}/255")
+        if outcome.unchanged:
+            said += f" (essentially unchanged: {outcome.reason})"
+        return f"graded   {result.relative}: {said}  {result.timings.get('total', 0.0):.1f} s"
     ranked = sorted(zip(result.names, result.weights), key=lambda pair: -pair[1])
     shown = ", ".join(f"{name} {weight:.3f}" for name, weight in ranked[:SHOWN_WEIGHTS]
                       if weight >= 0.0005)
@@ -113,7 +120,10 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
             click.echo(f"  failed   {item.relative}: {item.error}")
     for name in result.ignored:
         click.echo(f"  ignored  {name} (not an image)")
-    if result.series is not None:
+    outcome = None if result.series_grade is None else result.series_grade.outcome
+    if outcome is not None and outcome.palette is None:
+        click.echo("series grade: " + outcome.headline().removeprefix("grade: "))
+    elif result.series is not None:
         ranked = sorted(zip(result.style_names, result.series.weights), key=lambda p: -p[1])
         click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))
 
@@ -153,13 +163,14 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
           report_dir, lut, lut_size, lut_format, look_path, **kwargs):
     """Grade every photo in IN_DIR into OUT_DIR, keeping formats, bit depth and metadata.
 
-    Each photo gets its own barycentric coordinates, or with --consistent the
-    whole series shares one. Outputs are written atomically; a rerun skips
+    Each photo gets its own grade (the preset's or the style photos' look,
+    or with --mode palette its own blend of their palettes), or with
+    --consistent the whole series shares one. Outputs are written atomically; a rerun skips
     photos whose output is complete (--overwrite redoes them) and removes the
     temporary files of a killed run. One run at a time may write into OUT_DIR.
     Files that are not images (by extension) are ignored; unreadable photos
     and failed writes (e.g. a full disk) are reported and make the exit
-    status 1. --look FILE applies a saved grade (the JSON of `apply --json`,
+    status 1. --look FILE applies a saved grade (the JSON of `apply --save-grade`,
     or a LUT) to every photo with no fit.
     """
     from wbcgrade.color.batch import grade_folder

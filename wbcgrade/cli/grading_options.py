@@ -62,7 +62,8 @@ def _options() -> list:
                      help="Use these style weights and skip the fit (order: sorted file names of "
                           "--style DIR, or the preset's order shown by `preset list`)."),
         click.option("--strength", type=float, default=1.0, show_default=True,
-                     help="Blend: x -> (1-t) x + t T(x)."),
+                     help="How much of the grade: 0 none, 1 in full (x -> (1-t) x + t T(x)); "
+                          "up to 4 makes a faint grade stronger."),
         click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
                      metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
                      "(unbalanced transport: palette colours the photo has no use for are left "
@@ -134,10 +135,10 @@ def look_option() -> list:
     """``--look FILE``: apply a saved grade, no fit (for :func:`lazy_options`)."""
     return [click.option("--look", "look_path", type=click.Path(dir_okay=False, path_type=str),
                          default=None, metavar="FILE",
-                         help="Apply a saved grade instead of fitting one: the JSON printed by "
-                              "`apply --json` (regrain as it was) or a 3-D LUT (.cube from "
-                              "--lut, .clf, ...; regrained unless --no-regrain). Replaces "
-                              "--style/--preset; the fit options are not used.")]
+                         help="Apply a saved grade instead of fitting one: the JSON written "
+                              "by `apply --save-grade FILE` (regrain as it was) or a 3-D LUT "
+                              "(.cube from --lut, .clf, ...; regrained unless --no-regrain). "
+                              "Replaces --style/--preset; the fit options are not used.")]
 
 
 def write_options() -> list:
@@ -180,8 +181,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     def given(name: str) -> bool:
         return ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE
 
-    for name, flag in (("style_dir", "--style"), ("preset", "--preset"),
-                       ("weights_text", "--weights")):
+    for name, flag in (("style_dir", "--style"), ("preset", "--preset")):
         if given(name):
             raise OptionError(f"--look replaces {flag}: give one of them", "--look")
     look = load_look(look_path, options.spaces.working)
@@ -191,7 +191,10 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     if regrain_given or not is_json:
         changes["regrain"] = options.regrain.settings
     if given("strength"):
-        changes["strength"] = options.map.strength
+        from wbcgrade.color.grading import strengthened
+
+        changes["color_map"], changes["strength"] = strengthened(look.color_map,
+                                                                 options.map.strength)
     return replace(look, **changes) if changes else look
 
 
@@ -321,6 +324,52 @@ def lut_size_option() -> list:
                          help="Nodes per axis of the LUT.")]
 
 
+#: Options that steer the palette fit and transport only (parameter name -> flag): the
+#: look grade (``--mode look``, the default) and a saved grade (``--look``) never use them.
+PALETTE_ONLY = {"weights_text": "--weights", "relaxation": "--relax", "loss": "--loss",
+                "bins": "--bins", "fit_bins": "--fit-bins", "width": "--width",
+                "gamma": "--gamma", "transfer_width": "--transfer-width",
+                "n_iter": "--iterations", "max_iter": "--max-iter",
+                "smoothness": "--smoothness", "stiffness": "--stiffness"}
+#: Options of the look grade only (parameter name -> flag).
+LOOK_ONLY = {"natural": "--natural"}
+
+
+def given_flags() -> set[str]:
+    """The parameter names given on the command line of the running click command."""
+    from click.core import ParameterSource
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return set()
+    return {name for name in ctx.params
+            if ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE}
+
+
+def check_mode_options(mode: str, given: set[str], saved_look: bool = False) -> None:
+    """OptionError (one line) for an option given on the command line that the grade
+    would not use: a palette-fit option without ``--mode palette`` (``--weights``
+    would otherwise switch to a palette grade unannounced), ``--natural`` with it,
+    and any fit option with a saved grade (``saved_look``)."""
+    from wbcgrade.errors import OptionError
+
+    for name, flag in PALETTE_ONLY.items():
+        if name not in given:
+            continue
+        if saved_look:
+            raise OptionError(f"{flag} steers the palette fit; --look applies a saved grade "
+                              "as it is, with no fit", flag)
+        if mode != "palette":
+            what = ("sets the weights of a palette blend" if name == "weights_text"
+                    else "steers the palette fit")
+            raise OptionError(f"{flag} {what}, which the look grade (--mode {mode}) does not "
+                              "use: add --mode palette", flag)
+    for name, flag in LOOK_ONLY.items():
+        if name in given and mode == "palette":
+            raise OptionError(f"{flag} is the look grade's content model; --mode palette "
+                              "does not use it", flag)
+
+
 def take_grading_options(kwargs: dict) -> tuple:
     """Pop the grading options from a command's kwargs -> (GradeOptions, StyleSource).
 
@@ -337,6 +386,9 @@ def take_grading_options(kwargs: dict) -> tuple:
     from wbcgrade.errors import OptionError
 
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
+    ctx = click.get_current_context(silent=True)
+    saved_look = ctx is not None and ctx.params.get("look_path") is not None
+    check_mode_options(values["mode"], given_flags(), saved_look)
     spaces = {key: kwargs.pop(key, None) for key in _SPACE_KEYS}
     if any(spaces.values()):
         from wbcgrade.color.colorspace import resolve_space

@@ -46,6 +46,13 @@ def _print_result(result, as_json: bool) -> None:
                                  or encoding.working != default_working_space()):
         click.echo(f"colour: {encoding.input} ({encoding.source}), graded in {encoding.working}")
     for number, shot in enumerate(result.shots, start=1):
+        outcome = shot.grade.outcome
+        if outcome is not None and outcome.palette is None:  # a look: no weights to show
+            where = f"shot {number} (frames {shot.first}-{shot.last}) " \
+                if len(result.shots) > 1 else ""
+            for line in outcome.lines():
+                click.echo(where + line)
+            continue
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked()[:6])
         where = (f"shot {number} (frames {shot.first}-{shot.last})" if len(result.shots) > 1
                  else "weights")

@@ -71,27 +71,36 @@ class GradeReport:
         """The colour spaces (JSON-friendly)."""
         return self.graded.encoding.as_dict()
 
-    def as_dict(self, saved_grade: bool = False) -> dict:
-        """JSON-friendly summary; ``saved_grade``: with the grade itself under
-        ``"saved_grade"`` (what ``apply --look`` reads back, no fit)."""
-        saved = {}
-        if saved_grade:
-            from wbcgrade.color.saved_look import look_dict
+    @property
+    def outcome(self):
+        """What the grade did to this photo (:class:`wbcgrade.color.outcome.GradeOutcome`),
+        or None for a grade that has no outcome (built by hand)."""
+        return self.grade.outcome
 
-            saved = {"saved_grade": look_dict(self.grade)}
-        return {
+    def as_dict(self) -> dict:
+        """JSON-friendly summary (a few KB: no colour map; ``apply --save-grade FILE``
+        writes the grade itself). The style weights and the fit's loss are there for a
+        palette grade only (under ``"outcome"`` and, as before, ``"weights"``/``"loss"``):
+        a look grade has none that mean anything."""
+        outcome = self.outcome
+        palette = outcome is None or outcome.palette is not None
+        info = {k: v for k, v in dict(self.grade.info).items() if k != "fit"}
+        out = {
             "photo": str(self.photo),
             "output": None if self.output is None else str(self.output),
             "lut": None if self.lut is None else str(self.lut),
             "styles": self.styles_source,
-            "weights": [{"style": name, "weight": round(w, 6)} for name, w in self.grade.ranked()],
-            "loss": self.grade.loss,
-            "fitted": self.fit_start not in ("given", "saved"),
+            "outcome": None if outcome is None else outcome.as_dict(),
             "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
-            **dict(self.grade.info),
             "color": self.color,
+            "diagnostics": info,
             **({"report": str(self.report)} if self.report is not None else {}),
-            **saved,
         }
+        if palette:
+            out.update({"weights": [{"style": name, "weight": round(w, 6)}
+                                    for name, w in self.grade.ranked()],
+                        "loss": self.grade.loss,
+                        "fitted": self.fit_start not in ("given", "saved")})
+        return out

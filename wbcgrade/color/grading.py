@@ -58,6 +58,14 @@ from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
+from wbcgrade.color.outcome import (
+    FAINT_STRENGTH,
+    UNCHANGED_STRENGTH,
+    GradeOutcome,
+    GradeSource,
+    PaletteFit,
+    map_change,
+)
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
 from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
@@ -65,9 +73,16 @@ from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
            "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
-           "grade_histograms", "grade_encoded", "grade_array"]
+           "grade_histograms", "grade_outcome", "outcome_on_photo", "strengthened",
+           "grade_encoded", "grade_array"]
 
 FitCallback = Callable[[int, np.ndarray, float], None]
+
+#: Nodes per axis (at least) of a preset's look converted into another working space
+#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills 0.07-0.55 of ACEScct's
+#: cube, where 33 nodes left a JPEG graded in ACEScct 1.2/255 from the sRGB grade on
+#: average (99th percentile 8.5), 65 nodes 0.36 (3.8) (kodak-2383 on samples/coffee.jpg).
+CONVERTED_LOOK_SIZE = 65
 
 
 def _quiet(name: str) -> None:
@@ -91,6 +106,8 @@ class Grade:
     barycenter : (n, n, n) the target palette on the transfer grid, or None.
     info : fit, palette, Sinkhorn and map diagnostics (JSON-friendly).
     timings : seconds per stage.
+    outcome : what the grade did, in plain terms (source, strength, size, the
+        photo's change; :class:`wbcgrade.color.outcome.GradeOutcome`), or None.
     """
 
     names: tuple[str, ...]
@@ -103,6 +120,7 @@ class Grade:
     barycenter: np.ndarray | None = None
     info: Mapping = field(default_factory=dict)
     timings: Mapping = field(default_factory=dict)
+    outcome: GradeOutcome | None = field(default=None, compare=False)
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -261,7 +279,10 @@ def look_map(request: MapRequest) -> BuiltMap:
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
                          {"start": "preset", "look": "the preset's own"}, 0.0)
-        return BuiltMap(resample_lattice(styles.meta["look"], options.map.size), None,
+        size = options.map.size
+        if styles.meta.get("converted_from"):  # converted from the preset's own space: finer,
+            size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
+        return BuiltMap(resample_lattice(styles.meta["look"], size), None,
                         {"look": {"source": "preset"}}, {}, fit)
     timings: dict[str, float] = {}
     start = time.perf_counter()
@@ -392,7 +413,13 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     built = MAP_BUILDERS[name](MapRequest(photo, styles, options, encoding, callback,
                                           stage or _quiet))
     start = time.perf_counter()
-    color_map = finish_map(built.color_map, options, encoding)
+    finish = options
+    if built.fit.start == "preset" and options.map.monotone:
+        # a preset's look is applied as it was made (monotone in its own space already):
+        # the lattice of its conversion into another space also covers colours outside
+        # the preset's gamut, where a monotone pass would drag the look inside it
+        finish = replace(options, map=replace(options.map, monotone=False))
+    color_map = finish_map(built.color_map, finish, encoding)
     timings = {**built.timings, "finish": time.perf_counter() - start}
     info = {"fit": built.fit.info, **built.info}
     info["map"] = {**info.get("map", {}), "builder": name, "monotone": options.map.monotone,
@@ -401,12 +428,92 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                       built.fit.weights)
     if found is not None:  # the photo is one of the styles (the CLI warns)
         info["own_style"] = found
+    color_map, strength = strengthened(color_map, options.map.strength)
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
-                  strength=options.map.strength, regrain=options.regrain.settings,
+                  strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
-    return grade, built.fit
+    outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
+    return replace(grade, outcome=outcome), built.fit
+
+
+def strengthened(color_map: np.ndarray, strength: float) -> tuple[np.ndarray, float]:
+    """A map and the blend that apply it at ``strength``: up to 1 the map as it is and
+    that blend; above 1 the map's displacement scaled by ``strength`` (clipped to the
+    unit cube) and blend 1. (m, m, m, 3) -> same shape, float32."""
+    if strength <= 1.0:
+        return color_map, float(strength)
+    nodes = identity_map(color_map.shape[0])
+    return np.clip(nodes + strength * (color_map - nodes), 0.0, 1.0).astype(np.float32), 1.0
+
+
+def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
+    """The outcome of an existing grade (a series' shared grade, a saved one) on a photo
+    whose (n, n, n) working-space histogram is ``photo_hist``."""
+    change = map_change(grade.color_map, grade.strength, grade.working, photo_hist)
+    if grade.outcome is not None:
+        return grade.outcome.on_photo(change)
+    if "saved_look" in dict(grade.info):
+        from wbcgrade.color.saved_look import look_fit
+
+        return grade_outcome(grade, look_fit(grade), photo_hist)
+    return grade_outcome(grade, FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0),
+                                           np.zeros(0), "given"), photo_hist, "palette")
+
+
+def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
+                  builder: str = "look", blend: float | None = None) -> GradeOutcome:
+    """What ``grade`` does to a photo whose histogram (any (n, n, n) grid of working-space
+    colours) is ``photo_hist`` (None: judged on the whole colour cube).
+
+    The source follows how the builder found the map (``fit.start``: "preset",
+    "scene", "look", else a palette fit); the look's strength and match come
+    from the look builder's diagnostics (``grade.info["look"]``). ``blend``: the
+    ``--strength`` asked for (default the grade's own blend; above 1 the map was scaled).
+    """
+    blend = float(grade.strength if blend is None else blend)
+    look = dict(grade.info.get("look", {}) or {})
+    n_styles = len(grade.names)
+    look_size = map_change(grade.color_map, grade.strength, grade.working)
+    mean_change = (look_size if photo_hist is None else
+                   map_change(grade.color_map, grade.strength, grade.working, photo_hist))
+    start = fit.start
+    if start == "saved":
+        saved = dict(grade.info.get("saved_look", {}) or {})
+        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend,
+                                  look_size, mean_change, file=saved.get("file"))
+    if start == "preset":
+        return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
+                                  blend, look_size, mean_change)
+    if start in ("scene", "look") or (builder != "palette" and grade.barycenter is None
+                                      and start not in ("given", "uniform", "vertex",
+                                                        "vertex-refit")):
+        set_strength = float(look.get("set_strength", 1.0))
+        confidence = float(look.get("confidence", 0.0) or 0.0)
+        strength = confidence + (1.0 - confidence) * set_strength
+        why = None
+        if set_strength < FAINT_STRENGTH and confidence <= 0:
+            how = "no" if set_strength < UNCHANGED_STRENGTH else "little"
+            why = (f"these {n_styles} style photos share {how} look that can be told apart "
+                   "from their content" if n_styles > 1 else
+                   f"the style photo shows {how} look that can be told apart from its content")
+        source = GradeSource.OWN_SCENE if start == "scene" else GradeSource.SET_LOOK
+        return GradeOutcome.judge(source, n_styles, strength, blend,
+                                  look_size, mean_change, why, match=look.get("match"),
+                                  confidence=confidence,
+                                  extra={"set_strength": set_strength})
+    order = np.argsort(-np.asarray(fit.weights), kind="stable")
+    best = fit.best_vertex if len(fit.vertex_losses) else None
+    fit_info = dict(fit.info or {})
+    palette = PaletteFit(tuple(grade.names[i] for i in order),
+                         tuple(float(fit.weights[i]) for i in order), float(fit.loss),
+                         None if best is None or start == "given"
+                         else (grade.names[best], float(fit.vertex_losses[best])),
+                         start, int(fit_info.get("evaluations", 0)),
+                         bool(fit_info.get("converged", True)))
+    return GradeOutcome.judge(GradeSource.PALETTE, n_styles, 1.0, blend,
+                              look_size, mean_change, palette=palette)
 
 
 def grade_encoded(encoded: np.ndarray, styles: StyleSet, options: GradeOptions,

@@ -26,10 +26,10 @@ sorted into the groups (:data:`FLAT_FIELDS`).
 (64, 16, 'look')
 >>> GradeOptions(bins=64, relaxation=0.05) == opts  # the former flat names
 True
->>> GradeOptions(strength=2)
+>>> GradeOptions(strength=5)
 Traceback (most recent call last):
 ...
-wbcgrade.errors.OptionError: map.strength must be in [0, 1]
+wbcgrade.errors.OptionError: map.strength must be in [0, 4]
 """
 
 from __future__ import annotations
@@ -51,6 +51,8 @@ LOSSES = ("quadratic", "l1", "kl", "wasserstein")
 #: colour transfer onto the closest barycenter of the style palettes; "look", the
 #: look the style set shares, corrected towards the photo's own scene.
 MODES = ("look", "palette")
+#: The largest ``map.strength``: above 1 a grade's displacement is scaled up.
+MAX_STRENGTH = 4.0
 #: Fraction of mass spread uniformly over every histogram before fitting (real
 #: photo histograms are sparse; KL needs > 0).
 DEFAULT_FLOOR = 1e-4
@@ -226,7 +228,9 @@ class MapOptions:
         channel (the working space's luma, :attr:`ColorEncoding.luma_weights`).
     preserve_luminance : keep each colour's Oklab lightness (computed in the
         working space's own terms), change only its hue and chroma.
-    strength : t in [0, 1]: x -> (1 - t) x + t T(x).
+    strength : t in [0, :data:`MAX_STRENGTH`]: x -> (1 - t) x + t T(x); above 1 the
+        map's displacement itself is scaled by t (a faint look made stronger), clipped
+        to the cube.
     """
 
     builder: str = "look"
@@ -246,7 +250,10 @@ class MapOptions:
         _int_in("map", "size", self.size, 2, 129)
         _non_negative("map", "smoothness", self.smoothness)
         _non_negative("map", "stiffness", self.stiffness)
-        _fraction("map", "strength", self.strength)
+        strength = self.strength
+        if not (isinstance(strength, (int, float)) and math.isfinite(strength)
+                and 0 <= strength <= MAX_STRENGTH):
+            raise _fail("map.strength", f"must be in [0, {MAX_STRENGTH:g}]")
 
     @property
     def smoothed(self) -> bool:

@@ -60,6 +60,7 @@ from wbcgrade.errors import InputError
 __all__ = [
     "StyleSet",
     "StyleSource",
+    "look_in_space",
     "load_styles",
     "load_style_folder",
     "save_preset",
@@ -426,11 +427,47 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
             keep = np.flatnonzero(flat > 0)
             moved = convert(centres[keep], source, working)
             hists.append(soft_histogram(moved, styles.bins, flat[keep]))
-        meta = {**{k: v for k, v in styles.meta.items() if k != "look"},  # (its own space's)
-                "working_space": working, "converted_from": source}
+        meta = {**styles.meta, "working_space": working, "converted_from": source}
+        if styles.meta.get("look") is not None:  # the same look, converted (not re-extracted)
+            meta["look"] = look_in_space(styles.meta["look"], source, working,
+                                         max(65, styles.meta["look"].shape[0]))
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
+
+
+def look_in_space(look: np.ndarray, source: str, working: str,
+                  size: int | None = None) -> np.ndarray:
+    """A look lattice made in one working space, as the same look in another.
+
+    Each node y of a ``size``^3 lattice (default the look's own size) of
+    ``working`` is converted into ``source`` (x), moved by the look there
+    (colours outside ``source``'s unit cube keep their offset from it: the look
+    of the nearest colour inside), and converted back: the lattice holds
+    ``to_working(look(x))``, clipped to the unit cube. Applied to a colour,
+    the converted look gives (up to interpolation) what the original gives to
+    the same colour in its own space.
+
+    Parameters
+    ----------
+    look : (m, m, m, 3) the look's lattice in ``source`` (config names).
+    source, working : colour space names (:func:`resolve_space`).
+    size : nodes per axis of the result (default m).
+
+    Returns
+    -------
+    (size, size, size, 3) float32 lattice in ``working``.
+    """
+    from wbcgrade.color.histogram import grid_points
+    from wbcgrade.color.remap import apply_color_map
+
+    size = int(size or look.shape[0])
+    nodes = grid_points(size).astype(np.float32)
+    there = convert(nodes, working, source)
+    inside = np.clip(there, 0.0, 1.0)
+    moved = apply_color_map(inside, np.asarray(look, dtype=np.float32)) + (there - inside)
+    back = convert(moved, source, working)
+    return np.clip(back, 0.0, 1.0).reshape(size, size, size, 3).astype(np.float32)
 
 
 @dataclass(frozen=True)

@@ -169,11 +169,24 @@ def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
+    bins = 16
+    outcome = result.grade_outcome
+    if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
+        tiles = [StyleTile(name, 0.0, pictures.get(name, np.full((8, 8, 3), 0.5, np.float32)))
+                 for name in result.names]
+        palettes = [("input", histogram_palette(image_histogram(before, bins))),
+                    ("output", histogram_palette(image_histogram(after, bins)))]
+        subtitle = outcome.headline().removeprefix("grade: ")
+        if outcome.unchanged:
+            subtitle += f"  |  essentially unchanged: {outcome.reason}"
+        return SheetContent(title=result.relative, subtitle=subtitle, before=small_before,
+                            after=small_after, styles=tiles, palettes=palettes,
+                            styles_label=f"styles ({outcome.source.describe(len(tiles))}; "
+                                         "a look has no weights)")
     order = sorted(range(len(result.weights)), key=lambda i: -result.weights[i])
     tiles = [StyleTile(result.names[i], result.weights[i],
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
-    bins = 16
     palettes = [("input", histogram_palette(image_histogram(before, bins))),
                 *([("barycenter", target)] if target is not None else []),
                 ("output", histogram_palette(image_histogram(after, bins)))]
@@ -199,7 +212,8 @@ def report_entries(report_dir: str | os.PathLike, result: BatchResult) -> list[d
         if item.status == "skipped":
             try:
                 previous = json.loads(_record_path(report_dir, item.relative).read_text("utf-8"))
-                if isinstance(previous, dict) and "weights" in previous:
+                if isinstance(previous, dict) and ("weights" in previous
+                                                   or "outcome" in previous):
                     entry = {**previous, "status": "skipped"}
             except (OSError, ValueError):
                 pass
@@ -208,11 +222,16 @@ def report_entries(report_dir: str | os.PathLike, result: BatchResult) -> list[d
 
 
 def _weights_row(entry: dict, names: list[str]) -> list:
+    """A photo's row: its weights and loss for a palette grade (empty cells for a look
+    grade, which has none), then what the grade did (source, strength, change)."""
     weights = {w["style"]: w["weight"] for w in entry.get("weights", [])}
     best = entry.get("best_single_style") or {}
+    outcome = entry.get("outcome") or {}
     return ([entry["photo"], entry["status"]] + [weights.get(n, "") for n in names]
             + [entry.get("loss", ""), best.get("style", ""), best.get("loss", ""),
-               entry.get("nonzero_weights", "")])
+               entry.get("nonzero_weights", ""), outcome.get("source", ""),
+               outcome.get("strength", ""), outcome.get("mean_change_255", ""),
+               {True: "yes", False: "no"}.get(outcome.get("unchanged"), "")])
 
 
 _FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
@@ -235,7 +254,7 @@ def _csv_text(entries: list[dict], names: list[str]) -> str:
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     rows = [["photo", "status", *names, "loss", "best_single_style", "best_single_loss",
-             "nonzero_weights"]]
+             "nonzero_weights", "source", "strength", "mean_change_255", "unchanged"]]
     rows += [_weights_row(entry, names) for entry in entries]
     for row in rows:
         writer.writerow([csv_cell(cell) for cell in row])
@@ -263,6 +282,16 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
         photo = esc(entry["photo"])
         if entry.get("sheet"):
             photo = f'<a href="#{esc(entry["photo"])}">{photo}</a>'
+        outcome = entry.get("outcome")
+        if "weights" not in entry and outcome:  # a look grade: what it did, no weights
+            said = (f'{esc(str(outcome.get("source_text", "")))}, strength '
+                    f'{float(outcome.get("strength", 0)):.2f}, mean change '
+                    f'{float(outcome.get("mean_change_255", 0)):.1f}/255')
+            if outcome.get("unchanged"):
+                said += f'; essentially unchanged: {esc(str(outcome.get("reason", "")))}'
+            rows.append(f'<tr><td class="name">{photo}</td>'
+                        f'<td class="name" colspan="{len(names) + 2}">{said}</td></tr>')
+            continue
         if "weights" not in entry:
             rows.append(f'<tr><td class="name">{photo}</td>'
                         f'<td class="failed" colspan="{len(names) + 2}">'
@@ -350,7 +379,8 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
                         weights=[float(w) for w in graded.grade.weights],
                         loss=float(fit.loss), vertex_losses=[float(v) for v in fit.vertex_losses],
                         start=fit.start, timings=dict(graded.timings), color=graded.color,
-                        own_style=graded.grade.info.get("own_style"))
+                        own_style=graded.grade.info.get("own_style"),
+                        outcome=None if graded.outcome is None else graded.outcome.as_dict())
     sheet = sheet_path(result.relative)
     write_sheet(report_dir / sheet, sheet_content(result, graded.graded, style_pictures(styles)),
                 overwrite=overwrite)

@@ -280,7 +280,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
             else data
         if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
             raise InputError(f"{path}: holds no saved grade (write one with "
-                             "`wbcgrade apply PHOTO ... --json > grade.json`)")
+                             "`wbcgrade apply PHOTO ... --save-grade grade.json`)")
         grade = look_from_dict(entry, str(path))
         space = grade.working or default_working_space()
         return Grade(grade.names, grade.weights, grade.color_map,

@@ -134,6 +134,8 @@ class SheetContent:
     styles: list[StyleTile]
     palettes: list[tuple[str, Palette]]
     more_styles: int = 0
+    #: a look grade has no weights: the styles are shown without bars, under this label
+    styles_label: str | None = None
 
 
 class _Canvas:
@@ -194,7 +196,7 @@ def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
     canvas.text(pad, top + row_h + 16, "input", 13)
     canvas.text(2 * pad + half, top + row_h + 16, "graded", 13)
     top += row_h + 24
-    label = "styles (weight bars)"
+    label = content.styles_label or "styles (weight bars)"
     if content.more_styles:
         label += f", {content.more_styles} more below the threshold"
     canvas.text(pad, top + 14, label, 13)
@@ -204,9 +206,12 @@ def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
         y, x = top + row * tile_block, pad + col * (tile_w + pad)
         pic = thumbnail(tile.picture, tile_h, tile_w)
         canvas.paste(pic, y + (tile_h - pic.shape[0]) // 2, x + (tile_w - pic.shape[1]) // 2)
+        name = tile.name if len(tile.name) <= 11 else tile.name[:10] + "~"
+        if content.styles_label is not None:  # no weights to show
+            canvas.text(x, y + tile_h + 26, name, 11)
+            continue
         canvas.fill(y + tile_h + 3, x, 8, tile_w, (0.85, 0.85, 0.85))
         canvas.fill(y + tile_h + 3, x, 8, max(1, round(tile_w * min(tile.weight, 1.0))), _BAR)
-        name = tile.name if len(tile.name) <= 11 else tile.name[:10] + "~"
         canvas.text(x, y + tile_h + 26, f"{name} {tile.weight:.2f}", 11)
     top += tile_rows * tile_block
     label_w = 92

@@ -94,6 +94,7 @@ class PhotoPlan:
     lut_format: str = "cube"
     overwrite: bool = False
     encode: WriteOptions = WriteOptions()
+    saved_grade: Path | None = None
 
 
 def default_output_path(photo: str | os.PathLike) -> Path:
@@ -107,7 +108,9 @@ def default_output_path(photo: str | os.PathLike) -> Path:
 def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
                lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
                lut_format: str | None = None, overwrite: bool = False,
-               write: bool = True, encode: WriteOptions | None = None) -> PhotoPlan:
+               write: bool = True, encode: WriteOptions | None = None,
+               saved_grade: str | os.PathLike | None = None,
+               inputs: tuple = ()) -> PhotoPlan:
     """Check that the photo exists and its outputs may be written; -> the plan.
 
     Checked before any work: the output's file type can be written, and
@@ -116,7 +119,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     or ``.clf``) passes :func:`wbcgrade._publish.plan_outputs`: not the photo, not
     an existing file unless ``overwrite``, not a device, not two outputs in
     one file, a folder that exists and is writable. ``write`` False: nothing
-    is written (no output).
+    is written (no output). ``saved_grade``: where the grade itself goes (a JSON
+    file that ``--look`` reads), planned with the others. ``inputs``: other files
+    the run reads (e.g. a saved grade), which no output may replace.
     """
     photo = Path(photo)
     if not photo.exists():
@@ -135,8 +140,10 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
         check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
-    output, lut = plan_outputs([output, lut], [photo], overwrite)
-    return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode)
+    output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *inputs],
+                                            overwrite)
+    return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode,
+                     saved_grade)
 
 
 def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
@@ -199,8 +206,14 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     encoded = encoding.encode(rgb, image.is_float)
     timings["read"] = time.perf_counter() - start
     fit = None
-    if shared is not None:
-        grade = shared
+    if shared is not None:  # what the shared (series or saved) grade does to this photo
+        from dataclasses import replace
+
+        from wbcgrade.color.grading import outcome_on_photo
+        from wbcgrade.color.histogram import image_histogram
+
+        hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
+        grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
         grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
                                    progress.fit, progress.stage)
@@ -274,7 +287,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                 lut_size: int = DEFAULT_LUT_SIZE, lut_format: str | None = None,
                 overwrite: bool = False, report_dir: str | os.PathLike | None = None,
                 progress: Progress | None = None,
-                encode: WriteOptions | None = None) -> GradeReport:
+                encode: WriteOptions | None = None,
+                save_grade: str | os.PathLike | None = None) -> GradeReport:
     """``wbcgrade apply``: grade ``photo`` and write it, the LUT and the report.
 
     Every output (the graded photo, the LUT, the report's files) is planned
@@ -290,13 +304,16 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
       needs styles, so ``report_dir`` is an OptionError.
 
     ``encode``: JPEG/WebP quality and bit depth of the graded photo.
+    ``save_grade``: also write the grade itself, as JSON (what ``--look`` reads).
     """
     progress = progress or Progress()
     saved = isinstance(source, Grade)
     if saved and report_dir is not None:
         raise OptionError("--report needs styles to compare with; a saved --look has none",
                           "--report")
-    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode)
+    look_file = dict(source.info).get("saved_look", {}).get("file") if saved else None
+    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode,
+                      saved_grade=save_grade, inputs=(look_file,) if look_file else ())
     if report_dir is not None:
         from wbcgrade.color.report import plan_report
 
@@ -313,6 +330,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         report = grade_file(plan, look_styles(source, name), options, shared=source,
                             progress=progress, keep_input=False)
         report.fit = look_fit(source)
+        _save_grade(plan, report.grade)
         return report
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
@@ -320,8 +338,25 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
                         keep_input=report_dir is not None)
+    _save_grade(plan, report.grade)
     if report_dir is not None:
         from wbcgrade.color.report import report_from_grade
 
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report
+
+
+def _save_grade(plan: PhotoPlan, grade: Grade) -> None:
+    """Write the grade itself where the plan says (``--save-grade``), atomically."""
+    if plan.saved_grade is None:
+        return
+    import json
+
+    from wbcgrade._publish import publish_bytes
+    from wbcgrade.color.saved_look import look_dict
+
+    entry = look_dict(grade)
+    if grade.outcome is not None:
+        entry["outcome"] = grade.outcome.as_dict()
+    publish_bytes(plan.saved_grade, json.dumps(entry, indent=1).encode("utf-8"),
+                  overwrite=plan.overwrite)

@@ -76,6 +76,20 @@ def _sheet(result: VideoResult, number: int, shot: ShotGrade,
     before = [encoding.to_display(frame) for frame in before]  # pictures in sRGB
     after = [encoding.to_display(frame) for frame in after]
     weights, names = shot.grade.weights, shot.grade.names
+    outcome = shot.grade.outcome
+    if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
+        title = (f"{safe_text(result.input.name)}  shot {number} of {len(result.shots)}: "
+                 f"frames {shot.first}-{shot.last}, {len(shot.samples)} sampled")
+        subtitle = outcome.headline().removeprefix("grade: ")
+        if outcome.unchanged:
+            subtitle += f"  |  essentially unchanged: {outcome.reason}"
+        palettes = [("frames", histogram_palette(image_histogram(np.concatenate(before), 16))),
+                    ("graded", histogram_palette(image_histogram(np.concatenate(after), 16)))]
+        tiles = [StyleTile(name, 0.0, pictures[name]) for name in names if name in pictures]
+        return SheetContent(title=title, subtitle=subtitle, before=contact_grid(before),
+                            after=contact_grid(after), styles=tiles, palettes=palettes,
+                            styles_label=f"styles ({outcome.source.describe(len(names))}; "
+                                         "a look has no weights)")
     order = np.argsort(-weights, kind="stable")
     tiles = [StyleTile(names[i], float(weights[i]), pictures[names[i]])
              for i in order if weights[i] >= NONZERO_THRESHOLD]

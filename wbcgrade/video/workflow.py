@@ -133,16 +133,23 @@ class ShotGrade:
     table: np.ndarray
 
     def as_dict(self, fps: float) -> dict:
-        ranked = self.grade.ranked()
-        return {"first_frame": self.first, "last_frame": self.last,
-                "start_s": round(self.first / fps, 4), "end_s": round((self.last + 1) / fps, 4),
-                "sampled_frames": self.samples,
-                "weights": [{"style": n, "weight": round(w, 6)} for n, w in ranked],
-                "loss": self.fit.loss, "fit_start": self.fit.start,
+        """The shot, what its grade did (``outcome``) and, for a palette grade only, its
+        weights and losses (a look grade has none that mean anything)."""
+        outcome = self.grade.outcome
+        entry = {"first_frame": self.first, "last_frame": self.last,
+                 "start_s": round(self.first / fps, 4), "end_s": round((self.last + 1) / fps, 4),
+                 "sampled_frames": self.samples,
+                 "outcome": None if outcome is None else outcome.as_dict(),
+                 "fit_start": self.fit.start,
+                 "timings_s": {k: round(v, 3) for k, v in self.grade.timings.items()}}
+        if outcome is None or outcome.palette is not None:
+            entry.update({
+                "weights": [{"style": n, "weight": round(w, 6)} for n, w in self.grade.ranked()],
+                "loss": self.fit.loss,
                 "single_style_losses": dict(zip(self.grade.names,
                                                 (float(v) for v in self.fit.vertex_losses))),
-                "fit": self.grade.info.get("fit", {}),
-                "timings_s": {k: round(v, 3) for k, v in self.grade.timings.items()}}
+                "fit": self.grade.info.get("fit", {})})
+        return entry
 
 
 @dataclass
@@ -545,9 +552,11 @@ def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
+            from wbcgrade.color.grading import grade_outcome
             from wbcgrade.color.saved_look import look_fit
 
             grade, fit = look, look_fit(look)
+            grade = replace(grade, outcome=grade_outcome(grade, fit, None))
         else:
             grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options,
                                     encoding, progress.fit, progress.stage)

@@ -32,6 +32,23 @@ class FileResult:
     color: dict = field(default_factory=dict)  # colour spaces and config (ColorEncoding)
     own_style: dict | None = None  # the photo is one of the styles (presets.own_style)
     palette: dict | None = None  # display colours and shares the grade aimed at (sheets)
+    outcome: dict | None = None  # what the grade did (GradeOutcome.as_dict())
+
+    @property
+    def grade_outcome(self):
+        """The :class:`~wbcgrade.color.outcome.GradeOutcome` of the grade, or None (a record
+        from before outcomes, a photo not graded)."""
+        if not self.outcome:
+            return None
+        from wbcgrade.color.outcome import GradeOutcome
+
+        return GradeOutcome.from_dict(self.outcome)
+
+    @property
+    def has_weights(self) -> bool:
+        """Whether the weights mean something: a palette grade's (a look grade has none)."""
+        return bool(self.weights) and (not self.outcome
+                                       or self.outcome.get("palette") is not None)
 
     @property
     def n_nonzero(self) -> int:
@@ -44,7 +61,11 @@ class FileResult:
                        "status": self.status}
         if self.error:
             entry["error"] = self.error
-        if self.weights:
+        if self.outcome:
+            entry["outcome"] = self.outcome
+            if not self.has_weights and self.names:
+                entry["style_names"] = list(self.names)
+        if self.has_weights:
             best = int(np.argmin(self.vertex_losses)) if self.vertex_losses else None
             entry.update({
                 "weights": [{"style": self.names[i], "weight": round(self.weights[i], 6)}
@@ -76,7 +97,7 @@ class FileResult:
         ValueError on an entry that is not one."""
         losses = entry.get("single_style_losses") or {}
         weights = {str(w["style"]): float(w["weight"]) for w in entry.get("weights", [])}
-        names = list(losses) or list(weights)
+        names = list(losses) or list(weights) or [str(n) for n in entry.get("style_names", [])]
         return cls(str(entry["photo"]), str(entry["source"]), entry.get("output"),
                    str(entry["status"]), error=str(entry.get("error", "")), names=names,
                    weights=[weights.get(name, 0.0) for name in names],
@@ -85,7 +106,7 @@ class FileResult:
                    start=str(entry.get("fit_start", "")), sheet=entry.get("sheet"),
                    timings={k: float(v) for k, v in entry.get("timings_s", {}).items()},
                    color=dict(entry.get("color", {})), own_style=entry.get("own_style"),
-                   palette=entry.get("target_palette"))
+                   palette=entry.get("target_palette"), outcome=entry.get("outcome"))
 
 
 @dataclass

@@ -1,0 +1,303 @@
+"""What a grade did, in plain terms: :class:`GradeOutcome` (``grade.outcome``).
+
+Every grade says where its colour map came from (:class:`GradeSource`), how
+strongly it was applied, how large the look is and how much the photo's
+colours actually moved; when they barely moved, it says so and why, and what
+the user can do. The barycentric weights and the fit's loss come with it only
+for a palette grade (:class:`PaletteFit`): in a look grade they mean nothing.
+
+The command line, ``--json``, batch lines, reports and ``explore`` read this
+object instead of diagnostics keyed by strings.
+
+Sizes are in 1/255 of the sRGB-encoded cube (whatever the working space), so
+that "1.9" means the same on every photo:
+
+- ``look_size``: the mean displacement |T(x) - x| of the grade's colour map,
+  as applied, over every colour of the cube;
+- ``mean_change``: the mean per-channel change |T(x) - x| of the photo's own
+  colours (weighted by its histogram).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+__all__ = ["GradeSource", "PaletteFit", "GradeOutcome", "UNCHANGED_CHANGE",
+           "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice"]
+
+#: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
+#: photo is "essentially unchanged".
+UNCHANGED_CHANGE = 1.0
+#: Below this strength (the look's own strength times ``--strength``) a look is not applied.
+UNCHANGED_STRENGTH = 0.05
+#: Below this mean change (1/255 of the sRGB cube), or this strength, a grade is "faint":
+#: it changed the photo, but hardly visibly; the terminal says so and what to do.
+FAINT_CHANGE = 3.0
+FAINT_STRENGTH = 0.25
+
+
+class GradeSource(str, Enum):
+    """Where a grade's colour map came from."""
+
+    PRESET_LOOK = "preset-look"      #: a preset's own look, converted into the working space
+    OWN_SCENE = "own-scene"          #: read off a style photo that shows the photo's scene
+    SET_LOOK = "set-look"            #: the look the style photos share
+    PALETTE = "palette"              #: a palette fit: barycentric weights of the style palettes
+    SAVED = "saved"                  #: a saved grade (``--look``: a JSON grade or a LUT)
+
+    def describe(self, n_styles: int = 0) -> str:
+        """The source in words."""
+        return {
+            GradeSource.PRESET_LOOK: "the preset's own look",
+            GradeSource.OWN_SCENE: "the look of the style photo that shows this scene",
+            GradeSource.SET_LOOK: f"the look the {n_styles} style photos share",
+            GradeSource.PALETTE: f"a blend of the {n_styles} style palettes (palette fit)",
+            GradeSource.SAVED: "a saved grade, applied as saved",
+        }[self]
+
+
+@dataclass(frozen=True)
+class PaletteFit:
+    """The barycentric weights of a palette grade (the paper's report).
+
+    Attributes
+    ----------
+    names : the S style names, by decreasing weight.
+    weights : the S weights, same order (they sum to 1).
+    loss : the fit's loss at the weights.
+    best_single : the style that alone has the lowest loss, and that loss.
+    start : how the weights were found ("uniform", "vertex-refit", "vertex", "given").
+    evaluations : loss evaluations of the fit (0 for given weights).
+    converged : whether the fit converged.
+    """
+
+    names: tuple[str, ...]
+    weights: tuple[float, ...]
+    loss: float
+    best_single: tuple[str, float] | None = None
+    start: str = "uniform"
+    evaluations: int = 0
+    converged: bool = True
+
+    def as_dict(self) -> dict:
+        return {"weights": [{"style": n, "weight": round(w, 6)}
+                            for n, w in zip(self.names, self.weights)],
+                "loss": self.loss,
+                "best_single": None if self.best_single is None else
+                {"style": self.best_single[0], "loss": self.best_single[1]},
+                "start": self.start, "evaluations": self.evaluations,
+                "converged": self.converged}
+
+
+@dataclass(frozen=True)
+class GradeOutcome:
+    """What a grade did.
+
+    Attributes
+    ----------
+    source : where the colour map came from.
+    n_styles : how many styles (style photos, or a preset's palettes) it drew on.
+    look_strength : the strength the grade chose for its look: 1 for a preset's
+        look and a palette grade, the set look's reliability (0: no look to
+        apply), a style photo's scene match's confidence; None for a saved grade.
+    blend : ``--strength``, the blend x -> (1-t) x + t T(x).
+    look_size : mean displacement of the map as applied (look strength and blend)
+        over the whole colour cube, in 1/255 of the sRGB cube.
+    mean_change : mean per-channel change of the photo's colours, 1/255 (sRGB cube).
+    unchanged : the photo is essentially unchanged (strength under
+        :data:`UNCHANGED_STRENGTH` or ``mean_change`` under :data:`UNCHANGED_CHANGE`).
+    reason : why it is unchanged or faint, in words (None when it visibly changed).
+    advice : what the user can do about it (None when it visibly changed).
+    match : the style the grade leans on (the scene's style photo, or the
+        palette grade a set look was moved towards), or None.
+    confidence : how sure the grade is of ``match`` (0-1).
+    palette : the weights and loss, for a palette grade only.
+    file : the saved grade's file, for a saved grade.
+    faint : changed, but hardly visibly (strength under :data:`FAINT_STRENGTH` or
+        ``mean_change`` under :data:`FAINT_CHANGE`); ``reason`` says why.
+    """
+
+    source: GradeSource
+    n_styles: int
+    look_strength: float | None
+    blend: float
+    look_size: float
+    mean_change: float
+    unchanged: bool = False
+    reason: str | None = None
+    advice: str | None = None
+    match: str | None = None
+    confidence: float = 0.0
+    palette: PaletteFit | None = None
+    file: str | None = None
+    faint: bool = False
+    extra: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def strength(self) -> float:
+        """The fraction of the look applied: its own strength times ``--strength``."""
+        return (1.0 if self.look_strength is None else self.look_strength) * self.blend
+
+    def headline(self) -> str:
+        """One line: the source, the strength, the look's size and the photo's change."""
+        what = self.source.describe(self.n_styles)
+        if self.source is GradeSource.SAVED and self.file:
+            what = f"the saved grade {self.file}"
+        if self.source is GradeSource.OWN_SCENE and self.match:
+            what = f"the look of the style photo of this scene ({self.match}, " \
+                   f"confidence {self.confidence:.2f})"
+        elif self.source is GradeSource.SET_LOOK and self.match and self.confidence > 0:
+            what += (f", moved towards the palette grade of {self.match} "
+                     f"(confidence {self.confidence:.2f})")
+        return (f"grade: {what}; strength {self.strength:.2f}, look size "
+                f"{self.look_size:.1f}/255, mean change of this photo {self.mean_change:.1f}/255")
+
+    def lines(self) -> list[str]:
+        """The outcome in words, one line each (the headline, then why and what to do)."""
+        lines = [self.headline()]
+        if self.unchanged:
+            lines.append(f"the photo is essentially unchanged: {self.reason}")
+        elif self.faint:
+            lines.append(f"a faint grade: {self.reason}")
+        if (self.unchanged or self.faint) and self.advice:
+            lines.append(self.advice)
+        return lines
+
+    def as_dict(self) -> dict:
+        """JSON-friendly (a few hundred bytes; no arrays)."""
+        out = {"source": self.source.value, "source_text": self.source.describe(self.n_styles),
+               "n_styles": self.n_styles, "strength": round(self.strength, 4),
+               "look_strength": None if self.look_strength is None
+               else round(self.look_strength, 4),
+               "blend": self.blend, "look_size_255": round(self.look_size, 3),
+               "mean_change_255": round(self.mean_change, 3), "unchanged": self.unchanged,
+               "faint": self.faint,
+               "reason": self.reason, "advice": self.advice, "match": self.match,
+               "confidence": round(self.confidence, 4)}
+        if self.file is not None:
+            out["file"] = self.file
+        if self.palette is not None:
+            out["palette"] = self.palette.as_dict()
+        return out
+
+    @classmethod
+    def from_dict(cls, entry: dict) -> GradeOutcome:
+        """The outcome :meth:`as_dict` wrote."""
+        palette = entry.get("palette")
+        if palette is not None:
+            best = palette.get("best_single")
+            palette = PaletteFit(tuple(w["style"] for w in palette["weights"]),
+                                 tuple(float(w["weight"]) for w in palette["weights"]),
+                                 float(palette["loss"]),
+                                 None if best is None else (best["style"], float(best["loss"])),
+                                 palette.get("start", "uniform"),
+                                 int(palette.get("evaluations", 0)),
+                                 bool(palette.get("converged", True)))
+        strength = entry.get("look_strength")
+        return cls(GradeSource(entry["source"]), int(entry.get("n_styles", 0)),
+                   None if strength is None else float(strength), float(entry.get("blend", 1)),
+                   float(entry.get("look_size_255", 0)), float(entry.get("mean_change_255", 0)),
+                   bool(entry.get("unchanged", False)), entry.get("reason"),
+                   entry.get("advice"), entry.get("match"), float(entry.get("confidence", 0)),
+                   palette, entry.get("file"), bool(entry.get("faint", False)))
+
+    @classmethod
+    def judge(cls, source: GradeSource, n_styles: int, look_strength: float | None,
+              blend: float, look_size: float, mean_change: float,
+              why_weak: str | None = None, **more) -> GradeOutcome:
+        """An outcome with ``unchanged``, ``reason`` and ``advice`` decided here.
+
+        ``why_weak``: what made the look weak, in words, when the grade knows
+        (e.g. the style photos share no look); the default reason otherwise.
+        """
+        strength = (1.0 if look_strength is None else look_strength) * blend
+        unchanged = strength < UNCHANGED_STRENGTH or mean_change < UNCHANGED_CHANGE
+        faint = not unchanged and (strength < FAINT_STRENGTH or mean_change < FAINT_CHANGE)
+        reason = advice = None
+        if faint:
+            reason = f"this photo's colours move by {mean_change:.1f}/255 on average"
+            if strength < FAINT_STRENGTH and why_weak is not None:
+                reason += f"; the look is applied at strength {strength:.2f}: {why_weak}"
+            advice = unchanged_advice(source, blend)
+        if unchanged:
+            if blend < UNCHANGED_STRENGTH:
+                reason = f"--strength {blend:g} applies almost none of the grade"
+            elif why_weak is not None and strength < UNCHANGED_STRENGTH:
+                reason = why_weak
+            elif look_size < UNCHANGED_CHANGE:
+                reason = f"the grade itself moves colours by only {look_size:.1f}/255"
+            else:
+                reason = (f"the grade moves this photo's colours by only {mean_change:.1f}/255 "
+                          "on average (it changes other colours more)")
+            advice = unchanged_advice(source, blend)
+        more["faint"] = faint
+        if why_weak is not None:
+            more["extra"] = {**more.get("extra", {}), "why_weak": why_weak}
+        return cls(source, n_styles, look_strength, blend, look_size, mean_change, unchanged,
+                   reason, advice, **more)
+
+    def on_photo(self, mean_change: float) -> GradeOutcome:
+        """The same grade judged on another photo (whose colours move by ``mean_change``)."""
+        return GradeOutcome.judge(self.source, self.n_styles, self.look_strength, self.blend,
+                                  self.look_size, mean_change, self.extra.get("why_weak"),
+                                  match=self.match, confidence=self.confidence,
+                                  palette=self.palette, file=self.file, extra=self.extra)
+
+
+def unchanged_advice(source: GradeSource, blend: float) -> str | None:
+    """What the user can do about a grade that leaves the photo unchanged."""
+    if blend < UNCHANGED_STRENGTH:
+        return "raise --strength (1 applies the grade in full)"
+    if source in (GradeSource.SET_LOOK, GradeSource.OWN_SCENE):
+        return ("--mode palette moves the photo's colours towards those of the style "
+                "photos; --strength above 1 forces what look there is")
+    if source is GradeSource.PRESET_LOOK:
+        return "--strength above 1 strengthens the preset's look"
+    if source is GradeSource.PALETTE:
+        return "the style palettes are close to the photo's own: choose styles further from it"
+    return None
+
+
+def map_change(color_map: np.ndarray, strength: float, working: str,
+               hist: np.ndarray | None = None) -> float:
+    """Mean change of colours by a colour map, in 1/255 of the sRGB-encoded cube.
+
+    Parameters
+    ----------
+    color_map : (m, m, m, 3) the map (working-space colours at the lattice's nodes).
+    strength : the blend applied.
+    working : the map's working space ("" or None: sRGB-encoded already).
+    hist : (n, n, n) colour histogram of the photo in the working space: the mean
+        per-channel change of its colours; None: the mean length |T(x) - x| of
+        the displacement over the cube's colours (a 17^3 lattice).
+    """
+    from wbcgrade.color.histogram import grid_points
+    from wbcgrade.color.remap import apply_color_map
+
+    if hist is None:
+        colors, mass = grid_points(17), None
+    else:
+        flat = np.asarray(hist, dtype=np.float64).ravel()
+        used = np.flatnonzero(flat > 0)
+        if used.size == 0:
+            return 0.0
+        colors, mass = grid_points(hist.shape[0])[used], flat[used]
+    colors = np.asarray(colors, dtype=np.float32)
+    moved = np.asarray(apply_color_map(colors, np.asarray(color_map, dtype=np.float32),
+                                       float(strength)), dtype=np.float64)
+    before = np.asarray(colors, dtype=np.float64)
+    if working:
+        from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
+
+        space = resolve_space(working)
+        if space != default_working_space():
+            srgb = default_working_space()
+            before = np.clip(convert(before, space, srgb), 0.0, 1.0)
+            moved = np.clip(convert(moved, space, srgb), 0.0, 1.0)
+    if mass is None:
+        return float(255.0 * np.mean(np.linalg.norm(moved - before, axis=1)))
+    per_colour = np.mean(np.abs(moved - before), axis=1)
+    return float(255.0 * np.sum(mass * per_colour) / np.sum(mass))
