@@ -30,7 +30,7 @@ from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import WBCGRADE, command_env
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
-from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.remap import apply_color_map, identity_map
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install "
                                 "'wbcgrade[test]')")
@@ -177,10 +177,12 @@ def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, do
         browser.get(server.url)
         grade = look_shown(browser, 0)
         # the page states the grade apply gives: its source and strength
-        assert grade["source"] == expected["fit_start"] == "preset"
-        assert grade["strength"] == expected["saved_grade"]["strength"] == 1.0
+        outcome = expected["outcome"]
+        assert grade["source"] == outcome["source"] == "preset-look"
+        assert grade["strength"] == outcome["strength"] == 1.0
         words = browser.find_element("id", "grade-words").text
         assert "preset warm" in words and "the preset's own look" in words
+        assert f"mean change of this photo {outcome['mean_change_255']:.1f}/255" in words
         # the page shows that grade: apply's map on the preview picture
         studio = server.studio
         look = studio.source(0).session.look_grade()
@@ -206,7 +208,7 @@ def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, do
         picker.select_by_visible_text("preset faded")
         faded = labels.index("preset faded")
         grade = look_shown(browser, faded)
-        assert grade["source"] == "preset"
+        assert grade["source"] == "preset-look"
         assert np.abs(pixels(browser, "after").astype(int) - weaker).mean() > 0.5
         # undo goes back to warm at 60 %, redo to faded
         assert browser.execute_script("return window.wbcgradeExplore.history()") == [3, 0]
@@ -256,6 +258,19 @@ def test_a_style_folder_opens_on_its_look_with_apply_s_strength(browser, tmp_pat
         browser.get(server.url)
         grade = look_shown(browser, 0)
         words = browser.find_element("id", "grade-words").text
+        # a faint set look made stronger: 150 %, from the keyboard
+        from selenium.webdriver.common.keys import Keys
+
+        browser.find_element("id", "strength").send_keys(*[Keys.ARROW_RIGHT] * 50)
+        wait(browser, "return window.wbcgradeExplore.strength() === 1.5")
+        studio = server.studio
+        look = studio.session.look_grade()
+        stronger = np.clip(identity_map(33) + 1.5 * (look.color_map - identity_map(33)), 0, 1)
+        expected_pixels = apply_color_map(studio.session.preview / np.float32(255), stronger)
+        assert np.abs(pixels(browser, "after") - expected_pixels * 255).max() <= 1.0
+        stated = wait(browser, "const g = window.wbcgradeExplore.grade();"
+                               "return g.blend === 1.5 && g;")
+        assert stated["strength"] == pytest.approx(1.5 * grade["strength"], abs=1e-3)
         click(browser, "save")
         saved_name = wait(browser, "return document.body.dataset.saved")
         command = browser.find_element("id", "command").text
@@ -265,13 +280,14 @@ def test_a_style_folder_opens_on_its_look_with_apply_s_strength(browser, tmp_pat
     assert sorted(p.name for p in save_dir.iterdir()) == [saved_name]
     # apply --json on the same photo (the look read back from the same cache)
     expected = apply_json(photo, "--style", styles, "--no-regrain", "-o", tmp_path / "a.png")
-    assert grade["source"] == expected["fit_start"]
-    assert grade["source"] in ("look", "scene")
-    assert grade["strength"] == expected["saved_grade"]["strength"]
-    if grade["source"] == "look":
-        assert grade["look_strength"] == pytest.approx(expected["look"]["set_strength"])
-        assert f"{100 * expected['look']['set_strength']:.0f} %" in words
-    assert "style folder styles" in words
+    outcome = expected["outcome"]
+    assert grade["source"] == outcome["source"]
+    assert grade["source"] in ("set-look", "own-scene")
+    assert grade["strength"] == pytest.approx(outcome["strength"], abs=1e-4)
+    assert grade["look_strength"] == pytest.approx(outcome["look_strength"], abs=1e-4)
+    assert grade["blend"] == outcome["blend"] == 1.0
+    assert f"strength {outcome['strength']:.2f}" in words and "style folder styles" in words
+    assert "--strength 1.5" in command
     applied = run_command(command, tmp_path / "applied.png")
     saved = read_image(save_dir / saved_name).pixels[:, :, :3]
     assert np.abs(saved - applied).max() <= 1 / 255 + 1e-6

@@ -46,10 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.explore.settings import Settings, format_number, weights_text
+from wbcgrade.explore.settings import MAX_STRENGTH, Settings, format_number, weights_text
 
 __all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
-           "describe_grade", "serve_jobs",
+           "describe_outcome", "serve_jobs", "MAX_STRENGTH",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
 #: Bins per axis of the preview's palette, plan and photo histogram (the kernel
@@ -261,26 +261,56 @@ class Session:
 
     def look_grade(self):
         """The grade ``apply --no-regrain`` gives this photo with these styles (a
-        ``color.grading.Grade`` at strength 1; computed once, by ``apply``'s own grade path
-        ``color.grading.grade_encoded`` on the full-size photo)."""
+        ``color.grading.Grade`` at ``--strength`` 1, its ``outcome`` saying what it is;
+        computed once, by ``apply``'s own grade path ``color.grading.grade_encoded`` on
+        the full-size photo)."""
+        return self._look_and_fit()[0]
+
+    def _look_and_fit(self):
         from wbcgrade.color.grading import grade_encoded
 
         with self._look_lock:
             if self._look is None:
                 if self.loaded is None:
                     raise ValueError("the session was loaded without its photo's pixels")
-                grade, _ = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
-                                         self.encoding, self.loaded.alpha)
-                self._look = grade
+                self._look = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
+                                           self.encoding, self.loaded.alpha)
             return self._look
 
-    def palette_grade(self, color_map: np.ndarray, settings: Settings):
-        """The palette grade of ``settings`` whose exact map is ``color_map`` (a Grade)."""
-        from wbcgrade.color.grading import Grade
+    def look_at(self, strength: float):
+        """The look grade at ``apply --strength`` (0 to :data:`MAX_STRENGTH`; above 1 the
+        map's change scaled, as ``apply`` does), its outcome judged at that strength."""
+        from dataclasses import replace
 
-        return Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
-                     color_map=color_map, working=self.encoding.working,
-                     strength=settings.strength)
+        from wbcgrade.color.grading import grade_outcome, strengthened
+
+        grade, fit = self._look_and_fit()
+        if strength == 1.0:
+            return grade
+        color_map, blend = strengthened(grade.color_map, strength)
+        grade = replace(grade, color_map=np.asarray(color_map, dtype=np.float32),
+                        strength=blend)
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "look", strength)
+        return replace(grade, outcome=outcome)
+
+    def palette_grade(self, color_map: np.ndarray, settings: Settings):
+        """The palette grade of ``settings`` whose exact map is ``color_map`` (a Grade,
+        its outcome judged on this photo as ``apply --weights`` judges it)."""
+        from dataclasses import replace
+
+        from wbcgrade.color.fit import FitSummary
+        from wbcgrade.color.grading import Grade, grade_outcome, strengthened
+
+        weights = np.asarray(settings.weights, dtype=np.float64)
+        color_map, blend = strengthened(np.asarray(color_map, dtype=np.float32),
+                                        settings.strength)
+        grade = Grade(names=tuple(self.names), weights=weights / weights.sum(),
+                      color_map=np.asarray(color_map, dtype=np.float32),
+                      working=self.encoding.working, strength=blend)
+        fit = FitSummary(grade.weights, 0.0, np.zeros(0), "given")
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "palette",
+                                settings.strength)
+        return replace(grade, outcome=outcome)
 
     def look_command(self, strength: float) -> str:
         """The ``wbcgrade apply`` command that gives the look grade at ``strength``."""
@@ -499,40 +529,17 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
                    lut_size=base.map.size, loaded=loaded)
 
 
-def describe_grade(grade, n_styles: int) -> dict:
-    """What a grade is, in plain words, with its source and strength (JSON-friendly).
+def describe_outcome(outcome) -> dict:
+    """What a grade did (``color.outcome.GradeOutcome``), for the page (JSON-friendly).
 
-    Returns ``{"source": fit start ("preset", "scene", "look", "given", ...),
-    "words": a sentence, "strength": the grade's blend (``--strength``),
-    "look_strength": how much of the set's look the photo gets (None: not a set look),
-    "match": the style showing the photo's scene or None, "confidence": how sure}``.
+    The outcome's own fields (``source``: "preset-look", "own-scene", "set-look",
+    "palette"; ``strength``: the look's own strength times ``blend``, the
+    ``--strength``; ``look_strength``; the photo's mean change, ...) and ``words``: its
+    lines (``outcome.lines()``) without their "grade: " lead.
     """
-    info = dict(grade.info)
-    fit = dict(info.get("fit", {}))
-    look = dict(info.get("look", {}))
-    source = str(fit.get("start", "")) or "palette"
-    match = look.get("match", fit.get("match"))
-    confidence = float(look.get("confidence", fit.get("confidence", 0.0)) or 0.0)
-    look_strength = look.get("set_strength")
-    if source == "preset":
-        words = "the preset's own look, applied as it is"
-    elif source == "scene":
-        words = (f"the look of the style photo that shows this scene ({match}, confidence "
-                 f"{confidence:.2f})")
-    elif source == "look":
-        words = f"the look the {n_styles} style{'s' if n_styles != 1 else ''} share"
-        if look_strength is not None:
-            words += (f", at {100 * float(look_strength):.0f} % of its full size (as far as "
-                      "the set's two halves agree on it)")
-        if confidence > 0:
-            words += f", moved towards the palette grade of {match} (confidence {confidence:.2f})"
-    else:
-        ranked = ", ".join(f"{name} {weight:.2f}" for name, weight in grade.ranked()[:3])
-        words = ("a palette fit: the photo's colours moved onto a blend of the style palettes "
-                 f"({ranked})")
-    return {"source": source, "words": words, "strength": float(grade.strength),
-            "look_strength": None if look_strength is None else float(look_strength),
-            "match": match, "confidence": confidence}
+    lines = outcome.lines()
+    head = lines[0].removeprefix("grade: ")
+    return {**outcome.as_dict(), "words": " ".join([head, *lines[1:]])}
 
 
 class ExactGrader:

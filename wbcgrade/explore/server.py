@@ -145,36 +145,32 @@ class Studio:
 
     # the look grade (what ``apply`` gives): its map, words, command, export and save
     def look(self, strength: float):
-        """The look grade ``apply`` gives -> (its 33^3 map at strength 1, meta: what it is,
-        the page's ``strength`` and the ``apply`` command of both)."""
-        from dataclasses import replace
-
-        from wbcgrade.explore.engine import describe_grade
+        """The look grade ``apply`` gives -> (its 33^3 map at ``--strength`` 1, meta: what
+        it is at the page's ``strength`` and the ``apply`` command). The page applies the
+        strength itself (above 1 on the map's lattice, as ``apply`` does)."""
+        from wbcgrade.explore.engine import describe_outcome
 
         started = time.perf_counter()
-        grade = replace(self.session.look_grade(), strength=strength)
-        lut = np.ascontiguousarray(grade.color_map, dtype=np.float32)
+        grade = self.session.look_at(strength)
+        lut = np.ascontiguousarray(self.session.look_grade().color_map, dtype=np.float32)
         return lut, {"kind": "exact", "mode": "look",
                      "ms": round(1000 * (time.perf_counter() - started), 1),
-                     "strength": strength, "grade": describe_grade(grade, self.session.n_styles),
+                     "strength": strength, "grade": describe_outcome(grade.outcome),
                      "command": self.session.look_command(strength)}
 
     def grade_of(self, mode: str, settings: Settings | None, strength: float):
         """(the Grade the page shows in ``mode``, what it is in words, its ``apply`` command)."""
-        from dataclasses import replace
+        from wbcgrade.explore.engine import describe_outcome
 
         session = self.session
         if mode == "look":
-            grade = replace(session.look_grade(), strength=strength)
-            from wbcgrade.explore.engine import describe_grade
-
-            return (grade, describe_grade(grade, session.n_styles)["words"],
-                    session.look_command(strength))
-        color_map, _ = self.exact(settings, "export")
-        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
-            zip(session.names, settings.weights), key=lambda item: -item[1]))
-        return (session.palette_grade(color_map, settings), f"palette weights {ranked}",
-                session.command_line(settings))
+            grade = session.look_at(strength)
+            command = session.look_command(strength)
+        else:
+            color_map, _ = self.exact(settings, "export")
+            grade = session.palette_grade(color_map, settings)
+            command = session.command_line(settings)
+        return grade, describe_outcome(grade.outcome)["words"], command
 
     def export_mode(self, mode: str, settings: Settings | None, strength: float,
                     lut_format: str, size: int) -> tuple[str, bytes]:

@@ -88,13 +88,38 @@
   }
 
   // ---------------------------------------------------------------- grading
+  // A map made stronger than itself (strength t > 1), as wbcgrade does: each node moved
+  // t times as far, clipped to the cube; then applied in full.
+  let strongCache = {lut: null, t: 0, out: null};
+  function strengthened(lut, n, t) {
+    if (strongCache.lut === lut && strongCache.t === t) return strongCache.out;
+    const out = new Float32Array(lut.length);
+    for (let i = 0; i < n; i++) {
+      for (let j = 0; j < n; j++) {
+        for (let k = 0; k < n; k++) {
+          const q = ((i * n + j) * n + k) * 3;
+          const node = [i / (n - 1), j / (n - 1), k / (n - 1)];
+          for (let c = 0; c < 3; c++) {
+            out[q + c] = Math.min(1, Math.max(0, node[c] + t * (lut[q + c] - node[c])));
+          }
+        }
+      }
+    }
+    strongCache = {lut, t, out};
+    return out;
+  }
+
   function render() {
     if (!state.lut || !state.before) return;
     const src = state.before.data;
     const out = state.after.data;
-    const lut = state.lut;
     const n = state.lutSize;
-    const t = state.look.strength;
+    let lut = state.lut;
+    let t = state.look.strength;
+    if (t > 1) {
+      lut = strengthened(lut, n, t);
+      t = 1;
+    }
     const scale = (n - 1) / 255;
     const dj = 3 * n;
     const di = 3 * n * n;
@@ -677,7 +702,10 @@
       render();
       updateCommand();
     });
-    strength.addEventListener('change', () => record('strength'));
+    strength.addEventListener('change', () => {
+      record('strength');
+      if (state.mode === 'look') describeLook(state.version);
+    });
     $('mode-look').addEventListener('change', () => switchTo(state.source, 'look'));
     $('mode-palette').addEventListener('change', () => switchTo(state.source, 'palette'));
     $('source-pick').addEventListener('change',
@@ -895,6 +923,15 @@
     box.dataset.source = grade.source;
   }
 
+  // What the look grade is at the page's strength (the sentence; the map is the same).
+  async function describeLook(version) {
+    const strength = state.look.strength;
+    const response = await post('api/look', {source: state.source, strength});
+    if (!response.ok || version !== state.version || strength !== state.look.strength) return;
+    state.meta.look.grade = JSON.parse(response.headers.get('X-Explore-Meta')).grade;
+    describe();
+  }
+
   async function showLook(version) {
     const response = await post('api/look', {source: state.source, strength: state.look.strength});
     if (!response.ok) {
@@ -904,6 +941,8 @@
     const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
     const lut = new Float32Array(await response.arrayBuffer());
     if (version !== state.version) return;  // another source or mode meanwhile
+    state.meta.look.grade = meta.grade;
+    describe();
     state.lut = lut;
     state.lutSize = meta.size;
     state.shown = {version, kind: 'exact', weights: null, weightsText: ''};
