@@ -136,6 +136,7 @@ def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
             time.sleep(0.1)
         driver.execute_script("window.wbcgradeExplore.latencies.length = 0")
         point = driver.find_element("id", "point")
+        driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", point)
         chain = ActionChains(driver, duration=0).click_and_hold(point)
         for k in range(moves):  # a slow drag: one small step every 120 ms
             angle = 2 * np.pi * k / moves

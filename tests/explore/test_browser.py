@@ -316,6 +316,7 @@ def test_the_palette_mode_drags_and_exports_what_apply_writes(server, browser, d
 
     renders = browser.execute_script("return window.wbcgradeExplore.renders")
     point = browser.find_element("id", "point")
+    browser.execute_script("arguments[0].scrollIntoView({block: 'center'})", point)
     ActionChains(browser).click_and_hold(point).move_by_offset(-20, 25).pause(0.2) \
         .move_by_offset(-25, 20).release().perform()
     wait(browser, f"return window.wbcgradeExplore.renders > {renders + 1}")

@@ -15,8 +15,16 @@ grade path means changing this file only. It offers:
 - :class:`ExactGrader` (run in the job worker, :mod:`wbcgrade.explore.jobs`):
   the colour map exactly as ``apply --weights W --no-regrain`` computes it,
   and the fit's loss at any weights (the landscape);
-- :meth:`Session.export` (``.cube`` or CLF, any size) and
-  :meth:`Session.command_line` (the ``apply`` command that reproduces it).
+- :meth:`Session.look_grade` / :meth:`Session.look_at`: the grade ``apply``
+  gives (its default look grade, by ``apply``'s own grade path, with its
+  ``outcome``: where it comes from, its strength) at any strength;
+  :func:`describe_outcome` puts the outcome in the page's words;
+- :meth:`Session.save`: the graded photo at full size through ``apply``'s
+  own output path, under a new name in a given folder;
+- :meth:`Session.export` / :meth:`Session.export_grade` (``.cube`` or CLF,
+  any size) and :meth:`Session.command_line` / :meth:`Session.look_command`
+  (the ``apply`` command that reproduces it);
+- :func:`shipped_presets`: the names of the presets the package ships.
 
 The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
 64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
@@ -49,7 +57,7 @@ import numpy as np
 from wbcgrade.explore.settings import MAX_STRENGTH, Settings, format_number, weights_text
 
 __all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
-           "describe_outcome", "serve_jobs", "MAX_STRENGTH",
+           "describe_outcome", "shipped_presets", "serve_jobs", "MAX_STRENGTH",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
 #: Bins per axis of the preview's palette, plan and photo histogram (the kernel
@@ -439,6 +447,13 @@ class Session:
             path = Path(folder) / "picture.png"
             write_png(path, pixels)
             return path.read_bytes()
+
+
+def shipped_presets() -> list[str]:
+    """The names of the presets shipped with the package, sorted."""
+    from wbcgrade.color.presets import list_presets
+
+    return [name for name, _ in list_presets()]
 
 
 def clf_available() -> bool:

@@ -36,7 +36,7 @@ class StyleChoice:
 def style_choices(style_dir: str | None, presets: list[str]) -> list[StyleChoice]:
     """The picker's entries: the folder (when given), the presets given, the shipped ones
     not given by name. The first is where the page opens."""
-    from wbcgrade.color.presets import list_presets
+    from wbcgrade.explore.engine import shipped_presets
 
     out = []
     if style_dir is not None:
@@ -46,7 +46,7 @@ def style_choices(style_dir: str | None, presets: list[str]) -> list[StyleChoice
         label = Path(preset).name if Path(preset).suffix == ".npz" else preset
         out.append(StyleChoice(f"preset {label}", preset=preset))
     given = set(presets)
-    for name, _ in list_presets():
+    for name in shipped_presets():
         if name not in given:
             out.append(StyleChoice(f"preset {name}", preset=name))
     return out
