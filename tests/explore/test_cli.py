@@ -35,7 +35,9 @@ def test_bad_inputs_are_one_line_errors(tmp_path, photo):
             ((photo,), "give exactly one of --style DIR or --preset"),
             ((photo, "--preset", PRESET, "--style", tmp_path), "give exactly one of"),
             ((photo, "--preset", "nosuch"), "unknown preset 'nosuch'"),
-            ((photo, "--style", tmp_path / "nope"), "style folder does not exist")):
+            ((photo, "--style", tmp_path / "nope"), "style folder does not exist"),
+            ((photo, "--preset", PRESET, "--save-dir", tmp_path / "nope"),
+             "the save folder does not exist")):
         result = run("explore", *args, "--no-browser")
         assert result.exit_code == 1, (args, result.output)
         assert result.stderr.strip().splitlines()[-1].startswith("Error: "), result.stderr

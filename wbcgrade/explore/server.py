@@ -441,6 +441,10 @@ class _Handler(BaseHTTPRequestHandler):
             except RequestError as exc:
                 self._error(400, str(exc))
                 return
+            except Exception as exc:  # a style source that cannot be read: one line
+                text = str(exc).strip().splitlines()
+                self._error(500, text[0] if text else type(exc).__name__)
+                return
             self._json(200, data)
         else:
             self._error(404, f"no such page: /{route}"[:200])

@@ -135,7 +135,11 @@ class Explorer:
                "save_dir": str(self.save_dir), "lut_size": session.lut_size,
                "preview": {"width": width, "height": height},
                "formats": studio.formats, "sizes": studio.sizes}
-        if palette:  # the page's palette mode starts: its job worker too
+        if palette:  # the page's palette mode starts: its job worker too; the other
+            with self._lock:  # sources' workers stop (started again when picked again)
+                others = [s for i, s in self._studios.items() if i != index]
+            for other in others:
+                other.close()
             studio.worker  # noqa: B018 - started on first use
             out.update({k: v for k, v in studio.state().items()
                         if k in ("fit", "fitted", "fitted_text", "command_prefix")})
