@@ -170,6 +170,9 @@ class Studio:
             color_map, _ = self.exact(settings, "export")
             grade = session.palette_grade(color_map, settings)
             command = session.command_line(settings)
+            ranked = ", ".join(f"{n} {w:.4f}" for n, w in grade.ranked())
+            return grade, f"{describe_outcome(grade.outcome)['words']}; weights {ranked}", \
+                command
         return grade, describe_outcome(grade.outcome)["words"], command
 
     def export_mode(self, mode: str, settings: Settings | None, strength: float,

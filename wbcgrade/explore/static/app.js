@@ -210,7 +210,7 @@
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
         showLut(new Float32Array(await response.arrayBuffer()), meta, version, meta.kind);
-      } else if (response.status !== 409) {
+      } else if (response.status !== 409 && version >= state.switched) {
         say(await failure(response), true);
       }
     } catch (e) {
@@ -230,7 +230,7 @@
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
         showLut(new Float32Array(await response.arrayBuffer()), meta, version, 'exact');
-      } else if (response.status !== 409) {
+      } else if (response.status !== 409 && version >= state.switched) {
         say(await failure(response), true);
       }
     } catch (e) {
@@ -526,10 +526,13 @@
       }
     }
     let result;
+    const switched = state.switched;  // an answer for another source or mode is dropped
     try {
       const response = await post('api/landscape', {source: state.source, rows});
+      if (switched !== state.switched) return;
       if (!response.ok) { say(await failure(response), true); return; }
       result = await response.json();
+      if (switched !== state.switched) return;
     } catch (e) {
       return;
     }
@@ -935,7 +938,7 @@
   async function showLook(version) {
     const response = await post('api/look', {source: state.source, strength: state.look.strength});
     if (!response.ok) {
-      say(await failure(response), true);
+      if (version === state.version) say(await failure(response), true);
       return;
     }
     const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
