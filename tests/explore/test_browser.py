@@ -225,11 +225,36 @@ def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, do
         command = browser.find_element("id", "command").text
         assert command == browser.execute_script("return document.body.dataset.savedCommand")
         assert "--preset faded" in command and "--strength 0.6" in command
+        # a blend of two looks: 30 % warm into faded, saved with its grade file
+        Select(browser.find_element("id", "blend-pick")).select_by_visible_text(
+            "with preset warm")
+        browser.find_element("id", "blend-amount").send_keys(*[Keys.ARROW_LEFT] * 20)
+        wait(browser, "const b = window.wbcgradeExplore.blend(); return b && b.amount === 0.3")
+        blended = wait(browser, "const g = window.wbcgradeExplore.grade();"
+                                "return g.source === 'blend' && g.amount === 0.3 && g;")
+        assert "70 % preset faded and 30 % preset warm" in blended["words"]
+        warm = studio.source(0).session.look_grade().color_map
+        mixed = 0.7 * studio.source(faded).session.look_grade().color_map + 0.3 * warm
+        expected_blend = apply_color_map(preview, mixed, 0.6) * 255
+        wait(browser, "const s = window.wbcgradeExplore.shown();"
+                      "return s.kind === 'exact' && s.version === window.wbcgradeExplore"
+                      ".current();")
+        assert np.abs(pixels(browser, "after") - expected_blend).max() <= 1.0
+        click(browser, "save")
+        blend_name = wait(browser, f"const n = document.body.dataset.saved;"
+                                   f"return n !== '{saved_name}' && n;")
+        blend_command = browser.find_element("id", "command").text
+        assert "--look" in blend_command and blend_command.endswith("--no-regrain")
     finally:
         stop(server, thread)
     after = files(folder, SAMPLES)
     assert after == before, "the server wrote beside the photo or the samples"
-    assert sorted(p.name for p in save_dir.iterdir()) == [saved_name]
+    blend_grade = Path(blend_name).stem + ".grade.json"
+    assert sorted(p.name for p in save_dir.iterdir()) == sorted([saved_name, blend_name,
+                                                                blend_grade])
+    blended_by_apply = run_command(blend_command, tmp_path / "blend.png")
+    saved_blend = read_image(save_dir / blend_name).pixels[:, :, :3]
+    assert np.abs(saved_blend - blended_by_apply).max() <= 1 / 255 + 1e-6
     applied = run_command(command, tmp_path / "applied.png")
     saved = read_image(save_dir / saved_name).pixels[:, :, :3]
     assert saved.shape == applied.shape == read_image(photo).pixels[:, :, :3].shape

@@ -121,3 +121,44 @@ def test_a_palette_save_is_the_exact_mix_shown(server, photo, save_dir):
     graded = read_image(save_dir / saved["file"]).pixels[:, :, :3]
     expected = apply_color_map(read_image(photo).pixels[:, :, :3], exact)
     assert np.abs(graded - expected).max() <= 1 / 255 + 1e-6
+
+
+def test_a_blend_of_two_looks_is_their_mix_and_its_save_carries_its_grade(server, save_dir,
+                                                                          photo):
+    state = _state(server)
+    warm = [c["label"] for c in state["sources"]].index("preset warm")
+    body = {"strength": 0.5, "blend": {"source": warm, "amount": 0.25}}
+    status, headers, payload = api(server, "look", body)
+    assert status == 200, payload
+    lut = np.frombuffer(payload, dtype="<f4").reshape(33, 33, 33, 3)
+    first = server.studio.session.look_grade().color_map
+    second = server.studio.source(warm).session.look_grade().color_map
+    assert np.abs(lut - (0.75 * first + 0.25 * second)).max() < 1e-6
+    meta = json.loads(headers["X-Explore-Meta"])
+    assert meta["grade"]["source"] == "blend" and meta["command"] is None
+    assert "75 % preset" in meta["grade"]["words"] and "25 % preset warm" in meta["grade"]["words"]
+    status, _, payload = api(server, "save", {"mode": "look", **body})
+    assert status == 200, payload
+    saved = json.loads(payload)
+    grade_file = save_dir / saved["grade_file"]
+    assert grade_file.name == saved["file"].rsplit(".", 1)[0] + ".grade.json"
+    assert saved["command"].endswith(f"--look {grade_file} --no-regrain")
+    from wbcgrade.color.saved_look import load_look
+
+    look = load_look(grade_file)
+    assert look.strength == 0.5 and np.abs(look.color_map - lut).max() < 1e-4
+    graded = read_image(save_dir / saved["file"]).pixels[:, :, :3]
+    expected = apply_color_map(read_image(photo).pixels[:, :, :3], lut, 0.5)
+    assert np.abs(graded - expected).max() <= 1 / 255 + 1e-6
+
+
+@pytest.mark.parametrize("blend, message", [
+    ({"source": 1}, "blend must be null or"),
+    ({"source": 1, "amount": 1.5}, "amount must be between 0 and 1"),
+    ({"source": -1, "amount": 0.5}, "picker entry's number"),
+    ({"source": 999, "amount": 0.5}, "source must be a number from 0 to"),
+    ("warm", "blend must be null or"),
+])
+def test_bad_blends_are_refused(server, blend, message):
+    status, _, payload = api(server, "look", {"blend": blend})
+    assert status == 400 and message in error_of(payload)

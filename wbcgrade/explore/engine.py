@@ -57,7 +57,8 @@ import numpy as np
 from wbcgrade.explore.settings import MAX_STRENGTH, Settings, format_number, weights_text
 
 __all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
-           "describe_outcome", "shipped_presets", "serve_jobs", "MAX_STRENGTH",
+           "describe_outcome", "shipped_presets", "blend_looks", "grade_file_of", "serve_jobs",
+           "MAX_STRENGTH",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
 #: Bins per axis of the preview's palette, plan and photo histogram (the kernel
@@ -328,14 +329,16 @@ class Session:
             parts += ["--strength", format_number(strength, 3)]
         return " ".join(shlex.quote(p) for p in parts)
 
-    def save(self, grade, folder: str | os.PathLike) -> Path:
+    def save(self, grade, folder: str | os.PathLike, with_grade: bool = False) -> Path:
         """Grade the full-size photo with ``grade`` and write it into ``folder``; -> its path.
 
         ``apply``'s own path (``color.workflow.plan_photo`` and ``grade_file``, the grade
         given as a series' shared grade): the photo's format, bit depth and metadata, written
         atomically. The name is ``<stem>_explore_<n><ext>`` with the first ``n`` no file
         has: never the photo, never a file that exists (one appearing meanwhile is not
-        replaced: the next ``n`` is taken).
+        replaced: the next ``n`` is taken). ``with_grade``: the grade itself is written
+        beside it too, ``<stem>_explore_<n>.grade.json`` (what ``apply --look`` reads;
+        :func:`grade_file_of` names it).
         """
         from wbcgrade.color.workflow import default_output_path, grade_file, plan_photo
         from wbcgrade.errors import InputError
@@ -345,14 +348,17 @@ class Session:
         stem = Path(self.photo).stem
         for number in range(1, 10000):
             target = folder / f"{stem}_explore_{number}{suffix}"
-            if os.path.lexists(target):
+            saved = grade_file_of(target) if with_grade else None
+            if os.path.lexists(target) or (saved is not None and os.path.lexists(saved)):
                 continue
             try:
-                plan = plan_photo(self.photo, target, overwrite=False)
+                plan = plan_photo(self.photo, target, overwrite=False, saved_grade=saved)
                 grade_file(plan, self.styles, _look_options(), shared=grade, keep_input=False)
+                if saved is not None:
+                    _publish_grade(saved, grade)
             except InputError:
-                if os.path.lexists(target):  # taken meanwhile: the next number
-                    continue
+                if os.path.lexists(target) or (saved is not None and os.path.lexists(saved)):
+                    continue  # taken meanwhile: the next number
                 raise
             return target
         raise InputError(f"{folder}: no free name for {stem}_explore_N{suffix}")
@@ -447,6 +453,48 @@ class Session:
             path = Path(folder) / "picture.png"
             write_png(path, pixels)
             return path.read_bytes()
+
+
+def grade_file_of(photo: Path) -> Path:
+    """The grade file saved beside a saved photo: ``<its stem>.grade.json``."""
+    return photo.with_name(f"{photo.stem}.grade.json")
+
+
+def _publish_grade(path: Path, grade) -> None:
+    """Write ``grade`` as the JSON ``apply --look`` reads, atomically, never replacing."""
+    import json
+
+    from wbcgrade._publish import publish_bytes
+    from wbcgrade.color.saved_look import look_dict
+
+    publish_bytes(path, json.dumps(look_dict(grade), indent=1).encode("utf-8"),
+                  overwrite=False)
+
+
+def blend_looks(first, second, amount: float, strength: float, names: tuple[str, str],
+                photo_hist: np.ndarray | None = None) -> tuple:
+    """Two look grades blended on their lattice, ``(1 - amount) A + amount B``, at
+    ``--strength`` ``strength`` (above 1 the blend's change scaled, as ``apply`` does).
+
+    ``first`` and ``second``: Grades in the same working space (their maps at blend 1).
+    Returns (the Grade: names and weights the two looks and their shares, no regrain;
+    the map at blend 1 the page applies; the photo's mean change in /255, None without
+    ``photo_hist``).
+    """
+    from wbcgrade.color.grading import Grade, strengthened
+    from wbcgrade.color.outcome import map_change
+
+    if first.working != second.working or first.color_map.shape != second.color_map.shape:
+        raise ValueError("the looks to blend live in different spaces or lattices")
+    mixed = ((1.0 - amount) * np.asarray(first.color_map, dtype=np.float64)
+             + amount * np.asarray(second.color_map, dtype=np.float64)).astype(np.float32)
+    color_map, blend = strengthened(mixed, strength)
+    grade = Grade(names=tuple(names), weights=np.array([1.0 - amount, amount]),
+                  color_map=np.asarray(color_map, dtype=np.float32), working=first.working,
+                  strength=blend)
+    change = (None if photo_hist is None
+              else map_change(grade.color_map, grade.strength, grade.working, photo_hist))
+    return grade, mixed, change
 
 
 def shipped_presets() -> list[str]:

@@ -47,6 +47,7 @@ from wbcgrade.explore.jobs import JobError, JobWorker, Superseded
 from wbcgrade.explore.settings import (
     RequestError,
     Settings,
+    blend_from_json,
     settings_from_json,
     strength_from_json,
     weights_from_json,
@@ -469,14 +470,21 @@ class _Handler(BaseHTTPRequestHandler):
             n_styles = studio.session.n_styles
             if route == "api/look" or (route in ("api/save", "api/export") and mode == "look"):
                 strength = strength_from_json(data)
+                blend = blend_from_json(data.get("blend"))
+                if blend is not None:
+                    if not hasattr(explorer, "choices"):
+                        raise RequestError("there is no other look to blend with")
+                    explorer.source(blend[0])  # RequestError when there is no such entry
                 if route == "api/look":
-                    self._lut(*studio.look(strength))
+                    self._lut(*(explorer.look(index, strength, blend) if blend is not None
+                                else studio.look(strength)))
                 elif route == "api/save":
-                    self._json(200, explorer.save(index, "look", None, strength))
+                    self._json(200, explorer.save(index, "look", None, strength, blend))
                 else:
-                    self._download(*studio.export_mode("look", None, strength,
-                                                       data.get("format", "cube"),
-                                                       data.get("size", studio.sizes[0])))
+                    fmt, size = data.get("format", "cube"), data.get("size", studio.sizes[0])
+                    self._download(*(explorer.export_look(index, strength, blend, fmt, size)
+                                     if blend is not None else
+                                     studio.export_mode("look", None, strength, fmt, size)))
                 return
             if route == "api/landscape":
                 rows = data.get("rows") if isinstance(data, dict) else None

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 __all__ = ["Settings", "RequestError", "settings_from_json", "strength_from_json",
+           "blend_from_json",
            "weights_from_json",
            "weights_text", "format_number", "WEIGHT_DECIMALS", "MAX_STRENGTH", "MAX_RELAXATION",
            "MIN_RELAXATION"]
@@ -122,13 +123,29 @@ def strength_from_json(data) -> float:
     :data:`Settings.strength`. Other keys but ``format`` and ``size`` are refused."""
     if not isinstance(data, dict):
         raise RequestError("the request body must be a JSON object")
-    unknown = sorted(set(data) - {"strength", "format", "size", "seq", "client"})
+    unknown = sorted(set(data) - {"strength", "blend", "format", "size", "seq", "client"})
     if unknown:
         raise RequestError(f"unknown setting {unknown[0]!r} for the look"[:200])
     strength = _number(data.get("strength", 1.0), "strength")
     if not 0.0 <= strength <= MAX_STRENGTH:
         raise RequestError(f"strength must be between 0 and {MAX_STRENGTH:g}")
     return round(strength, STRENGTH_DECIMALS)
+
+
+def blend_from_json(value) -> tuple[int, float] | None:
+    """A look request's ``blend`` (null, or ``{"source": N, "amount": A}``: the share A in
+    [0, 1] of picker entry N's look) -> None or (N, A rounded to 3 decimals)."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"source", "amount"}:
+        raise RequestError('blend must be null or {"source": N, "amount": A}')
+    source = value["source"]
+    if isinstance(source, bool) or not isinstance(source, int) or source < 0:
+        raise RequestError("the blend's source must be a picker entry's number")
+    amount = _number(value["amount"], "the blend's amount")
+    if not 0.0 <= amount <= 1.0:
+        raise RequestError("the blend's amount must be between 0 and 1")
+    return source, round(amount, STRENGTH_DECIMALS)
 
 
 def settings_from_json(data, n_styles: int) -> Settings:

@@ -16,6 +16,8 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from wbcgrade.explore.settings import RequestError
 
 __all__ = ["Explorer", "StyleChoice", "style_choices"]
@@ -145,9 +147,68 @@ class Explorer:
                         if k in ("fit", "fitted", "fitted_text", "command_prefix")})
         return out
 
-    def save(self, index: int, mode: str, settings, strength: float) -> dict:
-        """Grade the full-size photo as the page shows it and save it into the save folder."""
+    def blended(self, index: int, strength: float, blend: tuple[int, float]):
+        """The look of entry ``index`` blended with entry ``blend[0]``'s (its share
+        ``blend[1]``) at ``strength`` -> (Grade, the map at blend 1, what it is as the page's
+        outcome dict)."""
+        from wbcgrade.explore.engine import blend_looks
+
+        other, amount = blend
+        first, second = self.source(index), self.source(other)
+        names = (self.choices[index].label, self.choices[other].label)
+        session = first.session
+        grade, mixed, change = blend_looks(
+            session.look_grade(), second.session.look_grade(), amount, strength, names,
+            session.hists[session.base.fit.bins])
+        words = (f"a blend of two looks: {100 * (1 - amount):.0f} % {names[0]} and "
+                 f"{100 * amount:.0f} % {names[1]} (each the grade apply gives); strength "
+                 f"{strength:.2f}, mean change of this photo {change:.1f}/255")
+        return grade, mixed, {"source": "blend", "strength": strength, "blend": strength,
+                              "look_strength": None, "mean_change_255": round(change, 3),
+                              "words": words, "blend_of": list(names), "amount": amount}
+
+    def look(self, index: int, strength: float, blend: tuple[int, float] | None = None):
+        """The look the page shows -> (its 33^3 map at blend 1, meta): entry ``index``'s
+        (the grade ``apply`` gives), or a blend of two (no ``apply`` command: the grade
+        file a save writes, or the exported LUT, reproduces it)."""
+        if blend is None:
+            return self.source(index).look(strength)
+        _, mixed, outcome = self.blended(index, strength, blend)
+        return np.ascontiguousarray(mixed, dtype=np.float32), {
+            "kind": "exact", "mode": "look", "strength": strength, "grade": outcome,
+            "command": None}
+
+    def export_look(self, index: int, strength: float, blend: tuple[int, float] | None,
+                    lut_format: str, size: int) -> tuple[str, bytes]:
+        """The LUT file of the look the page shows."""
         studio = self.source(index)
+        if blend is None:
+            return studio.export_mode("look", None, strength, lut_format, size)
+        if lut_format not in studio.formats or size not in studio.sizes:
+            return studio.export_mode("look", None, strength, lut_format, size)  # refused
+        grade, _, outcome = self.blended(index, strength, blend)
+        return studio.session.export_grade(grade, lut_format, size, outcome["words"],
+                                           "wbcgrade apply PHOTO --look THIS_FILE --no-regrain")
+
+    def save(self, index: int, mode: str, settings, strength: float,
+             blend: tuple[int, float] | None = None) -> dict:
+        """Grade the full-size photo as the page shows it and save it into the save folder
+        (a blend with its grade file beside it, which the command applies)."""
+        import shlex
+
+        from wbcgrade.explore.engine import grade_file_of
+
+        studio = self.source(index)
+        if mode == "look" and blend is not None:
+            grade, _, outcome = self.blended(index, strength, blend)
+            with self._save_lock:
+                path = studio.session.save(grade, self.save_dir, with_grade=True)
+            command = " ".join(shlex.quote(p) for p in (
+                "wbcgrade", "apply", studio.session.photo, "--look", str(grade_file_of(path)),
+                "--no-regrain"))
+            return {"file": path.name, "path": str(path), "folder": str(self.save_dir),
+                    "command": command, "grade": outcome["words"],
+                    "grade_file": grade_file_of(path).name}
         grade, words, command = studio.grade_of(mode, settings, strength)
         with self._save_lock:
             path = studio.session.save(grade, self.save_dir)

@@ -27,6 +27,8 @@
     meta: null,
     source: 0,                  // the preset picker's entry shown
     mode: 'look',               // 'look': the grade apply gives; 'palette': a mix of palettes
+    blend: null,                // look mode: {source, amount}: another look's share, or null
+    blendCommand: '',           // the command of a saved blend (its grade file)
     switched: 0,                // the version of the last source or mode switch
     history: [],                // undo: snapshots of what the page shows, the last is now
     future: [],                 // redo
@@ -55,6 +57,7 @@
                  mode: () => state.mode, source: () => state.source,
                  grade: () => state.meta && state.meta.look.grade,
                  strength: () => state.look.strength,
+                 blend: () => state.blend && {...state.blend},
                  history: () => [state.history.length, state.future.length],
                  current: () => state.version, weights: () => state.look.weights.slice(),
                  extrapolates: () => Boolean(state.model && state.model.family === family())};
@@ -180,7 +183,8 @@
   function status(kind, meta) {
     const badge = $('status');
     if (state.mode === 'look') {
-      badge.textContent = 'the grade apply gives: exact';
+      badge.textContent = state.blend ? 'a blend of two looks: exact'
+        : 'the grade apply gives: exact';
       badge.className = 'badge exact';
     } else if (kind === 'exact') {
       badge.textContent = 'exact grade: what the export holds';
@@ -298,6 +302,12 @@
   function updateCommand() {
     const meta = state.meta;
     const look = state.look;
+    if (meta && state.mode === 'look' && state.blend) {
+      $('command').textContent = state.blendCommand || 'A blend has no apply options of its '
+        + 'own: Save writes its grade file beside the photo (and the exported LUT holds it); '
+        + 'the command to apply that file appears here.';
+      return;
+    }
     if (meta && state.mode === 'look') {
       const parts = [meta.look.command];
       if (look.strength !== 1) parts.push('--strength', String(look.strength));
@@ -713,6 +723,19 @@
     $('mode-palette').addEventListener('change', () => switchTo(state.source, 'palette'));
     $('source-pick').addEventListener('change',
                                       () => switchTo(Number($('source-pick').value), state.mode));
+    $('blend-pick').addEventListener('change', async () => {
+      const value = $('blend-pick').value;
+      setBlend(value === '' ? null
+        : {source: Number(value), amount: Number($('blend-amount').value) / 100});
+      await showBlend();
+      record();
+    });
+    $('blend-amount').addEventListener('input', () => {
+      if (!state.blend) return;
+      setBlend({...state.blend, amount: Number($('blend-amount').value) / 100});
+      showBlend();
+    });
+    $('blend-amount').addEventListener('change', () => record('blend'));
     $('undo').addEventListener('click', undo);
     $('redo').addEventListener('click', redo);
     $('save').addEventListener('click', saveGraded);
@@ -770,7 +793,7 @@
     // exactly what is shown: the weights of the picture on screen
     let request = {...body(), format, size};
     if (state.mode === 'look') {
-      request = {source: state.source, mode: 'look', strength: state.look.strength, format, size};
+      request = {...lookBody(), mode: 'look', format, size};
     } else if (state.shown.weights) {
       request.weights = state.shown.weights.slice();
     }
@@ -804,7 +827,7 @@
   async function saveGraded() {
     const button = $('save');
     if (button.disabled) return;
-    let request = {source: state.source, mode: 'look', strength: state.look.strength};
+    let request = {...lookBody(), mode: 'look'};
     if (state.mode === 'palette') {
       request = {...body(), mode: 'palette'};
       if (state.shown.weights) request.weights = state.shown.weights.slice();
@@ -821,6 +844,10 @@
       say(`saved ${saved.file} into ${saved.folder}`);
       document.body.dataset.saved = saved.file;
       document.body.dataset.savedCommand = saved.command;
+      if (state.mode === 'look' && state.blend) {
+        state.blendCommand = saved.command;
+        updateCommand();
+      }
     } catch (e) {
       say(`the save failed (${e.message})`, true);
     } finally {
@@ -832,6 +859,7 @@
   function snapshot() {
     const look = state.look;
     return {source: state.source, mode: state.mode, strength: look.strength,
+            blend: state.mode === 'look' && state.blend ? {...state.blend} : null,
             weights: state.mode === 'palette' ? look.weights.slice() : null,
             relaxation: look.relaxation, keep_lightness: look.keep_lightness};
   }
@@ -863,8 +891,12 @@
   async function restore(snap) {
     state.restoring = true;
     try {
+      const blendChanged = JSON.stringify(snap.blend) !== JSON.stringify(state.blend);
+      if (snap.mode === 'look') setBlend(snap.blend);
       if (snap.source !== state.source || snap.mode !== state.mode) {
         await switchTo(snap.source, snap.mode, snap.weights);
+      } else if (blendChanged) {
+        await showBlend();
       }
       setStrength(snap.strength);
       if (snap.mode === 'palette') {
@@ -912,7 +944,9 @@
     const box = $('grade-words');
     box.textContent = '';
     const lead = document.createElement('b');
-    if (state.mode === 'look') {
+    if (state.mode === 'look' && grade.source === 'blend') {
+      box.append(grade.words[0].toUpperCase() + grade.words.slice(1), '.');
+    } else if (state.mode === 'look') {
       lead.textContent = `${state.meta.styles}: `;
       box.append('The grade ', Object.assign(document.createElement('code'),
                                              {textContent: 'wbcgrade apply'}),
@@ -927,16 +961,22 @@
   }
 
   // What the look grade is at the page's strength (the sentence; the map is the same).
+  function lookBody() {
+    const out = {source: state.source, strength: state.look.strength};
+    if (state.blend) out.blend = {...state.blend};
+    return out;
+  }
+
   async function describeLook(version) {
     const strength = state.look.strength;
-    const response = await post('api/look', {source: state.source, strength});
+    const response = await post('api/look', lookBody());
     if (!response.ok || version !== state.version || strength !== state.look.strength) return;
     state.meta.look.grade = JSON.parse(response.headers.get('X-Explore-Meta')).grade;
     describe();
   }
 
   async function showLook(version) {
-    const response = await post('api/look', {source: state.source, strength: state.look.strength});
+    const response = await post('api/look', lookBody());
     if (!response.ok) {
       if (version === state.version) say(await failure(response), true);
       return;
@@ -958,6 +998,35 @@
     updateCommand();
   }
 
+  function setBlend(blend) {
+    state.blend = blend;
+    state.blendCommand = '';
+    $('blend-pick').value = blend ? String(blend.source) : '';
+    $('blend-amount').disabled = !blend;
+    if (blend) {
+      $('blend-amount').value = String(Math.round(100 * blend.amount));
+      $('blend-out').textContent = `${Math.round(100 * blend.amount)} %`;
+    }
+  }
+
+  // The look with the blend of now (one request at a time, the newest settings next).
+  let blendBusy = false, blendAgain = false;
+  async function showBlend() {
+    if (blendBusy) { blendAgain = true; return; }
+    blendBusy = true;
+    state.version += 1;
+    state.changedAt.set(state.version, performance.now());
+    try {
+      await showLook(state.version);
+    } finally {
+      blendBusy = false;
+    }
+    if (blendAgain) {
+      blendAgain = false;
+      await showBlend();
+    }
+  }
+
   // Show source `index` in `mode` ('look' or 'palette'); `weights`: the palette mix to show
   // (default: the fitted one).
   async function switchTo(index, mode, weights) {
@@ -974,6 +1043,7 @@
     for (const id of ['palette-mix', 'palette-adjust', 'palette-weights']) {
       $(id).hidden = mode !== 'palette';
     }
+    $('blend-row').hidden = mode !== 'look';
     const badge = $('status');
     badge.textContent = mode === 'palette' && !(state.meta && state.meta.fit && !sourceChanged)
       ? 'fitting the palette mix…' : 'loading…';
@@ -1039,6 +1109,10 @@
       option.value = String(i);
       option.textContent = choice.label;
       pick.appendChild(option);
+      const other = document.createElement('option');
+      other.value = String(i);
+      other.textContent = `with ${choice.label}`;
+      $('blend-pick').appendChild(other);
     });
     $('save-where').textContent = `into ${state.meta.save_dir} (new files, never replacing one)`;
     bindSpace();
