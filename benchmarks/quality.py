@@ -6,7 +6,9 @@ cool) with wbcgrade's defaults and, in the same run, the same photos with
 color-matcher's ``mkl`` (Pitié's linear Monge-Kantorovich map) and IDT +
 regrain (Pitié et al. 2007, ``python-color-transfer``) towards the single
 style photo nearest to the input. The peers are benchmark-only extras:
-``pip install color-matcher python-color-transfer``.
+``pip install color-matcher`` and ``pip install --no-deps python-color-transfer``
+(its metadata pins numpy < 2 and the non-headless OpenCV; it runs on what
+wbcgrade installs).
 
 It prints one table (means over photos x style sets) and writes, in ``--out``:
 
@@ -47,7 +49,11 @@ import numpy as np
 from scipy import ndimage
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The full photo set (the README's figures): ``--photo-dir``, else $WBCGRADE_PHOTOS, else
+#: this folder beside the clone when it is there.
 DEFAULT_PHOTOS = ROOT.parent / "shared" / "data" / "photos"
+#: A clone's own photos (``samples/``), used when the full set is not found.
+SAMPLE_PHOTOS = ROOT / "samples"
 
 STYLE_SETS = {
     "warm": ["coffee", "flower", "sunset", "fig", "wine", "chelsea"],
@@ -55,6 +61,31 @@ STYLE_SETS = {
 }
 #: Photos in neither set: skies, fog, foliage, wood, saturated paint, a dark forest.
 DEFAULT_PHOTOS_GRADED = ["picosdeeuropa", "life", "china", "friends", "brushes", "aitzgorri"]
+#: The same benchmark on a clone's samples/ (smaller sets; figures not the README's).
+SAMPLE_SETS = {"warm": ["coffee", "flower", "sunset"], "cool": ["bridge", "astronaut"]}
+SAMPLE_PHOTOS_GRADED = ["aitzgorri", "chelsea", "seeding"]
+
+
+def photo_source(photo_dir: Path | None) -> tuple[Path, dict, list[str]]:
+    """(folder, style sets, photos to grade): the full set where it is found (``photo_dir``,
+    $WBCGRADE_PHOTOS, or beside the clone), else the clone's samples/ with smaller sets."""
+    import os
+
+    def holds(folder, sets: dict, graded: list[str]) -> bool:
+        names = [n for group in sets.values() for n in group] + graded
+        return bool(folder) and all(Path(folder, f"{n}.jpg").is_file() for n in names)
+
+    for folder in (photo_dir, os.environ.get("WBCGRADE_PHOTOS"), DEFAULT_PHOTOS):
+        if holds(folder, STYLE_SETS, DEFAULT_PHOTOS_GRADED):
+            return Path(folder), STYLE_SETS, DEFAULT_PHOTOS_GRADED
+    if photo_dir is not None:
+        if holds(photo_dir, SAMPLE_SETS, SAMPLE_PHOTOS_GRADED):
+            return Path(photo_dir), SAMPLE_SETS, SAMPLE_PHOTOS_GRADED
+        raise SystemExit(f"--photo-dir {photo_dir}: the benchmark's photos are not all there")
+    print(f"photo set not found ({DEFAULT_PHOTOS}; set --photo-dir or $WBCGRADE_PHOTOS): "
+          f"using the clone's {SAMPLE_PHOTOS} (smaller sets, not the README's figures)",
+          file=sys.stderr)
+    return SAMPLE_PHOTOS, SAMPLE_SETS, SAMPLE_PHOTOS_GRADED
 
 
 # --------------------------------------------------------------------------- metrics
@@ -263,9 +294,11 @@ def parse_options(pairs: list[str]):
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--photo-dir", type=Path, default=DEFAULT_PHOTOS)
-    parser.add_argument("--photos", default=",".join(DEFAULT_PHOTOS_GRADED))
-    parser.add_argument("--sets", default=",".join(STYLE_SETS))
+    parser.add_argument("--photo-dir", type=Path, default=None,
+                        help=f"the photos [default: $WBCGRADE_PHOTOS, else {DEFAULT_PHOTOS} "
+                             f"when it is there, else the clone's samples/]")
+    parser.add_argument("--photos", default=None, help="photos to grade (comma-separated)")
+    parser.add_argument("--sets", default=None, help="style sets (comma-separated)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "quality")
     parser.add_argument("--no-peers", action="store_true", help="wbcgrade only")
     parser.add_argument("--set", dest="options", action="append", default=[],
@@ -278,8 +311,9 @@ def main(argv: list[str] | None = None) -> None:
     opts = parse_options(args.options)
     args.out.mkdir(parents=True, exist_ok=True)
     lut_dir = Path(tempfile.mkdtemp(prefix="wbc-quality-lut-"))
-    photos = [p for p in args.photos.split(",") if p]
-    sets = [s for s in args.sets.split(",") if s]
+    args.photo_dir, style_sets, graded_photos = photo_source(args.photo_dir)
+    photos = [p for p in (args.photos or ",".join(graded_photos)).split(",") if p]
+    sets = [s for s in (args.sets or ",".join(style_sets)).split(",") if s]
     methods = ["wbcgrade"] + ([] if args.no_peers else ["mkl", "idt+regrain"])
     results: dict = {m: [] for m in ["input"] + methods}
     lut_diffs: list[float] = []
@@ -287,7 +321,7 @@ def main(argv: list[str] | None = None) -> None:
     sheet_rows, crop_rows = [], []
     seconds = []
     for set_name in sets:
-        names = STYLE_SETS[set_name]
+        names = style_sets[set_name]
         style_pixels = [read_rgb(args.photo_dir / f"{n}.jpg") for n in names]
         styles = load_set(args.photo_dir, names, opts.transfer.bins)
         for photo in photos:

@@ -1,4 +1,6 @@
-"""The README's shell commands run on a fresh clone and never write into it.
+"""The README's shell commands run on a fresh clone and never write into it; its shell
+examples use only the options ``--help`` lists (palette-fit options with ``--mode
+palette``); its Python examples run as written.
 
 Every line of a ```bash block is a command a reader may paste, in order
 (synopses with placeholders go in ```text blocks). Checked without running
@@ -20,7 +22,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 #: Options whose value is a file or folder the command writes.
-OUTPUT_FLAGS = {"-o", "--output", "--output-dir", "--out", "--lut", "--report"}
+OUTPUT_FLAGS = {"-o", "--output", "--output-dir", "--out", "--lut", "--report", "--save-grade"}
 #: Words that separate commands on one line.
 SEPARATORS = {"&&", "||", ";", "|"}
 PLACEHOLDER = re.compile(r"^[A-Z][A-Z0-9_]+(\.[a-z0-9]+)?/?$")
@@ -131,3 +133,98 @@ def test_the_checks_catch_what_they_should(tmp_path):
     assert inside_clone("graded/", home) and not inside_clone("$HOME/graded", home)
     assert PLACEHOLDER.match("PHOTO") and PLACEHOLDER.match("IN.mov")
     assert not PLACEHOLDER.match("samples/chelsea.jpg")
+
+
+def code_blocks(text: str, languages: tuple[str, ...]) -> list[tuple[int, str]]:
+    """(line number, code) of every fenced block in one of ``languages``."""
+    blocks, current, start = [], None, 0
+    for number, line in enumerate(text.splitlines(), start=1):
+        fence = line.strip()
+        if current is None and fence.startswith("```"):
+            current, start = ([] if fence[3:].strip() in languages else False), number + 1
+        elif current is not None and fence.startswith("```"):
+            if current is not False:
+                blocks.append((start, "\n".join(current)))
+            current = None
+        elif current not in (None, False):
+            current.append(line)
+    return blocks
+
+
+PYTHON = code_blocks(README.read_text("utf-8"), ("python",))
+
+
+@pytest.mark.parametrize("line, code", PYTHON, ids=[f"line{line}" for line, _ in PYTHON])
+def test_readme_python_example_runs_as_written(line, code, tmp_path):
+    """Each ```python block runs in a fresh interpreter from the clone's folder."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+        "WBCGRADE_CACHE_DIR": str(tmp_path / "cache")}
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, f"README line {line}: the example fails:\n{run.stderr[-2000:]}"
+
+
+def _wbcgrade_lines() -> list[tuple[int, list[str]]]:
+    """Every ``wbcgrade ...`` command of the README's bash and text blocks (synopses too),
+    split into words: brackets and ``A|B`` alternatives opened up."""
+    found = []
+    for start, code in code_blocks(README.read_text("utf-8"), ("bash", "sh", "shell", "text")):
+        for offset, raw in enumerate(code.splitlines()):
+            for part in re.split(r"&&|;|\|(?=\s*wbcgrade )", raw.split("#", 1)[0]):
+                words = part.replace("[", " ").replace("]", " ").split()
+                if words[:1] == ["wbcgrade"]:
+                    found.append((start + offset, words))
+    return found
+
+
+SHELL = _wbcgrade_lines()
+
+
+def _help_of(words: list[str]) -> tuple[list[str], str]:
+    """The command path (e.g. ["look", "extract"]) and its ``--help`` text."""
+    import click
+    from click.testing import CliRunner
+
+    from wbcgrade.cli import main
+
+    command, path = main, []
+    for word in words[1:]:
+        if not isinstance(command, click.Group) or word.startswith("-"):
+            break
+        sub = command.get_command(None, word)
+        if sub is None:
+            break
+        command, path = sub, path + [word]
+    result = CliRunner().invoke(main, [*path, "--help"], terminal_width=200)
+    if result.exit_code != 0 and "pip install" in result.output:  # an extra not installed
+        pytest.skip(result.output.strip())
+    assert result.exit_code == 0, result.output
+    return path, result.output
+
+
+@pytest.mark.parametrize("line, words", SHELL, ids=[f"line{line}-{' '.join(w)[:40]}"
+                                                    for line, w in SHELL])
+def test_readme_shell_example_uses_options_the_help_lists(line, words):
+    from wbcgrade.cli.grading_options import PALETTE_ONLY
+
+    path, text = _help_of(words)
+    assert path, f"README line {line}: {' '.join(words)!r} names no wbcgrade command"
+    listed = set(re.findall(r"(?<![\w-])(--?[a-zA-Z][\w-]*)", text))
+    flags = [w.split("=", 1)[0] for w in words if re.match(r"^--?[a-zA-Z]", w)]
+    unknown = [f for f in flags if f not in listed and f not in ("-h", "--help")]
+    assert not unknown, (f"README line {line}: {' '.join(words)!r} uses {unknown}, which "
+                         f"`wbcgrade {' '.join(path)} --help` does not list")
+    palette_only = set(PALETTE_ONLY.values()) & set(flags)
+    if palette_only and "--look" not in flags:
+        assert "palette" in words[words.index("--mode") + 1:words.index("--mode") + 2] \
+            if "--mode" in words else False, (
+            f"README line {line}: {sorted(palette_only)} need --mode palette (refused "
+            "otherwise)")
+
+
+def test_the_readme_has_shell_and_python_examples():
+    assert len(SHELL) > 20 and len(PYTHON) >= 2

@@ -162,7 +162,7 @@ def _bad_photo(tmp_path, case):
     ("ok", ["-o", "{existing}"], "file exists"),
     ("ok", ["-o", "{nowhere}"], "output folder does not exist"),
     ("ok", ["--lut", "{existing_cube}"], "file exists"),
-    ("ok", ["--strength", "2"], "--strength must be in [0, 1]"),
+    ("ok", ["--strength", "5"], "--strength must be in [0, 4]"),
     ("ok", ["--weights", "1,x"], "comma-separated numbers"),
     ("ok", ["--weights", "1,1"], "2 numbers for 4 styles"),
 ])

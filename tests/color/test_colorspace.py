@@ -460,8 +460,8 @@ def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     np.testing.assert_allclose(cct.luma_weights, [0.27, 0.67, 0.06], atol=0.01)
     rgb = read_image(SAMPLES / "chelsea.jpg").rgb()[::8, ::8]
     styles = load_preset(resolve_preset("warm"))
-    _, grade = grade_array(rgb, styles, GradeOptions(bins=16, fit_bins=8, max_iter=10,
-                                                     n_iter=30, map_size=9,
+    _, grade = grade_array(rgb, styles, GradeOptions(mode="palette", bins=16, fit_bins=8,
+                                                     max_iter=10, n_iter=30, map_size=9,
                                                      working_space="acescct"))
     luma = grade.color_map.astype(np.float64) @ cct.luma_weights
     for axis in range(3):

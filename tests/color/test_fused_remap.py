@@ -114,3 +114,16 @@ def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixel
     assert np.array_equal(regrain(source, graded, 0.05, 0.01, out=source), expected)
     with pytest.raises(ValueError, match="out must be"):
         regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))
+
+
+@pytest.mark.parametrize("shape, radius", [((37, 53, 3), 3), ((7, 5, 3), 9), ((1, 6, 3), 2)])
+def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, radius):
+    """Below ``_NUMPY_SOLVE_PIXELS`` the window models and box means come from numpy and
+    scipy (nothing to compile on a first run): the same numbers as the kernels."""
+    guide = rng.random(shape).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1).astype(np.float32)
+    compiled = regrain_module._window_models(guide, change, radius, 0.01)
+    plain = regrain_module._window_models_numpy(guide, change, radius, 0.01)
+    np.testing.assert_allclose(plain, compiled, rtol=0, atol=5e-5)
+    np.testing.assert_allclose(regrain_module._box_numpy(compiled, radius),
+                               regrain_module._box(compiled, radius), rtol=0, atol=1e-5)

@@ -307,3 +307,24 @@ def test_batch_lines_and_report_of_a_look_grade_have_no_weights(tmp_path, photo)
     report = json.loads((tmp_path / "rep" / "report.json").read_text())
     photos = report.get("photos", report)
     assert "weights" not in json.dumps(photos)
+
+
+def test_look_extract_says_when_the_lut_does_nothing(tmp_path, style_dir):
+    result = run("look", "extract", style_dir, "-o", tmp_path / "l.cube", "--strength", "0",
+                 "--no-cache")
+    assert result.exit_code == 0, result.output
+    assert "strength 0.00" in result.output
+    assert "it leaves colours essentially unchanged" in result.output
+    found = run("look", "extract", style_dir, "-o", tmp_path / "m.cube", "--no-cache", "--json")
+    outcome = json.loads(found.stdout)["outcome"]
+    assert outcome["source"] == "set-look"
+    if outcome["strength"] < 0.25:  # an ungraded set: said in words, not only a number
+        text = run("look", "extract", style_dir, "-o", tmp_path / "n.cube", "--no-cache")
+        assert "share no look" in text.output or "share little look" in text.output
+
+
+def test_look_extract_of_a_preset_is_its_own_look(tmp_path):
+    result = run("look", "extract", "--preset", "kodak-2383", "-o", tmp_path / "k.cube")
+    assert result.exit_code == 0, result.output
+    assert "the preset's own look, strength 1.00" in result.output
+    assert "unchanged" not in result.output and "faint" not in result.output

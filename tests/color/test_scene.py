@@ -93,7 +93,8 @@ def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, 
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["fit_start"] == "scene"
-    assert max(report["weights"], key=lambda w: w["weight"])["style"] == "coffee"
+    assert report["outcome"]["source"] == "own-scene"
+    assert report["outcome"]["match"] == "coffee" and "weights" not in report
     graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3]
     truth = np.round(warm_look(right) * 255) / 255
     assert error(graded, truth) < 0.25 * error(right, truth)

@@ -27,7 +27,8 @@ from wbcgrade.color.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
-FAST = ["--preset", str(THREE_STYLES), "--bins", "16", "--no-cache", "--weights", "0.5,0.3,0.2"]
+FAST = ["--preset", str(THREE_STYLES), "--mode", "palette", "--bins", "16", "--no-cache",
+        "--weights", "0.5,0.3,0.2"]
 
 
 def _ffmpeg(*args: str, **kwargs) -> None:

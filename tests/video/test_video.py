@@ -38,8 +38,9 @@ from wbcgrade.color.remap import apply_color_map
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 from wbcgrade.video.shots import frame_tables, lut_schedule
 
-FAST = ["--preset", str(THREE_STYLES), "--bins", "32", "--no-cache"]
-WEIGHTS = ["--weights", "0.5,0.3,0.2"]  # skip the fit where the test is about frames
+FAST = ["--preset", str(THREE_STYLES), "--no-cache"]
+# skip the fit where the test is about frames (fixed weights: a palette grade)
+WEIGHTS = ["--mode", "palette", "--bins", "32", "--weights", "0.5,0.3,0.2"]
 
 
 def _ffmpeg(*args: str) -> None:
@@ -130,7 +131,9 @@ def test_default_x264_keeps_frames_rate_audio_tags_and_writes_lut_and_report(cli
     document = json.loads((report / "report.json").read_text())
     assert len(document["shots"]) == 1 and document["shots"][0]["sampled_frames"] == [0, 25]
     assert (report / document["shots"][0]["sheet"]).stat().st_size > 1000
-    assert {w["style"] for w in document["shots"][0]["weights"]} == {"coffee", "flower", "sunset"}
+    shot = document["shots"][0]  # a look grade: what it did, no placeholder weights
+    assert shot["outcome"]["source"] == "set-look" and shot["outcome"]["n_styles"] == 3
+    assert "weights" not in shot and "loss" not in shot
 
 
 def test_every_frame_is_the_lut_applied_to_the_input_and_nothing_flickers(clips, tmp_path):

@@ -84,8 +84,8 @@ def print_palette_fit(palette) -> None:
               metavar="FILE", help="Also write the grade itself to FILE (JSON), which "
               "--look FILE applies again with no fit.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Also write a palette weight report (JSON, CSV, PNG sheet, "
-              "index.html) into this folder.")
+              default=None, help="Also write a report (what the grade did; a palette "
+              "grade's weights): JSON, CSV, a PNG sheet and index.html, into this folder.")
 @click.pass_context
 def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, as_json,
           save_grade, report_dir, **kwargs):

@@ -65,9 +65,10 @@ def _options() -> list:
                      help="How much of the grade: 0 none, 1 in full (x -> (1-t) x + t T(x)); "
                           "up to 4 makes a faint grade stronger."),
         click.option("--relax", "relaxation", type=float, default=_DEFAULTS.relaxation,
-                     metavar="RHO", help="Relax the palette side of the transfer plan by RHO KL "
-                     "(unbalanced transport: palette colours the photo has no use for are left "
-                     "out; smaller = more relaxed, e.g. 0.05) [default: balanced]."),
+                     metavar="RHO", help="Unbalanced transport: palette colours the photo has "
+                     "no use for may be left out, at a KL cost of RHO each (a small RHO such "
+                     "as 0.05 leaves out more; a large one keeps nearly all) [default: none "
+                     "left out, balanced transport]."),
         click.option("--map-size", type=int, default=_DEFAULTS.map_size, show_default=True,
                      help="Nodes per axis of the smooth colour map (the grade is this LUT)."),
         click.option("--smoothness", type=float, default=_DEFAULTS.smoothness, show_default=True,
@@ -78,7 +79,8 @@ def _options() -> list:
                           "near 1: less noise amplification, less contrast change)."),
         click.option("--monotone/--no-monotone", default=_DEFAULTS.monotone, show_default=True,
                      help="Keep the order of lightness: the map's output luma never decreases "
-                          "when an input channel increases (no reversed steps in flat areas)."),
+                          "when an input channel increases (no reversed steps in flat areas; "
+                          "a preset's own look is applied as it was made)."),
         click.option("--regrain/--no-regrain", default=_DEFAULTS.regrain, show_default=True,
                      help="Keep the input's grain and edges (edge-aware local linear model; "
                           "off: every pixel goes exactly through the LUT)."),
@@ -213,6 +215,15 @@ _PLAIN_KEYS = ("bins", "fit_bins", "loss", "width", "gamma", "transfer_width", "
 GRADING_KEYS = ("style_dir", "preset", "weights_text", "no_cache", "cache_dir") + _PLAIN_KEYS
 #: Options of :data:`space_options` (fields ``spaces.input`` and ``spaces.working``).
 _SPACE_KEYS = ("input_space", "working_space")
+#: Options that steer the palette fit and transport only (parameter name -> flag): the
+#: look grade (``--mode look``, the default) and a saved grade (``--look``) never use them.
+PALETTE_ONLY = {"weights_text": "--weights", "relaxation": "--relax", "loss": "--loss",
+                "bins": "--bins", "fit_bins": "--fit-bins", "width": "--width",
+                "gamma": "--gamma", "transfer_width": "--transfer-width",
+                "n_iter": "--iterations", "max_iter": "--max-iter",
+                "smoothness": "--smoothness", "stiffness": "--stiffness"}
+#: Options of the look grade only (parameter name -> flag).
+LOOK_ONLY = {"natural": "--natural"}
 
 #: Option field (``group.field``) or library setting -> the flag that sets it.
 FLAGS = {
@@ -255,12 +266,28 @@ class _Deferred:
         return list(reversed(holder.__click_params__))
 
 
+#: ``--help`` sections: (title, parameter names), in order; options not named go under
+#: "Other options".
+OPTION_GROUPS = (
+    ("Where the grade comes from", ("style_dir", "preset", "look_path", "mode", "strength")),
+    ("Look grade (--mode look, the default)", tuple(LOOK_ONLY)),
+    ("Colour map and finish (both modes)",
+     ("map_size", "monotone", "preserve_luminance", "regrain", "regrain_radius",
+      "regrain_eps")),
+    ("Palette fit (--mode palette only)", tuple(PALETTE_ONLY)),
+    ("Colour spaces", _SPACE_KEYS),
+    ("Outputs", ("output", "output_dir", "out_dir", "report_dir", "lut", "lut_size",
+                 "lut_format", "save_grade", "quality", "bit_depth", "overwrite", "as_json")),
+)
+
+
 class LazyOptionsCommand(click.Command):
     """A click command whose deferred options are built when its parameters are first used.
 
     Listing the command (``wbcgrade --help``) needs only its name and help
     text; its options, parsing and ``--help`` expand the placeholders left by
-    :func:`lazy_options` in place, in their order.
+    :func:`lazy_options` in place, in their order. ``--help`` lists the options
+    in sections by what they steer (:data:`OPTION_GROUPS`).
     """
 
     @property
@@ -272,6 +299,18 @@ class LazyOptionsCommand(click.Command):
                 expanded.extend(p.build() if isinstance(p, _Deferred) else [p])
             params[:] = expanded
         return params
+
+    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        records = {}
+        for param in self.get_params(ctx):
+            record = param.get_help_record(ctx)
+            if record is not None:
+                records[param.name] = record
+        for title, names in (*OPTION_GROUPS, ("Other options", tuple(records))):
+            rows = [records.pop(name) for name in names if name in records]
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
 
     @params.setter
     def params(self, value: list[click.Parameter]) -> None:
@@ -323,16 +362,6 @@ def lut_size_option() -> list:
     return [click.option("--lut-size", type=int, default=DEFAULT_LUT_SIZE, show_default=True,
                          help="Nodes per axis of the LUT.")]
 
-
-#: Options that steer the palette fit and transport only (parameter name -> flag): the
-#: look grade (``--mode look``, the default) and a saved grade (``--look``) never use them.
-PALETTE_ONLY = {"weights_text": "--weights", "relaxation": "--relax", "loss": "--loss",
-                "bins": "--bins", "fit_bins": "--fit-bins", "width": "--width",
-                "gamma": "--gamma", "transfer_width": "--transfer-width",
-                "n_iter": "--iterations", "max_iter": "--max-iter",
-                "smoothness": "--smoothness", "stiffness": "--stiffness"}
-#: Options of the look grade only (parameter name -> flag).
-LOOK_ONLY = {"natural": "--natural"}
 
 
 def given_flags() -> set[str]:

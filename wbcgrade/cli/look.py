@@ -67,6 +67,17 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
                                   on_look)
     if as_json:
         click.echo(json.dumps(found.as_dict(), indent=2))
-    else:
-        click.echo(f"wrote {found.lut}: the look of {len(found.styles)} style photos "
-                   f"(mean colour shift {found.info['amplitude_applied']:.3f} of the cube)")
+        return
+    outcome = found.outcome
+    what = ("the preset's own look" if outcome.source.value == "preset-look"
+            else f"the look {len(found.styles)} style photos share")
+    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}, look size "
+               f"{outcome.look_size:.1f}/255 (mean change of the cube's colours)")
+    if outcome.unchanged or outcome.faint:
+        state = ("it leaves colours essentially unchanged" if outcome.unchanged
+                 else "a faint look")
+        click.echo(f"{state}: {outcome.reason}")
+        if outcome.source.value == "set-look":
+            click.echo("--strength 1 (up to 2) writes the extracted look in full; "
+                       "`wbcgrade apply --mode palette` moves a photo's colours towards "
+                       "the style photos' instead")

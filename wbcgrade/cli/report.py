@@ -33,12 +33,15 @@ from wbcgrade.cli.grading_options import (
 @click.pass_context
 def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, overwrite,
            **kwargs):
-    """Palette weight report of a photo or a folder of photos.
+    """What the grade does to a photo or a folder (weights with --mode palette).
 
-    Writes REPORT_DIR/report.json (per photo: the weights sorted with style
-    names, the fitted loss and the loss of the best single style, the number
-    of weights >= 0.001, the time), weights.csv (one row a photo, one column a
-    style), a PNG sheet per photo in sheets/ and index.html.
+    Writes REPORT_DIR/report.json (per photo: what the grade did: its
+    source, strength and the photo's change; for a palette grade also the
+    weights sorted with style names, the fitted loss and the loss of the
+    best single style, the number of weights >= 0.001; the time),
+    weights.csv (one row a photo: a palette grade's weights, one column a
+    style, then the grade's source, strength and change), a PNG sheet per
+    photo in sheets/ and index.html.
     """
     from wbcgrade.color.batch import report_folder
 

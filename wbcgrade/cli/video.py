@@ -108,14 +108,15 @@ def _print_result(result, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
               default=None, help="Also write a contact sheet per shot (sampled frames before "
-              "and after, weights, palettes) and report.json into this folder.")
+              "and after, what the grade did, palettes) and report.json into this folder.")
 @click.pass_context
 def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames, codec, crf,
           lut, lut_size, look_path, overwrite, as_json, report_dir, **kwargs):
-    """Grade CLIP towards the barycenter of style palettes closest to its own.
+    """Grade CLIP with the look of a preset or of style photos, one grade per clip or shot.
 
     Frames sampled every --sample-every seconds are pooled into one palette
-    (as `batch --consistent` pools photos), the weights are fitted once and
+    (as `batch --consistent` pools photos), the grade is made once (the look,
+    or with --mode palette the fitted blend of the style palettes) and
     the grade's colour map is applied to every frame by ffmpeg as a 3-D LUT
     (lut3d, tetrahedral): one grade for the whole clip, no flicker. Audio and
     other streams are copied; frame rate, pixel format and colour tags are

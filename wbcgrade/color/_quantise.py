@@ -13,10 +13,9 @@ child that encodes JPEGs under a file size limit (``imageio._encode_in_child``).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-from wbcgrade.core._jit import compiled
+from wbcgrade.core._jit import compiled, in_bands
 
 __all__ = ["to_uint8", "HALVES_TO_EVEN"]
 
@@ -31,9 +30,10 @@ def _halves_to_even() -> bool:
 HALVES_TO_EVEN = _halves_to_even()
 
 
-@compiled(parallel=True, cache=True)
-def _to_uint8(flat: np.ndarray, out: np.ndarray, half_even: bool) -> None:  # pragma: no cover
-    for i in numba.prange(flat.shape[0]):
+@compiled(nogil=True, cache=True)
+def _to_uint8(flat: np.ndarray, out: np.ndarray, half_even: bool, lo: int,
+              hi: int) -> None:  # pragma: no cover - compiled
+    for i in range(lo, hi):
         scaled = np.float64(flat[i] * np.float32(255.0))  # float32 product, as OpenImageIO's
         value = np.rint(scaled) if half_even else np.floor(scaled + 0.5)
         if not value > 0.0:  # negative or NaN
@@ -52,5 +52,6 @@ def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
     """
     flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1)
     out = np.empty(flat.shape, np.uint8)
-    _to_uint8(flat, out, HALVES_TO_EVEN if half_even is None else bool(half_even))
+    in_bands(_to_uint8, flat.shape[0], flat, out,
+             HALVES_TO_EVEN if half_even is None else bool(half_even), min_band=65536)
     return out.reshape(pixels.shape)

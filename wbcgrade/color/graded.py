@@ -84,7 +84,7 @@ class GradeReport:
         a look grade has none that mean anything."""
         outcome = self.outcome
         palette = outcome is None or outcome.palette is not None
-        info = {k: v for k, v in dict(self.grade.info).items() if k != "fit"}
+        info = {k: v for k, v in dict(self.grade.info).items() if palette or k != "fit"}
         out = {
             "photo": str(self.photo),
             "output": None if self.output is None else str(self.output),
@@ -94,8 +94,8 @@ class GradeReport:
             "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
+            **info,  # diagnostics of the fit, the look, the transport and the map
             "color": self.color,
-            "diagnostics": info,
             **({"report": str(self.report)} if self.report is not None else {}),
         }
         if palette:

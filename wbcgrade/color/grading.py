@@ -455,9 +455,8 @@ def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
     if grade.outcome is not None:
         return grade.outcome.on_photo(change)
     if "saved_look" in dict(grade.info):
-        from wbcgrade.color.saved_look import look_fit
-
-        return grade_outcome(grade, look_fit(grade), photo_hist)
+        return grade_outcome(grade, FitSummary(np.asarray(grade.weights), 0.0, np.zeros(0),
+                                               "saved"), photo_hist)
     return grade_outcome(grade, FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0),
                                            np.zeros(0), "given"), photo_hist, "palette")
 

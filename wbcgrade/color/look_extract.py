@@ -21,6 +21,13 @@ from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import Grade
 from wbcgrade.color.look import natural_palettes, set_look_map
 from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
+from wbcgrade.color.outcome import (
+    FAINT_STRENGTH,
+    UNCHANGED_STRENGTH,
+    GradeOutcome,
+    GradeSource,
+    map_change,
+)
 from wbcgrade.color.presets import StyleSource, load_preset, load_styles, styles_in_space
 
 __all__ = ["ExtractedLook", "extract_look_file"]
@@ -40,17 +47,21 @@ class ExtractedLook:
     strength : the scale the look was applied at.
     info : what the extraction found (JSON-friendly; ``amplitude_applied``:
         the mean colour shift in cube units, ...).
+    outcome : what the LUT does, in plain terms (its ``mean_change`` is over the
+        whole cube: there is no photo), or None.
     """
 
     lut: Path
     styles: list[str]
     strength: float
     info: dict = field(default_factory=dict)
+    outcome: GradeOutcome | None = None
 
     def as_dict(self) -> dict:
         """JSON-friendly summary."""
         return {"lut": str(self.lut), "styles": list(self.styles), "strength": self.strength,
-                **self.info}
+                **self.info,
+                **({} if self.outcome is None else {"outcome": self.outcome.as_dict()})}
 
 
 def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: int = 33,
@@ -97,4 +108,14 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: 
     path = write_grade_lut(output, grade, encoding, lut_size, lut_format,
                            title="wbcgrade look", overwrite=overwrite,
                            comments=[f"look of {len(styles.names)} style photos"])
-    return ExtractedLook(path, list(styles.names), float(strength), dict(info))
+    size = map_change(lattice, 1.0, encoding.working)
+    n_styles = len(styles.names)
+    preset = info.get("source") == "preset"
+    why = None
+    if not preset and strength < FAINT_STRENGTH:
+        how = "no" if strength < UNCHANGED_STRENGTH else "little"
+        why = (f"these {n_styles} style photos share {how} look that can be told apart "
+               "from their content")
+    outcome = GradeOutcome.judge(GradeSource.PRESET_LOOK if preset else GradeSource.SET_LOOK,
+                                 n_styles, float(strength), 1.0, size, size, why)
+    return ExtractedLook(path, list(styles.names), float(strength), dict(info), outcome)

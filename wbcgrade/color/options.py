@@ -68,7 +68,7 @@ DEFAULT_STIFFNESS = 1e-4
 DEFAULT_REGRAIN_RADIUS = 1.0 / 200.0
 #: Regrain regulariser in squared encoded units: input variations well below
 #: sqrt(eps) = 0.2 (grain, JPEG blocks, gentle gradients) keep their amplitude.
-DEFAULT_REGRAIN_EPS = 0.2 ** 2
+DEFAULT_REGRAIN_EPS = 0.04  # (0.2 squared, written as typed: --help shows it)
 
 
 def _fail(name: str, why: str) -> OptionError:

@@ -55,7 +55,7 @@ class GradeSource(str, Enum):
             GradeSource.OWN_SCENE: "the look of the style photo that shows this scene",
             GradeSource.SET_LOOK: f"the look the {n_styles} style photos share",
             GradeSource.PALETTE: f"a blend of the {n_styles} style palettes (palette fit)",
-            GradeSource.SAVED: "a saved grade, applied as saved",
+            GradeSource.SAVED: "a saved grade, applied as saved (no fit)",
         }[self]
 
 
@@ -145,7 +145,7 @@ class GradeOutcome:
         """One line: the source, the strength, the look's size and the photo's change."""
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
-            what = f"the saved grade {self.file}"
+            what = f"the saved grade {self.file} (applied as saved, no fit)"
         if self.source is GradeSource.OWN_SCENE and self.match:
             what = f"the look of the style photo of this scene ({self.match}, " \
                    f"confidence {self.confidence:.2f})"

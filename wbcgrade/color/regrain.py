@@ -25,12 +25,11 @@ He and Sun 2015), so 16 megapixels cost about one pass over the pixels.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core._jit import compiled
+from wbcgrade.core._jit import compiled, in_bands
 
 __all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
 
@@ -106,23 +105,40 @@ def _column_means(rows: np.ndarray, radius: int, y: int, lo: int, acc: np.ndarra
             acc[i, c] += rows[enter, lo + i, c] - rows[leave, lo + i, c]
 
 
-@compiled(parallel=True, cache=True)
+@compiled(nogil=True, cache=True)
+def _box_rows(x: np.ndarray, radius: int, rows: np.ndarray, lo: int,
+              hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of the horizontal pass of :func:`_box` into ``rows``."""
+    for y in range(lo, hi):
+        _running_mean(x[y], radius, rows[y])
+
+
+@compiled(nogil=True, cache=True)
+def _box_columns(rows: np.ndarray, radius: int, out: np.ndarray, lo: int,
+                 hi: int) -> None:  # pragma: no cover - compiled
+    """Column blocks lo:hi of the vertical pass of :func:`_box` into ``out``."""
+    h, w = rows.shape[:2]
+    for block in range(lo, hi):
+        start = block * _COLUMN_BLOCK
+        stop = min(start + _COLUMN_BLOCK, w)
+        acc = _column_sums(rows, radius, start, stop)
+        for y in range(h):
+            _column_means(rows, radius, y, start, acc, out[y, start:stop])
+
+
 def _box(x: np.ndarray, radius: int) -> np.ndarray:
     """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
     the borders: ``scipy.ndimage.uniform_filter(mode="reflect")`` on each channel, to
-    float32 rounding (rows, then blocks of columns, in parallel; running sums in float64)."""
+    float32 rounding (rows, then blocks of columns, in bands on every core; running sums
+    in float64)."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
     h, w, k = x.shape
     rows = np.empty((h, w, k), np.float32)
-    for y in numba.prange(h):
-        _running_mean(x[y], radius, rows[y])
     out = np.empty((h, w, k), np.float32)
-    n_blocks = _column_blocks(w) if h > 0 else 0
-    for block in numba.prange(n_blocks):
-        lo = block * _COLUMN_BLOCK
-        hi = min(lo + _COLUMN_BLOCK, w)
-        acc = _column_sums(rows, radius, lo, hi)
-        for y in range(h):
-            _column_means(rows, radius, y, lo, acc, out[y, lo:hi])
+    if h == 0 or w == 0:
+        return out
+    in_bands(_box_rows, h, x, int(radius), rows, min_band=1)
+    in_bands(_box_columns, _column_blocks(w), rows, int(radius), out, min_band=1)
     return out
 
 
@@ -167,15 +183,13 @@ def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndar
         out[9 + c] = offset
 
 
-@compiled(parallel=True, cache=True)
-def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
-                   eps: float) -> np.ndarray:
-    """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
-    window means (rows, then blocks of columns, as :func:`_box`), solved as they come."""
-    h, w = guide.shape[:2]
-    rows = np.empty((h, w, _N_MOMENTS), np.float32)
-    for y in numba.prange(h):
-        moments = np.empty((w, _N_MOMENTS), np.float32)
+@compiled(nogil=True, cache=True)
+def _moment_rows(guide: np.ndarray, change: np.ndarray, radius: int, rows: np.ndarray,
+                 lo: int, hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of the moments' horizontal window means (:func:`_window_models`)."""
+    w = guide.shape[1]
+    moments = np.empty((w, _N_MOMENTS), np.float32)
+    for y in range(lo, hi):
         for x in range(w):
             for c in range(3):
                 moments[x, c] = guide[y, x, c]
@@ -189,20 +203,51 @@ def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
                 for c in range(3):
                     moments[x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
         _running_mean(moments, radius, rows[y])
-    out = np.empty((h, w, 12), np.float32)
-    n_blocks = _column_blocks(w) if h > 0 else 0
-    for block in numba.prange(n_blocks):
-        lo = block * _COLUMN_BLOCK
-        hi = min(lo + _COLUMN_BLOCK, w)
-        acc = _column_sums(rows, radius, lo, hi)
-        means = np.empty((hi - lo, _N_MOMENTS), np.float64)
-        inverse = np.empty((3, 3))
-        cross = np.empty((3, 3))
+
+
+@compiled(nogil=True, cache=True)
+def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray, lo: int,
+                   hi: int) -> None:  # pragma: no cover - compiled
+    """Column blocks lo:hi of :func:`_window_models`: the moments' window means (vertical
+    pass), solved as they come."""
+    h, w = rows.shape[:2]
+    inverse = np.empty((3, 3))
+    cross = np.empty((3, 3))
+    for block in range(lo, hi):
+        start = block * _COLUMN_BLOCK
+        stop = min(start + _COLUMN_BLOCK, w)
+        acc = _column_sums(rows, radius, start, stop)
+        means = np.empty((stop - start, _N_MOMENTS), np.float64)
         for y in range(h):
-            _column_means(rows, radius, y, lo, acc, means)
-            for x in range(lo, hi):
-                _solve_window(means[x - lo], eps, inverse, cross, out[y, x])
+            _column_means(rows, radius, y, start, acc, means)
+            for x in range(start, stop):
+                _solve_window(means[x - start], eps, inverse, cross, out[y, x])
+
+
+def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
+                   eps: float) -> np.ndarray:
+    """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
+    window means (rows, then blocks of columns, as :func:`_box`), solved as they come;
+    in bands on every core (serial compiled kernels: a first run compiles them fast)."""
+    guide = np.ascontiguousarray(guide, dtype=np.float32)
+    change = np.ascontiguousarray(change, dtype=np.float32)
+    h, w = guide.shape[:2]
+    rows = np.empty((h, w, _N_MOMENTS), np.float32)
+    out = np.empty((h, w, 12), np.float32)
+    if h == 0 or w == 0:
+        return out
+    in_bands(_moment_rows, h, guide, change, int(radius), rows, min_band=1)
+    in_bands(_solve_columns, _column_blocks(w), rows, int(radius), float(eps), out,
+             min_band=1)
     return out
+
+
+#: Solve grids of fewer pixels than this are solved with numpy and scipy.ndimage
+#: (:func:`_window_models_numpy`), larger ones with the compiled kernels: on a small
+#: photo (the README's first command) both take a fraction of a second, but the kernels
+#: cost seconds to compile on a first run after install; on 1.5 megapixels (every
+#: photo above it is solved there) numpy takes about twice as long (1.7 s, 0.8 s).
+_NUMPY_SOLVE_PIXELS = 400_000
 
 
 def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float) -> np.ndarray:
@@ -210,35 +255,125 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
     ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``."""
     guide = np.ascontiguousarray(guide, dtype=np.float32)
     change = np.ascontiguousarray(change, dtype=np.float32)
+    if guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS:
+        return _box_numpy(_window_models_numpy(guide, change, int(radius), float(eps)),
+                          int(radius))
     return _box(_window_models(guide, change, int(radius), float(eps)), int(radius))
 
 
-@compiled(parallel=True, cache=True)
-def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
-                     out: np.ndarray) -> None:
-    """``out = clip(source + A(x)^T source + b(x))`` with the (lh, lw, 12) ``A, b`` of
-    :func:`_coefficients` bilinearly interpolated from the coarse grid (pixel centres,
-    edges clamped): each output row first blends its two coarse rows, then each pixel
-    blends two nodes of that row (the column weights are the same for every row)."""
-    h, w = source.shape[:2]
+def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
+    """:func:`_box` with scipy.ndimage's reflect-mode uniform filter (float64 running
+    sums), one channel a plane, on as many threads as numba uses."""
+    from scipy import ndimage
+
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    out = np.empty_like(x)
+    if x.size == 0:
+        return out
+    planes = np.ascontiguousarray(np.moveaxis(x, -1, 0))
+    means = np.empty_like(planes)
+
+    def window_mean(k: int) -> None:
+        ndimage.uniform_filter(planes[k], size=2 * radius + 1, mode="reflect",
+                               output=means[k])
+
+    _threaded(window_mean, x.shape[2])
+    out[...] = np.moveaxis(means, 0, -1)
+    return out
+
+
+def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
+                         eps: float) -> np.ndarray:
+    """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
+    moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
+    of rows. Nothing to compile."""
+    from scipy import ndimage
+
+    h, w = guide.shape[:2]
+    out = np.empty((h, w, 12), np.float32)
+    if h == 0 or w == 0:
+        return out
+    g = np.moveaxis(np.asarray(guide, dtype=np.float32), -1, 0)
+    d = np.moveaxis(np.asarray(change, dtype=np.float32), -1, 0)
+    first = (g[0], g[1], g[2], d[0], d[1], d[2])
+    pairs = [(a, c) for a in range(3) for c in range(a, 3)]
+    pairs += [(a, 3 + c) for a in range(3) for c in range(3)]
+    means = np.empty((_N_MOMENTS, h, w), np.float32)  # one plane a moment
+
+    def window_mean(k: int) -> None:
+        plane = first[k] if k < 6 else np.multiply(first[pairs[k - 6][0]],
+                                                   first[pairs[k - 6][1]])
+        ndimage.uniform_filter(np.ascontiguousarray(plane), size=2 * radius + 1,
+                               mode="reflect", output=means[k])
+
+    _threaded(window_mean, _N_MOMENTS)
+    for start in range(0, h, 64):
+        _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64])
+    return out
+
+
+def _threaded(task, n: int) -> None:
+    """``task(k)`` for k in range(n), on as many threads as numba uses (numpy and
+    scipy.ndimage release the GIL in their loops)."""
+    import numba
+
+    threads = min(n, numba.get_num_threads())
+    if threads <= 1:
+        for k in range(n):
+            task(k)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        for done in [pool.submit(task, k) for k in range(n)]:
+            done.result()
+
+
+def _solve_band(m: np.ndarray, eps: float, band: np.ndarray) -> None:
+    """:func:`_solve_window` on a band of (21, rows, W) float64 window means, into the
+    (rows, W, 12) ``band`` of the output."""
+    mg, md = m[0:3], m[3:6]
+    s00 = m[6] - mg[0] * mg[0] + eps
+    s01 = m[7] - mg[0] * mg[1]
+    s02 = m[8] - mg[0] * mg[2]
+    s11 = m[9] - mg[1] * mg[1] + eps
+    s12 = m[10] - mg[1] * mg[2]
+    s22 = m[11] - mg[2] * mg[2] + eps
+    i00 = s11 * s22 - s12 * s12
+    i01 = s02 * s12 - s01 * s22
+    i02 = s01 * s12 - s02 * s11
+    i11 = s00 * s22 - s02 * s02
+    i12 = s01 * s02 - s00 * s12
+    i22 = s00 * s11 - s01 * s01
+    scale = 1.0 / (s00 * i00 + s01 * i01 + s02 * i02)
+    inverse = ((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))
+    for c in range(3):
+        cross = [m[12 + 3 * b + c] - mg[b] * md[c] for b in range(3)]
+        offset = md[c].copy()
+        for a in range(3):
+            row = inverse[a]
+            value = ((row[0] * cross[0] + row[1] * cross[1] + row[2] * cross[2])
+                     * scale).astype(np.float32)
+            band[:, :, 3 * a + c] = value
+            offset -= value * mg[a]
+        band[:, :, 9 + c] = offset
+
+
+@compiled(nogil=True, cache=True)
+def _apply_rows(source: np.ndarray, coefficients: np.ndarray, step: float, left: np.ndarray,
+                right: np.ndarray, weight: np.ndarray, out: np.ndarray, lo: int,
+                hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of :func:`_apply_upsampled` (the columns' nodes and weights given)."""
     lh, lw = coefficients.shape[:2]
-    left = np.empty(w, np.int64)
-    right = np.empty(w, np.int64)
-    weight = np.empty(w, np.float32)
-    for x in range(w):
-        fx = min(max((x + 0.5) / step - 0.5, 0.0), lw - 1.0)
-        x0 = min(int(fx), lw - 2) if lw > 1 else 0
-        left[x] = x0
-        right[x] = min(x0 + 1, lw - 1)
-        weight[x] = fx - x0
+    w = source.shape[1]
     one = np.float32(1.0)
     zero = np.float32(0.0)
-    for y in numba.prange(h):
+    row = np.empty((lw, 12), np.float32)  # this output row's coefficients, coarse columns
+    for y in range(lo, hi):
         fy = min(max((y + 0.5) / step - 0.5, 0.0), lh - 1.0)
         y0 = min(int(fy), lh - 2) if lh > 1 else 0
         ty = np.float32(fy - y0)
         y1 = min(y0 + 1, lh - 1)
-        row = np.empty((lw, 12), np.float32)  # this output row's coefficients, coarse columns
         for x in range(lw):
             for k in range(12):
                 row[x, k] = (one - ty) * coefficients[y0, x, k] + ty * coefficients[y1, x, k]
@@ -257,13 +392,29 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
                 out[y, x, c] = min(max(source[y, x, c] + value, zero), one)
 
 
-@compiled(parallel=True, cache=True)
-def _downsample(x: np.ndarray, step: int) -> np.ndarray:
-    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
-    h, w, c = x.shape[0] // step, x.shape[1] // step, x.shape[2]
-    out = np.zeros((h, w, c), np.float32)
+def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
+                     out: np.ndarray) -> None:
+    """``out = clip(source + A(x)^T source + b(x))`` with the (lh, lw, 12) ``A, b`` of
+    :func:`_coefficients` bilinearly interpolated from the coarse grid (pixel centres,
+    edges clamped): each output row first blends its two coarse rows, then each pixel
+    blends two nodes of that row (the column weights are the same for every row)."""
+    w = source.shape[1]
+    lw = coefficients.shape[1]
+    fx = np.minimum(np.maximum((np.arange(w) + 0.5) / step - 0.5, 0.0), lw - 1.0)
+    left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
+    right = np.minimum(left + 1, lw - 1)
+    weight = (fx - left).astype(np.float32)
+    in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
+             weight, out)
+
+
+@compiled(nogil=True, cache=True)
+def _downsample_rows(x: np.ndarray, step: int, out: np.ndarray, lo: int,
+                     hi: int) -> None:  # pragma: no cover - compiled
+    """Block rows lo:hi of :func:`_downsample` into ``out`` (zeros on entry)."""
+    w, c = out.shape[1], out.shape[2]
     scale = 1.0 / (step * step)
-    for i in numba.prange(h):
+    for i in range(lo, hi):
         for di in range(step):
             row = i * step + di
             for j in range(w):
@@ -273,6 +424,13 @@ def _downsample(x: np.ndarray, step: int) -> np.ndarray:
         for j in range(w):
             for k in range(c):
                 out[i, j, k] *= scale
+
+
+def _downsample(x: np.ndarray, step: int) -> np.ndarray:
+    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    out = np.zeros((x.shape[0] // step, x.shape[1] // step, x.shape[2]), np.float32)
+    in_bands(_downsample_rows, out.shape[0], x, int(step), out, min_band=1)
     return out
 
 

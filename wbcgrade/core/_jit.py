@@ -37,7 +37,7 @@ from typing import Any
 
 import numba
 
-__all__ = ["compiled", "parallel_layer", "THREAD_SAFE_LAYERS"]
+__all__ = ["compiled", "parallel_layer", "in_bands", "THREAD_SAFE_LAYERS"]
 
 #: numba threading layers that accept parallel calls from several threads at once.
 THREAD_SAFE_LAYERS = ("tbb", "omp")
@@ -154,3 +154,25 @@ def compiled(**options: Any) -> Callable[[Callable], Callable]:
         return dispatcher
 
     return decorate
+
+
+def in_bands(kernel: Callable, n: int, *args: Any, min_band: int = 8) -> None:
+    """Run ``kernel(*args, lo, hi)`` over bands [lo, hi) covering range(n), in threads.
+
+    For compiled ``nogil`` kernels that are serial (no ``parallel=True``): they
+    compile several times faster than a ``prange`` loop (a first run after
+    install pays the compilation), and the bands run at once on as many threads
+    as numba would use (``numba.get_num_threads()``, the caller's setting). A
+    band holds at least ``min_band`` items; one band runs on the calling thread.
+    """
+    bands = max(1, min(numba.get_num_threads(), n // max(1, min_band)))
+    if bands == 1:
+        kernel(*args, 0, n)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    edges = [round(i * n / bands) for i in range(bands + 1)]
+    with ThreadPoolExecutor(bands) as pool:
+        for done in [pool.submit(kernel, *args, edges[i], edges[i + 1])
+                     for i in range(bands)]:
+            done.result()

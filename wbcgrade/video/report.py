@@ -3,12 +3,15 @@
 Folder layout (REPORT_DIR)::
 
     report.json        the clip, the encoding, the cuts, and per shot its frames,
-                       sampled frames, ranked weights, loss against the best
-                       single style and timings (VideoResult.as_dict)
+                       sampled frames, what its grade did (``outcome``: source,
+                       strength, change), for a palette grade its ranked weights
+                       and loss against the best single style, and timings
+                       (VideoResult.as_dict)
     shot-NN.png        per shot: up to six sampled frames before and after its
-                       LUT (a grid each), the contributing styles with their
-                       weights, palettes of the frames, the barycenter and the
-                       graded frames (the photo sheet's layout, wbcgrade.color.sheet)
+                       LUT (a grid each), what the grade did, the styles (with
+                       their weights for a palette grade), palettes of the
+                       frames, the barycenter and the graded frames (the photo
+                       sheet's layout, wbcgrade.color.sheet)
 
 The "after" pictures are the sampled frames through the shot's LUT
 (trilinear, in the library), which is what ffmpeg's ``lut3d`` gives to
