@@ -50,7 +50,7 @@ def explore(photo, style_dir, presets, port, save_dir, no_browser):
                               progress=progress, stage=bar.set_description,
                               save_dir=save_dir)
     studio = server.studio
-    _, look = studio.look(1.0)
+    _, look = studio.look(0, 1.0)
     click.echo(f"grade: {look['grade']['words']} (as `wbcgrade apply` gives it)", err=True)
     click.echo(f"saves into: {studio.save_dir}", err=True)
     click.echo(server.url)

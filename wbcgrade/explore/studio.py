@@ -75,6 +75,8 @@ class Explorer:
         self._lock = threading.Lock()
         self._loading = {index: threading.Lock() for index in range(len(choices))}
         self._save_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._prefetch: threading.Thread | None = None
 
     def __getattr__(self, name: str):
         if name.startswith("_"):
@@ -114,6 +116,8 @@ class Explorer:
             except (AttributeError, OSError):  # pragma: no cover - not Linux
                 pass
             for index in range(1, len(self.choices)):
+                if self._stop.is_set():
+                    return
                 try:
                     self.source(index).session.look_grade()
                 except Exception:  # noqa: BLE001 - the page reports it when picked
@@ -121,6 +125,7 @@ class Explorer:
 
         thread = threading.Thread(target=run, daemon=True, name="explore-sources")
         thread.start()
+        self._prefetch = thread
         return thread
 
     def state(self, index: int = 0, palette: bool = False) -> dict:
@@ -216,7 +221,11 @@ class Explorer:
                 "command": command, "grade": words}
 
     def close(self) -> None:
-        """Stop every source's job worker."""
+        """Stop the prefetch (after the source it is loading) and every source's job worker
+        (a thread left in the colour library's native code aborts the interpreter's exit)."""
+        self._stop.set()
+        if self._prefetch is not None:
+            self._prefetch.join(60)
         with self._lock:
             studios = list(self._studios.values())
         for studio in studios:
