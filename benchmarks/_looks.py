@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Look", "LOOKS", "TUNED_LOOKS", "HELD_OUT_LOOKS", "asc_cdl", "rec709_luma"]
+__all__ = ["Look", "LOOKS", "TUNED_LOOKS", "HELD_OUT_LOOKS", "FILM_LOOKS", "FILM_TUNED_LOOKS",
+           "FILM_HELD_OUT_LOOKS", "MONOCHROME_LOOKS", "asc_cdl", "rec709_luma"]
 
 SRGB = "sRGB Encoded Rec.709 (sRGB)"
 ACES = "ACES2065-1"
@@ -269,6 +270,58 @@ def _shipped(name: str, package: str, relative: str, description: str,
     return Look(name, ocio_look(package, relative, through_aces), description, source)
 
 
+#: Real film looks (Hald CLUTs of the RawTherapee Film Simulation Collection, CC BY-SA
+#: 4.0), kept beside the clone in ``../shared/data/looks`` (development material, never
+#: shipped): file stem -> look name.
+FILM_FOLDER = Path(__file__).resolve().parents[2] / "shared" / "data" / "looks"
+_FILM_FILES = {
+    "velvia": "fuji_velvia_50", "provia": "fuji_provia_100f", "fuji-400h": "fuji_400h",
+    "ektar": "kodak_ektar_100", "portra-160nc": "kodak_portra_160_nc",
+    "elite-chrome": "kodak_elite_chrome_200", "precisa": "agfa_precisa_100",
+    "polachrome": "polaroid_polachrome", "redscale": "lomography_redscale_100",
+    "bleach-bypass-2": "bleach_bypass_2", "smokey": "smokey", "crisp-winter": "crisp_winter",
+    "late-sunset": "late_sunset", "night-from-day": "night_from_day",
+    "tri-x": "kodak_tri_x_400", "delta-100": "ilford_delta_100",
+}
+
+
+@functools.cache
+def _hald_lattice(stem: str) -> np.ndarray:
+    """A level-8 Hald CLUT as a (64, 64, 64, 3) float64 lattice indexed [b, g, r]."""
+    import OpenImageIO as oiio
+
+    path = FILM_FOLDER / f"{stem}.png"
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error or buf.spec().width != 512:
+        raise SystemExit(f"cannot read the film look {path} (a clone beside ../shared?)")
+    return buf.get_pixels(oiio.FLOAT)[..., :3].astype(np.float64).reshape(64, 64, 64, 3)
+
+
+def hald_look(stem: str):
+    """A film look from its Hald CLUT, applied trilinearly to the sRGB-encoded values."""
+
+    def apply(rgb: np.ndarray) -> np.ndarray:
+        from scipy import ndimage
+
+        lattice = _hald_lattice(stem)
+        pos = np.clip(np.asarray(rgb, np.float64), 0.0, 1.0).reshape(-1, 3) * 63.0
+        coords = np.stack([pos[:, 2], pos[:, 1], pos[:, 0]])  # [b, g, r]
+        out = np.stack([ndimage.map_coordinates(lattice[..., c], coords, order=1,
+                                                mode="nearest") for c in range(3)], axis=-1)
+        return np.clip(out, 0.0, 1.0).reshape(np.shape(rgb))
+
+    return apply
+
+
+def _film(name: str) -> Look:
+    stem = _FILM_FILES[name]
+    return Look(name, hald_look(stem), f"film look: {stem} (RawTherapee Film Simulation "
+                "Collection, CC BY-SA 4.0, Hald CLUT level 8)",
+                lambda: {"file": f"../shared/data/looks/{stem}.png",
+                         "collection": "RawTherapee Film Simulation Collection 2015-09-20",
+                         "licence": "CC BY-SA 4.0", "applied_with": "trilinear, sRGB-encoded"})
+
+
 def _defined_here(name: str, apply, description: str, params: dict) -> Look:
     return Look(name, apply, description, lambda: {"defined_in": "benchmarks/_looks.py",
                                                     **params})
@@ -305,11 +358,23 @@ LOOKS: dict[str, Look] = {
                       DAY_FOR_NIGHT),
         _defined_here("pastel", pastel, "pastel high key: lifted, low contrast, soft colour",
                       PASTEL),
+        # real film looks (Hald CLUTs)
+        *[_film(name) for name in _FILM_FILES],
     ]
 }
 
 #: The looks the defaults were chosen on (the benchmark's default set).
 TUNED_LOOKS = ["kodak2383", "arri-k1s1", "cdl-warm", "teal-orange", "bleach-bypass",
                "faded-film"]
-#: Looks no default was chosen on (``--looks held-out``).
-HELD_OUT_LOOKS = [name for name in LOOKS if name not in TUNED_LOOKS]
+#: The real film looks (``--looks film``); two are black and white.
+FILM_LOOKS = list(_FILM_FILES)
+#: Film looks no setting was chosen on (``--looks film-held-out``): one black and white
+#: film, two colour negative stocks, an instant film, a redscale and a creative look.
+FILM_HELD_OUT_LOOKS = ["portra-160nc", "fuji-400h", "polachrome", "redscale", "smokey",
+                       "delta-100"]
+#: Film looks settings may be chosen on (``--looks film-tuned``).
+FILM_TUNED_LOOKS = [name for name in FILM_LOOKS if name not in FILM_HELD_OUT_LOOKS]
+#: Looks whose output is black and white.
+MONOCHROME_LOOKS = ["tri-x", "delta-100"]
+#: Looks no default was chosen on (``--looks held-out``; the film looks apart).
+HELD_OUT_LOOKS = [name for name in LOOKS if name not in TUNED_LOOKS and name not in FILM_LOOKS]

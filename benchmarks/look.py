@@ -69,7 +69,15 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.modules.setdefault("look", sys.modules[__name__])  # method files: ``from look import ...``
 
-from _looks import HELD_OUT_LOOKS, LOOKS, TUNED_LOOKS  # noqa: E402
+from _looks import (  # noqa: E402
+    FILM_HELD_OUT_LOOKS,
+    FILM_LOOKS,
+    FILM_TUNED_LOOKS,
+    HELD_OUT_LOOKS,
+    LOOKS,
+    MONOCHROME_LOOKS,
+    TUNED_LOOKS,
+)
 from quality import (  # noqa: E402
     gradient_correlation,
     luma,
@@ -92,6 +100,8 @@ SHUFFLE_SEED = 19
 ROTATION = 4  # places the shuffled order turns from one look to the next
 FRAMING = 0.62  # share of the width in each framing (shot matching)
 PROTOCOLS = {"shot": "shot matching", "cross": "cross-content"}
+#: Photos with people's faces (reported apart: skin is where a grade is judged first).
+FACES = {"astronaut", "grace_hopper"}
 
 
 # --------------------------------------------------------------------------- photos
@@ -180,17 +190,19 @@ class Case:
 
 
 def make_cases(names: list[str], looks: list[str], protocols: list[str], n: int,
-               graded: int | None = None) -> list[Case]:
+               graded: int | None = None, n_styles: int | None = None) -> list[Case]:
     """Deterministic partitions: look k uses the shuffled order turned by k * ROTATION.
 
-    cross: styles = the first n, graded = the next n; shot: the last n scenes
-    are both (left framings styled, right framings graded). ``graded`` < n
-    grades only the first few of a case's graded photos (the partition, and
-    so the natural list, stays that of the full run).
+    cross: styles = the first ``n_styles`` (default n), graded = the next n;
+    shot: the last n scenes are both (left framings styled, right framings
+    graded). ``graded`` < n grades only the first few of a case's graded
+    photos (the partition, and so the natural list, stays that of the full run).
     """
-    need = 2 * n
+    n_styles = n if n_styles is None else n_styles
+    need = n_styles + n if "cross" in protocols else 2 * n
     if len(names) < need:
-        raise SystemExit(f"--photos {n} needs {need} photos, {len(names)} found")
+        raise SystemExit(f"--styles {n_styles} --photos {n} needs {need} photos, "
+                         f"{len(names)} found")
     order = [names[i] for i in np.random.default_rng(SHUFFLE_SEED).permutation(len(names))]
     all_looks = list(LOOKS)
     cases = []
@@ -199,7 +211,7 @@ def make_cases(names: list[str], looks: list[str], protocols: list[str], n: int,
         ring = order[turn:] + order[:turn]
         for protocol in protocols:
             if protocol == "cross":
-                styles, graded_all = ring[:n], ring[n:2 * n]
+                styles, graded_all = ring[:n_styles], ring[n_styles:n_styles + n]
             else:
                 styles = graded_all = ring[-n:]
             held = set(styles) | set(graded_all)
@@ -295,6 +307,12 @@ class Context:
             raise ValueError(f"{name} is not a natural photo of this case")
         return self._photos.photo(name)
 
+    def before(self, index: int) -> np.ndarray:
+        """The ungraded original of style image ``index``: for the paired ceiling only (no
+        user has it; a method graded on it is a bound, not a method)."""
+        photo = self._photos.photo(self.style_names[index])
+        return framings(photo)[0] if self.protocol == "shot" else photo
+
 
 Method = Callable[[np.ndarray, list, Context], np.ndarray]
 
@@ -303,21 +321,32 @@ def nothing(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np
     return photo
 
 
-def natural_preset(context: Context) -> str:
-    """A preset file of the shipped natural palettes this case may learn from.
+#: A preset of natural palettes that replaces the shipped one (``--natural``): palettes of
+#: photos other than the benchmark's, so nothing needs holding out.
+NATURAL_FILE: str | None = None
 
-    The shipped palettes (``wbcgrade/color/data/natural.npz``) are built from
-    the benchmark's photos; the case's graded photos and the sources of its
-    style images are left out (held out), so a look is never learnt from them.
+
+def natural_preset(context: Context) -> str:
+    """A preset file of the shipped natural palettes this case may learn from
+    (``--natural``'s file instead, when given).
+
+    The shipped palettes (``wbcgrade/color/data/natural.npz``) come from photos
+    other than the benchmark's; should one of the benchmark's photos be among
+    them, it is left out (held out) unless the case allows it, so a look is
+    never learnt from the case's graded photos or the sources of its style images.
     """
     from wbcgrade.color.look import natural_palettes
     from wbcgrade.color.presets import save_preset
 
+    if NATURAL_FILE is not None:
+        return NATURAL_FILE
     allowed = sorted(context.natural)
     key = ("natural", tuple(allowed))
     if key not in context.memo:
         shipped = natural_palettes()
-        held_out = set(shipped.names) - set(allowed)
+        photos = context._photos
+        benchmark = set(photos.names()) if photos is not None else set(shipped.names)
+        held_out = (set(shipped.names) & benchmark) - set(allowed)
         digest = hashlib.sha1(",".join(allowed).encode()).hexdigest()[:16]
         path = Path(context.cache_dir) / f"natural-{digest}.npz"
         if not path.exists():
@@ -342,6 +371,57 @@ def wbcgrade_method(**options) -> Method:
         return out
 
     return method
+
+
+def extract_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
+    """The fit-once route: ``look extract`` (the set's look as a LUT, once per set), then
+    ``apply --look`` (that LUT applied in full, with the default regrain)."""
+    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.look import set_look_map
+    from wbcgrade.color.presets import StyleSet, load_preset
+
+    key = ("extracted-look",)
+    if key not in context.memo:
+        from wbcgrade.color.colorspace import default_working_space
+        from wbcgrade.color.histogram import image_histogram
+
+        hists = np.stack([image_histogram(np.asarray(s, np.float32), 64, None, 1 << 20)
+                          for s in styles])
+        style_set = StyleSet(names=list(context.style_names), histograms=hists,
+                             source="look benchmark",
+                             meta={"working_space": default_working_space(),
+                                   "images": [np.asarray(s, np.float32) for s in styles]})
+        lattice, _ = set_look_map(style_set, load_preset(natural_preset(context)))
+        context.memo[key] = StyleSet(names=["look"], histograms=hists[:1], source="look",
+                                     meta={"working_space": default_working_space(),
+                                           "look": lattice})
+    graded, _ = grade_array(np.asarray(photo, np.float32), context.memo[key])
+    return np.clip(graded, 0.0, 1.0)
+
+
+def _cubic_features(rgb: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, 20): the monomials of R, G, B up to degree 3."""
+    r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    one = np.ones_like(r)
+    cols = [one, r, g, b, r * r, g * g, b * b, r * g, r * b, g * b,
+            r ** 3, g ** 3, b ** 3, r * r * g, r * r * b, g * g * r, g * g * b, b * b * r,
+            b * b * g, r * g * b]
+    return np.stack(cols, axis=1)
+
+
+def paired_ceiling(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
+    """A ceiling, not a method: a cubic polynomial of R, G, B fitted (least squares) on the
+    style images and their UNGRADED originals, which no user has, applied to the photo."""
+    key = ("paired-ceiling",)
+    if key not in context.memo:
+        before = np.concatenate([sample_pixels(context.before(i), 40_000, seed=i)
+                                 for i in range(len(styles))])
+        after = np.concatenate([sample_pixels(s, 40_000, seed=i)
+                                for i, s in enumerate(styles)])
+        features = _cubic_features(before.reshape(-1, 3))
+        context.memo[key] = np.linalg.lstsq(features, after.reshape(-1, 3), rcond=None)[0]
+    flat = photo.reshape(-1, 3)
+    return np.clip(_cubic_features(flat) @ context.memo[key], 0.0, 1.0).reshape(photo.shape)
 
 
 def nearest_reference(photo: np.ndarray, styles: list[np.ndarray], context: Context):
@@ -382,6 +462,8 @@ def idt_pooled(photo, styles, context):
 METHODS: dict[str, Method] = {
     "nothing": nothing,
     "wbcgrade": wbcgrade_method(),  # the defaults: the look grade
+    "wbcgrade-extract": extract_route,
+    "ceiling": paired_ceiling,
     "wbcgrade-palette": wbcgrade_method(mode="palette"),
     "wbcgrade-relax0.1": wbcgrade_method(mode="palette", relaxation=0.1),
     "wbcgrade-kl-relax0.01": wbcgrade_method(mode="palette", loss="kl", relaxation=0.01),
@@ -474,8 +556,10 @@ def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> 
             out = to_8bit(np.asarray(out, dtype=np.float64)[..., :3])
             if out.shape != photo.shape:
                 raise SystemExit(f"{method} returned {out.shape} for a {photo.shape} photo")
-            de = delta_e(photo_lab if np.array_equal(out, photo) else lab(out), truth_lab)
+            out_lab = photo_lab if np.array_equal(out, photo) else lab(out)
+            de = delta_e(out_lab, truth_lab)
             result = {"dE": de, "recovered": 1.0 - de / de0,
+                      "chroma": float(np.mean(np.hypot(out_lab[..., 1], out_lab[..., 2]))),
                       "grad_r": gradient_correlation(photo, out),
                       "noise": noise_ratio(photo, out), "seconds": seconds}
             weights = context.info.get("weights")
@@ -561,6 +645,12 @@ def summarise(cases: list[dict], methods: list[str], protocol: str) -> dict:
             per = [(row, {"dE": 0.0, "recovered": 1.0, **row["truth"]}) for row, _ in per]
         per = [p for p in per if p[1] is not None]
         rec = [r["recovered"] for _, r in per]
+        faces = [r["recovered"] for c in cases for name, row in c["photos"].items()
+                 if name in FACES and (r := row["methods"].get(method, {} if method != "(truth)"
+                                                               else {"recovered": 1.0}))]
+        mono = [r["chroma"] for c in cases if c["case"]["look"] in MONOCHROME_LOOKS
+                for row in c["photos"].values()
+                if (r := row["methods"].get(method)) and "chroma" in r]
         same = [r["same_scene_on_top"] for _, r in per if "same_scene_on_top" in r]
         secs = [r["seconds"] for _, r in per if "seconds" in r]
         summary[method] = {
@@ -572,6 +662,9 @@ def summarise(cases: list[dict], methods: list[str], protocol: str) -> dict:
             "noise_geomean": float(np.exp(np.mean(np.log([r["noise"] for _, r in per])))),
             "noise_worst": float(np.max([r["noise"] for _, r in per])),
             "same_scene_on_top": [int(sum(same)), len(same)] if same else None,
+            "faces_mean": float(np.mean(faces)) if faces else None,
+            "faces_worst": float(np.min(faces)) if faces else None,
+            "monochrome_chroma_max": float(np.max(mono)) if mono else None,
             "seconds_median": float(np.median(secs)) if secs else None,
             "by_look": {c["case"]["look"]: float(np.mean(
                 [row["methods"][method]["recovered"] if method != "(truth)" else 1.0
@@ -586,17 +679,21 @@ def print_table(protocol: str, summary: dict, looks: list[str]) -> None:
           f"(ungraded vs truth) {any_row['dE0']:.2f}")
     head = (f"| {'method':24s} | {'dE2000':>6s} | {'recovered':>9s} | {'worst':>6s} | "
             f"{'grad r (worst)':>14s} | {'noise (worst)':>13s} | {'same scene on top':>17s} "
-            f"| {'s/photo':>7s} |")
+            f"| {'s/photo':>7s} | {'faces (worst)':>13s} | {'b&w chroma':>10s} |")
     print(head)
     print("|" + "|".join("-" * (len(part)) for part in head.split("|")[1:-1]) + "|")
     for method, s in summary.items():
         same = f"{s['same_scene_on_top'][0]} of {s['same_scene_on_top'][1]}" \
             if s["same_scene_on_top"] else "-"
         secs = f"{s['seconds_median']:.2f}" if s["seconds_median"] is not None else "-"
+        faces = (f"{s['faces_mean']:+.2f} ({s['faces_worst']:+.2f})"
+                 if s["faces_mean"] is not None else "-")
+        mono = (f"{s['monochrome_chroma_max']:.1f}" if s["monochrome_chroma_max"] is not None
+                else "-")
         print(f"| {method:24s} | {s['dE']:6.2f} | {s['recovered_mean']:+9.2f} | "
               f"{s['recovered_worst']:+6.2f} | {s['grad_r_mean']:6.3f} ({s['grad_r_worst']:5.3f})"
               f" | {s['noise_geomean']:5.2f} ({s['noise_worst']:5.2f}) | {same:>17s} | "
-              f"{secs:>7s} |")
+              f"{secs:>7s} | {faces:>13s} | {mono:>10s} |")
     print(f"recovered by look ({PROTOCOLS[protocol]}):")
     print(f"| {'method':24s} | " + " | ".join(f"{lk:>13s}" for lk in looks) + " |")
     for method, s in summary.items():
@@ -656,12 +753,17 @@ def main(argv: list[str] | None = None) -> None:
                                      + "; held-out looks: " + ", ".join(HELD_OUT_LOOKS))
     parser.add_argument("--protocol", choices=["shot", "cross", "both"], default="both")
     parser.add_argument("--looks", help="comma-separated; 'held-out': the looks no default "
-                        "was chosen on, 'all': every look (default: the six tuned looks; "
-                        "--quick: 3 of them)")
+                        "was chosen on, 'film': the 16 real film looks ('film-tuned', "
+                        "'film-held-out': those settings were / were not chosen on), 'all': "
+                        "every look (default: the six tuned looks; --quick: 3 of them)")
     parser.add_argument("--methods", help="comma-separated (default: all registered)")
     parser.add_argument("--method-file", type=Path, action="append", default=[],
                         help="a Python file with its own METHODS dict (repeatable)")
     parser.add_argument("--photos", type=int, default=6, help="photos per set (default 6)")
+    parser.add_argument("--styles", type=int, help="style photos per cross-content set "
+                        "(default --photos; --looks film: 12)")
+    parser.add_argument("--natural", type=Path, help="a preset (.npz) of natural palettes of "
+                        "photos other than the benchmark's, for wbcgrade's content model")
     parser.add_argument("--graded", type=int,
                         help="grade only the first K photos of each case (--quick: 3)")
     parser.add_argument("--size", type=int, help="long side in px (default 768; --quick: 384)")
@@ -679,7 +781,9 @@ def main(argv: list[str] | None = None) -> None:
         load_method_file(path)
     size = args.size or (384 if args.quick else 768)
     graded = args.graded or (3 if args.quick else None)
-    groups = {"held-out": HELD_OUT_LOOKS, "all": list(LOOKS), "tuned": TUNED_LOOKS}
+    groups = {"held-out": HELD_OUT_LOOKS, "all": list(LOOKS), "tuned": TUNED_LOOKS,
+              "film": FILM_LOOKS, "film-tuned": FILM_TUNED_LOOKS,
+              "film-held-out": FILM_HELD_OUT_LOOKS}
     if args.looks:
         looks = [lk for part in args.looks.split(",") if part
                  for lk in groups.get(part, [part])]
@@ -693,9 +797,14 @@ def main(argv: list[str] | None = None) -> None:
     protocols = ["shot", "cross"] if args.protocol == "both" else [args.protocol]
     if not 1 <= args.photos <= 10 or (graded is not None and graded < 1):
         raise SystemExit("--photos must be in 1..10 and --graded at least 1")
+    film = any(lk in FILM_LOOKS for lk in looks)
+    n_styles = args.styles or (12 if film and args.photos <= 8 else args.photos)
+    if args.natural is not None:
+        global NATURAL_FILE
+        NATURAL_FILE = str(args.natural.resolve())
 
     photos = Photos(args.photo_dir, size, args.cache_dir)
-    cases = make_cases(photos.names(), looks, protocols, args.photos, graded)
+    cases = make_cases(photos.names(), looks, protocols, args.photos, graded, n_styles)
     args.out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     from tqdm import tqdm
@@ -720,6 +829,7 @@ def main(argv: list[str] | None = None) -> None:
     total = time.perf_counter() - start
 
     results = {"settings": {"size": size, "photos_per_set": args.photos, "graded": graded,
+                            "styles_per_set": n_styles, "natural": NATURAL_FILE,
                             "framing": FRAMING, "shuffle_seed": SHUFFLE_SEED,
                             "rotation": ROTATION, "photo_dir": str(args.photo_dir),
                             "methods": methods, "looks": looks, "jobs": args.jobs,

@@ -33,6 +33,45 @@ def test_round_trip(tmp_path, style_dir):
         save_preset(path, styles)
 
 
+def test_compact_presets_hold_the_same_histograms_in_half_the_file(tmp_path, style_dir):
+    styles = load_style_folder(style_dir, 32)
+    full = save_preset(tmp_path / "full.npz", styles)
+    compact = save_preset(tmp_path / "compact.npz", styles, compact=True)
+    with np.load(compact) as data:
+        assert data["index"].dtype == np.uint16 and data["values"].dtype == np.float16
+    assert compact.stat().st_size < 0.75 * full.stat().st_size
+    loaded = load_preset(compact)
+    assert loaded.names == styles.names and loaded.bins == 32
+    reference = load_preset(full).histograms
+    np.testing.assert_allclose(loaded.histograms, reference, rtol=2e-3, atol=1e-12)
+    # a grid too fine for 16-bit indices keeps 32-bit ones
+    fine = save_preset(tmp_path / "fine.npz", load_style_folder(style_dir, 48), compact=True)
+    with np.load(fine) as data:
+        assert data["index"].dtype == np.int32 and data["values"].dtype == np.float16
+    assert load_preset(fine).bins == 48
+
+
+def test_natural_palettes_are_many_listed_photos_none_of_them_a_sample():
+    import csv
+    from pathlib import Path
+
+    from wbcgrade.color.look import natural_palettes
+
+    naturals = natural_palettes()
+    names = set(naturals.names)
+    assert len(names) == len(naturals.names) >= 300
+    assert np.allclose(naturals.histograms.sum(axis=(1, 2, 3)), 1.0)
+    assert not names & {p.stem for p in SAMPLES.glob("*.jpg")}  # the samples stay unseen
+    root = Path(__file__).resolve().parents[2]
+    with open(root / "presets" / "natural_corpus.csv", newline="", encoding="utf-8") as f:
+        corpus = {row["name"]: row for row in csv.DictReader(f)}
+    assert names == set(corpus)
+    assert all(row["author"] and row["licence"] and row["source_package"]
+               for row in corpus.values())
+    table = (root / "wbcgrade" / "color" / "data" / "NATURAL.md").read_text(encoding="utf-8")
+    assert all(f"| {name} |" in table for name in names)
+
+
 def test_shipped_presets_are_looks_of_photos_outside_the_samples():
     names = [name for name, _ in list_presets()]
     assert {"kodak-2383", "teal-orange", "bleach-bypass", "faded", "warm"} <= set(names)

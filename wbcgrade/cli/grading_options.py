@@ -36,10 +36,11 @@ def _options() -> list:
                      help="look: apply the look the styles share (and their own scene's, when "
                           "one of them shows the photo's scene); palette: move the photo's "
                           "colours onto the closest blend of the style palettes."),
-        click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
-                     metavar="PRESET",
-                     help="Preset (.npz) of ungraded photos, the look's content model "
-                          "[default: the shipped one]."),
+        click.option("--natural", type=click.Path(path_type=str), default=None,
+                     metavar="PRESET|DIR",
+                     help="The look's content model: a preset (.npz) of ungraded photos, or "
+                          "a folder of your own ungraded photos [default: the shipped "
+                          "palettes of 300+ photos]."),
         click.option("--bins", type=int, default=_DEFAULTS.bins, show_default=True,
                      help="Bins per axis of the photo's histogram and the transport plan (the "
                           "paper's 128; 64 or 32 are faster and coarser)."),

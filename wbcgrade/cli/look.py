@@ -26,9 +26,10 @@ def look() -> None:
 @click.option("--strength", type=click.FloatRange(0.0, 2.0), default=None,
               help="Scale of the extracted look [default: how far the two halves of "
                    "the set agree on it; a preset's own look: all of it].")
-@click.option("--natural", type=click.Path(dir_okay=False, path_type=str), default=None,
-              metavar="PRESET", help="Preset (.npz) of ungraded photos, the content model "
-                                     "[default: the shipped one].")
+@click.option("--natural", type=click.Path(path_type=str), default=None,
+              metavar="PRESET|DIR", help="The content model: a preset (.npz) of ungraded "
+                                         "photos, or a folder of your own ungraded photos "
+                                         "[default: the shipped palettes].")
 @click.option("--working-space", default=None, metavar="NAME",
               help="Colour space the look is extracted and the LUT applied in "
                    "[default: sRGB-encoded Rec.709].")

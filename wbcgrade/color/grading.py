@@ -68,7 +68,15 @@ from wbcgrade.color.outcome import (
 )
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.color.regrain import regrain_map
-from wbcgrade.color.remap import apply_color_map, identity_map, keep_lightness, monotone_lightness
+from wbcgrade.color.remap import (
+    apply_color_map,
+    identity_map,
+    keep_lightness,
+    monochrome_map,
+    monochrome_toning,
+    monotone_lightness,
+    to_monochrome,
+)
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
@@ -131,7 +139,12 @@ class Grade:
         into, which may be ``encoded`` itself (graded in place); returned.
         """
         if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
-            return regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out)
+            graded = regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out)
+            if self.strength == 1.0:  # a black-and-white map stays so: no colour regrained
+                toning = monochrome_toning(self.color_map)
+                if toning is not None:
+                    to_monochrome(graded, toning, out=graded)
+            return graded
         graded = apply_color_map(encoded, self.color_map, self.strength)
         if out is None:
             return graded
@@ -263,11 +276,10 @@ def look_map(request: MapRequest) -> BuiltMap:
         SCENE_LOSS,
         SCENE_RELAXATION,
         find_scene_look,
+        load_naturals,
         look_color_map,
-        natural_palettes,
         set_look_base,
     )
-    from wbcgrade.color.presets import load_preset
     from wbcgrade.color.scene import has_style_images
 
     options, styles, say = request.options, request.styles, request.stage
@@ -291,8 +303,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     timings["histograms"] = time.perf_counter() - start
     say("look")
     start = time.perf_counter()
-    naturals = load_preset(options.map.natural) if options.map.natural else natural_palettes()
-    naturals = styles_in_space(naturals, styles.working_space)
+    naturals = load_naturals(options.map.natural, styles.working_space)
     n_styles = len(styles.names)
     if request.photo.pixels is not None:
         base, extracted, strength = set_look_base(styles, naturals, None, photo_hist)
@@ -322,7 +333,7 @@ def look_map(request: MapRequest) -> BuiltMap:
             fit = FitSummary(weights, scene.residual, alone, "scene",
                              {"start": "scene", "match": styles.names[best],
                               "confidence": scene.confidence}, sum(timings.values()))
-            return BuiltMap(color_map.astype(np.float32), None, info, timings, fit)
+            return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit)
         if has_style_images(styles):
             # the style photos were looked at and none shows this scene: the set's look
             # (a palette that merely resembles the photo's is no better sign of its scene)
@@ -332,7 +343,8 @@ def look_map(request: MapRequest) -> BuiltMap:
             fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
                              "look", {"start": "look", "match": None, "confidence": 0.0},
                              sum(timings.values()))
-            return BuiltMap(base.lattice(options.map.size), None, info, timings, fit)
+            return BuiltMap(_as_set_look(base.lattice(options.map.size), extracted), None, info,
+                            timings, fit)
         start = time.perf_counter()
     base, photo, info = look_color_map(photo_hist, styles, naturals)
     timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
@@ -360,7 +372,17 @@ def look_map(request: MapRequest) -> BuiltMap:
         info.update({k: v for k, v in scene.info.items() if k != "fit"})
     fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
                      fit_info, sum(timings.values()))
+    if info["look"].get("monochrome"):
+        color_map = monochrome_map(color_map)
     return BuiltMap(color_map, None, info, timings, fit)
+
+
+def _as_set_look(color_map: np.ndarray, extracted) -> np.ndarray:
+    """The map as the set's look has it: exactly black and white (or toned) when every
+    style photo is (a scene read off such a style is too), float32."""
+    if extracted.info.get("monochrome"):
+        return monochrome_map(color_map)
+    return np.asarray(color_map, dtype=np.float32)
 
 
 #: Map builders by name (``map.builder``): MapRequest -> BuiltMap.

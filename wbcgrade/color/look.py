@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
+from wbcgrade.color.remap import TONE_LUMA, monochrome_map
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
@@ -44,7 +45,7 @@ __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences
            "set_look_base", "set_look_halves", "look_reliability"]
 
 #: Rec.709 luma weights (on encoded values: a lightness proxy, as colourists' luma).
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA = TONE_LUMA
 
 #: Knots of each 1-D curve, evenly spaced on [0, 1].
 DEFAULT_KNOTS = 9
@@ -340,8 +341,7 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
     if average:
         all_weights[:] = 1.0 / len(natural_map)
         losses[:] = np.nan
-        average_content = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map]),
-                                     all_weights[0], geometry, 60)
+        average_content = _average_content(natural_map, geometry)
     for round_ in range(rounds):
         if not average:
             pushed = np.stack([push_histogram(h, look, fit_bins) for h in naturals[fit_bins]])
@@ -374,6 +374,28 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
             "smoothness": smoothness, "ridge": ridge, "knots": knots,
             "fit_bins": fit_bins, "map_bins": map_bins, "amplitude": look.amplitude()}
     return LookResult(look, all_weights, losses, info)
+
+
+#: The natural palettes' barycenter by a digest of the palettes: a style set and its two
+#: halves (and every set graded against the same palettes) share it, and with hundreds
+#: of palettes it is most of an extraction's time.
+_AVERAGE_CONTENTS: dict[str, np.ndarray] = {}
+
+
+def _average_content(natural_map: np.ndarray, geometry) -> np.ndarray:
+    """The uniform Wasserstein barycenter of the natural palettes (n, b, b, b), computed once."""
+    import hashlib
+
+    from wbcgrade.core import barycenter
+
+    digest = hashlib.sha1(np.ascontiguousarray(natural_map, dtype=np.float64).tobytes())
+    digest.update(repr(natural_map.shape).encode())
+    key = digest.hexdigest()
+    if key not in _AVERAGE_CONTENTS:
+        weights = np.full(len(natural_map), 1.0 / len(natural_map))
+        _AVERAGE_CONTENTS[key] = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map]),
+                                            weights, geometry, 60)
+    return _AVERAGE_CONTENTS[key]
 
 
 def _shrunk(pooled: LookMap, each: list[LookMap], size: int = 17) -> LookMap:
@@ -697,6 +719,28 @@ FIT_BINS = 16
 MAP_BINS = 32
 
 
+def load_naturals(natural: str | None, working_space: str):
+    """The content model a command names: ``natural`` a preset file (.npz) of natural
+    palettes, a folder of the user's own ungraded photos (their statistics say what
+    content looks like in their collection; the shipped palettes how much it varies:
+    ``meta["own"]``), or None (the shipped palettes); in ``working_space``."""
+    from pathlib import Path
+
+    from wbcgrade.color.presets import load_preset, load_style_folder, styles_in_space
+
+    if natural is not None and Path(natural).is_dir():
+        from wbcgrade.color.histogram import HistogramCache
+
+        own = load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
+                                working_space=working_space)
+        naturals = styles_in_space(natural_palettes(), working_space)
+        return type(naturals)(naturals.names, naturals.histograms, naturals.source,
+                              naturals.width, naturals.description,
+                              {**naturals.meta, "own": own})
+    naturals = load_preset(natural) if natural else natural_palettes()
+    return styles_in_space(naturals, working_space)
+
+
 def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     """The shipped palettes of ungraded photos (a :class:`~wbcgrade.color.presets.StyleSet`).
 
@@ -741,22 +785,28 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
     naturals = naturals if naturals is not None else natural_palettes()
     digest = hashlib.sha1()
-    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS)):
+    own = naturals.meta.get("own")
+    for hists in (styles.at_bins(FIT_BINS), naturals.at_bins(FIT_BINS),
+                  *([own.at_bins(FIT_BINS)] if own is not None else [])):
         digest.update(np.ascontiguousarray(hists, dtype=np.float64).tobytes())
     # the settings too: a look cached under other settings (an experiment's) is not reused
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS, SET_RELAXATION, SET_RIDGE,
                         DEFAULT_CONTENT_SHRINK, DEFAULT_WIDTH, DEFAULT_SMOOTHNESS,
-                        DEFAULT_KNOTS)).encode())
+                        DEFAULT_KNOTS, SET_LOOK_METHOD, statistics_settings())).encode())
     key = (digest.hexdigest(),)
     if key not in _SET_LOOKS:
         found = _read_cached_look(key[0], styles) if cache else None
         if found is None:
-            found = extract_look(
-                {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
-                {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
-                relaxation=SET_RELAXATION, width=DEFAULT_WIDTH, smoothness=DEFAULT_SMOOTHNESS,
-                ridge=SET_RIDGE, knots=DEFAULT_KNOTS, content_shrink=DEFAULT_CONTENT_SHRINK,
-                fit_bins=FIT_BINS, map_bins=MAP_BINS, progress=progress)
+            if SET_LOOK_METHOD == "statistics":
+                found = statistics_set_look(styles, naturals)
+            else:
+                found = extract_look(
+                    {b: styles.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                    {b: naturals.at_bins(b) for b in (FIT_BINS, MAP_BINS)},
+                    relaxation=SET_RELAXATION, width=DEFAULT_WIDTH,
+                    smoothness=DEFAULT_SMOOTHNESS, ridge=SET_RIDGE, knots=DEFAULT_KNOTS,
+                    content_shrink=DEFAULT_CONTENT_SHRINK, fit_bins=FIT_BINS,
+                    map_bins=MAP_BINS, progress=progress)
             if cache:
                 _write_cached_look(key[0], found, styles)
         _SET_LOOKS[key] = found
@@ -764,7 +814,69 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 5
+LOOK_VERSION = 6
+
+#: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
+#: content hardly moves, against the natural palettes' spread) or "transport"
+#: (:func:`extract_look`: relaxed plans from the natural barycenter, pooled).
+SET_LOOK_METHOD = "statistics"
+
+_NATURAL_STATISTICS: dict[str, object] = {}
+
+
+def statistics_settings() -> tuple:
+    """The settings of :mod:`wbcgrade.color.look_statistics` a set's look depends on."""
+    from wbcgrade.color import look_statistics as stats
+
+    return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
+            stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS)
+
+
+def _natural_statistics(naturals):
+    """:func:`~wbcgrade.color.look_statistics.palette_statistics` of the natural palettes,
+    once per process and set of palettes."""
+    import hashlib
+
+    from wbcgrade.color.look_statistics import palette_statistics
+
+    hists = naturals.at_bins(MAP_BINS)
+    key = hashlib.sha1(np.ascontiguousarray(hists, dtype=np.float32).tobytes()).hexdigest()
+    if key not in _NATURAL_STATISTICS:
+        _NATURAL_STATISTICS[key] = palette_statistics(hists)
+    return _NATURAL_STATISTICS[key]
+
+
+def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookResult:
+    """The look a style set shares, from statistics content hardly moves
+    (:func:`wbcgrade.color.look_statistics.statistics_look`), fitted into the
+    :class:`LookMap` family on the colours natural photos hold (and, less, all others).
+
+    Parameters
+    ----------
+    styles, naturals : StyleSets in one working space.
+    """
+    from wbcgrade.color.histogram import resample_histogram
+    from wbcgrade.color.look_statistics import (
+        palette_statistics,
+        statistics_look,
+        tinted_statistics,
+    )
+
+    natural_stats = _natural_statistics(naturals)
+    own = naturals.meta.get("own")
+    reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
+    model = statistics_look(tinted_statistics(styles.at_bins(MAP_BINS), natural_stats, reference),
+                            natural_stats, _space_scale(styles.working_space),
+                            reference=reference)
+    size = 17
+    points = grid_points(size)
+    density = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), size).ravel()
+    weights = density / density.sum() + 0.25 / len(points)
+    look = fit_look_map(points, model(points), weights, None, 1e-4, 1e-6, knots)
+    n_styles, n_naturals = len(styles.names), len(naturals.names)
+    info = {**model.info, "amplitude": look.amplitude()}
+    return LookResult(look, np.full((n_styles, n_naturals), 1.0 / max(n_naturals, 1)),
+                      np.full(n_styles, np.nan), info)
 
 
 def _styles_subset(styles, indices):
@@ -902,6 +1014,8 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     Returns (the look at that strength, the extraction, the strength).
     """
     extracted = set_look(styles, naturals, progress)
+    if strength is None and extracted.info.get("method") == "statistics":
+        strength = 1.0  # the statistics were shrunk by what content alone varies by
     if strength is None:
         halves = set_look_halves(styles, naturals)
         if halves is None:
@@ -1025,4 +1139,5 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
                    for style, row in zip(styles.names, extracted.weights)}
     info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
             "content": content}
-    return look.lattice(map_size), info
+    lattice = look.lattice(map_size)
+    return (monochrome_map(lattice) if extracted.info.get("monochrome") else lattice), info

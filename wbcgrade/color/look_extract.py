@@ -19,7 +19,7 @@ import numpy as np
 from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import Grade
-from wbcgrade.color.look import natural_palettes, set_look_map
+from wbcgrade.color.look import load_naturals, set_look_map
 from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
@@ -28,7 +28,7 @@ from wbcgrade.color.outcome import (
     GradeSource,
     map_change,
 )
-from wbcgrade.color.presets import StyleSource, load_preset, load_styles, styles_in_space
+from wbcgrade.color.presets import StyleSource, load_styles
 
 __all__ = ["ExtractedLook", "extract_look_file"]
 
@@ -98,8 +98,7 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: 
     output = plan_outputs([output], [], overwrite)[0]  # before any work
     encoding = ColorEncoding.of(None, working_space).within_working()
     styles = load_styles(source, STYLE_BINS, working_space, warn, on_style)
-    naturals = load_preset(natural) if natural else natural_palettes()
-    naturals = styles_in_space(naturals, styles.working_space)
+    naturals = load_naturals(natural, styles.working_space)
     # strength None: a preset's own look in full, an extracted one at its reliability
     lattice, info = set_look_map(styles, naturals, strength, lut_size, on_look)
     strength = info["strength"]

@@ -217,8 +217,8 @@ class MapOptions:
         off the style photos that show the photo's own scene
         (:mod:`wbcgrade.color.scene`); "palette": the fitted barycenter
         palette, (unbalanced) Sinkhorn, smooth map, the paper's colour transfer).
-    natural : preset file (.npz) of ungraded photos, the content model of the
-        "look" builder; None: the shipped one.
+    natural : preset file (.npz) of ungraded photos, or a folder of the user's own
+        ungraded photos, the content model of the "look" builder; None: the shipped one.
     size : nodes per axis of the smooth colour map (the grade is this lattice
         LUT; ``--lut`` at the same size writes it exactly).
     smoothness, stiffness : curvature and first-difference penalties of the

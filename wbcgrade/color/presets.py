@@ -13,7 +13,10 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
   (:func:`styles_in_space`); ``provenance`` (optional) says how the styles
   were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
-  concatenated, with flat C-order indices into the (n, n, n) grid;
+  concatenated, with flat C-order indices into the (n, n, n) grid; a compact
+  file (``save_preset(compact=True)``, ``preset build --compact``) stores
+  uint16 indices (n <= 40) and float16 values scaled by 2**15, which the
+  reader takes as they are (each style is renormalised on load);
 - ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``;
 - ``look`` (optional, float16 (m, m, m, 3), indexed [r, g, b], values in [0, 1]):
   the look the styles share, known exactly because the preset was made by
@@ -221,13 +224,15 @@ def check_preset_width(width: float) -> float:
 def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
                 threshold: float = 1e-7, provenance: dict | None = None,
-                look: np.ndarray | None = None) -> Path:
+                look: np.ndarray | None = None, compact: bool = False) -> Path:
     """Write a style set as a preset file (atomically; see the module docstring).
 
     ``threshold`` drops bins holding less than that fraction of a style's mass
     (they are far below the fitting floor) to keep files small; ``provenance``
     (JSON-friendly) is recorded in the header as it is; ``look`` (m, m, m, 3):
     the look the styles were made with, as a lattice LUT in the working space.
+    ``compact`` stores uint16 indices and float16 values (about half the size;
+    each bin within 0.05 % of its value): for sets of hundreds of photos.
     """
     if look is not None:
         look = np.asarray(look)
@@ -247,6 +252,11 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
         indices.append(index)
         values.append(vals)
         offsets.append(offsets[-1] + len(index))
+    # compact: 2**15 keeps every value of a normalised style, and each style's
+    # sum (1 * 2**15), inside float16's normal range
+    compact_index = compact and bins ** 3 <= np.iinfo(np.uint16).max + 1
+    index_type = np.uint16 if compact_index else np.int32
+    value_type, value_scale = (np.float16, 2.0 ** 15) if compact else (np.float32, 1.0)
     working = styles.working_space
     header = {"format": PRESET_FORMAT, "version": PRESET_VERSION, "bins": bins,
               "names": list(styles.names), "width": float(width), "gamma": gamma,
@@ -259,7 +269,8 @@ def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAUL
             np.savez_compressed(
                 handle,
                 header=np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8),
-                index=np.concatenate(indices), values=np.concatenate(values),
+                index=np.concatenate(indices).astype(index_type),
+                values=(np.concatenate(values) * value_scale).astype(value_type),
                 offsets=np.asarray(offsets, dtype=np.int64),
                 **({} if look is None else {"look": look.astype(np.float16)}))
     return path

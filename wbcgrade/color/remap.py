@@ -13,7 +13,8 @@ import numpy as np
 from wbcgrade.core._jit import compiled, in_bands
 
 __all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
-           "monotone_lightness", "LUMA_WEIGHTS"]
+           "monotone_lightness", "LUMA_WEIGHTS", "TONE_LUMA", "monochrome_toning",
+           "to_monochrome", "monochrome_map"]
 
 
 @compiled(inline="always", cache=True)
@@ -228,3 +229,57 @@ def monotone_lightness(color_map: np.ndarray,
         step = np.where(movable, remaining / np.where(movable, share, 1.0), 0.0)
         out = np.clip(out + step[..., None] * room, 0.0, 1.0)
     return out.astype(np.float32)
+
+
+#: Luma of the look family (Rec.709 weights on encoded values) that toning is a function of.
+TONE_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def monochrome_toning(color_map: np.ndarray, tol: float = 2e-3
+                      ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The toning of a black-and-white (or toned) colour map, None for a colour one.
+
+    A map is monochrome when every node's output is ``Y + t(Y)``: its luma plus
+    a tint that depends on that luma alone (zero for black and white), read
+    off the map's grey axis. Returns (lumas (m,) increasing, tints (m, 3)).
+    """
+    table = np.asarray(color_map, dtype=np.float64)
+    m = table.shape[0]
+    grey = table[np.arange(m), np.arange(m), np.arange(m)]
+    lumas = grey @ TONE_LUMA
+    order = np.argsort(lumas, kind="stable")
+    lumas, tints = lumas[order], grey[order] - lumas[order, None]
+    flat = table.reshape(-1, 3)
+    y = flat @ TONE_LUMA
+    expected = y[:, None] + np.stack([np.interp(y, lumas, tints[:, c]) for c in range(3)], 1)
+    if float(np.max(np.abs(flat - expected))) > tol:
+        return None
+    return lumas, tints
+
+
+def to_monochrome(rgb: np.ndarray, toning: tuple[np.ndarray, np.ndarray],
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """Colours (..., 3) -> their luma plus the toning's tint at that luma (float32, clipped
+    to [0, 1]); ``out`` may be ``rgb`` itself."""
+    lumas, tints = toning
+    flat = np.asarray(rgb, dtype=np.float32).reshape(-1, 3)
+    result = np.empty(flat.shape, np.float32) if out is None else out.reshape(-1, 3)
+    step = 1 << 20
+    for start in range(0, len(flat), step):
+        part = flat[start:start + step].astype(np.float64)
+        y = np.clip(part @ TONE_LUMA, 0.0, 1.0)
+        toned = y[:, None] + np.stack([np.interp(y, lumas, tints[:, c]) for c in range(3)], 1)
+        result[start:start + step] = np.clip(toned, 0.0, 1.0)
+    return result.reshape(np.shape(rgb))
+
+
+def monochrome_map(color_map: np.ndarray) -> np.ndarray:
+    """The colour map made exactly black and white (or toned): every node's output
+    becomes its luma plus the tint the map gives grey of that luma. (n, n, n, 3) float32."""
+    table = np.asarray(color_map, dtype=np.float64)
+    m = table.shape[0]
+    grey = table[np.arange(m), np.arange(m), np.arange(m)]
+    lumas = grey @ TONE_LUMA
+    order = np.argsort(lumas, kind="stable")
+    toning = (lumas[order], grey[order] - lumas[order, None])
+    return to_monochrome(table.astype(np.float32), toning)

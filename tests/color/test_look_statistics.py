@@ -1,0 +1,196 @@
+"""A set's look from statistics content hardly moves (wbcgrade.color.look_statistics)."""
+
+import numpy as np
+import pytest
+
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.look_statistics import (
+    LUMA,
+    QUANTILES,
+    palette_statistics,
+    statistics_look,
+    tinted_statistics,
+)
+from wbcgrade.color.remap import monochrome_map, monochrome_toning, to_monochrome
+
+
+def natural_photo(seed, size=40):
+    """A synthetic ungraded photo: a few colour regions from a shared everyday prior (skin,
+    foliage, sky, greys, wood), its own exposure, a gradient and grain."""
+    rng = np.random.default_rng(seed)
+    prior = np.array([[0.85, 0.62, 0.5], [0.3, 0.45, 0.2], [0.45, 0.62, 0.85], [0.5, 0.5, 0.5],
+                      [0.9, 0.9, 0.88], [0.15, 0.12, 0.1], [0.6, 0.45, 0.3], [0.7, 0.75, 0.8],
+                      [0.8, 0.2, 0.15], [0.2, 0.3, 0.6]])
+    colors = np.clip(prior[rng.choice(len(prior), 5, replace=False)] * rng.uniform(0.7, 1.15)
+                     + rng.normal(0, 0.05, (5, 3)), 0, 1)
+    labels = (np.arange(size)[:, None] * 5 // size + rng.integers(0, 5)) % 5
+    image = colors[np.broadcast_to(labels, (size, size))]
+    image = image * np.linspace(0.7, 1.1, size)[None, :, None]
+    return np.clip(image + rng.normal(0, 0.02, image.shape), 0.0, 1.0)
+
+
+def hists(images):
+    return np.stack([image_histogram(i, 32) for i in images])
+
+
+def faded_teal(rgb):
+    """A film-like look: lifted blacks, softer whites, teal shadows, less saturation."""
+    luma = (rgb @ LUMA)[..., None]
+    out = luma + 0.5 * (rgb - luma)
+    out = 0.12 + 0.8 * out
+    shadow = np.clip(1.0 - 2.0 * luma, 0.0, 1.0)
+    return np.clip(out + shadow * np.array([-0.06, 0.015, 0.05]), 0.0, 1.0)
+
+
+def black_and_white(rgb):
+    """A black-and-white film: luma through a contrast curve, no colour."""
+    luma = rgb @ LUMA
+    curve = np.clip(0.5 + 1.2 * (luma - 0.5), 0.0, 1.0)
+    return np.repeat(curve[..., None], 3, axis=-1)
+
+
+NATURALS = palette_statistics(hists([natural_photo(s) for s in range(100, 140)]))
+
+
+def test_the_statistics_of_a_histogram_are_those_of_its_pixels():
+    image = natural_photo(3, size=64)
+    stats = palette_statistics(image_histogram(image, 32))
+    luma = (image @ LUMA).ravel()
+    assert np.allclose(stats.quantiles[0], np.quantile(luma, QUANTILES), atol=0.02)
+    grey = np.repeat(np.random.default_rng(0).random((64, 64, 1)), 3, axis=2)
+    assert palette_statistics(image_histogram(grey, 32)).spread[0] < 0.004  # binning removed
+    assert stats.spread[0] > 0.05
+
+
+def test_a_shared_look_is_found_and_ungraded_or_split_sets_stay_near_the_identity():
+    contents = [natural_photo(s) for s in range(24)]
+    test = np.concatenate([natural_photo(s) for s in range(200, 206)])
+    before = np.mean(np.abs(faded_teal(test) - test))
+
+    def estimate(images):  # the styles' content is of the naturals' kind: little bias
+        return statistics_look(tinted_statistics(hists(images), NATURALS), NATURALS,
+                               content_bias=0.25)
+
+    found = estimate([faded_teal(c) for c in contents])
+    assert np.mean(np.abs(found(test) - faded_teal(test))) < 0.5 * before
+    assert found.saturation[2:7].max() < 0.95  # the set is less saturated...
+    assert found.tone_out[1] > 0.04  # ...with lifted blacks
+    # ungraded photos: no look (what content alone varies by is dropped)
+    plain = estimate(contents)
+    assert np.mean(np.abs(plain(test) - test)) < 0.25 * before
+    # half the set warm, half cool: they cancel, nothing is applied with confidence
+    warm = np.array([0.06, 0.0, -0.06])
+    split = estimate([np.clip(c + (warm if i % 2 else -warm), 0, 1)
+                      for i, c in enumerate(contents)])
+    shift = split(test) - test
+    assert np.abs(np.mean(shift @ np.array([1.0, 0.0, -1.0]))) < 0.03
+
+
+def test_a_black_and_white_set_gives_black_and_white_and_its_tone_curve():
+    contents = [natural_photo(s) for s in range(12)]
+    found = statistics_look(tinted_statistics(hists([black_and_white(c) for c in contents]),
+                                              NATURALS), NATURALS)
+    assert found.monochrome
+    test = np.concatenate([natural_photo(s) for s in range(200, 206)])
+    out = found(test)
+    assert np.abs(out - (out @ LUMA)[..., None]).max() < 1e-9  # no colour at all
+    truth = black_and_white(test)
+    assert np.mean(np.abs(out - truth)) < 0.5 * np.mean(np.abs(test - truth))
+
+
+def test_a_sepia_set_keeps_its_toning():
+    tone = np.array([0.05, 0.0, -0.08])
+
+    def sepia(rgb):
+        return np.clip(black_and_white(rgb) + tone * (1 - np.abs(2 * (rgb @ LUMA)[..., None]
+                                                                  - 1)), 0, 1)
+
+    contents = [natural_photo(s) for s in range(12)]
+    found = statistics_look(tinted_statistics(hists([sepia(c) for c in contents]), NATURALS),
+                            NATURALS)
+    assert found.monochrome
+    mid = found(np.array([[0.45, 0.5, 0.55]]))[0]
+    chroma = mid - mid @ LUMA
+    assert chroma[0] > 0.02 and chroma[2] < -0.03  # warm mid-tones, as every style has
+
+
+def test_a_monochrome_map_is_recognised_and_projects_colours_onto_its_toning():
+    axis = np.linspace(0, 1, 9)
+    nodes = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1)
+    colour_map = faded_teal(nodes)
+    assert monochrome_toning(colour_map) is None
+    mono = monochrome_map(colour_map)
+    toning = monochrome_toning(mono)
+    assert toning is not None
+    pixels = np.random.default_rng(1).random((50, 3)).astype(np.float32)
+    out = to_monochrome(pixels, toning)
+    lumas = out @ LUMA
+    expected = lumas[:, None] + np.stack([np.interp(lumas, toning[0], toning[1][:, c])
+                                          for c in range(3)], 1)
+    assert np.allclose(out, expected, atol=2e-3)
+
+
+@pytest.mark.parametrize("n_naturals", [2, 5])
+def test_few_natural_palettes_still_give_a_finite_look(n_naturals):
+    naturals = palette_statistics(hists([natural_photo(s) for s in range(n_naturals)]))
+    styles = palette_statistics(hists([faded_teal(natural_photo(s)) for s in range(20, 24)]))
+    found = statistics_look(styles, naturals)
+    out = found(np.random.default_rng(0).random((100, 3)))
+    assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
+
+
+def test_the_grade_applies_the_statistics_look_of_a_style_set_in_full():
+    from wbcgrade.color import look
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))], hists(images),
+                        meta={"cache_dir": None})
+
+    naturals = style_set([natural_photo(s) for s in range(100, 140)])
+    contents = [natural_photo(s) for s in range(12)]
+    test = np.concatenate([natural_photo(s) for s in range(200, 204)])
+    base, extracted, strength = look.set_look_base(style_set([faded_teal(c) for c in contents]),
+                                                   naturals)
+    assert extracted.info["method"] == "statistics" and strength == 1.0
+    before = np.mean(np.abs(faded_teal(test) - test))
+    assert np.mean(np.abs(base(test) - faded_teal(test))) < 0.75 * before
+    plain = look.set_look_base(style_set(contents), naturals)[0]
+    assert np.mean(np.abs(plain(test) - test)) < 0.3 * before
+    mono, extracted, _ = look.set_look_base(
+        style_set([black_and_white(c) for c in contents]), naturals)
+    assert extracted.info["monochrome"]
+    lattice = look.set_look_map(style_set([black_and_white(c) for c in contents]), naturals)[0]
+    assert monochrome_toning(lattice) is not None  # exactly black and white as a LUT too
+
+
+def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tmp_path):
+    """A collection whose every photo is warm (its camera, its light): graded photos of it
+    with no look are no warm look against the user's own photos, and are against others."""
+    warm = np.array([0.06, 0.0, -0.06])
+
+    def collection(seeds):
+        return [np.clip(natural_photo(s) + warm, 0, 1) for s in seeds]
+
+    styles = tinted_statistics(hists(collection(range(12))), NATURALS)
+    against_others = statistics_look(styles, NATURALS, content_bias=0.0)
+    own = palette_statistics(hists(collection(range(300, 320))))
+    against_own = statistics_look(styles, NATURALS, reference=own)
+    test = np.concatenate(collection(range(200, 204)))
+    red_blue = np.array([1.0, 0.0, -1.0])  # the warmth each adds
+    warmer_others = np.mean((against_others(test) - test) @ red_blue)
+    assert warmer_others > 0.015
+    assert abs(np.mean((against_own(test) - test) @ red_blue)) < 0.5 * warmer_others
+
+    # a folder of them as --natural: the shipped palettes' spread, the folder's centre
+    import OpenImageIO as oiio
+
+    from wbcgrade.color.look import load_naturals
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    for i, image in enumerate(collection(range(300, 303))):
+        oiio.ImageBuf(np.ascontiguousarray(image, dtype=np.float32)).write(
+            str(folder / f"p{i}.png"))
+    naturals = load_naturals(str(folder), "sRGB Encoded Rec.709 (sRGB)")
+    assert len(naturals.meta["own"].names) == 3 and len(naturals.names) > 3

@@ -1,0 +1,332 @@
+"""A set's look from statistics that content hardly moves, measured against natural photos.
+
+A look moves every photo it touches the same way; content moves each photo
+its own way. So compare, statistic by statistic, the *median over the style
+photos* with the *median over natural (ungraded) photos*:
+
+- the lightness distribution (quantiles of luma, black and white levels
+  included): a tone curve ``g`` mapping the natural quantiles onto the
+  styles' ones (a median commutes with a monotone curve, so the styles'
+  median quantile is the curve applied to their content's);
+- per lightness band, the mean chroma (the tint of shadows, mid-tones and
+  highlights: white balance, split toning) and the chroma spread around it
+  (saturation; zero in a black-and-white set).
+
+Every difference is shrunk by how much that statistic varies between sets of
+as many natural photos (``1.25 sd / sqrt(S)`` for a median of ``S``, ``sd``
+robust, over the natural palettes) plus a share of ``sd`` for content that
+differs from the natural photos' kind: a difference content alone would make
+is dropped, a larger one kept in part (positive-part James-Stein), so a
+black level every style lifts is kept, a brightness two scenes could explain
+is not. The statistics define a look ``T``: luma through ``g``, chroma scaled
+by ``s(Y)`` and shifted by ``t(Y)``; a set whose every photo is monochrome
+(or toned) gets ``s = 0``. ``T`` is fitted into the smooth
+:class:`~wbcgrade.color.look.LookMap` family the grade applies.
+
+Arrays in, arrays out: histograms are (K, n, n, n) on the colour grid of
+:func:`~wbcgrade.color.histogram.grid_points`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbcgrade.color.histogram import grid_points
+from wbcgrade.color.remap import TONE_LUMA
+
+__all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
+           "statistics_look",
+           "QUANTILES", "BANDS"]
+
+#: Rec.709 luma weights on encoded values (the look family's lightness).
+LUMA = TONE_LUMA
+#: Levels of the luma quantiles compared (black and white levels at the ends).
+QUANTILES = np.array([0.005, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
+                      0.98, 0.995])
+#: Lightness bands (tent functions centred on ``linspace(0, 1, BANDS)``).
+BANDS = 9
+#: A band holding less of a photo's mass than this says nothing about it.
+MIN_BAND_MASS = 0.01
+#: Efficiency of a median against a mean (its standard error is this times sd / sqrt(n)).
+MEDIAN_SE = 1.2533
+#: Share of the natural photos' spread added to every statistic's uncertainty: content
+#: of another kind than the natural photos' (another camera, another collection).
+CONTENT_BIAS = 1.0
+#: The same for the luma quantiles (a collection's typical exposure differs more).
+TONE_BIAS = 1.0
+#: Which tint the look takes: "neutral" (of each band's least colourful colours) or "mean".
+TINT_FROM = "neutral"
+#: Share of a band's mass (its least colourful colours) whose tint is the band's neutral tint.
+NEUTRAL_SHARE = 0.2
+#: Chroma spread (sRGB-encoded units) under which a photo counts as monochrome or toned.
+MONOCHROME_SPREAD = 0.01
+
+
+@dataclass(frozen=True)
+class PaletteStatistics:
+    """Per-palette statistics of K histograms.
+
+    Attributes
+    ----------
+    quantiles : (K, Q) luma at :data:`QUANTILES`.
+    band_mass : (K, B) share of the palette in each lightness band.
+    band_mean : (K, B, 3) mean chroma (colour minus its luma) in each band (NaN where
+        the band holds under :data:`MIN_BAND_MASS`).
+    band_spread : (K, B) rms distance of the band's chroma from that mean (NaN likewise).
+    spread : (K,) rms chroma spread about the band means over the whole palette.
+    band_neutral : (K, B, 3) mean chroma of the least colourful :data:`NEUTRAL_SHARE` of
+        each band (what is grey in a natural photo: its tint is the look's; NaN likewise).
+    """
+
+    quantiles: np.ndarray
+    band_mass: np.ndarray
+    band_mean: np.ndarray
+    band_spread: np.ndarray
+    spread: np.ndarray
+    band_neutral: np.ndarray
+
+
+def _bands(luma: np.ndarray) -> np.ndarray:
+    """(N,) luma -> (N, B) tent memberships (a partition of 1)."""
+    pos = np.clip(luma, 0.0, 1.0) * (BANDS - 1)
+    base = np.minimum(pos.astype(np.int64), BANDS - 2)
+    frac = pos - base
+    out = np.zeros((len(luma), BANDS))
+    rows = np.arange(len(luma))
+    out[rows, base] = 1.0 - frac
+    out[rows, base + 1] = frac
+    return out
+
+
+def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
+                       ) -> PaletteStatistics:
+    """Statistics of (K, n, n, n) histograms (or one (n, n, n)) on the colour grid.
+
+    ``centre``: (B, 3) chroma per band from which the least colourful colours are
+    measured (default 0, the grey axis; a set's rough tint finds the colours that were
+    grey before it: :func:`tinted_statistics`).
+    """
+    hists = np.asarray(hists, dtype=np.float64)
+    if hists.ndim == 3:
+        hists = hists[None]
+    k, n = len(hists), hists.shape[1]
+    flat = hists.reshape(k, -1)
+    flat = flat / np.maximum(flat.sum(axis=1, keepdims=True), 1e-300)
+    points = grid_points(n)
+    luma = points @ LUMA
+    chroma = points - luma[:, None]
+    # luma quantiles: the cumulative mass in luma order, interpolated
+    order = np.argsort(luma, kind="stable")
+    sorted_luma = luma[order]
+    cumulative = np.cumsum(flat[:, order], axis=1)
+    quantiles = np.stack([np.interp(QUANTILES, c, sorted_luma) for c in cumulative])
+    # chroma per lightness band
+    member = _bands(luma)                                           # (N, B)
+    mass = flat @ member                                            # (K, B)
+    safe = np.maximum(mass, 1e-300)
+    mean = np.einsum("kn,nb,nc->kbc", flat, member, chroma) / safe[..., None]
+    second = np.einsum("kn,nb,n->kb", flat, member, np.sum(chroma ** 2, axis=1)) / safe
+    # soft binning spreads each channel by f (1 - f) / (n - 1)^2 (f: where a colour falls
+    # between two nodes; 1/6 on average), independently, which chroma (summed over its three
+    # components) takes 1 + 3 |luma weights|^2 times
+    binning = (1.0 + 3.0 * float(LUMA @ LUMA)) / (6.0 * (n - 1) ** 2)
+    spread = np.sqrt(np.maximum(second - np.sum(mean ** 2, axis=-1) - binning, 0.0))
+    whole = np.sqrt(np.maximum(np.sum(mass * spread ** 2, axis=1), 0.0))
+    # the least colourful share of each band (bands by nearest centre here)
+    nearest = np.rint(np.clip(luma, 0.0, 1.0) * (BANDS - 1)).astype(np.int64)
+    centre = np.zeros((BANDS, 3)) if centre is None else np.nan_to_num(centre)
+    neutral = np.full((k, BANDS, 3), np.nan)
+    for b in range(BANDS):
+        idx = np.flatnonzero(nearest == b)
+        magnitude = np.sum((chroma[idx] - centre[b]) ** 2, axis=1)
+        idx = idx[np.argsort(magnitude, kind="stable")]
+        band = flat[:, idx]
+        total = band.sum(axis=1, keepdims=True)
+        cumulative = np.cumsum(band, axis=1)
+        # each bin's share of the band's least colourful NEUTRAL_SHARE (partial at the edge)
+        limit = NEUTRAL_SHARE * total
+        take = np.clip(limit - (cumulative - band), 0.0, band)
+        got = take.sum(axis=1)
+        ok = total[:, 0] >= MIN_BAND_MASS
+        neutral[ok, b] = (take[ok] @ chroma[idx]) / got[ok, None]
+    empty = mass < MIN_BAND_MASS
+    mean[empty] = np.nan
+    spread = np.where(empty, np.nan, spread)
+    return PaletteStatistics(quantiles, mass, mean, spread, whole, neutral)
+
+
+def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
+                      reference: PaletteStatistics | None = None) -> PaletteStatistics:
+    """:func:`palette_statistics` of a style set, its neutral tints measured from the set's
+    rough tint (the median band means' departure from the natural ones): a tint every
+    style shows moves what was grey, and the least colourful colours of a strongly
+    tinted photo are not what was grey."""
+    first = palette_statistics(hists)
+    centre = reference if reference is not None else naturals
+    rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(centre.band_mean, axis=0)
+    sd = _robust_sd(naturals.band_mean)
+    sigma = np.sqrt((MEDIAN_SE * sd) ** 2 / len(first.quantiles) + (CONTENT_BIAS * sd) ** 2)
+    return palette_statistics(hists, _shrink(rough, sigma))
+
+
+def _nanmedian(values: np.ndarray, axis: int = 0, keepdims: bool = False) -> np.ndarray:
+    """``np.nanmedian`` that gives NaN for an all-NaN slice without a warning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(values, axis=axis, keepdims=keepdims)
+
+
+def _robust_sd(values: np.ndarray, axis: int = 0) -> np.ndarray:
+    """1.4826 x the median absolute deviation (NaN ignored)."""
+    centre = _nanmedian(values, axis=axis, keepdims=True)
+    return 1.4826 * _nanmedian(np.abs(values - centre), axis=axis)
+
+
+def _shrink(difference: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Positive-part James-Stein: ``d * max(0, 1 - sigma^2 / d^2)`` (0 where d is NaN)."""
+    d = np.nan_to_num(difference)
+    power = d * d
+    factor = np.where(power > 0, np.maximum(0.0, 1.0 - sigma ** 2 / np.maximum(power, 1e-300)),
+                      0.0)
+    return d * factor
+
+
+def _fill(values: np.ndarray, axis_values: np.ndarray) -> np.ndarray:
+    """Interpolate NaN entries of a 1-D profile from its valid neighbours (edges held)."""
+    values = np.asarray(values, dtype=np.float64)
+    valid = np.isfinite(values)
+    if not valid.any():
+        return np.zeros_like(values)
+    return np.interp(axis_values, axis_values[valid], values[valid])
+
+
+@dataclass(frozen=True)
+class StatisticsLook:
+    """The look the statistics describe, as functions of lightness.
+
+    Attributes
+    ----------
+    tone_in, tone_out : (Q + 2,) knots of the monotone tone curve on luma.
+    saturation : (B,) chroma scale per input lightness band.
+    tint : (B, 3) chroma added per input lightness band.
+    monochrome : every style photo is monochrome or toned (saturation 0).
+    info : JSON-friendly diagnostics (shrink factors, differences).
+    """
+
+    tone_in: np.ndarray
+    tone_out: np.ndarray
+    saturation: np.ndarray
+    tint: np.ndarray
+    monochrome: bool
+    info: dict
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        """(..., 3) colours in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        rgb = np.asarray(rgb, dtype=np.float64)
+        flat = rgb.reshape(-1, 3)
+        luma = flat @ LUMA
+        chroma = flat - luma[:, None]
+        centres = np.linspace(0.0, 1.0, BANDS)
+        new_luma = np.interp(luma, self.tone_in, self.tone_out)
+        scale = np.interp(luma, centres, self.saturation)
+        shift = np.stack([np.interp(luma, centres, self.tint[:, c]) for c in range(3)], axis=1)
+        out = new_luma[:, None] + scale[:, None] * chroma + shift
+        return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
+
+
+def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
+                    space_scale: float = 1.0, content_bias: float | None = None,
+                    reference: PaletteStatistics | None = None) -> StatisticsLook:
+    """The look the styles' statistics show beyond what natural content varies by.
+
+    Parameters
+    ----------
+    styles : statistics of the S style palettes.
+    naturals : statistics of K natural palettes (K >= 2; more is better), same space.
+    space_scale : the working space's colour differences against sRGB-encoded ones
+        (scales :data:`MONOCHROME_SPREAD`).
+    content_bias : share of the natural spread added to each statistic's uncertainty
+        (default :data:`CONTENT_BIAS`; the tone curve's :data:`TONE_BIAS`).
+    reference : statistics of the user's own ungraded photos: what content looks like
+        in this collection (their medians replace the natural ones, which then only say
+        how much each statistic varies; no collection bias is added, their own
+        sampling error is).
+    """
+    n_styles = len(styles.quantiles)
+    bias = CONTENT_BIAS if content_bias is None else content_bias
+    tone_bias = TONE_BIAS if content_bias is None else content_bias
+    n_reference = 0
+    if reference is not None:  # the collection's own content: no bias, its sampling error
+        bias = tone_bias = 0.0
+        n_reference = len(reference.quantiles)
+    centre_of = reference if reference is not None else naturals
+
+    def sigma(natural_values: np.ndarray, count: np.ndarray | int,
+              share: float | None = None) -> np.ndarray:
+        sd = _robust_sd(natural_values)
+        count = np.maximum(np.asarray(count, dtype=np.float64), 1.0)
+        share = bias if share is None else share
+        own = (MEDIAN_SE * sd) ** 2 / n_reference if n_reference else 0.0
+        return np.sqrt((MEDIAN_SE * sd) ** 2 / count + (share * sd) ** 2 + own)
+
+    # tone curve: natural median quantiles -> the styles' median quantiles, shrunk
+    nat_q = np.median(centre_of.quantiles, axis=0)
+    sty_q = np.median(styles.quantiles, axis=0)
+    tone_shift = _shrink(sty_q - nat_q, sigma(naturals.quantiles, n_styles, tone_bias))
+    tone_out = np.maximum.accumulate(np.clip(nat_q + tone_shift, 0.0, 1.0))
+    tone_in = np.concatenate([[0.0], nat_q, [1.0]])
+    tone_out = np.concatenate([[np.clip(tone_shift[0], 0.0, 1.0)], tone_out,
+                               [np.clip(1.0 + tone_shift[-1], 0.0, 1.0)]])
+    tone_in, keep = np.unique(tone_in, return_index=True)
+    tone_out = np.maximum.accumulate(tone_out[keep])
+
+    centres = np.linspace(0.0, 1.0, BANDS)
+    mapped = np.interp(centres, tone_in, tone_out)  # where each band's colours land
+    valid_styles = np.sum(np.isfinite(styles.band_spread), axis=0)
+    monochrome = bool(np.all(styles.spread < MONOCHROME_SPREAD * space_scale))
+
+    # the styles' band statistics read at the lightness the tone curve sends each band to
+    def at_mapped(values: np.ndarray) -> np.ndarray:  # (S, B) -> (S, B)
+        return np.stack([np.interp(mapped, centres, _fill(row, centres))
+                         if np.isfinite(row).any() else np.full(BANDS, np.nan)
+                         for row in values])
+
+    sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
+    nat_spread = _nanmedian(centre_of.band_spread, axis=0)
+    log_nat = np.log(np.maximum(naturals.band_spread, 1e-4))
+    log_ratio = np.log(np.maximum(sty_spread, 1e-4)) - np.log(np.maximum(nat_spread, 1e-4))
+    log_ratio = _shrink(log_ratio, sigma(log_nat, valid_styles))
+    log_ratio = _fill(np.where(valid_styles >= 2, log_ratio, np.nan), centres)
+    saturation = np.zeros(BANDS) if monochrome else np.exp(log_ratio)
+
+    sty_mean = np.stack([_nanmedian(at_mapped(styles.band_mean[..., c]), axis=0)
+                         for c in range(3)], axis=-1)               # (B, 3)
+    nat_mean = _nanmedian(centre_of.band_mean, axis=0)            # (B, 3)
+    nat_mean = np.stack([_fill(nat_mean[:, c], centres) for c in range(3)], axis=-1)
+    if monochrome:  # the toning itself: what every style shows (a trace is black and white)
+        tint = _shrink(sty_mean, np.full(sty_mean.shape, 0.004 * space_scale))
+    elif TINT_FROM == "neutral":  # how the least colourful colours moved
+        sty_neutral = np.stack([_nanmedian(at_mapped(styles.band_neutral[..., c]), axis=0)
+                                for c in range(3)], axis=-1)
+        nat_neutral = _nanmedian(centre_of.band_neutral, axis=0)
+        tint = _shrink(sty_neutral - nat_neutral,
+                       sigma(naturals.band_neutral, valid_styles[:, None]))
+    else:
+        tint = _shrink(sty_mean - saturation[:, None] * nat_mean,
+                       sigma(naturals.band_mean, valid_styles[:, None]))
+    has = valid_styles >= (1 if monochrome else 2)
+    tint = np.stack([_fill(np.where(has & np.isfinite(tint[:, c]), tint[:, c], np.nan)
+                           if has.any() else np.zeros(BANDS), centres)
+                     for c in range(3)], axis=-1)
+    tint -= (tint @ LUMA)[:, None]  # chroma only: the tone curve owns lightness
+    info = {"method": "statistics", "monochrome": monochrome,
+            "tone_shift": [round(float(v), 4) for v in tone_shift],
+            "tone_raw": [round(float(v), 4) for v in sty_q - nat_q],
+            "saturation": [round(float(v), 3) for v in saturation],
+            "tint": [[round(float(v), 4) for v in row] for row in tint],
+            "styles": n_styles, "naturals": len(naturals.quantiles)}
+    return StatisticsLook(tone_in, tone_out, saturation, tint, monochrome, info)
