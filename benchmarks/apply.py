@@ -244,6 +244,9 @@ def main() -> None:
     parser.add_argument("--photos", type=Path, default=DEFAULT_PHOTOS,
                         help="folder the style photos are taken from")
     parser.add_argument("--styles", type=int, default=10)
+    parser.add_argument("--mode", choices=("look", "palette"), default="look",
+                        help="the grade measured (--verify checks a palette grade's weights: "
+                             "it needs --mode palette)")
     parser.add_argument("--repeats", type=int, default=1, help="apply runs (median)")
     parser.add_argument("--no-cache", action="store_true",
                         help="measure apply without cached style histograms")
@@ -260,6 +263,8 @@ def main() -> None:
                         help="grid of the float64 agreement check")
     parser.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.verify and args.mode != "palette":
+        parser.error("--verify checks a palette grade's weights: add --mode palette")
 
     if args.worker:
         kind, *rest = args.worker
@@ -284,6 +289,7 @@ def main() -> None:
 
         fast = tmp / "fast.jpg"
         cache_args = ["--no-cache"] if args.no_cache else ["--cache-dir", str(tmp / "cache")]
+        cache_args += ["--mode", args.mode]
         if not args.no_cache:  # fill the histogram cache (not measured)
             run_measured(wbcgrade("apply", str(args.photo), "--style", str(styles), "-o",
                                   str(tmp / "warm.jpg"), *cache_args))
@@ -322,10 +328,9 @@ def main() -> None:
                 rows.append((f"batch --consistent -j {jobs}", f"{wall:.1f} s", f"{peak:.0f} MB",
                              f"{args.batch} photos of {args.photo.name}: "
                              f"{60 * args.batch / wall:.1f} photos/min"))
-        by_name = {entry["style"]: entry["weight"] for entry in report["weights"]}
-        fast_weights = [by_name[name] for name in names]
-
         if args.verify:
+            by_name = {entry["style"]: entry["weight"] for entry in report["weights"]}
+            fast_weights = [by_name[name] for name in names]
             print("verify: L-BFGS on the plain 128³ energy from the fast weights ...", flush=True)
             wall, peak, out = run_measured([sys.executable, __file__, "--worker", "verify",
                                             str(args.photo), str(styles),
@@ -335,7 +340,8 @@ def main() -> None:
             refined = tmp / "refined.jpg"
             weights_text = ",".join(f"{w:.12g}" for w in check["weights"])
             run_measured(wbcgrade("apply", str(args.photo), "--style", str(styles), "-o",
-                                  str(refined), "--weights", weights_text, "--no-cache"))
+                                  str(refined), "--mode", "palette", "--weights", weights_text,
+                                  "--no-cache"))
             diff = np.abs(read_8bit(fast) - read_8bit(refined)).mean() * 255.0
             rows.append(("verify: 128³ energy drop", f"{wall:.0f} s", f"{peak:.0f} MB",
                          f"{100 * drop:.4f} % (E = {check['fast_energy']:.6e} at the fast "

@@ -2,7 +2,7 @@
 
 For each photo: ``wbcgrade apply PHOTO --preset warm --mode palette`` (or
 ``--style`` with ten photos, ``--styles-from``), the original run: fit,
-transport, map, regrain; it saves the grade with ``--json`` (an unmeasured first run also
+transport, map, regrain; it saves the grade with ``--save-grade`` (an unmeasured first run also
 writes it as ``--lut .cube``). Then ``apply PHOTO --look grade.json`` and
 ``--look grade.cube`` (the saved grade again, no fit). Each command is a
 fresh process timed end to end (start-up included, as a user sees it),
@@ -86,17 +86,16 @@ def measure(photo: Path, folder: Path, styles: list[str], repeats: int = 1,
     cpu: dict[str, list[float]] = {"original": [], "json": [], "cube": []}
 
     def original(suffix: str, *extra: str) -> float:
-        with open(out / "grade.json", "w") as json_file:
-            return timed(wbcgrade("apply", str(photo), *styles, "--mode", mode, "-o",
-                                  str(out / f"original{suffix}"), "--json", "--overwrite",
-                                  *extra), json_file)
+        return timed(wbcgrade("apply", str(photo), *styles, "--mode", mode, "-o",
+                              str(out / f"original{suffix}"), "--save-grade",
+                              str(out / "grade.json"), "--overwrite", *extra))
 
     def looked(kind: str, suffix: str, *extra: str) -> float:
         return timed(wbcgrade("apply", str(photo), "--look", str(out / f"grade.{kind}"),
                               "-o", str(out / f"{kind}{suffix}"), "--overwrite", *extra))
 
     # unmeasured: fills the style histogram cache (as a user's earlier runs have) and
-    # writes the .cube (the timed runs save the grade with --json only)
+    # writes the .cube (the timed runs save the grade with --save-grade only)
     original(".jpg", "--lut", str(out / "grade.cube"))
     for _ in range(repeats):
         times["original"].append(original(".jpg"))

@@ -395,8 +395,8 @@ def test_apply_report_option_writes_a_report(folders, tmp_path):
     photos, styles = folders
     result = CliRunner().invoke(main, [
         "apply", str(photos / "chelsea.jpg"), "--style", str(styles), "-o", str(tmp_path / "c.jpg"),
-        "--bins", "8", "--fit-bins", "6", "--max-iter", "3", "--iterations", "10", "--no-cache",
-        "--report", str(tmp_path / "report"),
+        "--mode", "palette", "--bins", "8", "--fit-bins", "6", "--max-iter", "3",
+        "--iterations", "10", "--no-cache", "--report", str(tmp_path / "report"),
     ])
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "report" / "report.json").read_text())

@@ -139,7 +139,8 @@ def test_workers_stop_when_the_batch_is_killed(shoot, tmp_path):
     photos, styles = tmp_path / "photos", shoot[1]
     for i in range(4):
         small_copy(SAMPLES / "chelsea.jpg", photos / f"p{i}.jpg", 96)
-    slow = ["--bins", "64", "--fit-bins", "16", "--max-iter", "50", "--iterations", "100",
+    slow = ["--mode", "palette", "--bins", "64", "--fit-bins", "16", "--max-iter", "50",
+            "--iterations", "100",
             "--no-cache"]
     parent = subprocess.Popen(
         [sys.executable, "-c", "from wbcgrade.cli import main; main()", "batch", str(photos),

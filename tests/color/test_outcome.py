@@ -144,7 +144,9 @@ def test_json_is_small_and_save_grade_is_what_look_reads(tmp_path, photo):
     result = run("apply", photo, "--preset", "kodak-2383", "-o", tmp_path / "a.png",
                  "--json", "--save-grade", saved)
     assert result.exit_code == 0, result.output
-    assert len(result.stdout.encode()) < 10_000 and "map" not in json.loads(result.stdout)
+    document = json.loads(result.stdout)
+    assert len(result.stdout.encode()) < 10_000 and "saved_grade" not in document
+    assert "data" not in json.dumps(document.get("map", {}))  # diagnostics, not the map
     again = run("apply", photo, "--look", saved, "-o", tmp_path / "b.png")
     assert again.exit_code == 0, again.output
     assert f"grade: the saved grade {saved}" in again.output

@@ -128,7 +128,7 @@ def test_video_report_never_replaces_a_report_it_did_not_write(tmp_path):
     before = _report_folder(report, "report.json")
     out = tmp_path / "graded.mp4"
     result = _run("video", clip, "-o", out, "--report", report, "--preset", "warm",
-                  "--weights", "1,1,1", "--bins", "16", "--fit-bins", "8", "--iterations",
+                  "--mode", "palette", "--weights", "1,1,1", "--bins", "16", "--fit-bins", "8", "--iterations",
                   "10", "--sample-every", "2")
     assert result.exit_code == 1 and "file exists (use --overwrite" in result.output
     assert _digest(report) == before and not out.exists()
