@@ -97,3 +97,21 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     while (_workers() - before) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not (_workers() - before), "the job worker outlived the server"
+
+
+def test_a_worker_still_starting_is_stopped_with_the_server(server):
+    """Closed while its worker process still imports, the job queue kills it (else it
+    outlived the server until its imports were done)."""
+    from wbcgrade.explore.jobs import JobWorker
+
+    before = _workers()
+    worker = JobWorker(server.studio.session.grader_state()).start()
+    deadline = time.monotonic() + 30
+    while not (_workers() - before) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert _workers() - before, "the job worker did not start"
+    worker.close()
+    deadline = time.monotonic() + 0.5  # killed, not left to finish its imports (~1-2 s)
+    while (_workers() - before) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not (_workers() - before), "the starting worker outlived close()"
