@@ -1,10 +1,19 @@
-"""Latency of ``wbcgrade explore``: from a move of the point to the new LUT (and pixels).
+"""Latency of ``wbcgrade explore``: from a move to the new LUT (and pixels).
 
-    python benchmarks/explore.py [--photo samples/chelsea.jpg] [--presets warm,mixed]
-                                 [--moves 40] [--browser] [--baseline REV]
+    python benchmarks/explore.py [--photo samples/chelsea.jpg] [--presets warm,faded]
+                                 [--moves 40] [--browser] [--baseline REV] [--look-only]
 
-For each preset, starts a studio on the photo (the server and its job worker,
-as ``wbcgrade explore`` does), waits for the exact map of the fitted weights,
+**Look moves** (the page's default mode, the grade ``apply`` gives): a studio on
+the photo with the first preset, every shipped preset in its picker; over HTTP
+(``api/look``, the map and what it is) it times ``--moves`` strength moves and
+preset switches, each preset's first visit (loaded then: its styles and look)
+and later ones, and the first visits once the background prefetch has loaded
+every preset (what a user gets a few seconds after the page opens). With
+``--browser``, in headless Chromium, from picking a preset to its pixels drawn
+(the page's own measurement).
+
+**Palette moves**: for each preset, starts a studio on the photo (the server and its
+job worker, as ``wbcgrade explore`` does), waits for the exact map of the fitted weights,
 then replays a drag: ``--moves`` small steps of the point (each moving the
 weights by about 0.02 in L1) on a loop around the fitted weights. It times
 
@@ -50,6 +59,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+if "PYTHONPATH" not in os.environ:  # run from a checkout: its package (--baseline sets it)
+    sys.path.insert(0, str(ROOT))
 
 
 def drag_path(center: np.ndarray, moves: int, rng: np.random.Generator) -> list[np.ndarray]:
@@ -110,6 +121,12 @@ def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
     try:
         driver.get(url)
         deadline = time.monotonic() + 600
+        while not driver.execute_script("const p = window.wbcgradeExplore;"
+                                        "return p && p.mode() === 'look' && p.grade();"):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the page did not show its look in 10 min")
+            time.sleep(0.1)
+        driver.find_element("id", "mode-palette").click()
         while not driver.execute_script(
                 "const p = window.wbcgradeExplore, s = p && p.shown();"
                 "return s && s.kind === 'exact' && s.version === p.current()"
@@ -119,6 +136,7 @@ def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
             time.sleep(0.1)
         driver.execute_script("window.wbcgradeExplore.latencies.length = 0")
         point = driver.find_element("id", "point")
+        driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", point)
         chain = ActionChains(driver, duration=0).click_and_hold(point)
         for k in range(moves):  # a slow drag: one small step every 120 ms
             angle = 2 * np.pi * k / moves
@@ -139,7 +157,7 @@ def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
     from wbcgrade.explore.engine import ExactGrader
     from wbcgrade.explore.settings import settings_from_json
 
-    server = start_studio(photo, preset=preset)
+    server = start_studio(photo, preset=preset, prefetch=False)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     studio = server.studio
@@ -199,6 +217,109 @@ def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
             "preview": f"{session.preview.shape[1]}x{session.preview.shape[0]}"}
 
 
+def browser_look_latencies(url: str, sources: int) -> list[float]:
+    """Pick-a-preset-to-pixels latencies (s) measured by the page in headless Chromium,
+    each preset picked in turn (after the first round: all loaded)."""
+    import shutil
+    import tempfile
+
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.support.select import Select
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update",
+                 "--disable-sync", "--window-size=1400,900",
+                 f"--user-data-dir={tempfile.mkdtemp(prefix='wbcgrade-bench-')}"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")
+                                              or "/usr/bin/chromedriver"), options=options)
+    try:
+        driver.get(url)
+        shown = ("const p = window.wbcgradeExplore, s = p && p.shown();"
+                 "return s && s.kind === 'exact' && s.version === p.current()"
+                 " && p.source() === {};")
+        deadline = time.monotonic() + 600
+        while not driver.execute_script(shown.format(0)):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the page did not show its look in 10 min")
+            time.sleep(0.05)
+        driver.execute_script("window.wbcgradeExplore.latencies.length = 0")
+        picker = Select(driver.find_element("id", "source-pick"))
+        for index in [*range(1, sources), 0] * 2:
+            picker.select_by_index(index)
+            while not driver.execute_script(shown.format(index)):
+                time.sleep(0.02)
+        records = driver.execute_script("return window.wbcgradeExplore.latencies")
+        return [r["ms"] / 1000 for r in records if r["kind"] == "look"]
+    finally:
+        driver.quit()
+
+
+def look_case(photo: str, preset: str, moves: int, browser: bool) -> dict:
+    """Look moves over HTTP: strength moves, preset switches (first and later visits), and
+    first visits after the background prefetch."""
+    from wbcgrade.explore.app import start_studio
+
+    def timed(server, body) -> float:
+        start = time.perf_counter()
+        post(server.port, server.token, "look", body)
+        return time.perf_counter() - start
+
+    out: dict = {"preset": preset}
+    for prefetch in (False, True):
+        start = time.perf_counter()
+        server = start_studio(photo, preset=preset, prefetch=prefetch)
+        started = time.perf_counter() - start
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        try:
+            sources = len(server.studio.choices)
+            if prefetch:  # what a user gets a few seconds after the page opens
+                deadline = time.monotonic() + 600
+                while len(server.studio._studios) < sources or not all(
+                        s.session._look is not None for s in server.studio._studios.values()):
+                    if time.monotonic() > deadline:
+                        raise RuntimeError("the prefetch did not end in 10 min")
+                    time.sleep(0.1)
+                out["prefetched"] = [timed(server, {"source": i}) for i in range(sources)]
+                out["prefetch_s"] = time.perf_counter() - start
+                if browser:
+                    out["browser"] = browser_look_latencies(server.url, sources)
+                continue
+            out["start_s"] = started
+            out["strength"] = [timed(server, {"strength": round(float(s), 3)})
+                               for s in np.linspace(0.0, 2.0, moves)]
+            out["first"] = [timed(server, {"source": i}) for i in range(1, sources)]
+            out["later"] = [timed(server, {"source": i % sources, "strength": 0.8})
+                            for i in range(moves)]
+            out["sources"] = sources
+        finally:
+            server.shutdown()
+            server.close()
+    return out
+
+
+def print_look_table(case: dict, photo: str) -> None:
+    print(f"look moves (HTTP, api/look: the 33^3 map and what it is), photo {Path(photo).name}, "
+          f"opened on preset {case['preset']}, {case['sources']} presets in the picker; "
+          f"start {case['start_s']:.1f} s, every preset prefetched {case['prefetch_s']:.1f} s "
+          f"after start")
+    print(f"{'measure':<44} {'n':>4} {'median':>7} {'p90':>7} {'max':>7}  (ms)")
+    rows = [("strength move", case["strength"]),
+            ("preset switch, first visit (not prefetched)", case["first"]),
+            ("preset switch, later visits", case["later"]),
+            ("preset switch, first visit after prefetch", case["prefetched"])]
+    if case.get("browser"):
+        rows.append(("pick a preset -> pixels drawn (Chromium)", case["browser"]))
+    for name, values in rows:
+        print(f"{name:<44} {len(values):>4} {summary(values)}")
+    print()
+    sys.stdout.flush()
+
+
 def measured_in(tree: Path, args, preset: str) -> dict:
     """:func:`run_case` in a fresh process on the package in ``tree`` (run from there, so
     that the studio's job worker, started with ``python -m``, imports it too)."""
@@ -247,7 +368,9 @@ def print_tables(cases: list[dict], moves: int, photo: str, load: tuple[float, f
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--photo", default=str(ROOT / "samples" / "chelsea.jpg"))
-    parser.add_argument("--presets", default="warm,mixed")
+    parser.add_argument("--presets", default="warm,faded")
+    parser.add_argument("--look-only", action="store_true",
+                        help="measure the look moves only (no palette drags)")
     parser.add_argument("--moves", type=int, default=40)
     parser.add_argument("--browser", action="store_true",
                         help="also measure move -> pixels in headless Chromium")
@@ -257,6 +380,11 @@ def main() -> None:
     parser.add_argument("--json", help=argparse.SUPPRESS)  # one process's cases, for --baseline
     args = parser.parse_args()
     load_before = os.getloadavg()
+    if not args.json:
+        print_look_table(look_case(args.photo, args.presets.split(",")[0], args.moves,
+                                   args.browser), args.photo)
+        if args.look_only:
+            return
     if args.baseline:
         with tempfile.TemporaryDirectory(prefix="wbcgrade-baseline-") as tree:
             archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline],

@@ -33,9 +33,15 @@ def photo(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def server(photo):
+def save_dir(tmp_path_factory) -> Path:
+    """The folder the studio's saved photos go to."""
+    return tmp_path_factory.mktemp("saved")
+
+
+@pytest.fixture(scope="session")
+def server(photo, save_dir):
     """A studio on the photo with the preset, served from a thread; closed afterwards."""
-    server = start_studio(str(photo), preset=PRESET)
+    server = start_studio(str(photo), preset=PRESET, prefetch=False, save_dir=save_dir)
     thread = threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.1},
                               daemon=True)
     thread.start()

@@ -35,7 +35,9 @@ def test_bad_inputs_are_one_line_errors(tmp_path, photo):
             ((photo,), "give exactly one of --style DIR or --preset"),
             ((photo, "--preset", PRESET, "--style", tmp_path), "give exactly one of"),
             ((photo, "--preset", "nosuch"), "unknown preset 'nosuch'"),
-            ((photo, "--style", tmp_path / "nope"), "style folder does not exist")):
+            ((photo, "--style", tmp_path / "nope"), "style folder does not exist"),
+            ((photo, "--preset", PRESET, "--save-dir", tmp_path / "nope"),
+             "the save folder does not exist")):
         result = run("explore", *args, "--no-browser")
         assert result.exit_code == 1, (args, result.output)
         assert result.stderr.strip().splitlines()[-1].startswith("Error: "), result.stderr
@@ -76,6 +78,9 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
         with urllib.request.urlopen(url + "api/state", timeout=60) as answer:
             state = json.load(answer)
         assert state["names"] == ["coffee", "flower", "sunset"]
+        assert state["look"]["command"].startswith("wbcgrade apply ")
+        with urllib.request.urlopen(url + "api/state?palette=1", timeout=120) as answer:
+            assert len(json.load(answer)["fit"]["weights"]) == 3  # the palette mode
         deadline = time.monotonic() + 60
         while not (_workers() - before) and time.monotonic() < deadline:
             time.sleep(0.2)
@@ -87,7 +92,26 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
             process.kill()
     assert process.returncode == 0, err
     assert "Open the address above" in err and "Stopped." in err and "Traceback" not in err
+    assert "grade: " in err and "saves into: " in err
     deadline = time.monotonic() + 10
     while (_workers() - before) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not (_workers() - before), "the job worker outlived the server"
+
+
+def test_a_worker_still_starting_is_stopped_with_the_server(server):
+    """Closed while its worker process still imports, the job queue kills it (else it
+    outlived the server until its imports were done)."""
+    from wbcgrade.explore.jobs import JobWorker
+
+    before = _workers()
+    worker = JobWorker(server.studio.session.grader_state()).start()
+    deadline = time.monotonic() + 30
+    while not (_workers() - before) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert _workers() - before, "the job worker did not start"
+    worker.close()
+    deadline = time.monotonic() + 0.5  # killed, not left to finish its imports (~1-2 s)
+    while (_workers() - before) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not (_workers() - before), "the starting worker outlived close()"

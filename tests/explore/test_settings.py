@@ -33,7 +33,7 @@ def test_weights_are_normalised_and_rounded_as_the_command_line_writes_them():
     ({"weights": [1e-9, 0]}, None),  # tiny but positive: all on the first style
     ({}, "weights are missing"),
     ([0.5, 0.5], "must be a JSON object"),
-    ({"weights": [0.5, 0.5], "strength": 1.5}, "strength must be between 0 and 1"),
+    ({"weights": [0.5, 0.5], "strength": 2.5}, "strength must be between 0 and 2"),
     ({"weights": [0.5, 0.5], "strength": "x"}, "strength must be a number"),
     ({"weights": [0.5, 0.5], "relaxation": 0}, "relaxation must be between"),
     ({"weights": [0.5, 0.5], "relaxation": math.nan}, "relaxation must be a finite number"),

@@ -1,10 +1,13 @@
-"""``wbcgrade explore``: steer a photo's grade by hand in a live local page, then export it.
+"""``wbcgrade explore``: steer the grade ``apply`` gives a photo in a live local page, then
+save the photo or export the grade.
 
 The pieces (the README's "Explore" section has the user's view):
 
 - :mod:`.engine`: the one module that calls the colour library (load the
   photo and styles, fit, fast and exact colour maps, LUT export, the
   reproducing command line);
+- :mod:`.studio`: the style sources the page switches between (the one it
+  opened on, other presets) and the folder saved photos go to;
 - :mod:`.jobs`: the slow jobs (exact maps, the loss landscape) in one worker
   process at lower priority, coalesced;
 - :mod:`.settings`: what the page controls, checked as it arrives;

@@ -6,66 +6,65 @@ import os
 import sys
 import threading
 import webbrowser
-from collections.abc import Callable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from wbcgrade.explore.server import ExploreServer, Studio, make_server
-
-if TYPE_CHECKING:
-    import numpy as np
 
 __all__ = ["start_studio", "open_browser", "serve"]
 
 
-def start_studio(photo: str, style_dir: str | None = None, preset: str | None = None,
+def start_studio(photo: str, style_dir: str | None = None,
+                 preset: str | Sequence[str] | None = None,
                  port: int = 0, *, warn: Callable[[str], None] | None = None,
                  progress: Callable[[int, int, str], None] | None = None,
-                 fit_callback: Callable[[int, np.ndarray, float], None] | None = None,
                  stage: Callable[[str], None] | None = None,
-                 token: str | None = None) -> ExploreServer:
-    """Bind the server, load the photo and styles, fit the weights; -> the server.
+                 token: str | None = None,
+                 save_dir: str | os.PathLike | None = None,
+                 prefetch: bool = True) -> ExploreServer:
+    """Bind the server, load the photo and styles, compute the grade ``apply`` gives;
+    -> the server (its ``studio``: an :class:`~wbcgrade.explore.studio.Explorer`).
 
     The port is taken first (a busy port is reported before any work). The
-    exact map of the fitted weights is queued at once, so the page's first
-    picture turns exact within seconds. Nothing is written to the photo or
-    the styles.
+    page opens on ``style_dir``, else on the first of ``preset`` (one name or
+    file, or several: the others join the page's preset picker, with every
+    shipped preset). The palette fit runs when the page first asks for the
+    palette mode. Saved photos go into ``save_dir`` (default: the photo's
+    folder), which must be a folder that exists; nothing else is written.
+    ``prefetch``: the other sources are loaded in the background at once.
     """
+    from wbcgrade.errors import InputError
     from wbcgrade.explore.engine import load_session
-    from wbcgrade.explore.jobs import JobWorker
+    from wbcgrade.explore.studio import Explorer, style_choices
 
     say = stage or (lambda name: None)
-    if (style_dir is None) == (preset is None):
-        from wbcgrade.errors import InputError
-
+    presets = [preset] if isinstance(preset, str) else list(preset or [])
+    if (style_dir is None) == (not presets):
         raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
+    folder = Path(save_dir) if save_dir is not None else Path(photo).resolve().parent
+    if not folder.is_dir():
+        raise InputError(f"{folder}: the save folder does not exist (--save-dir)")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: the save folder is not writable (--save-dir)")
     server = make_server(port, token)
-    worker = None
+    studio = None
     try:
         say("load")
-        session = load_session(photo, style_dir, preset, warn=warn, progress=progress)
-        worker = JobWorker(session.grader_state()).start()
-        say("fit")
-        fit = session.fit(fit_callback)
-        studio = Studio(session, fit, worker)
-        threading.Thread(target=_prefetch, args=(worker, studio.fitted), daemon=True,
-                         name="explore-prefetch").start()
-        server.studio = studio
+        choices = style_choices(style_dir, presets)
+        session = load_session(photo, choices[0].style_dir, choices[0].preset, warn=warn,
+                               progress=progress)
+        studio = Studio(session)
+        say("look")
+        session.look_grade()
+        server.studio = Explorer(studio, choices, folder.resolve())
+        if prefetch:
+            server.studio.prefetch()
     except BaseException:
         server.server_close()
-        if worker is not None:
-            worker.close()
+        if studio is not None:
+            studio.close()
         raise
     return server
-
-
-def _prefetch(worker, settings) -> None:
-    """Compute the exact map of the fitted weights (the page asks for it first)."""
-    from wbcgrade.explore.jobs import JobError, Superseded
-
-    try:
-        worker.reference(settings, "view")
-    except (JobError, Superseded, TimeoutError):
-        pass  # the page asks again
 
 
 def open_browser(url: str) -> bool:

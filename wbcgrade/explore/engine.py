@@ -15,8 +15,16 @@ grade path means changing this file only. It offers:
 - :class:`ExactGrader` (run in the job worker, :mod:`wbcgrade.explore.jobs`):
   the colour map exactly as ``apply --weights W --no-regrain`` computes it,
   and the fit's loss at any weights (the landscape);
-- :meth:`Session.export` (``.cube`` or CLF, any size) and
-  :meth:`Session.command_line` (the ``apply`` command that reproduces it).
+- :meth:`Session.look_grade` / :meth:`Session.look_at`: the grade ``apply``
+  gives (its default look grade, by ``apply``'s own grade path, with its
+  ``outcome``: where it comes from, its strength) at any strength;
+  :func:`describe_outcome` puts the outcome in the page's words;
+- :meth:`Session.save`: the graded photo at full size through ``apply``'s
+  own output path, under a new name in a given folder;
+- :meth:`Session.export` / :meth:`Session.export_grade` (``.cube`` or CLF,
+  any size) and :meth:`Session.command_line` / :meth:`Session.look_command`
+  (the ``apply`` command that reproduces it);
+- :func:`shipped_presets`: the names of the presets the package ships.
 
 The live preview. ``apply`` computes the palette on 64^3, the plan on 32^3 ->
 64^3 -> 128^3 and a 33^3 smooth map (about 3 s on two cores): too slow for a
@@ -46,9 +54,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.explore.settings import Settings, format_number, weights_text
+from wbcgrade.explore.settings import MAX_STRENGTH, Settings, format_number, weights_text
 
-__all__ = ["Session", "FitResult", "ExactGrader", "load_session", "serve_jobs",
+__all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
+           "describe_outcome", "shipped_presets", "blend_looks", "grade_file_of", "serve_jobs",
+           "MAX_STRENGTH",
            "PREVIEW_BINS", "PREVIEW_MAP_SIZE", "PREVIEW_SIDE", "EXPORT_SIZES", "EXPORT_FORMATS"]
 
 #: Bins per axis of the preview's palette, plan and photo histogram (the kernel
@@ -91,6 +101,14 @@ def _options(base, settings: Settings, **changes):
 
     return as_options(base, relaxation=settings.relaxation,
                       preserve_luminance=settings.keep_lightness, **changes)
+
+
+def _look_options():
+    """``apply --no-regrain``'s settings (the default "look" grade): what the page opens on,
+    the grade of ``apply`` with the same styles, and what a LUT can hold."""
+    from wbcgrade.color.options import GradeOptions
+
+    return GradeOptions(regrain=False)
 
 
 def _apply_weights(settings: Settings) -> tuple[float, ...]:
@@ -225,10 +243,125 @@ class Session:
     thumbnails: list[np.ndarray]
     base: object
     lut_size: int
+    loaded: LoadedPhoto | None = None
 
     def __post_init__(self) -> None:
-        self._fast = _FastGrader(self.styles, self.hists[PREVIEW_BINS], self.base,
-                                 self.encoding)
+        import threading
+
+        self._fast_grader = None
+        self._look = None
+        self._look_lock = threading.Lock()
+
+    @property
+    def _fast(self) -> _FastGrader:
+        """The preview's fast grader (made on the palette mode's first move)."""
+        with self._look_lock:
+            if self._fast_grader is None:
+                self._fast_grader = _FastGrader(self.styles, self.hists[PREVIEW_BINS],
+                                                self.base, self.encoding)
+            return self._fast_grader
+
+    @property
+    def source_args(self) -> list[str]:
+        """The command line's style source: ``--style DIR`` or ``--preset NAME_OR_FILE``."""
+        if self.style_dir is not None:
+            return ["--style", self.style_dir]
+        return ["--preset", self.preset]
+
+    def look_grade(self):
+        """The grade ``apply --no-regrain`` gives this photo with these styles (a
+        ``color.grading.Grade`` at ``--strength`` 1, its ``outcome`` saying what it is;
+        computed once, by ``apply``'s own grade path ``color.grading.grade_encoded`` on
+        the full-size photo)."""
+        return self._look_and_fit()[0]
+
+    def _look_and_fit(self):
+        from wbcgrade.color.grading import grade_encoded
+
+        with self._look_lock:
+            if self._look is None:
+                if self.loaded is None:
+                    raise ValueError("the session was loaded without its photo's pixels")
+                self._look = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
+                                           self.encoding, self.loaded.alpha)
+            return self._look
+
+    def look_at(self, strength: float):
+        """The look grade at ``apply --strength`` (0 to :data:`MAX_STRENGTH`; above 1 the
+        map's change scaled, as ``apply`` does), its outcome judged at that strength."""
+        from dataclasses import replace
+
+        from wbcgrade.color.grading import grade_outcome, strengthened
+
+        grade, fit = self._look_and_fit()
+        if strength == 1.0:
+            return grade
+        color_map, blend = strengthened(grade.color_map, strength)
+        grade = replace(grade, color_map=np.asarray(color_map, dtype=np.float32),
+                        strength=blend)
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "look", strength)
+        return replace(grade, outcome=outcome)
+
+    def palette_grade(self, color_map: np.ndarray, settings: Settings):
+        """The palette grade of ``settings`` whose exact map is ``color_map`` (a Grade,
+        its outcome judged on this photo as ``apply --weights`` judges it)."""
+        from dataclasses import replace
+
+        from wbcgrade.color.fit import FitSummary
+        from wbcgrade.color.grading import Grade, grade_outcome, strengthened
+
+        weights = np.asarray(settings.weights, dtype=np.float64)
+        color_map, blend = strengthened(np.asarray(color_map, dtype=np.float32),
+                                        settings.strength)
+        grade = Grade(names=tuple(self.names), weights=weights / weights.sum(),
+                      color_map=np.asarray(color_map, dtype=np.float32),
+                      working=self.encoding.working, strength=blend)
+        fit = FitSummary(grade.weights, 0.0, np.zeros(0), "given")
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "palette",
+                                settings.strength)
+        return replace(grade, outcome=outcome)
+
+    def look_command(self, strength: float) -> str:
+        """The ``wbcgrade apply`` command that gives the look grade at ``strength``."""
+        parts = ["wbcgrade", "apply", self.photo, *self.source_args, "--mode", "look",
+                 "--no-regrain"]
+        if strength != 1.0:
+            parts += ["--strength", format_number(strength, 3)]
+        return " ".join(shlex.quote(p) for p in parts)
+
+    def save(self, grade, folder: str | os.PathLike, with_grade: bool = False) -> Path:
+        """Grade the full-size photo with ``grade`` and write it into ``folder``; -> its path.
+
+        ``apply``'s own path (``color.workflow.plan_photo`` and ``grade_file``, the grade
+        given as a series' shared grade): the photo's format, bit depth and metadata, written
+        atomically. The name is ``<stem>_explore_<n><ext>`` with the first ``n`` no file
+        has: never the photo, never a file that exists (one appearing meanwhile is not
+        replaced: the next ``n`` is taken). ``with_grade``: the grade itself is written
+        beside it too, ``<stem>_explore_<n>.grade.json`` (what ``apply --look`` reads;
+        :func:`grade_file_of` names it).
+        """
+        from wbcgrade.color.workflow import default_output_path, grade_file, plan_photo
+        from wbcgrade.errors import InputError
+
+        folder = Path(folder)
+        suffix = default_output_path(self.photo).suffix
+        stem = Path(self.photo).stem
+        for number in range(1, 10000):
+            target = folder / f"{stem}_explore_{number}{suffix}"
+            saved = grade_file_of(target) if with_grade else None
+            if os.path.lexists(target) or (saved is not None and os.path.lexists(saved)):
+                continue
+            try:
+                plan = plan_photo(self.photo, target, overwrite=False, saved_grade=saved)
+                grade_file(plan, self.styles, _look_options(), shared=grade, keep_input=False)
+                if saved is not None:
+                    _publish_grade(saved, grade)
+            except InputError:
+                if os.path.lexists(target) or (saved is not None and os.path.lexists(saved)):
+                    continue  # taken meanwhile: the next number
+                raise
+            return target
+        raise InputError(f"{folder}: no free name for {stem}_explore_N{suffix}")
 
     @property
     def n_styles(self) -> int:
@@ -273,9 +406,7 @@ class Session:
 
     def command_line(self, settings: Settings) -> str:
         """The ``wbcgrade apply`` command that grades the full-size photo as shown."""
-        parts = ["wbcgrade", "apply", self.photo]
-        parts += ["--style", self.style_dir] if self.style_dir is not None \
-            else ["--preset", self.preset]
+        parts = ["wbcgrade", "apply", self.photo, *self.source_args]
         parts += ["--mode", "palette", "--weights", weights_text(settings.weights),
                   "--no-regrain"]
         if settings.strength != 1.0:
@@ -288,27 +419,30 @@ class Session:
 
     def export(self, color_map: np.ndarray, settings: Settings, lut_format: str,
                size: int) -> tuple[str, bytes]:
-        """The LUT file of ``color_map`` at ``settings.strength`` -> (file name, bytes).
+        """The LUT file of the palette map ``color_map`` at ``settings`` -> (file name, bytes)."""
+        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
+            zip(self.names, settings.weights), key=lambda item: -item[1]))
+        return self.export_grade(self.palette_grade(color_map, settings), lut_format, size,
+                                 f"palette weights {ranked}", self.command_line(settings))
 
-        Made by the colour library's LUT writer (the header names the spaces
-        and the weights) in a temporary folder; nothing is written beside the photo.
+    def export_grade(self, grade, lut_format: str, size: int, what: str,
+                     command: str) -> tuple[str, bytes]:
+        """The LUT file of ``grade`` (at its strength) -> (file name, bytes).
+
+        Made by the colour library's LUT writer (the header names the spaces,
+        ``what`` the grade is and the ``command`` that reproduces it) in a temporary
+        folder; nothing is written beside the photo.
         """
-        from wbcgrade.color.grading import Grade
         from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
 
         stem = Path(self.photo).stem
         name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
-        ranked = ", ".join(f"{n} {w:.4f}" for n, w in sorted(
-            zip(self.names, settings.weights), key=lambda item: -item[1]))
-        grade = Grade(names=tuple(self.names), weights=np.asarray(settings.weights),
-                      color_map=color_map, working=self.encoding.working,
-                      strength=settings.strength)
         with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
             path = Path(folder) / name
             write_grade_lut(path, grade, self.encoding.within_working(), size, lut_format,
                             title=f"wbcgrade {stem}",
                             comments=[f"wbcgrade explore grade of {Path(self.photo).name}: "
-                                      f"{ranked}", f"reproduce: {self.command_line(settings)}"])
+                                      f"{what}", f"reproduce: {command}"])
             return name, path.read_bytes()
 
     def png(self, pixels: np.ndarray) -> bytes:
@@ -319,6 +453,55 @@ class Session:
             path = Path(folder) / "picture.png"
             write_png(path, pixels)
             return path.read_bytes()
+
+
+def grade_file_of(photo: Path) -> Path:
+    """The grade file saved beside a saved photo: ``<its stem>.grade.json``."""
+    return photo.with_name(f"{photo.stem}.grade.json")
+
+
+def _publish_grade(path: Path, grade) -> None:
+    """Write ``grade`` as the JSON ``apply --look`` reads, atomically, never replacing."""
+    import json
+
+    from wbcgrade._publish import publish_bytes
+    from wbcgrade.color.saved_look import look_dict
+
+    publish_bytes(path, json.dumps(look_dict(grade), indent=1).encode("utf-8"),
+                  overwrite=False)
+
+
+def blend_looks(first, second, amount: float, strength: float, names: tuple[str, str],
+                photo_hist: np.ndarray | None = None) -> tuple:
+    """Two look grades blended on their lattice, ``(1 - amount) A + amount B``, at
+    ``--strength`` ``strength`` (above 1 the blend's change scaled, as ``apply`` does).
+
+    ``first`` and ``second``: Grades in the same working space (their maps at blend 1).
+    Returns (the Grade: names and weights the two looks and their shares, no regrain;
+    the map at blend 1 the page applies; the photo's mean change in /255, None without
+    ``photo_hist``).
+    """
+    from wbcgrade.color.grading import Grade, strengthened
+    from wbcgrade.color.outcome import map_change
+
+    if first.working != second.working or first.color_map.shape != second.color_map.shape:
+        raise ValueError("the looks to blend live in different spaces or lattices")
+    mixed = ((1.0 - amount) * np.asarray(first.color_map, dtype=np.float64)
+             + amount * np.asarray(second.color_map, dtype=np.float64)).astype(np.float32)
+    color_map, blend = strengthened(mixed, strength)
+    grade = Grade(names=tuple(names), weights=np.array([1.0 - amount, amount]),
+                  color_map=np.asarray(color_map, dtype=np.float32), working=first.working,
+                  strength=blend)
+    change = (None if photo_hist is None
+              else map_change(grade.color_map, grade.strength, grade.working, photo_hist))
+    return grade, mixed, change
+
+
+def shipped_presets() -> list[str]:
+    """The names of the presets shipped with the package, sorted."""
+    from wbcgrade.color.presets import list_presets
+
+    return [name for name, _ in list_presets()]
 
 
 def clf_available() -> bool:
@@ -333,21 +516,31 @@ def clf_available() -> bool:
     return True
 
 
-def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
-                 preview_side: int = PREVIEW_SIDE,
-                 warn: Callable[[str], None] | None = None,
-                 progress: Callable[[int, int, str], None] | None = None) -> Session:
-    """Read the photo and the styles as ``apply`` does; nothing is written.
+@dataclass
+class LoadedPhoto:
+    """The photo as ``apply`` reads it, shared by the sessions of every style source.
 
-    ``style_dir`` photos' histograms come from (and go to) the histogram
-    cache, as with ``apply``. Raises InputError on a missing or unreadable
-    photo or style source (one line).
+    Attributes
+    ----------
+    encoding : its colour encoding (``color.colorspace.ColorEncoding``).
+    encoded : (H, W, 3) float32 working-space colours, full size.
+    alpha : (H, W) coverage or None.
+    hists : {bins: (bins, bins, bins)} histograms on the fit, preview and transfer grids.
+    preview : (h, w, 3) uint8 preview picture (working-space colours).
     """
+
+    encoding: object
+    encoded: np.ndarray
+    alpha: np.ndarray | None
+    hists: dict
+    preview: np.ndarray
+
+
+def load_photo(photo: str, preview_side: int = PREVIEW_SIDE) -> LoadedPhoto:
+    """Read the photo as ``apply`` does (colour spaces, histograms); nothing is written."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.histogram import HistogramCache, image_histogram
+    from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
-    from wbcgrade.color.report import style_pictures
     from wbcgrade.color.sheet import thumbnail
     from wbcgrade.errors import InputError
 
@@ -357,23 +550,59 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     image = read_image(photo)
     encoding = ColorEncoding.for_image(image, base.spaces.input, base.spaces.working)
     encoded, _ = encoding.encode(image.rgb(), image.is_float)
+    encoded = np.ascontiguousarray(encoded, dtype=np.float32)
     alpha = image.alpha()
     limit = base.transfer.max_pixels
     hists = {bins: image_histogram(encoded, bins, alpha, limit)
              for bins in (base.fit.bins, PREVIEW_BINS, base.transfer.bins)}
-    source = StyleSource(style_dir, preset, HistogramCache())
-    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
-    styles = styles_in_space(styles, encoding.working)
     height, width = encoded.shape[:2]
     side = min(preview_side, max(height, width))
     small = thumbnail(np.clip(encoded, 0.0, 1.0), side, side)
     preview = np.clip(np.round(small * 255.0), 0, 255).astype(np.uint8)
+    return LoadedPhoto(encoding, encoded, alpha, hists, preview)
+
+
+def load_session(photo: str, style_dir: str | None = None, preset: str | None = None,
+                 preview_side: int = PREVIEW_SIDE,
+                 warn: Callable[[str], None] | None = None,
+                 progress: Callable[[int, int, str], None] | None = None,
+                 loaded: LoadedPhoto | None = None) -> Session:
+    """Read the photo (unless ``loaded`` holds it) and the styles as ``apply`` does;
+    nothing is written.
+
+    ``style_dir`` photos' histograms come from (and go to) the histogram
+    cache, as with ``apply``. Raises InputError on a missing or unreadable
+    photo or style source (one line).
+    """
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
+    from wbcgrade.color.report import style_pictures
+
+    if loaded is None:
+        loaded = load_photo(photo, preview_side)
+    base = _base_options()
+    source = StyleSource(style_dir, preset, HistogramCache())
+    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
+    styles = styles_in_space(styles, loaded.encoding.working)
     pictures = style_pictures(styles, THUMBNAIL_SIDE)
     return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
-                   preset=preset, names=list(styles.names), styles=styles, encoding=encoding,
-                   hists=hists, preview=preview,
+                   preset=preset, names=list(styles.names), styles=styles,
+                   encoding=loaded.encoding, hists=loaded.hists, preview=loaded.preview,
                    thumbnails=[pictures[name] for name in styles.names], base=base,
-                   lut_size=base.map.size)
+                   lut_size=base.map.size, loaded=loaded)
+
+
+def describe_outcome(outcome) -> dict:
+    """What a grade did (``color.outcome.GradeOutcome``), for the page (JSON-friendly).
+
+    The outcome's own fields (``source``: "preset-look", "own-scene", "set-look",
+    "palette"; ``strength``: the look's own strength times ``blend``, the
+    ``--strength``; ``look_strength``; the photo's mean change, ...) and ``words``: its
+    lines (``outcome.lines()``) without their "grade: " lead.
+    """
+    lines = outcome.lines()
+    head = lines[0].removeprefix("grade: ")
+    return {**outcome.as_dict(), "words": " ".join([head, *lines[1:]])}
 
 
 class ExactGrader:

@@ -100,6 +100,7 @@ class JobWorker:
         self._closed = False
         self._process = None
         self._connection = None
+        self._starting = None  # a worker process still starting (killed by close)
         self._thread = threading.Thread(target=self._run, name="explore-jobs", daemon=True)
 
     # -- the caller's side -------------------------------------------------------------
@@ -145,6 +146,10 @@ class JobWorker:
             self._cond.notify_all()
         for job in waiting:
             job.finish(error=JobError("the explore server is stopping"))
+        with self._cond:
+            starting = self._starting
+        if starting is not None:  # still importing: it would outlive the server a while
+            starting.kill()
         self._stop_process()
 
     # -- inside ------------------------------------------------------------------------
@@ -202,7 +207,12 @@ class JobWorker:
 
     def _start_process(self) -> None:
         process, connection = _spawn()
+        with self._cond:
+            self._starting = process
+            closed = self._closed
         try:
+            if closed:
+                raise JobError("the explore server is stopping")
             connection.send(self._state)
             if not connection.poll(START_TIMEOUT_S):
                 raise JobError("the worker did not start")
@@ -213,8 +223,11 @@ class JobWorker:
             process.kill()
             process.wait()
             connection.close()
+            with self._cond:
+                self._starting = None
             raise
         with self._cond:
+            self._starting = None
             self._process, self._connection = process, connection
             if self._closed:  # closed while starting
                 self._stop_process_locked()

@@ -39,7 +39,7 @@ import time
 import traceback
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
-from urllib.parse import quote, urlsplit
+from urllib.parse import parse_qsl, quote, urlsplit
 
 import numpy as np
 
@@ -47,7 +47,9 @@ from wbcgrade.explore.jobs import JobError, JobWorker, Superseded
 from wbcgrade.explore.settings import (
     RequestError,
     Settings,
+    blend_from_json,
     settings_from_json,
+    strength_from_json,
     weights_from_json,
     weights_text,
 )
@@ -97,12 +99,14 @@ class Studio:
     worker : a started :class:`~wbcgrade.explore.jobs.JobWorker`.
     """
 
-    def __init__(self, session, fit, worker: JobWorker) -> None:
+    def __init__(self, session, fit=None, worker: JobWorker | None = None) -> None:
         from wbcgrade.explore.engine import EXPORT_FORMATS, EXPORT_SIZES, clf_available
 
         self.session = session
-        self.fit = fit
-        self.worker = worker
+        self._fit = fit
+        self._worker = worker
+        self._fitted = None
+        self._lazy_lock = threading.Lock()
         self.formats = [f for f in EXPORT_FORMATS if f != "clf" or clf_available()]
         self.sizes = list(EXPORT_SIZES)
         self._preview_lock = threading.Lock()
@@ -110,7 +114,80 @@ class Studio:
         self._latest_lock = threading.Lock()
         self.photo_png = session.png(session.preview)
         self.thumbnails_png = [session.png(t) for t in session.thumbnails]
-        self.fitted = settings_from_json({"weights": list(fit.weights)}, session.n_styles)
+
+    # the palette fit and the job worker: made when the palette mode first needs them
+    @property
+    def fit(self):
+        """The palette weights ``apply --mode palette`` fits (fitted on first use)."""
+        with self._lazy_lock:
+            if self._fit is None:
+                self._fit = self.session.fit()
+            return self._fit
+
+    @property
+    def fitted(self) -> Settings:
+        """The fitted weights as page settings."""
+        if self._fitted is None:
+            self._fitted = settings_from_json({"weights": list(self.fit.weights)},
+                                              self.session.n_styles)
+        return self._fitted
+
+    @property
+    def worker(self) -> JobWorker:
+        """The job worker of this style source (started on first use)."""
+        with self._lazy_lock:
+            if self._worker is None:
+                self._worker = JobWorker(self.session.grader_state()).start()
+            return self._worker
+
+    def close(self) -> None:
+        """Stop the job worker, when one was started."""
+        with self._lazy_lock:
+            worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.close()
+
+    # the look grade (what ``apply`` gives): its map, words, command, export and save
+    def look(self, strength: float):
+        """The look grade ``apply`` gives -> (its 33^3 map at ``--strength`` 1, meta: what
+        it is at the page's ``strength`` and the ``apply`` command). The page applies the
+        strength itself (above 1 on the map's lattice, as ``apply`` does)."""
+        from wbcgrade.explore.engine import describe_outcome
+
+        started = time.perf_counter()
+        grade = self.session.look_at(strength)
+        lut = np.ascontiguousarray(self.session.look_grade().color_map, dtype=np.float32)
+        return lut, {"kind": "exact", "mode": "look",
+                     "ms": round(1000 * (time.perf_counter() - started), 1),
+                     "strength": strength, "grade": describe_outcome(grade.outcome),
+                     "command": self.session.look_command(strength)}
+
+    def grade_of(self, mode: str, settings: Settings | None, strength: float):
+        """(the Grade the page shows in ``mode``, what it is in words, its ``apply`` command)."""
+        from wbcgrade.explore.engine import describe_outcome
+
+        session = self.session
+        if mode == "look":
+            grade = session.look_at(strength)
+            command = session.look_command(strength)
+        else:
+            color_map, _ = self.exact(settings, "export")
+            grade = session.palette_grade(color_map, settings)
+            command = session.command_line(settings)
+            ranked = ", ".join(f"{n} {w:.4f}" for n, w in grade.ranked())
+            return grade, f"{describe_outcome(grade.outcome)['words']}; weights {ranked}", \
+                command
+        return grade, describe_outcome(grade.outcome)["words"], command
+
+    def export_mode(self, mode: str, settings: Settings | None, strength: float,
+                    lut_format: str, size: int) -> tuple[str, bytes]:
+        """The LUT file of exactly what the page shows in ``mode``."""
+        if lut_format not in self.formats:
+            raise RequestError(f"format must be one of {', '.join(self.formats)}")
+        if size not in self.sizes:
+            raise RequestError(f"size must be one of {', '.join(map(str, self.sizes))}")
+        grade, words, command = self.grade_of(mode, settings, strength)
+        return self.session.export_grade(grade, lut_format, size, words, command)
 
     def state(self) -> dict:
         """The page's start-up data."""
@@ -221,7 +298,7 @@ class ExploreServer(ThreadingHTTPServer):
         """Close the socket and stop the studio's job worker."""
         self.server_close()
         if self.studio is not None:
-            self.studio.worker.close()
+            self.studio.close()
 
 
 def make_server(port: int = 0, token: str | None = None) -> ExploreServer:
@@ -282,6 +359,16 @@ class _Handler(BaseHTTPRequestHandler):
         body = lut.astype("<f4", copy=False).tobytes()
         self._send(200, body, "application/octet-stream",
                    {"X-Explore-Meta": json.dumps({**meta, "size": int(lut.shape[-2])})})
+
+    def _download(self, name: str, body: bytes) -> None:
+        """A file the browser saves (a LUT), its name in the headers."""
+        plain = "".join(c if c.isascii() and c.isprintable() and c not in '"\\'
+                        else "_" for c in name)
+        raw = name.encode("utf-8", "surrogateescape")  # a non-UTF-8 photo's name
+        self._send(200, body, "application/octet-stream",
+                   {"Content-Disposition": f"attachment; filename=\"{plain}\"; "
+                                           f"filename*=UTF-8''{quote(raw)}",
+                    "X-Explore-File": base64.b64encode(raw).decode("ascii")})
 
     # -- checks ------------------------------------------------------------------------
     def _route(self) -> str | None:
@@ -352,13 +439,36 @@ class _Handler(BaseHTTPRequestHandler):
         elif route == "photo.png":
             self._send(200, studio.photo_png, "image/png")
         elif route.startswith("style/") and route.endswith(".png") \
-                and route[6:-4].isascii() and route[6:-4].isdigit() \
-                and int(route[6:-4]) < len(studio.thumbnails_png):  # '²' is a digit too
-            self._send(200, studio.thumbnails_png[int(route[6:-4])], "image/png")
+                and route[6:-4].isascii() and route[6:-4].isdigit():  # '²' is a digit too
+            try:
+                thumbnails = _source_of(studio, self._query()).thumbnails_png
+            except RequestError as exc:
+                self._error(400, str(exc))
+                return
+            if int(route[6:-4]) < len(thumbnails):
+                self._send(200, thumbnails[int(route[6:-4])], "image/png")
+            else:
+                self._error(404, f"no such page: /{route}"[:200])
         elif route == "api/state":
-            self._json(200, studio.state())
+            query = self._query()
+            try:
+                index = _source_index(query)
+                data = (studio.state(index, query.get("palette") == "1")
+                        if hasattr(studio, "choices") else studio.state())
+            except RequestError as exc:
+                self._error(400, str(exc))
+                return
+            except Exception as exc:  # a style source that cannot be read: one line
+                text = str(exc).strip().splitlines()
+                self._error(500, text[0] if text else type(exc).__name__)
+                return
+            self._json(200, data)
         else:
             self._error(404, f"no such page: /{route}"[:200])
+
+    def _query(self) -> dict[str, str]:
+        """The address's query (``?source=1&palette=1``): its last value of each name."""
+        return dict(parse_qsl(urlsplit(self.path).query))
 
     def do_POST(self) -> None:  # noqa: N802
         route = self._route()
@@ -367,9 +477,28 @@ class _Handler(BaseHTTPRequestHandler):
         data = self._body()
         if data is None:
             return
-        studio = self.server.studio
-        n_styles = studio.session.n_styles
+        explorer = self.server.studio
         try:
+            studio, mode, index = _take_source(explorer, data)
+            n_styles = studio.session.n_styles
+            if route == "api/look" or (route in ("api/save", "api/export") and mode == "look"):
+                strength = strength_from_json(data)
+                blend = blend_from_json(data.get("blend"))
+                if blend is not None:
+                    if not hasattr(explorer, "choices"):
+                        raise RequestError("there is no other look to blend with")
+                    explorer.source(blend[0])  # RequestError when there is no such entry
+                if route == "api/look":
+                    self._lut(*(explorer.look(index, strength, blend) if blend is not None
+                                else studio.look(strength)))
+                elif route == "api/save":
+                    self._json(200, explorer.save(index, "look", None, strength, blend))
+                else:
+                    fmt, size = data.get("format", "cube"), data.get("size", studio.sizes[0])
+                    self._download(*(explorer.export_look(index, strength, blend, fmt, size)
+                                     if blend is not None else
+                                     studio.export_mode("look", None, strength, fmt, size)))
+                return
             if route == "api/landscape":
                 rows = data.get("rows") if isinstance(data, dict) else None
                 if not isinstance(rows, list) or not 0 < len(rows) <= MAX_LANDSCAPE_ROWS:
@@ -391,15 +520,11 @@ class _Handler(BaseHTTPRequestHandler):
             elif route == "api/slopes":
                 self._lut(*studio.slopes(settings))
             elif route == "api/export":
-                name, body = studio.export(settings, data.get("format", "cube"),
-                                           data.get("size", studio.sizes[0]))
-                plain = "".join(c if c.isascii() and c.isprintable() and c not in '"\\'
-                                else "_" for c in name)
-                raw = name.encode("utf-8", "surrogateescape")  # a non-UTF-8 photo's name
-                self._send(200, body, "application/octet-stream",
-                           {"Content-Disposition": f"attachment; filename=\"{plain}\"; "
-                                                   f"filename*=UTF-8''{quote(raw)}",
-                            "X-Explore-File": base64.b64encode(raw).decode("ascii")})
+                self._download(*studio.export_mode("palette", settings, settings.strength,
+                                                   data.get("format", "cube"),
+                                                   data.get("size", studio.sizes[0])))
+            elif route == "api/save":
+                self._json(200, explorer.save(index, "palette", settings, settings.strength))
             else:
                 self._error(404, f"no such action: /{route}"[:200])
         except RequestError as exc:
@@ -414,6 +539,41 @@ class _Handler(BaseHTTPRequestHandler):
             traceback.print_exc()
             text = str(exc).strip().splitlines()
             self._error(500, text[0] if text else type(exc).__name__)
+
+
+#: What a request's ``mode`` may be: the look grade (``apply``'s default) or a palette mix.
+MODES = ("look", "palette")
+
+
+def _source_index(query: dict[str, str]) -> int:
+    """The ``source`` of an address's query (default 0) -> an index (RequestError)."""
+    text = query.get("source", "0")
+    if not (text.isascii() and text.isdigit()) or len(text) > 4:
+        raise RequestError("source must be a small whole number")
+    return int(text)
+
+
+def _source_of(explorer, query: dict[str, str]):
+    """The Studio a GET names with ``?source=N`` (the only one when there are no choices)."""
+    if not hasattr(explorer, "choices"):
+        return explorer
+    return explorer.source(_source_index(query))
+
+
+def _take_source(explorer, data) -> tuple:
+    """Take ``source`` (default 0) and ``mode`` (default "palette", the routes of the
+    weights) out of a request body -> (Studio, mode, index); RequestError when bad."""
+    if not isinstance(data, dict):
+        raise RequestError("the request body must be a JSON object")
+    index = data.pop("source", 0)
+    mode = data.pop("mode", "palette")
+    if mode not in MODES:
+        raise RequestError(f"mode must be one of {', '.join(MODES)}")
+    if not hasattr(explorer, "choices"):
+        if index != 0:
+            raise RequestError("source must be 0")
+        return explorer, mode, 0
+    return explorer.source(index), mode, index
 
 
 def _refuse_constant(name: str):

@@ -12,8 +12,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Settings", "RequestError", "settings_from_json", "weights_from_json",
-           "weights_text", "format_number", "WEIGHT_DECIMALS", "MAX_RELAXATION",
+__all__ = ["Settings", "RequestError", "settings_from_json", "strength_from_json",
+           "blend_from_json",
+           "weights_from_json",
+           "weights_text", "format_number", "WEIGHT_DECIMALS", "MAX_STRENGTH", "MAX_RELAXATION",
            "MIN_RELAXATION"]
 
 #: Weights are rounded to this many decimals: the command line the page gives
@@ -21,6 +23,9 @@ __all__ = ["Settings", "RequestError", "settings_from_json", "weights_from_json"
 WEIGHT_DECIMALS = 4
 #: Strength is a percentage on the page: rounded to 0.001.
 STRENGTH_DECIMALS = 3
+#: The largest strength the page offers (``apply --strength`` takes up to 4; above 1 the
+#: map's change is scaled, x -> x + t (T(x) - x) on its lattice, clipped to the cube).
+MAX_STRENGTH = 2.0
 #: The relaxation slider's range (``apply --relax RHO``), rounded to 3 significant digits.
 MIN_RELAXATION = 0.01
 MAX_RELAXATION = 100.0
@@ -45,7 +50,8 @@ class Settings:
         rounded to :data:`WEIGHT_DECIMALS` decimals: exactly the numbers of the
         ``--weights`` text (:func:`weights_text`), which ``apply`` normalises
         again (so the sum may be 1 +- a few 1e-4).
-    strength : t in [0, 1]: x -> (1 - t) x + t T(x) (``--strength``).
+    strength : t in [0, :data:`MAX_STRENGTH`]: x -> (1 - t) x + t T(x) (``--strength``;
+        above 1 on the map's lattice, clipped to the cube).
     relaxation : rho > 0 of ``--relax``, or None (balanced transport).
     keep_lightness : ``--preserve-luminance``.
     """
@@ -112,6 +118,36 @@ def weights_from_json(value, n_styles: int) -> tuple[float, ...]:
     return rounded
 
 
+def strength_from_json(data) -> float:
+    """The ``strength`` of a look request (default 1): a number in [0, 2], rounded as
+    :data:`Settings.strength`. Other keys but ``format`` and ``size`` are refused."""
+    if not isinstance(data, dict):
+        raise RequestError("the request body must be a JSON object")
+    unknown = sorted(set(data) - {"strength", "blend", "format", "size", "seq", "client"})
+    if unknown:
+        raise RequestError(f"unknown setting {unknown[0]!r} for the look"[:200])
+    strength = _number(data.get("strength", 1.0), "strength")
+    if not 0.0 <= strength <= MAX_STRENGTH:
+        raise RequestError(f"strength must be between 0 and {MAX_STRENGTH:g}")
+    return round(strength, STRENGTH_DECIMALS)
+
+
+def blend_from_json(value) -> tuple[int, float] | None:
+    """A look request's ``blend`` (null, or ``{"source": N, "amount": A}``: the share A in
+    [0, 1] of picker entry N's look) -> None or (N, A rounded to 3 decimals)."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"source", "amount"}:
+        raise RequestError('blend must be null or {"source": N, "amount": A}')
+    source = value["source"]
+    if isinstance(source, bool) or not isinstance(source, int) or source < 0:
+        raise RequestError("the blend's source must be a picker entry's number")
+    amount = _number(value["amount"], "the blend's amount")
+    if not 0.0 <= amount <= 1.0:
+        raise RequestError("the blend's amount must be between 0 and 1")
+    return source, round(amount, STRENGTH_DECIMALS)
+
+
 def settings_from_json(data, n_styles: int) -> Settings:
     """Check a request's settings (a JSON object) -> :class:`Settings` (not yet rounded).
 
@@ -128,8 +164,8 @@ def settings_from_json(data, n_styles: int) -> Settings:
         raise RequestError("weights are missing")
     weights = weights_from_json(data["weights"], n_styles)
     strength = _number(data.get("strength", 1.0), "strength")
-    if not 0.0 <= strength <= 1.0:
-        raise RequestError("strength must be between 0 and 1")
+    if not 0.0 <= strength <= MAX_STRENGTH:
+        raise RequestError(f"strength must be between 0 and {MAX_STRENGTH:g}")
     relaxation = data.get("relaxation")
     if relaxation is not None:
         relaxation = _number(relaxation, "relaxation")

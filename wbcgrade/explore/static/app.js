@@ -1,8 +1,10 @@
 // wbcgrade explore: the page. Plain JavaScript, no build step, no outside resource.
 //
 // The server computes colour maps (3-D LUTs); this page applies them to the
-// preview picture itself (trilinear, as wbcgrade's remap does). A move is
-// shown in three steps, each replacing the one before:
+// preview picture itself (trilinear, as wbcgrade's remap does), at the strength
+// of the slider. It opens on the grade `wbcgrade apply` gives (the "look" mode:
+// one map per style source, fetched when a source is picked). In the palette
+// mode a move of the weights is shown in three steps, each replacing the one before:
 //   1. at once, extrapolated here from the last exact map and the slopes of
 //      the fast map there (a sum of LUTs: no request);
 //   2. the server's fast map, corrected by the nearest exact map (one small
@@ -23,6 +25,14 @@
 
   const state = {
     meta: null,
+    source: 0,                  // the preset picker's entry shown
+    mode: 'look',               // 'look': the grade apply gives; 'palette': a mix of palettes
+    blend: null,                // look mode: {source, amount}: another look's share, or null
+    blendCommand: '',           // the command of a saved blend (its grade file)
+    switched: 0,                // the version of the last source or mode switch
+    history: [],                // undo: snapshots of what the page shows, the last is now
+    future: [],                 // redo
+    restoring: false,
     n: 0,
     vertices: [],
     look: {weights: [], strength: 1, relaxation: null, keep_lightness: false},
@@ -44,6 +54,11 @@
   };
   // What a test or benchmark reads: move-to-pixels latencies (ms) and the renders done.
   const probe = {latencies: [], renders: 0, seen: new Set(), shown: () => ({...state.shown}),
+                 mode: () => state.mode, source: () => state.source,
+                 grade: () => state.meta && state.meta.look.grade,
+                 strength: () => state.look.strength,
+                 blend: () => state.blend && {...state.blend},
+                 history: () => [state.history.length, state.future.length],
                  current: () => state.version, weights: () => state.look.weights.slice(),
                  extrapolates: () => Boolean(state.model && state.model.family === family())};
   window.wbcgradeExplore = probe;
@@ -65,7 +80,7 @@
 
   function body() {
     const look = state.look;
-    return {weights: look.weights.slice(), strength: look.strength,
+    return {source: state.source, weights: look.weights.slice(), strength: look.strength,
             relaxation: look.relaxation, keep_lightness: look.keep_lightness};
   }
 
@@ -76,13 +91,38 @@
   }
 
   // ---------------------------------------------------------------- grading
+  // A map made stronger than itself (strength t > 1), as wbcgrade does: each node moved
+  // t times as far, clipped to the cube; then applied in full.
+  let strongCache = {lut: null, t: 0, out: null};
+  function strengthened(lut, n, t) {
+    if (strongCache.lut === lut && strongCache.t === t) return strongCache.out;
+    const out = new Float32Array(lut.length);
+    for (let i = 0; i < n; i++) {
+      for (let j = 0; j < n; j++) {
+        for (let k = 0; k < n; k++) {
+          const q = ((i * n + j) * n + k) * 3;
+          const node = [i / (n - 1), j / (n - 1), k / (n - 1)];
+          for (let c = 0; c < 3; c++) {
+            out[q + c] = Math.min(1, Math.max(0, node[c] + t * (lut[q + c] - node[c])));
+          }
+        }
+      }
+    }
+    strongCache = {lut, t, out};
+    return out;
+  }
+
   function render() {
     if (!state.lut || !state.before) return;
     const src = state.before.data;
     const out = state.after.data;
-    const lut = state.lut;
     const n = state.lutSize;
-    const t = state.look.strength;
+    let lut = state.lut;
+    let t = state.look.strength;
+    if (t > 1) {
+      lut = strengthened(lut, n, t);
+      t = 1;
+    }
     const scale = (n - 1) / 255;
     const dj = 3 * n;
     const di = 3 * n * n;
@@ -115,14 +155,15 @@
 
   function showLut(lut, meta, version, kind) {
     const shown = state.shown;
-    if (version < shown.version) return;
+    if (state.mode !== 'palette') return;  // a palette answer after a switch to the look
+    if (version < shown.version || version < state.switched) return;
     if (version === shown.version && RANK[kind] < RANK[shown.kind]) return;
     state.lut = lut;
     state.lutSize = meta.size;
     state.shown = {version, kind, weights: meta.weights, weightsText: meta.weights_text};
     render();
     probe.renders += 1;
-    if (kind === 'exact') {  // moves from here can be shown at once: fetch the slopes
+    if (kind === 'exact' && state.mode === 'palette') {  // moves from here: the slopes
       const settings = {weights: meta.weights, relaxation: meta.relaxation,
                         keep_lightness: meta.keep_lightness};
       const key = meta.weights_text + JSON.stringify([meta.relaxation, meta.keep_lightness]);
@@ -141,7 +182,11 @@
 
   function status(kind, meta) {
     const badge = $('status');
-    if (kind === 'exact') {
+    if (state.mode === 'look') {
+      badge.textContent = state.blend ? 'a blend of two looks: exact'
+        : 'the grade apply gives: exact';
+      badge.className = 'badge exact';
+    } else if (kind === 'exact') {
       badge.textContent = 'exact grade: what the export holds';
       badge.className = 'badge exact';
     } else if (kind === 'extrapolated') {
@@ -169,14 +214,14 @@
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
         showLut(new Float32Array(await response.arrayBuffer()), meta, version, meta.kind);
-      } else if (response.status !== 409) {
+      } else if (response.status !== 409 && version >= state.switched) {
         say(await failure(response), true);
       }
     } catch (e) {
       say(`the server did not answer (${e.message}); is wbcgrade explore still running?`, true);
     }
     state.inFlight = false;
-    if (state.dirty) requestPreview();
+    if (state.dirty && state.mode === 'palette') requestPreview();
   }
 
   async function requestExact() {
@@ -189,7 +234,7 @@
       if (response.ok) {
         const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
         showLut(new Float32Array(await response.arrayBuffer()), meta, version, 'exact');
-      } else if (response.status !== 409) {
+      } else if (response.status !== 409 && version >= state.switched) {
         say(await failure(response), true);
       }
     } catch (e) {
@@ -207,7 +252,7 @@
     if (state.slopesAsked === key) return;
     state.slopesAsked = key;
     try {
-      const response = await post('api/slopes', settings);
+      const response = await post('api/slopes', {...settings, source: state.source});
       if (!response.ok) return;  // superseded, or the page moved on
       const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
       const data = new Float32Array(await response.arrayBuffer());
@@ -243,6 +288,7 @@
   }
 
   function changed() {
+    if (state.mode !== 'palette') return;
     state.version += 1;
     state.changedAt.set(state.version, performance.now());
     if (state.changedAt.size > 200) state.changedAt.delete(state.changedAt.keys().next().value);
@@ -256,6 +302,18 @@
   function updateCommand() {
     const meta = state.meta;
     const look = state.look;
+    if (meta && state.mode === 'look' && state.blend) {
+      $('command').textContent = state.blendCommand || 'A blend has no apply options of its '
+        + 'own: Save writes its grade file beside the photo (and the exported LUT holds it); '
+        + 'the command to apply that file appears here.';
+      return;
+    }
+    if (meta && state.mode === 'look') {
+      const parts = [meta.look.command];
+      if (look.strength !== 1) parts.push('--strength', String(look.strength));
+      $('command').textContent = parts.join(' ');
+      return;
+    }
     if (!meta || !state.shown.weightsText) return;
     const parts = [meta.command_prefix, '--weights', state.shown.weightsText, '--no-regrain'];
     if (look.strength !== 1) parts.push('--strength', String(look.strength));
@@ -393,7 +451,7 @@
         out = [d[0] / len, d[1] / len];
       }
       const cx = v[0] + out[0] * 40, cy = v[1] + out[1] * 32;
-      el('image', {href: `style/${i}.png`, x: cx - 28, y: cy - 21, width: 56, height: 42,
+      el('image', {href: `style/${i}.png?source=${state.source}`, x: cx - 28, y: cy - 21, width: 56, height: 42,
                    preserveAspectRatio: 'xMidYMid slice'}, svg);
       el('rect', {class: 'thumb-frame', x: cx - 28, y: cy - 21, width: 56, height: 42}, svg);
       // names on the outer side: above the picture at the top, below it elsewhere
@@ -453,7 +511,7 @@
     });
     svg.addEventListener('pointermove', (event) => { if (dragging) move(event); });
     const stop = () => { dragging = false; };
-    svg.addEventListener('pointerup', stop);
+    svg.addEventListener('pointerup', () => { if (dragging) record(); stop(); });
     svg.addEventListener('pointercancel', stop);
   }
 
@@ -478,10 +536,13 @@
       }
     }
     let result;
+    const switched = state.switched;  // an answer for another source or mode is dropped
     try {
-      const response = await post('api/landscape', {rows});
+      const response = await post('api/landscape', {source: state.source, rows});
+      if (switched !== state.switched) return;
       if (!response.ok) { say(await failure(response), true); return; }
       result = await response.json();
+      if (switched !== state.switched) return;
     } catch (e) {
       return;
     }
@@ -542,7 +603,7 @@
       const row = document.createElement('tr');
       const thumb = document.createElement('td');
       const img = document.createElement('img');
-      img.src = `style/${i}.png`;
+      img.src = `style/${i}.png?source=${state.source}`;
       img.alt = '';
       thumb.appendChild(img);
       const label = document.createElement('td');
@@ -587,6 +648,7 @@
     }
     say('');
     setWeights(weights);
+    record();
   }
 
   // ---------------------------------------------------------------- before / after
@@ -653,6 +715,37 @@
       render();
       updateCommand();
     });
+    strength.addEventListener('change', () => {
+      record('strength');
+      if (state.mode === 'look') describeLook(state.version);
+    });
+    $('mode-look').addEventListener('change', () => switchTo(state.source, 'look'));
+    $('mode-palette').addEventListener('change', () => switchTo(state.source, 'palette'));
+    $('source-pick').addEventListener('change',
+                                      () => switchTo(Number($('source-pick').value), state.mode));
+    $('blend-pick').addEventListener('change', async () => {
+      const value = $('blend-pick').value;
+      setBlend(value === '' ? null
+        : {source: Number(value), amount: Number($('blend-amount').value) / 100});
+      await showBlend();
+      record();
+    });
+    $('blend-amount').addEventListener('input', () => {
+      if (!state.blend) return;
+      setBlend({...state.blend, amount: Number($('blend-amount').value) / 100});
+      showBlend();
+    });
+    $('blend-amount').addEventListener('change', () => record('blend'));
+    $('undo').addEventListener('click', undo);
+    $('redo').addEventListener('click', redo);
+    $('save').addEventListener('click', saveGraded);
+    document.addEventListener('keydown', (event) => {
+      const key = event.key.toLowerCase();
+      if (!(event.ctrlKey || event.metaKey) || event.altKey) return;
+      if (key === 'z' && !event.shiftKey) { event.preventDefault(); undo(); }
+      else if ((key === 'z' && event.shiftKey) || key === 'y') { event.preventDefault(); redo(); }
+      else if (key === 's') { event.preventDefault(); saveGraded(); }
+    });
     const relaxOn = $('relax-on'), relax = $('relax');
     const relaxChanged = () => {
       relax.disabled = !relaxOn.checked;
@@ -661,13 +754,18 @@
       state.look.relaxation = relaxOn.checked ? value : null;
       changed();
     };
-    relaxOn.addEventListener('change', relaxChanged);
+    relaxOn.addEventListener('change', () => { relaxChanged(); record(); });
     relax.addEventListener('input', relaxChanged);
+    relax.addEventListener('change', () => record('relax'));
     $('keep').addEventListener('change', () => {
       state.look.keep_lightness = $('keep').checked;
       changed();
+      record();
     });
-    $('to-fit').addEventListener('click', () => setWeights(state.meta.fitted.weights.slice()));
+    $('to-fit').addEventListener('click', () => {
+      setWeights(state.meta.fitted.weights.slice());
+      record();
+    });
     $('export-cube').addEventListener('click', () => exportLut('cube', $('export-cube')));
     $('export-clf').addEventListener('click', () => exportLut('clf', $('export-clf')));
     if (!state.meta.formats.includes('clf')) {
@@ -693,8 +791,12 @@
   async function exportLut(format, button) {
     const size = Number($('size').value);
     // exactly what is shown: the weights of the picture on screen
-    const request = {...body(), format, size};
-    if (state.shown.weights) request.weights = state.shown.weights.slice();
+    let request = {...body(), format, size};
+    if (state.mode === 'look') {
+      request = {...lookBody(), mode: 'look', format, size};
+    } else if (state.shown.weights) {
+      request.weights = state.shown.weights.slice();
+    }
     button.disabled = true;
     say('computing the exact grade for the export…');
     try {
@@ -721,6 +823,277 @@
     }
   }
 
+  // ---------------------------------------------------------------- save
+  async function saveGraded() {
+    const button = $('save');
+    if (button.disabled) return;
+    let request = {...lookBody(), mode: 'look'};
+    if (state.mode === 'palette') {
+      request = {...body(), mode: 'palette'};
+      if (state.shown.weights) request.weights = state.shown.weights.slice();
+    }
+    button.disabled = true;
+    say('grading the full-size photo…');
+    try {
+      const response = await post('api/save', request);
+      if (!response.ok) {
+        say(await failure(response), true);
+        return;
+      }
+      const saved = await response.json();
+      say(`saved ${saved.file} into ${saved.folder}`);
+      document.body.dataset.saved = saved.file;
+      document.body.dataset.savedCommand = saved.command;
+      if (state.mode === 'look' && state.blend) {
+        state.blendCommand = saved.command;
+        updateCommand();
+      }
+    } catch (e) {
+      say(`the save failed (${e.message})`, true);
+    } finally {
+      button.disabled = false;
+    }
+  }
+
+  // ---------------------------------------------------------------- undo and redo
+  function snapshot() {
+    const look = state.look;
+    return {source: state.source, mode: state.mode, strength: look.strength,
+            blend: state.mode === 'look' && state.blend ? {...state.blend} : null,
+            weights: state.mode === 'palette' ? look.weights.slice() : null,
+            relaxation: look.relaxation, keep_lightness: look.keep_lightness};
+  }
+
+  // Keep what the page shows now as an undo step. Steps of one control in quick succession
+  // (a slider moved with the arrow keys) make one step.
+  const COALESCE_MS = 1500;
+  function record(control) {
+    if (state.restoring || !state.meta) return;
+    const now = snapshot();
+    const last = state.history[state.history.length - 1];
+    if (last && JSON.stringify(last.snap) === JSON.stringify(now)) return;
+    const at = performance.now();
+    if (last && control && last.control === control && at - last.at < COALESCE_MS
+        && state.history.length > 1) {
+      state.history.pop();
+    }
+    state.history.push({snap: now, control, at});
+    if (state.history.length > 100) state.history.shift();
+    state.future = [];
+    historyButtons();
+  }
+
+  function historyButtons() {
+    $('undo').disabled = state.history.length < 2;
+    $('redo').disabled = state.future.length === 0;
+  }
+
+  async function restore(snap) {
+    state.restoring = true;
+    try {
+      const blendChanged = JSON.stringify(snap.blend) !== JSON.stringify(state.blend);
+      if (snap.mode === 'look') setBlend(snap.blend);
+      if (snap.source !== state.source || snap.mode !== state.mode) {
+        await switchTo(snap.source, snap.mode, snap.weights);
+      } else if (blendChanged) {
+        await showBlend();
+      }
+      setStrength(snap.strength);
+      if (snap.mode === 'palette') {
+        state.look.relaxation = snap.relaxation;
+        state.look.keep_lightness = snap.keep_lightness;
+        $('relax-on').checked = snap.relaxation !== null;
+        $('relax').disabled = snap.relaxation === null;
+        if (snap.relaxation !== null) {
+          $('relax').value = String(Math.max(0, RELAX_STEPS.indexOf(snap.relaxation)));
+          $('relax-out').textContent = String(snap.relaxation);
+        }
+        $('keep').checked = snap.keep_lightness;
+        if (snap.weights) setWeights(snap.weights.slice());
+      }
+    } finally {
+      state.restoring = false;
+      historyButtons();
+    }
+  }
+
+  async function undo() {
+    if (state.history.length < 2) return;
+    state.future.push(state.history.pop());
+    await restore(state.history[state.history.length - 1].snap);
+  }
+
+  async function redo() {
+    if (!state.future.length) return;
+    const step = state.future.pop();
+    state.history.push({...step, control: null});
+    await restore(step.snap);
+  }
+
+  function setStrength(value) {
+    state.look.strength = value;
+    $('strength').value = String(Math.round(100 * value));
+    $('strength-out').textContent = `${Math.round(100 * value)} %`;
+    render();
+    updateCommand();
+  }
+
+  // ---------------------------------------------------------------- sources and modes
+  function describe() {
+    const grade = state.meta.look.grade;
+    const box = $('grade-words');
+    box.textContent = '';
+    const lead = document.createElement('b');
+    if (state.mode === 'look' && grade.source === 'blend') {
+      box.append(grade.words[0].toUpperCase() + grade.words.slice(1), '.');
+    } else if (state.mode === 'look') {
+      lead.textContent = `${state.meta.styles}: `;
+      box.append('The grade ', Object.assign(document.createElement('code'),
+                                             {textContent: 'wbcgrade apply'}),
+                 ' gives, with ', lead, grade.words, '.');
+    } else {
+      lead.textContent = `${state.meta.styles}: `;
+      box.append('A palette mix of ', lead, 'the photo\'s colours moved onto the blend of '
+                 + 'style palettes you choose (', Object.assign(
+        document.createElement('code'), {textContent: 'apply'}), ' gives: ', grade.words, ').');
+    }
+    box.dataset.source = grade.source;
+  }
+
+  // What the look grade is at the page's strength (the sentence; the map is the same).
+  function lookBody() {
+    const out = {source: state.source, strength: state.look.strength};
+    if (state.blend) out.blend = {...state.blend};
+    return out;
+  }
+
+  async function describeLook(version) {
+    const strength = state.look.strength;
+    const response = await post('api/look', lookBody());
+    if (!response.ok || version !== state.version || strength !== state.look.strength) return;
+    state.meta.look.grade = JSON.parse(response.headers.get('X-Explore-Meta')).grade;
+    describe();
+  }
+
+  async function showLook(version) {
+    const response = await post('api/look', lookBody());
+    if (!response.ok) {
+      if (version === state.version) say(await failure(response), true);
+      return;
+    }
+    const meta = JSON.parse(response.headers.get('X-Explore-Meta'));
+    const lut = new Float32Array(await response.arrayBuffer());
+    if (version !== state.version) return;  // another source or mode meanwhile
+    state.meta.look.grade = meta.grade;
+    describe();
+    state.lut = lut;
+    state.lutSize = meta.size;
+    state.shown = {version, kind: 'exact', weights: null, weightsText: ''};
+    render();
+    probe.renders += 1;
+    const asked = state.changedAt.get(version);
+    if (asked !== undefined) probe.latencies.push({ms: performance.now() - asked, kind: 'look',
+                                                   first: true});
+    status('exact', meta);
+    updateCommand();
+  }
+
+  function setBlend(blend) {
+    state.blend = blend;
+    state.blendCommand = '';
+    $('blend-pick').value = blend ? String(blend.source) : '';
+    $('blend-amount').disabled = !blend;
+    if (blend) {
+      $('blend-amount').value = String(Math.round(100 * blend.amount));
+      $('blend-out').textContent = `${Math.round(100 * blend.amount)} %`;
+    }
+  }
+
+  // The look with the blend of now (one request at a time, the newest settings next).
+  let blendBusy = false, blendAgain = false;
+  async function showBlend() {
+    if (blendBusy) { blendAgain = true; return; }
+    blendBusy = true;
+    state.version += 1;
+    state.changedAt.set(state.version, performance.now());
+    try {
+      await showLook(state.version);
+    } finally {
+      blendBusy = false;
+    }
+    if (blendAgain) {
+      blendAgain = false;
+      await showBlend();
+    }
+  }
+
+  // Show source `index` in `mode` ('look' or 'palette'); `weights`: the palette mix to show
+  // (default: the fitted one).
+  async function switchTo(index, mode, weights) {
+    clearTimeout(state.idle);
+    state.version += 1;
+    state.switched = state.version;
+    state.changedAt.set(state.version, performance.now());
+    const version = state.version;
+    const sourceChanged = index !== state.source || !state.meta;
+    state.source = index;
+    state.mode = mode;
+    $('source-pick').value = String(index);
+    $(mode === 'look' ? 'mode-look' : 'mode-palette').checked = true;
+    for (const id of ['palette-mix', 'palette-adjust', 'palette-weights']) {
+      $(id).hidden = mode !== 'palette';
+    }
+    $('blend-row').hidden = mode !== 'look';
+    const badge = $('status');
+    badge.textContent = mode === 'palette' && !(state.meta && state.meta.fit && !sourceChanged)
+      ? 'fitting the palette mix…' : 'loading…';
+    badge.className = 'badge preview';
+    badge.dataset.kind = '';
+    const needPalette = mode === 'palette';
+    if (sourceChanged || (needPalette && !state.meta.fit)) {
+      const response = await fetch(`api/state?source=${index}${needPalette ? '&palette=1' : ''}`);
+      if (!response.ok) {
+        say(await failure(response), true);
+        return;
+      }
+      const meta = await response.json();
+      if (version !== state.version) return;
+      state.meta = meta;
+      state.n = meta.names.length;
+      state.model = null;
+      state.slopesAsked = '';
+      $('source').textContent = `${meta.photo} · ${meta.styles} · ${state.n} style`
+        + `${state.n === 1 ? '' : 's'}`;
+      if (needPalette) {
+        state.vertices = polygon(state.n);
+        buildTable();
+        drawSpace();
+        state.look.weights = (weights || meta.fitted.weights).slice();
+        moveMarks();
+        $('sure').textContent = `${fitSentence()} Measuring how sure the fit is…`;
+        landscape();
+      }
+    }
+    describe();
+    if (mode === 'look') {
+      await showLook(version);
+    } else {
+      if (!sourceChanged && !state.vertices.length) {
+        state.vertices = polygon(state.n);
+        buildTable();
+        drawSpace();
+        landscape();
+      }
+      if (weights) state.look.weights = weights.slice();
+      if (!state.look.weights.length || state.look.weights.length !== state.n) {
+        state.look.weights = state.meta.fitted.weights.slice();
+      }
+      moveMarks();
+      changed();
+    }
+    record();
+  }
+
   // ---------------------------------------------------------------- start
   async function start() {
     const response = await fetch('api/state');
@@ -730,21 +1103,25 @@
     }
     state.meta = await response.json();
     state.n = state.meta.names.length;
-    state.vertices = polygon(state.n);
-    $('source').textContent = `${state.meta.photo} · ${state.meta.styles}`
-      + ` · ${state.n} style${state.n === 1 ? '' : 's'}`;
-    buildTable();
-    drawSpace();
+    const pick = $('source-pick');
+    state.meta.sources.forEach((choice, i) => {
+      const option = document.createElement('option');
+      option.value = String(i);
+      option.textContent = choice.label;
+      pick.appendChild(option);
+      const other = document.createElement('option');
+      other.value = String(i);
+      other.textContent = `with ${choice.label}`;
+      $('blend-pick').appendChild(other);
+    });
+    $('save-where').textContent = `into ${state.meta.save_dir} (new files, never replacing one)`;
     bindSpace();
     bindSplit();
     bindControls();
     await loadPhoto();
     fitStage();
-    state.look.weights = state.meta.fitted.weights.slice();
-    moveMarks();
-    changed();
-    $('sure').textContent = `${fitSentence()} Measuring how sure the fit is…`;
-    landscape();
+    state.meta = null;  // loaded again by the switch
+    await switchTo(0, 'look');
   }
 
   start().catch((e) => say(`the page could not start (${e.message})`, true));
