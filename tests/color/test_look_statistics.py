@@ -194,3 +194,17 @@ def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tm
             str(folder / f"p{i}.png"))
     naturals = load_naturals(str(folder), "sRGB Encoded Rec.709 (sRGB)")
     assert len(naturals.meta["own"].names) == 3 and len(naturals.names) > 3
+
+
+def test_black_and_white_histograms_rebinned_from_a_finer_grid_hold_no_colour():
+    """Style histograms come at the transfer grid (64^3, 128^3) and are re-binned to 32^3:
+    the colour both binnings blur a grey into is taken off, so the set stays black and
+    white (a 64^3 preset of black-and-white photos was taken for a colour one)."""
+    from wbcgrade.color.presets import StyleSet
+
+    grey = np.repeat(np.random.default_rng(2).random((80, 80, 1)), 3, axis=2)
+    for bins in (64, 128):
+        styles = StyleSet(["a"], image_histogram(grey, bins)[None])
+        assert palette_statistics(styles.at_bins(32), source_bins=bins).spread[0] < 0.006
+    assert palette_statistics(StyleSet(["a"], image_histogram(grey, 64)[None]).at_bins(32)
+                              ).spread[0] > 0.01  # what it was without

@@ -853,7 +853,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 6
+LOOK_VERSION = 8
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -954,7 +954,11 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     natural_stats = _natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
     reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
-    model = statistics_look(tinted_statistics(styles.at_bins(MAP_BINS), natural_stats, reference),
+    # re-binned from a finer grid, the styles' colours were binned twice (a trace of chroma
+    # in a black-and-white set's histograms): both are taken off the chroma spread
+    style_hists = styles.at_bins(MAP_BINS)
+    model = statistics_look(tinted_statistics(style_hists, natural_stats, reference,
+                                              source_bins=styles.bins),
                             natural_stats, _space_scale(styles.working_space),
                             reference=reference)
     size = 17

@@ -100,13 +100,14 @@ def _bands(luma: np.ndarray) -> np.ndarray:
     return out
 
 
-def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
-                       ) -> PaletteStatistics:
+def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None,
+                       source_bins: int | None = None) -> PaletteStatistics:
     """Statistics of (K, n, n, n) histograms (or one (n, n, n)) on the colour grid.
 
     ``centre``: (B, 3) chroma per band from which the least colourful colours are
     measured (default 0, the grey axis; a set's rough tint finds the colours that were
-    grey before it: :func:`tinted_statistics`).
+    grey before it: :func:`tinted_statistics`). ``source_bins``: the grid the
+    histograms were first binned on, when they were re-binned from a finer one.
     """
     hists = np.asarray(hists, dtype=np.float64)
     if hists.ndim == 3:
@@ -135,6 +136,8 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
     # between two nodes; 1/6 on average), independently, which chroma (summed over its three
     # components) takes 1 + 3 |luma weights|^2 times
     binning = (1.0 + 3.0 * float(LUMA @ LUMA)) / (6.0 * (n - 1) ** 2)
+    if source_bins is not None and source_bins > n:  # binned on that grid first
+        binning *= 1.0 + ((n - 1) / (source_bins - 1)) ** 2
     spread = np.sqrt(np.maximum(second - np.sum(mean ** 2, axis=-1) - binning, 0.0))
     whole = np.sqrt(np.maximum(np.sum(mass * spread ** 2, axis=1), 0.0))
     # the least colourful share of each band (bands by nearest centre here)
@@ -161,17 +164,18 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None
 
 
 def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
-                      reference: PaletteStatistics | None = None) -> PaletteStatistics:
+                      reference: PaletteStatistics | None = None,
+                      source_bins: int | None = None) -> PaletteStatistics:
     """:func:`palette_statistics` of a style set, its neutral tints measured from the set's
     rough tint (the median band means' departure from the natural ones): a tint every
     style shows moves what was grey, and the least colourful colours of a strongly
     tinted photo are not what was grey."""
-    first = palette_statistics(hists)
+    first = palette_statistics(hists, source_bins=source_bins)
     centre = reference if reference is not None else naturals
     rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(centre.band_mean, axis=0)
     sd = _robust_sd(naturals.band_mean)
     sigma = np.sqrt((MEDIAN_SE * sd) ** 2 / len(first.quantiles) + (CONTENT_BIAS * sd) ** 2)
-    return palette_statistics(hists, _shrink(rough, sigma))
+    return palette_statistics(hists, _shrink(rough, sigma), source_bins)
 
 
 def _nanmedian(values: np.ndarray, axis: int = 0, keepdims: bool = False) -> np.ndarray:
