@@ -139,7 +139,7 @@ def test_few_natural_palettes_still_give_a_finite_look(n_naturals):
     assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
 
 
-def test_the_grade_applies_the_statistics_look_of_a_style_set_in_full():
+def test_the_grade_applies_the_statistics_look_of_a_style_set_as_far_as_its_halves_agree():
     from wbcgrade.color import look
     from wbcgrade.color.presets import StyleSet
 
@@ -152,7 +152,8 @@ def test_the_grade_applies_the_statistics_look_of_a_style_set_in_full():
     test = np.concatenate([natural_photo(s) for s in range(200, 204)])
     base, extracted, strength = look.set_look_base(style_set([faded_teal(c) for c in contents]),
                                                    naturals)
-    assert extracted.info["method"] == "statistics" and strength == 1.0
+    # applied as far as the set's halves agree on it (here: a look every style shows)
+    assert extracted.info["method"] == "statistics" and strength > 0.6
     before = np.mean(np.abs(faded_teal(test) - test))
     assert np.mean(np.abs(base(test) - faded_teal(test))) < 0.75 * before
     plain = look.set_look_base(style_set(contents), naturals)[0]

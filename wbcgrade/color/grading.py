@@ -517,7 +517,8 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
         strength = confidence + (1.0 - confidence) * set_strength
         why = None
         # the statistics look was shrunk by what content varies by: its size says how much
-        shared = (look_size / 3.0 if look.get("method") == "statistics" else set_strength)
+        shared = (min(set_strength, look_size / 3.0) if look.get("method") == "statistics"
+                  else set_strength)
         if shared < FAINT_STRENGTH and confidence <= 0:
             how = "no" if shared < UNCHANGED_STRENGTH else "little"
             why = (f"these {n_styles} style photos share {how} look that can be told apart "
