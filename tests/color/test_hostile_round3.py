@@ -75,13 +75,13 @@ def photo(tmp_path):
 
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory) -> dict:
-    """The saved grade of a small photo (the ``saved_grade`` of ``apply --json``)."""
+    """The saved grade of a small photo (``apply --save-grade``)."""
     folder = tmp_path_factory.mktemp("saved")
     photo = small_copy(SAMPLES / "chelsea.jpg", folder / "cat.png", width=48)
-    result = run("apply", photo, "--preset", "warm", "-o", folder / "out.png", "--json",
-                 *FAST_ARGS)
+    result = run("apply", photo, "--preset", "warm", "-o", folder / "out.png",
+                 "--save-grade", folder / "grade.json", *FAST_ARGS)
     assert result.exit_code == 0, result.output
-    return json.loads(result.stdout)["saved_grade"]
+    return json.loads((folder / "grade.json").read_text())
 
 
 def _write_look(path: Path, entry: dict) -> Path:
