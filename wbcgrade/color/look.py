@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
+from wbcgrade.color.look_statistics import hats as _hats
 from wbcgrade.color.remap import TONE_LUMA, monochrome_map
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
@@ -80,18 +81,6 @@ SET_RIDGE = 1e-3
 #: 0.61 (0.6) to 0.53 (1.0): every style's content is the average natural palette,
 #: and the coordinates are not fitted.
 DEFAULT_CONTENT_SHRINK = 1.0
-
-
-def _hats(t: np.ndarray, knots: int) -> np.ndarray:
-    """(N,) values in [0, 1] -> (N, knots) piecewise-linear hat functions (a partition of 1)."""
-    pos = np.clip(t, 0.0, 1.0) * (knots - 1)
-    base = np.minimum(pos.astype(np.int64), knots - 2)
-    frac = pos - base
-    out = np.zeros((len(t), knots))
-    rows = np.arange(len(t))
-    out[rows, base] = 1.0 - frac
-    out[rows, base + 1] = frac
-    return out
 
 
 @dataclass(frozen=True)

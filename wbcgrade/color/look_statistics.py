@@ -88,16 +88,21 @@ class PaletteStatistics:
     band_neutral: np.ndarray
 
 
-def _bands(luma: np.ndarray) -> np.ndarray:
-    """(N,) luma -> (N, B) tent memberships (a partition of 1)."""
-    pos = np.clip(luma, 0.0, 1.0) * (BANDS - 1)
-    base = np.minimum(pos.astype(np.int64), BANDS - 2)
+def hats(t: np.ndarray, knots: int) -> np.ndarray:
+    """(N,) values in [0, 1] -> (N, knots) piecewise-linear hat functions (a partition of 1)."""
+    pos = np.clip(t, 0.0, 1.0) * (knots - 1)
+    base = np.minimum(pos.astype(np.int64), knots - 2)
     frac = pos - base
-    out = np.zeros((len(luma), BANDS))
-    rows = np.arange(len(luma))
+    out = np.zeros((len(t), knots))
+    rows = np.arange(len(t))
     out[rows, base] = 1.0 - frac
     out[rows, base + 1] = frac
     return out
+
+
+def _bands(luma: np.ndarray) -> np.ndarray:
+    """(N,) luma -> (N, B) tent memberships of the lightness bands."""
+    return hats(luma, BANDS)
 
 
 def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None,
