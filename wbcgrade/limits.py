@@ -24,10 +24,12 @@ import io
 import os
 import zipfile
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from wbcgrade.errors import InputError
+
+if TYPE_CHECKING:  # numpy is imported where arrays are read (`wbcgrade --help` needs none)
+    import numpy as np
 
 __all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
            "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
@@ -141,6 +143,8 @@ def read_npy(path: str | os.PathLike, max_bytes: int = MAX_ARRAY_BYTES) -> np.nd
 
 
 def _read_member(member, name: str, where, max_bytes: int) -> np.ndarray:
+    import numpy as np
+
     fmt = np.lib.format
     version = fmt.read_magic(member)
     if version == (1, 0):

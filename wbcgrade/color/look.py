@@ -36,8 +36,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
+from wbcgrade.color.look_statistics import LUMA as TONE_LUMA
 from wbcgrade.color.look_statistics import hats as _hats
-from wbcgrade.color.remap import TONE_LUMA, monochrome_map
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
@@ -1244,4 +1244,8 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
     info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
             "content": content}
     lattice = look.lattice(map_size)
-    return (monochrome_map(lattice) if extracted.info.get("monochrome") else lattice), info
+    if extracted.info.get("monochrome"):
+        from wbcgrade.color.remap import monochrome_map
+
+        lattice = monochrome_map(lattice)
+    return lattice, info

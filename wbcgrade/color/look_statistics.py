@@ -34,14 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbcgrade.color.histogram import grid_points
-from wbcgrade.color.remap import TONE_LUMA
 
 __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
            "statistics_look",
            "QUANTILES", "BANDS"]
 
-#: Rec.709 luma weights on encoded values (the look family's lightness).
-LUMA = TONE_LUMA
+#: Rec.709 luma weights on encoded values (the look family's lightness; toning is a
+#: function of it: :data:`wbcgrade.color.remap.TONE_LUMA`).
+LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: Levels of the luma quantiles compared (black and white levels at the ends).
 QUANTILES = np.array([0.005, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
                       0.98, 0.995])

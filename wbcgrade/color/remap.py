@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
 from wbcgrade.core._jit import compiled, in_bands
 
 __all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
@@ -234,7 +235,7 @@ def monotone_lightness(color_map: np.ndarray,
 
 
 #: Luma of the look family (Rec.709 weights on encoded values) that toning is a function of.
-TONE_LUMA = np.array([0.2126, 0.7152, 0.0722])
+TONE_LUMA = LOOK_LUMA
 
 
 def monochrome_toning(color_map: np.ndarray, tol: float = 2e-3
