@@ -220,6 +220,7 @@ class Executor:
         SIGKILL after ``grace_s``; the caller removes what they had half-written.
         """
         processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        _quiet_broken_pool_thread()
         for process in processes:
             with contextlib.suppress(Exception):
                 process.terminate()
@@ -283,3 +284,27 @@ class Executor:
                 yield futures[future], future.result()
         finally:
             self.client.cancel(list(futures))
+
+
+def _quiet_broken_pool_thread() -> None:
+    """Let the pool's manager thread find its workers gone without a traceback.
+
+    Python 3.11's ``ProcessPoolExecutor`` marks every pending future failed when a
+    worker dies, cancelled ones included, which raises ``InvalidStateError`` in
+    that thread (printed as "Exception in thread ..."): an interrupted run stops
+    its workers on purpose, so that error says nothing and is not printed.
+    """
+    import concurrent.futures
+    import threading
+
+    previous = threading.excepthook
+    if getattr(previous, "_wbcgrade_quiet", False):
+        return
+
+    def hook(args) -> None:
+        if isinstance(args.exc_value, concurrent.futures.InvalidStateError):
+            return
+        previous(args)
+
+    hook._wbcgrade_quiet = True  # type: ignore[attr-defined]
+    threading.excepthook = hook

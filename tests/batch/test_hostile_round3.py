@@ -96,7 +96,7 @@ def test_sigterm_to_a_parallel_batch_stops_its_workers_and_the_rerun_heals(shoot
     finally:
         batch.kill()
     assert batch.returncode == 128 + signal.SIGTERM, stderr
-    assert "Traceback" not in stderr
+    assert "Traceback" not in stderr, stderr
     assert took < 10, f"the batch took {took:.1f} s to end after SIGTERM"  # 23 s before
     published, recorded = _published(out), _recorded(out)
     assert len(published) < 10, "the batch went on after SIGTERM until it had finished"
