@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> None:
         rows.append(row)
         crop = row.get("cropped_mean")
         print(f"{look:26s} {row['group']:8s} {row['mean']:+6.3f} {row['worst']:+6.3f} "
-              f"{crop if crop is None else format(crop, '+7.3f'):>7} "
+              f"{'-' if crop is None else format(crop, '+7.3f'):>7} "
               f"{'' if crop is None else format(abs(crop - row['mean']), '5.3f'):>5} "
               f"{row['learn_s']:5.1f} ({row['learn_cpu_s']:4.1f}) "
               f"{row.get('cropped_s', float('nan')):5.1f} "
