@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
-from wbcgrade.color.look_statistics import LUMA as TONE_LUMA
+from wbcgrade.color.look_statistics import LUMA
 from wbcgrade.color.look_statistics import hats as _hats
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
@@ -45,8 +45,6 @@ __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences
            "fit_correction", "fit_pairs_look",
            "set_look_base", "set_look_halves", "look_reliability"]
 
-#: Rec.709 luma weights (on encoded values: a lightness proxy, as colourists' luma).
-LUMA = TONE_LUMA
 
 #: Knots of each 1-D curve, evenly spaced on [0, 1].
 DEFAULT_KNOTS = 9
@@ -908,18 +906,7 @@ def _natural_statistics(naturals, cache_from=None):
             found = None
     if found is None:
         found = palette_statistics(naturals.at_bins(MAP_BINS))
-        if path is not None:
-            import os
-            import tempfile
-
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-                with os.fdopen(handle, "wb") as out:
-                    np.savez(out, **{f: getattr(found, f) for f in _STAT_FIELDS})
-                os.replace(tmp, path)
-            except OSError:
-                pass
+        _write_cache_entry(path, **{f: getattr(found, f) for f in _STAT_FIELDS})
     _NATURAL_STATISTICS[key] = found
     return found
 
@@ -1044,25 +1031,33 @@ def _read_cached_look(key: str, styles=None) -> LookResult | None:
 def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
+
+    _write_cache_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
+                       knots=result.look.knots, weights=result.weights, losses=result.losses,
+                       info=json.dumps(result.info))
+
+
+def _write_cache_entry(path, **arrays) -> None:
+    """Write a looks' cache entry (an ``.npz``) atomically; best effort: a cache that cannot
+    be written is skipped (None: caching is off)."""
     import os
     import tempfile
 
-    path = _look_cache_path(key, styles)
     if path is None:
         return
+    tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
         with os.fdopen(handle, "wb") as out:
-            np.savez(out, coefficients=result.look.coefficients, knots=result.look.knots,
-                     weights=result.weights, losses=result.losses,
-                     info=json.dumps(result.info))
+            np.savez(out, **arrays)
         os.replace(tmp, path)
     except OSError:
-        try:
-            os.unlink(tmp)
-        except (OSError, UnboundLocalError):
-            pass
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
 
 
 #: Styles each half of a set needs for the statistics look to be checked by its halves'
