@@ -340,5 +340,5 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
             "tone_raw": [round(float(v), 4) for v in sty_q - nat_q],
             "saturation": [round(float(v), 3) for v in saturation],
             "tint": [[round(float(v), 4) for v in row] for row in tint],
-            "styles": n_styles, "naturals": len(naturals.quantiles)}
+            "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference}
     return StatisticsLook(tone_in, tone_out, saturation, tint, monochrome, info)
