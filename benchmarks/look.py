@@ -328,6 +328,9 @@ def nothing(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np
 #: A preset of natural palettes that replaces the shipped one (``--natural``): palettes of
 #: photos other than the benchmark's, so nothing needs holding out.
 NATURAL_FILE: str | None = None
+#: How the graded framing of a shot-matching case is shot (``--framing``): "plain", "dark"
+#: (2.5 stops under: 0.18 x its encoded values, then the look) or "flipped" (left to right).
+GRADED_FRAMING = "plain"
 
 
 def natural_preset(context: Context) -> str:
@@ -576,6 +579,11 @@ def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> 
         if case.protocol == "shot":
             photo = framings(photos.photo(name))[1]
             truth = framings(photos.looked(case.look, name))[1]
+            if GRADED_FRAMING == "dark":  # shot 2.5 stops under (sRGB-encoded: x 0.18 ~ 2.5 stops)
+                photo = to_8bit(0.18 * photo)
+                truth = to_8bit(LOOKS[case.look].apply(photo))
+            elif GRADED_FRAMING == "flipped":
+                photo, truth = photo[:, ::-1].copy(), truth[:, ::-1].copy()
         else:
             photo, truth = photos.photo(name), photos.looked(case.look, name)
         truth_lab, photo_lab = lab(truth), lab(photo)
@@ -801,6 +809,9 @@ def main(argv: list[str] | None = None) -> None:
                         "(default --photos; --looks film: 12)")
     parser.add_argument("--natural", type=Path, help="a preset (.npz) of natural palettes of "
                         "photos other than the benchmark's, for wbcgrade's content model")
+    parser.add_argument("--framing", choices=["plain", "dark", "flipped"], default="plain",
+                        help="shot matching: the graded framing as it is, 2.5 stops darker, "
+                        "or flipped left to right")
     parser.add_argument("--graded", type=int,
                         help="grade only the first K photos of each case (--quick: 3)")
     parser.add_argument("--size", type=int, help="long side in px (default 768; --quick: 384)")
@@ -836,9 +847,10 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit("--photos must be in 1..10 and --graded at least 1")
     film = any(lk in FILM_LOOKS for lk in looks)
     n_styles = args.styles or (12 if film and args.photos <= 8 else args.photos)
+    global NATURAL_FILE, GRADED_FRAMING
     if args.natural is not None:
-        global NATURAL_FILE
         NATURAL_FILE = str(args.natural.resolve())
+    GRADED_FRAMING = args.framing
 
     photos = Photos(args.photo_dir, size, args.cache_dir)
     cases = make_cases(photos.names(), looks, protocols, args.photos, graded, n_styles)
@@ -867,7 +879,8 @@ def main(argv: list[str] | None = None) -> None:
 
     results = {"settings": {"size": size, "photos_per_set": args.photos, "graded": graded,
                             "styles_per_set": n_styles, "natural": NATURAL_FILE,
-                            "framing": FRAMING, "shuffle_seed": SHUFFLE_SEED,
+                            "framing": FRAMING, "graded_framing": GRADED_FRAMING,
+                            "shuffle_seed": SHUFFLE_SEED,
                             "rotation": ROTATION, "photo_dir": str(args.photo_dir),
                             "methods": methods, "looks": looks, "jobs": args.jobs,
                             "seconds_total": total},

@@ -50,6 +50,25 @@ def test_the_look_read_off_the_overlap_is_the_look(photos):
     assert error(found.look(right), truth) < 0.15 * error(right, truth)
 
 
+def test_dark_and_flipped_framings_find_their_scene_and_its_look(photos):
+    """A framing shot two and a half stops darker (the keypoints are found on ranked
+    lightness: a tone curve does not change them), or flipped left to right (matched on
+    the mirrored photo when nothing matches as it is), still finds its scene; the look
+    read off the flipped overlap is the look."""
+    styles = [scene_image(warm_look(halves(photos[n])[0]).astype(np.float32)) for n in NAMES]
+    for name in ("aitzgorri", "sunset"):
+        right = halves(photos[name])[1]
+        dark = scene_image((0.18 * right).astype(np.float32))
+        assert match_scene(dark, styles[NAMES.index(name)]) is not None, name
+        flipped = np.ascontiguousarray(right[:, ::-1])
+        assert match_scene(scene_image(flipped.astype(np.float32)),
+                           styles[NAMES.index(name)]) is None  # not as it is
+        found = fit_scene_look(scene_image(flipped.astype(np.float32)), styles)
+        assert found is not None and list(found.matches) == [NAMES.index(name)], name
+        truth = warm_look(flipped)
+        assert error(found.look(flipped), truth) < 0.25 * error(flipped, truth), name
+
+
 def test_no_scene_without_a_match_and_none_from_palettes_alone(photos):
     from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.presets import StyleSet

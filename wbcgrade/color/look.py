@@ -655,10 +655,10 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
 
     Returns None when no style shows the scene.
     """
-    from wbcgrade.color.scene import colour_pairs, match_scene
+    from wbcgrade.color.scene import colour_pairs, match_scene, mirrored, unmirror
 
     prior = prior or LookMap.identity()
-    matches, parts = {}, []
+    matches = {}
     for index, style in enumerate(styles):
         if style is None:
             continue
@@ -669,7 +669,17 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
                 why[index] = reasons[0]
             continue
         matches[index] = match
-        sources, targets, weights = colour_pairs(photo, style, match)
+    if not matches and any(style is not None for style in styles):  # a flipped framing?
+        flipped, width = mirrored(photo), photo.colors.shape[1]
+        for index, style in enumerate(styles):
+            match = match_scene(flipped, style) if style is not None else None
+            if match is not None:
+                matches[index] = unmirror(match, width)
+                if why is not None:
+                    why.pop(index, None)
+    parts = []
+    for index, match in matches.items():
+        sources, targets, weights = colour_pairs(photo, styles[index], match)
         parts.append((sources, targets, weights * match.sureness / max(len(weights), 1)))
     if not matches or not any(p[2].sum() > 0 for p in parts):
         return None

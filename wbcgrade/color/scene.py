@@ -10,13 +10,17 @@ tell content from look.
 
 The steps, on images of at most :data:`MATCH_SIZE` pixels a side:
 
-1. SIFT keypoints on the lightness of both images (features that survive a
+1. SIFT keypoints on the lightness of both images, each equalised (its
+   lightness replaced by its rank: any monotone change of tone, a dark or a
+   flat frame included, gives the same image) (features that survive a
    change of tone and colour: gradient orientations);
 2. descriptor matches kept by the ratio test, then a homography fitted with
    RANSAC; a match counts when enough keypoints agree (:data:`MIN_INLIERS`;
    photos of other scenes give a handful by chance) and the homography is a
    plausible change of framing (no mirror image, scale within a factor 4);
-3. the style image warped onto the photo's frame; pixels of the overlap
+3. when no style photo shows the scene so, the same with the photo mirrored
+   (a framing flipped left to right);
+4. the style image warped onto the photo's frame; pixels of the overlap
    (away from its border, down-weighted on edges where a small misalignment
    mixes colours) give the pairs.
 
@@ -37,7 +41,8 @@ import numpy as np
 from wbcgrade.errors import InputError
 from wbcgrade.limits import key_bytes, read_cache_entry
 
-__all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
+__all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
+           "colour_pairs",
            "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
 #: Long side (pixels) of the images keypoints are found on and pairs are read from.
@@ -56,7 +61,9 @@ MIN_COVERAGE = 0.05
 MAX_FEATURES = 4000
 CONTRAST = 0.02
 #: Bumped when what is cached (size, features) changes.
-SCENE_VERSION = 1
+SCENE_VERSION = 2
+#: Levels of the lightness whose ranks the keypoints are found on.
+RANK_LEVELS = 4096
 
 
 def _cv2():
@@ -113,6 +120,17 @@ def _lightness8(colors: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(luma * 255.0), 0, 255).astype(np.uint8)
 
 
+def _ranked_lightness8(colors: np.ndarray) -> np.ndarray:
+    """(h, w) uint8: the lightness equalised (each pixel's rank among the image's, on
+    :data:`RANK_LEVELS` levels), so keypoints do not depend on the image's tone curve."""
+    luma = np.asarray(colors, dtype=np.float32) @ np.float32([0.299, 0.587, 0.114])
+    levels = np.clip(np.rint(luma * (RANK_LEVELS - 1)), 0, RANK_LEVELS - 1).astype(np.int64)
+    counts = np.bincount(levels.ravel(), minlength=RANK_LEVELS).astype(np.float64)
+    below = np.cumsum(counts) - counts  # pixels darker than each level
+    rank = (below + (counts - 1) / 2) / max(levels.size - 1, 1)  # ties: their middle rank
+    return np.clip(np.rint(rank[levels] * 255.0), 0, 255).astype(np.uint8)
+
+
 def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
     cv2 = _cv2()
     h, w = colors.shape[:2]
@@ -129,7 +147,7 @@ def scene_image(colors: np.ndarray, size: int = MATCH_SIZE) -> SceneImage:
     cv2 = _cv2()
     small = _shrink(colors, size)
     sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=CONTRAST)
-    keypoints, descriptors = sift.detectAndCompute(_lightness8(small), None)
+    keypoints, descriptors = sift.detectAndCompute(_ranked_lightness8(small), None)
     if descriptors is None or not keypoints:
         return SceneImage(small, np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
     points = np.float32([k.pt for k in keypoints])
@@ -170,6 +188,18 @@ def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
         return no(f"the framings overlap on {coverage:.0%} of the photo, "
                   f"{MIN_COVERAGE:.0%} needed")
     return SceneMatch(homography, inliers, coverage)
+
+
+def mirrored(photo: SceneImage) -> SceneImage:
+    """The photo flipped left to right, with its own keypoints (for :func:`unmirror`)."""
+    return scene_image(photo.colors[:, ::-1], size=max(photo.colors.shape[:2]))
+
+
+def unmirror(match: SceneMatch, width: int) -> SceneMatch:
+    """A match on the :func:`mirrored` photo (``width`` pixels wide) as a match on the
+    photo itself: its homography followed by the flip."""
+    flip = np.array([[-1.0, 0.0, width - 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    return SceneMatch(flip @ match.homography, match.inliers, match.coverage)
 
 
 def _plausible(homography: np.ndarray) -> bool:
