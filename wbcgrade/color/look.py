@@ -892,10 +892,10 @@ def _natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
-    from wbcgrade.limits import read_cache_entry
+    from wbcgrade.color.cache import read_entry, write_entry
 
     found = None
-    data = read_cache_entry(path) if path is not None and path.is_file() else None
+    data = read_entry(path)
     if data is not None:
         try:
             found = PaletteStatistics(**{f: np.asarray(data[f], np.float64)
@@ -906,7 +906,7 @@ def _natural_statistics(naturals, cache_from=None):
             found = None
     if found is None:
         found = palette_statistics(naturals.at_bins(MAP_BINS))
-        _write_cache_entry(path, **{f: getattr(found, f) for f in _STAT_FIELDS})
+        write_entry(path, **{f: getattr(found, f) for f in _STAT_FIELDS})
     _NATURAL_STATISTICS[key] = found
     return found
 
@@ -997,26 +997,20 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
 
 
 def _look_cache_path(key: str, styles=None):
-    """Where a set's look is kept: the styles' cache folder (``meta["cache_dir"]``, None
-    when the command said ``--no-cache``), else the default one."""
-    from pathlib import Path
+    """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
+    ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`);
+    None when the command said ``--no-cache``."""
+    from wbcgrade.color.cache import cache_folder, entry_path
 
-    from wbcgrade.color.histogram import default_cache_dir
-
-    meta = getattr(styles, "meta", {}) or {}
-    folder = meta["cache_dir"] if "cache_dir" in meta else default_cache_dir()
-    return None if folder is None else Path(folder) / "looks" / f"{key}.npz"
+    return entry_path(cache_folder(styles), "looks", key)
 
 
 def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
 
-    path = _look_cache_path(key, styles)
-    if path is None:
-        return None
-    from wbcgrade.limits import read_cache_entry
+    from wbcgrade.color.cache import read_entry
 
-    data = read_cache_entry(path)  # a damaged entry: removed, the look extracted again
+    data = read_entry(_look_cache_path(key, styles))  # damaged: removed, extracted again
     try:
         look = LookMap(np.array(data["coefficients"], dtype=np.float64), int(data["knots"]))
         if look.coefficients.shape != (3, 4 * look.knots) \
@@ -1032,32 +1026,11 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
 
-    _write_cache_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
-                       knots=result.look.knots, weights=result.weights, losses=result.losses,
-                       info=json.dumps(result.info))
+    from wbcgrade.color.cache import write_entry
 
-
-def _write_cache_entry(path, **arrays) -> None:
-    """Write a looks' cache entry (an ``.npz``) atomically; best effort: a cache that cannot
-    be written is skipped (None: caching is off)."""
-    import os
-    import tempfile
-
-    if path is None:
-        return
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, **arrays)
-        os.replace(tmp, path)
-    except OSError:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
+                knots=result.look.knots, weights=result.weights, losses=result.losses,
+                info=json.dumps(result.info))
 
 
 #: Styles each half of a set needs for the statistics look to be checked by its halves'

@@ -25,17 +25,14 @@ Feature detection and matching use OpenCV.
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.cache import cache_folder, entry_path, file_key, read_entry, write_entry
 from wbcgrade.errors import InputError
-from wbcgrade.limits import key_bytes, read_cache_entry
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
            "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
@@ -219,19 +216,19 @@ def colour_pairs(photo: SceneImage, style: SceneImage, match: SceneMatch,
 # ------------------------------------------------------------------------ style images
 
 
-def _scene_cache_path(path: Path, working_space: str, folder: Path) -> Path | None:
+def _scene_cache_path(path: Path, working_space: str, folder: Path | None) -> Path | None:
+    """The entry of a style photo prepared for matching: ``scenes/`` in ``folder`` (None:
+    not cached), keyed by the file, the working space and the matching settings."""
     try:
-        stat = path.stat()
+        key = (f"{file_key(path)}|{working_space}|{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|"
+               f"{SCENE_VERSION}")
     except OSError:
         return None
-    key = hashlib.sha1(key_bytes(
-        f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{working_space}|"
-        f"{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|{SCENE_VERSION}")).hexdigest()
-    return folder / "scenes" / f"{key}.npz"
+    return entry_path(folder, "scenes", key)
 
 
 def _read_cached(path: Path | None) -> SceneImage | None:
-    data = read_cache_entry(path)
+    data = read_entry(path)
     try:
         return SceneImage(data["colors"].astype(np.float32),
                           data["points"].astype(np.float32),
@@ -242,22 +239,8 @@ def _read_cached(path: Path | None) -> SceneImage | None:
 
 def _write_cached(path: Path | None, image: SceneImage) -> None:
     """Best effort: a cache that cannot be written is skipped."""
-    if path is None:
-        return
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, colors=image.colors.astype(np.float16), points=image.points,
-                     descriptors=image.descriptors.astype(np.float16))
-        os.replace(tmp, path)
-    except (OSError, ValueError):
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_entry(path, colors=image.colors.astype(np.float16), points=image.points,
+                descriptors=image.descriptors.astype(np.float16))
 
 
 def _read_style(path: Path, working_space: str) -> SceneImage:
@@ -290,9 +273,9 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     A :class:`~wbcgrade.color.presets.StyleSet` loaded from a folder names its
     files (``meta["files"]``); one built from arrays may carry the images
     themselves (``meta["images"]``: (H, W, 3) working-space colours); a preset
-    holds palettes only (all None). Images read from files are kept in the
-    style cache folder (``meta["cache_dir"]``, beside the histograms; None:
-    not cached), in ``scenes/``, keyed by the file and the working space.
+    holds palettes only (all None). Images read from files are kept in ``scenes/``
+    in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`, beside
+    the histograms), keyed by the file and the working space.
     """
     images: Sequence = styles.meta.get("images") or ()
     files: Sequence = styles.meta.get("files") or ()
@@ -304,9 +287,8 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
             found = scene_image(np.asarray(images[i], dtype=np.float32))
         elif i < len(files) and files[i]:
             path = Path(files[i])
-            folder = styles.meta.get("cache_dir") if cache else None
-            where = (_scene_cache_path(path, styles.working_space, Path(folder))
-                     if folder else None)
+            where = _scene_cache_path(path, styles.working_space,
+                                      cache_folder(styles) if cache else None)
             found = _IN_MEMORY.get(where) if where is not None else None
             found = found or _read_cached(where)
             if found is None:
