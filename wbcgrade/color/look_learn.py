@@ -275,7 +275,9 @@ class Registration:
 
 
 def _luma(colors: np.ndarray) -> np.ndarray:
-    return np.asarray(colors, np.float32) @ np.float32([0.299, 0.587, 0.114])
+    from wbcgrade.color.colorspace import SYCC_LUMA
+
+    return np.asarray(colors, np.float32) @ np.float32(SYCC_LUMA)
 
 
 def _rotation_homography(shape_after: tuple[int, int], turns: int,

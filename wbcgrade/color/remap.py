@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
 from wbcgrade.core._jit import compiled, in_bands
 
 __all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
-           "monotone_lightness", "LUMA_WEIGHTS", "TONE_LUMA", "monochrome_toning",
+           "monotone_lightness", "TONE_LUMA", "monochrome_toning",
            "to_monochrome", "monochrome_map"]
 
 
@@ -181,11 +182,6 @@ def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:
     return encoding.from_oklab(mapped)
 
 
-#: Luma of sRGB-encoded RGB (sYCC: BT.601 weights, as JPEG's Y'CbCr); other working
-#: spaces have their own (``ColorEncoding.luma_weights``).
-LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114])
-
-
 def monotone_lightness(color_map: np.ndarray,
                        luma_weights: np.ndarray | None = None) -> np.ndarray:
     """A colour map whose output luma never decreases when an input channel increases.
@@ -206,13 +202,14 @@ def monotone_lightness(color_map: np.ndarray,
     ----------
     color_map : (n, n, n, 3) working-space colours in [0, 1].
     luma_weights : (3,) the working encoding's luma weights, summing to 1
-        (default :data:`LUMA_WEIGHTS`, sRGB's).
+        (default sRGB's, :data:`wbcgrade.color.colorspace.SYCC_LUMA`; other working
+        spaces have their own, ``ColorEncoding.luma_weights``).
 
     Returns
     -------
     (n, n, n, 3) float32 in [0, 1].
     """
-    weights = LUMA_WEIGHTS if luma_weights is None else np.asarray(luma_weights, np.float64)
+    weights = np.asarray(SYCC_LUMA if luma_weights is None else luma_weights, np.float64)
     table = np.asarray(color_map, dtype=np.float64)
     luma = table @ weights
     target = luma.copy()

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.color.cache import cache_folder, entry_path, file_key, read_entry, write_entry
+from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
@@ -106,7 +107,7 @@ class SceneMatch:
 
 
 def _lightness8(colors: np.ndarray) -> np.ndarray:
-    luma = np.asarray(colors, dtype=np.float32) @ np.float32([0.299, 0.587, 0.114])
+    luma = np.asarray(colors, dtype=np.float32) @ np.float32(SYCC_LUMA)
     return np.clip(np.rint(luma * 255.0), 0, 255).astype(np.uint8)
 
 
