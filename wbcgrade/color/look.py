@@ -38,6 +38,7 @@ import numpy as np
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
 from wbcgrade.color.look_statistics import LUMA
 from wbcgrade.color.look_statistics import hats as _hats
+from wbcgrade.color.remap import interpolate_lattice, resample_lattice
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
@@ -184,25 +185,6 @@ def push_histogram(hist: np.ndarray, look: LookMap, bins: int | None = None) -> 
     keep = np.flatnonzero(flat > 0)
     points = grid_points(n)[keep]
     return soft_histogram(look(points), bins or n, flat[keep])
-
-
-def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
-    """An (m, m, m, 3) lattice LUT read trilinearly at a (size, size, size) grid -> float32."""
-    lattice = np.asarray(lattice, dtype=np.float64)
-    if lattice.shape[0] == size:
-        return lattice.astype(np.float32)
-    points = grid_points(size)
-    return _trilinear(lattice, points).reshape(size, size, size, 3).astype(np.float32)
-
-
-def _trilinear(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
-    """Interpolate (n, n, n, C) grid values at (N, 3) colours in [0, 1] -> (N, C)."""
-    from scipy.ndimage import map_coordinates
-
-    n = values.shape[0]
-    coords = (np.clip(colors, 0.0, 1.0) * (n - 1)).T
-    return np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
-                     for c in range(values.shape[-1])], axis=1)
 
 
 def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float = 1.5,
@@ -415,8 +397,8 @@ def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width:
     moved = look(points)
     projection, kept = relaxed_correspondences(push_histogram(photo, look), style, width,
                                                relaxation)
-    mass = flat[used] * _trilinear(kept[..., None], moved)[:, 0]
-    return points, _trilinear(projection, moved), mass, moved
+    mass = flat[used] * interpolate_lattice(kept[..., None], moved)[:, 0]
+    return points, interpolate_lattice(projection, moved), mass, moved
 
 
 @dataclass(frozen=True)
@@ -582,7 +564,8 @@ class SceneLook:
         if self.correction is None:
             return mapped
         flat = mapped.reshape(-1, 3)
-        return np.clip(flat + _trilinear(self.correction, flat), 0.0, 1.0).reshape(mapped.shape)
+        moved = flat + interpolate_lattice(self.correction, flat)
+        return np.clip(moved, 0.0, 1.0).reshape(mapped.shape)
 
     def lattice(self, size: int = 33) -> np.ndarray:
         """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""

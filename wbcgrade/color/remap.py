@@ -14,7 +14,8 @@ from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
 from wbcgrade.core._jit import compiled, in_bands
 
-__all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
+__all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
+           "identity_map", "blend_map", "keep_lightness",
            "monotone_lightness", "TONE_LUMA", "monochrome_toning",
            "to_monochrome", "monochrome_map"]
 
@@ -118,6 +119,43 @@ def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
     in_bands(_block_means_mapped, h, colors, table, np.float32(strength), int(step), mapped,
              source_means, min_band=1)
     return (mapped, source_means) if with_source else mapped
+
+
+def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
+    """An (n, n, n, C) lattice read trilinearly at a (size, size, size) grid -> float32.
+
+    The lattice-to-lattice reader (a preset's look at the map size, the explorer's
+    maps at its LUT size). At lattice nodes trilinear interpolation is separable: a
+    (size, n) linear interpolation along each axis in turn, in float64 (a millisecond,
+    where a pass over the size^3 nodes as pixels takes tens). The lattice itself when
+    ``n == size``. LUT export samples with :func:`apply_color_map` instead, so that a
+    LUT holds what the pixels get.
+    """
+    n = lattice.shape[0]
+    if n == size:
+        return np.asarray(lattice, dtype=np.float32)
+    position = np.linspace(0.0, n - 1.0, size)
+    low = np.minimum(position.astype(np.int64), n - 2)
+    frac = position - low
+    weights = np.zeros((size, n))
+    weights[np.arange(size), low] = 1.0 - frac
+    weights[np.arange(size), low + 1] += frac
+    out = np.einsum("ai,ijkc->ajkc", weights, np.asarray(lattice, dtype=np.float64))
+    out = np.einsum("bj,ajkc->abkc", weights, out)
+    out = np.einsum("ck,abkd->abcd", weights, out)
+    return out.astype(np.float32)
+
+
+def interpolate_lattice(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """(n, n, n, C) lattice values read trilinearly at (N, 3) colours in [0, 1] -> (N, C)
+    float64 (the fits' reader: any number of channels, float64 throughout; pixels go
+    through :func:`apply_color_map`)."""
+    from scipy.ndimage import map_coordinates
+
+    n = values.shape[0]
+    coords = (np.clip(colors, 0.0, 1.0) * (n - 1)).T
+    return np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
+                     for c in range(values.shape[-1])], axis=1)
 
 
 def identity_map(bins: int, dtype=np.float32) -> np.ndarray:
