@@ -584,10 +584,10 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.smooth_map import _interpolation_matrix
+    from wbcgrade.color.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
-    interpolate = _interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
+    interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
     second = sparse.diags([np.ones(nodes - 1), -2.0 * np.ones(nodes), np.ones(nodes - 1)],
                           [-1, 0, 1], shape=(nodes, nodes)).tolil()
     second[0, :] = 0.0
@@ -690,7 +690,7 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     look : :class:`SceneLook` (no matches, confidence 1).
     robust : (N,) the final robust weights.
     """
-    from wbcgrade.core._cpu import fast_cpu
+    from wbcgrade.core import fast_cpu
 
     prior = prior or LookMap.identity()
     look, robust = prior, (weights if robust is None else robust)

@@ -12,7 +12,7 @@ import numpy as np
 
 from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
-from wbcgrade.core._jit import compiled, in_bands
+from wbcgrade.core import compiled, in_bands
 
 __all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
            "identity_map", "blend_map", "keep_lightness",
@@ -52,7 +52,7 @@ def _mapped(table, x0, x1, x2, strength, out) -> None:  # pragma: no cover - com
 def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.ndarray,
                lo: int, hi: int) -> None:  # pragma: no cover - compiled
     """Colours lo:hi of (N, 3) ``colors`` through the map into ``out`` (one band of
-    :func:`wbcgrade.core._jit.in_bands`)."""
+    :func:`wbcgrade.core.in_bands`)."""
     for p in range(lo, hi):
         _mapped(table, colors[p, 0], colors[p, 1], colors[p, 2], strength, out[p])
 

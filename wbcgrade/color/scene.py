@@ -36,7 +36,8 @@ from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "colour_pairs",
-           "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
+           "style_scene_images", "has_style_images", "shrink_colors", "MATCH_SIZE",
+           "MIN_INLIERS", "SURE_INLIERS"]
 
 #: Long side (pixels) of the images keypoints are found on and pairs are read from.
 MATCH_SIZE = 768
@@ -111,7 +112,9 @@ def _lightness8(colors: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(luma * 255.0), 0, 255).astype(np.uint8)
 
 
-def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
+def shrink_colors(colors: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, C) colours with their long side at most ``size`` (OpenCV's area average;
+    float32; the colours themselves when already that small)."""
     cv2 = _cv2()
     h, w = colors.shape[:2]
     scale = size / max(h, w)
@@ -125,7 +128,7 @@ def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
 def scene_image(colors: np.ndarray, size: int = MATCH_SIZE) -> SceneImage:
     """Shrink (H, W, 3) working-space colours in [0, 1] and find their keypoints."""
     cv2 = _cv2()
-    small = _shrink(colors, size)
+    small = shrink_colors(colors, size)
     sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=CONTRAST)
     keypoints, descriptors = sift.detectAndCompute(_lightness8(small), None)
     if descriptors is None or not keypoints:

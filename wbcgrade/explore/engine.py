@@ -650,17 +650,17 @@ class ExactGrader:
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
-        from wbcgrade.color.fit import _loss_at, _problem
+        from wbcgrade.color.fit import fit_problem, loss_at
 
         fit = self.base.fit
         if self._loss_problem is None:
-            self._loss_problem = _problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
+            self._loss_problem = fit_problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
                                           fit)
         target, hists, geometry = self._loss_problem
         out = []
         for row in rows:
             weights = np.asarray(row, dtype=np.float64)
-            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), fit))
+            out.append(loss_at(target, hists, geometry, weights / weights.sum(), fit))
         return out
 
 
