@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.color.conftest import SAMPLES, small_copy
 from wbcgrade.color import cache
 from wbcgrade.color.histogram import HistogramCache, soft_histogram
 from wbcgrade.color.options import DEFAULT_MAX_PIXELS
@@ -102,13 +101,10 @@ def test_an_unwritable_folder_warns_once_and_the_value_is_still_returned(tmp_pat
     assert len(warnings) == 1
 
 
-def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_path):
+def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_path, style_dir,
+                                                                        photo):
     """The style path (histograms, the set's look, scene images: all three kinds)."""
-    styles = tmp_path / "styles"
-    styles.mkdir()
-    for name in ("coffee", "flower", "sunset"):
-        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 64)
-    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "chelsea.jpg", 64)
+    styles = style_dir
     blocker = tmp_path / "not a folder"
     blocker.write_bytes(b"")
     outputs = []
