@@ -110,3 +110,34 @@ def test_imports_point_downwards():
             if other == "cli":
                 wrong.append(f"{module} -> {target}")
     assert wrong == []
+
+
+#: Private modules every layer may import (docs/architecture.md, layers: shared).
+SHARED_PRIVATE = {"wbcgrade._publish", "wbcgrade._names", "wbcgrade._executor"}
+
+
+def test_no_private_name_is_imported_from_another_module():
+    """What one module uses of another has a public name: no ``from m import _x`` (inside
+    the core, its own internals excepted) and no private module of another layer."""
+    modules = _modules()
+
+    def layer(module: str) -> str:
+        return module.split(".")[1] if module.count(".") else ""
+
+    wrong = []
+    for name, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.ImportFrom) and node.module and not node.level
+                    and node.module.startswith("wbcgrade")):
+                continue
+            for alias in node.names:
+                target = f"{node.module}.{alias.name}"
+                module = target if target in modules else node.module
+                private_module = any(p.startswith("_") for p in module.split(".")[1:]) \
+                    and module not in SHARED_PRIVATE and layer(module) != layer(name)
+                private_name = module != target and alias.name.startswith("_") \
+                    and not alias.name.startswith("__") \
+                    and not layer(name) == layer(module) == "core"
+                if private_module or private_name:
+                    wrong.append(f"{name} <- {target}")
+    assert wrong == []

@@ -232,7 +232,7 @@ def _publish(tmp: str, target: Path, overwrite: bool) -> None:
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike, suffix: str = "",
-                overwrite: bool = True) -> Iterator[str]:
+                overwrite: bool = True, sync: bool = True) -> Iterator[str]:
     """Yield a temporary path beside ``target``; on success publish it as ``target``.
 
     Parameters
@@ -244,6 +244,9 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
         that pick the format by extension.
     overwrite : bool
         False: an existing ``target`` is never replaced (InputError).
+    sync : bool
+        False: skip the flushes to disk (a cache entry, which its reader checks and
+        rebuilds when a crash damaged it); the rename is atomic all the same.
 
     The temporary file exists (empty, permissions as a new file's under the
     umask) when the body starts; the body may write it by path or replace it.
@@ -261,9 +264,11 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # tells a cleaner this file is live
         os.chmod(tmp, 0o666 & ~_UMASK)
         yield tmp
-        _fsync_path(tmp)
+        if sync:
+            _fsync_path(tmp)
         _publish(tmp, target, overwrite)
-        _fsync_path(folder, directory=True)
+        if sync:
+            _fsync_path(folder, directory=True)
     except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -280,10 +285,11 @@ def atomic_path(target: str | os.PathLike, suffix: str = "",
 _PLAIN_OS_ERRORS = (OSError, PermissionError, FileNotFoundError)
 
 
-def publish_bytes(target: str | os.PathLike, data: bytes, overwrite: bool = True) -> Path:
+def publish_bytes(target: str | os.PathLike, data: bytes, overwrite: bool = True,
+                  sync: bool = True) -> Path:
     """Write ``data`` to ``target`` atomically (see :func:`atomic_path`). -> ``target``."""
     target = Path(target)
-    with atomic_path(target, overwrite=overwrite) as tmp, open(tmp, "wb") as handle:
+    with atomic_path(target, overwrite=overwrite, sync=sync) as tmp, open(tmp, "wb") as handle:
         handle.write(data)
     return target
 

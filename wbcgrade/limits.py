@@ -19,7 +19,6 @@ wbcgrade.errors.InputError: p.npz: 1000000 styles, more than the 4096 wbcgrade r
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 import zipfile
@@ -34,7 +33,7 @@ if TYPE_CHECKING:  # numpy is imported where arrays are read (`wbcgrade --help` 
 __all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
            "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
            "check_count", "check_lut_entries", "check_histogram_cells", "read_npz",
-           "read_cache_entry", "key_bytes", "read_npy"]
+           "read_npy"]
 
 #: Nodes per axis of any 3-D LUT or colour map read or written (256^3 x 3 float32: 200 MB).
 MAX_LUT_SIZE = 256
@@ -168,28 +167,3 @@ def _read_member(member, name: str, where, max_bytes: int) -> np.ndarray:
     array = np.frombuffer(data, dtype=dtype, count=count)
     array = array.reshape(shape[::-1]).transpose() if fortran else array.reshape(shape)
     return array.copy()
-
-
-def read_cache_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
-    """The arrays of a cache entry (an ``.npz``), or None when there is none or it is unusable.
-
-    A cache must never make a run fail: an entry that is not a readable archive
-    (garbage, zero bytes, cut short, too large) is removed, so that the caller
-    computes the value again and writes a good entry in its place. Callers
-    still treat any error in using the arrays as a miss.
-    """
-    if path is None:
-        return None
-    try:
-        return read_npz(path)
-    except InputError:
-        if os.path.isfile(path):
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-        return None
-
-
-def key_bytes(text: str) -> bytes:
-    """``text`` as bytes for a cache key: UTF-8, a path's undecodable bytes (``caf\\udce9``,
-    a POSIX name that is not UTF-8) as they were on disk."""
-    return text.encode("utf-8", "surrogateescape")

@@ -8,14 +8,13 @@ import numpy as np
 import pytest
 
 from wbcgrade.color import regrain as regrain_module
-from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.colorspace import SYCC_LUMA, ColorEncoding
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.regrain import regrain
 from wbcgrade.color.remap import (
-    LUMA_WEIGHTS,
     apply_color_map,
     identity_map,
     keep_lightness,
@@ -25,6 +24,8 @@ from wbcgrade.color.smooth_map import fit_smooth_map
 from wbcgrade.color.transfer import color_transfer_map
 
 from .conftest import SAMPLES, grade_of, small_copy
+
+LUMA_WEIGHTS = np.array(SYCC_LUMA)
 
 
 @pytest.fixture(scope="module")

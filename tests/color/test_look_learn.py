@@ -57,7 +57,7 @@ def lattice_error(grade, look, size=9):
     the sample photos (the colours a look is learned on)."""
     points = grid_points(size)
     table = np.asarray(grade.color_map)
-    from wbcgrade.color.look import resample_lattice
+    from wbcgrade.color.remap import resample_lattice
 
     mapped = resample_lattice(table, size).reshape(-1, 3)
     return float(np.mean(np.linalg.norm(mapped - look(points), axis=1)))

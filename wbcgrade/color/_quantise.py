@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.core._jit import compiled, in_bands
+from wbcgrade.core import compiled, in_bands
 
 __all__ = ["to_uint8", "HALVES_TO_EVEN"]
 

@@ -82,6 +82,7 @@ __all__ = [
     "ColorEncoding",
     "WorkingState",
     "SYCC_LUMA",
+    "REC709_LUMA",
 ]
 
 #: The config used when ``$OCIO`` is not set: OpenColorIO's built-in default.
@@ -389,8 +390,12 @@ def _config_name(path: str, version: str) -> str:
 
 # ------------------------------------------------------------------ the encoding of a grade
 #: Luma of sRGB-encoded values: sYCC's (IEC 61966-2-1), BT.601's weights, as
-#: 8-bit JPEG files store their Y'CbCr.
+#: 8-bit JPEG files store their Y'CbCr. The one definition: remap's lightness
+#: order, the grey of written files, the scene and pair matchers' 8-bit lightness.
 SYCC_LUMA = (0.299, 0.587, 0.114)
+#: The Rec.709 primaries' weights (BT.709): of linear values their luminance (the grey
+#: of scene-linear pixels), of encoded ones the look family's luma (look_statistics.LUMA).
+REC709_LUMA = (0.2126, 0.7152, 0.0722)
 
 
 @dataclass

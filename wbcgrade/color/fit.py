@@ -35,8 +35,8 @@ import numpy as np
 from wbcgrade.color.histogram import add_floor
 from wbcgrade.color.options import FitOptions
 
-__all__ = ["NONZERO_THRESHOLD", "FitSummary", "fit_geometry", "vertex_losses", "fit_weights",
-           "given_weights"]
+__all__ = ["NONZERO_THRESHOLD", "FitSummary", "fit_geometry", "fit_problem", "loss_at",
+           "vertex_losses", "fit_weights", "given_weights"]
 
 #: Weights at or above this count as "non-zero" (softmax weights are never exactly 0).
 NONZERO_THRESHOLD = 1e-3
@@ -84,13 +84,17 @@ def fit_geometry(options: FitOptions):
     return GridGeometry((options.bins,) * 3, options.kernel_gamma, np.float32)
 
 
-def _problem(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOptions):
+def fit_problem(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOptions):
+    """What the fit compares: (target (m, m, m), styles (S, m, m, m), both floored
+    (``options.floor``), the grid geometry of :func:`fit_geometry`)."""
     target = add_floor(photo_fit, options.floor)
     hists = np.stack([add_floor(h, options.floor) for h in style_fit])
     return target, hists, fit_geometry(options)
 
 
-def _loss_at(target, hists, geometry, weights, options: FitOptions) -> float:
+def loss_at(target, hists, geometry, weights, options: FitOptions) -> float:
+    """The fit's loss of the barycenter of ``hists`` at ``weights`` (S,) against ``target``
+    (the three from :func:`fit_problem`)."""
     from wbcgrade.core import barycenter, get_loss
 
     keep = np.flatnonzero(weights > 0)
@@ -112,8 +116,8 @@ def vertex_losses(photo_fit: np.ndarray, style_fit: np.ndarray,
     -------
     (S,) losses of ``P_L(e_s)`` (the barycenter with all weight on style s).
     """
-    target, hists, geometry = _problem(photo_fit, style_fit, options)
-    return np.array([_loss_at(target, hists, geometry, np.eye(len(hists))[s], options)
+    target, hists, geometry = fit_problem(photo_fit, style_fit, options)
+    return np.array([loss_at(target, hists, geometry, np.eye(len(hists))[s], options)
                      for s in range(len(hists))])
 
 
@@ -121,11 +125,11 @@ def given_weights(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOpti
                   weights: np.ndarray) -> FitSummary:
     """The summary of fixed weights: their loss and every vertex's (no fit)."""
     start = time.perf_counter()
-    target, hists, geometry = _problem(photo_fit, style_fit, options)
+    target, hists, geometry = fit_problem(photo_fit, style_fit, options)
     vertices = vertex_losses(photo_fit, style_fit, options)
     weights = np.asarray(weights, dtype=np.float64)
     weights = weights / weights.sum()
-    loss = _loss_at(target, hists, geometry, weights, options)
+    loss = loss_at(target, hists, geometry, weights, options)
     return FitSummary(weights, loss, vertices, "given", {"start": "given"},
                       time.perf_counter() - start)
 
@@ -159,7 +163,7 @@ class _HeldProgress:
 
 def _speculate() -> bool:
     """Whether a second core is there for the refit from the best vertex."""
-    from wbcgrade.core._cpu import n_workers
+    from wbcgrade.core import n_workers
 
     return n_workers() >= 2
 
@@ -190,7 +194,7 @@ def fit_weights(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOption
     from wbcgrade.core import barycentric_coordinates
 
     start = time.perf_counter()
-    target, hists, geometry = _problem(photo_fit, style_fit, options)
+    target, hists, geometry = fit_problem(photo_fit, style_fit, options)
     n_styles = len(hists)
     vertices = vertex_losses(photo_fit, style_fit, options)
     best = int(np.argmin(vertices))

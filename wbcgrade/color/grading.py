@@ -286,7 +286,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     if options.fit.weights is not None:
         return palette_map(request)
     if styles.meta.get("look") is not None:  # a preset made with a known look: that look
-        from wbcgrade.color.look import resample_lattice
+        from wbcgrade.color.remap import resample_lattice
 
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",

@@ -8,19 +8,14 @@ recovered exactly as the weighted mean of its bins' positions.
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import io
-import logging
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.cache import default_cache_dir, entry_path, file_key, read_entry, write_entry
 from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
 from wbcgrade.errors import InputError
-from wbcgrade.limits import key_bytes, read_cache_entry
 
 __all__ = [
     "soft_histogram",
@@ -37,8 +32,6 @@ __all__ = [
     "DEFAULT_FLOOR",
     "DEFAULT_MAX_PIXELS",
 ]
-
-log = logging.getLogger(__name__)
 
 #: DEFAULT_FLOOR: fraction of the total mass spread uniformly over all bins before
 #: fitting. Real photo histograms are sparse; the KL loss needs a target > 0
@@ -150,24 +143,15 @@ def from_sparse(index: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
     return (hist / hist.sum()).reshape(bins, bins, bins)
 
 
-def default_cache_dir() -> Path:
-    """``$WBCGRADE_CACHE_DIR``, else ``$XDG_CACHE_HOME/wbcgrade``, else ``~/.cache/wbcgrade``."""
-    env = os.environ.get("WBCGRADE_CACHE_DIR")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "wbcgrade"
-
-
 class HistogramCache:
     """On-disk cache of style-photo histograms.
 
     Keyed by the file's absolute path, modification time, size, the number of
     bins, the subsampling limit and the colour spaces (``space``: the
     OpenColorIO config and the working space the colours were converted into),
-    so an edited photo is re-read. Entries are
-    small sparse ``.npz`` files (no pickle). A cache that cannot be written is
-    only logged: caching never makes a run fail.
+    so an edited photo is re-read. Entries are small sparse ``.npz`` files at the
+    top of the cache folder (:mod:`wbcgrade.color.cache`: a damaged entry is
+    rebuilt, one that cannot be written is one warning; caching never makes a run fail).
     """
 
     VERSION = 1
@@ -175,13 +159,11 @@ class HistogramCache:
     def __init__(self, folder: str | os.PathLike | None = None, enabled: bool = True):
         self.folder = Path(folder) if folder is not None else default_cache_dir()
         self.enabled = enabled
-        self._unwritable = False
 
     def _key(self, path: Path, bins: int, max_pixels: int, space: str = "") -> Path:
-        stat = path.stat()
-        text = (f"{self.VERSION}|{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
-                f"|{bins}|{max_pixels}" + (f"|{space}" if space else ""))
-        return self.folder / (hashlib.sha256(key_bytes(text)).hexdigest()[:32] + ".npz")
+        text = (f"{self.VERSION}|{file_key(path)}|{bins}|{max_pixels}"
+                + (f"|{space}" if space else ""))
+        return entry_path(self.folder, "", text)
 
     def get(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS,
             space: str = "") -> np.ndarray | None:
@@ -189,11 +171,7 @@ class HistogramCache:
         if not self.enabled:
             return None
         try:
-            entry = self._key(path, bins, max_pixels, space)
-        except OSError:
-            return None
-        data = read_cache_entry(entry)
-        try:
+            data = read_entry(self._key(path, bins, max_pixels, space))
             return from_sparse(data["index"], data["values"], bins)
         except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
             return None
@@ -208,27 +186,12 @@ class HistogramCache:
         """
         index, values = to_sparse(hist)
         stored = from_sparse(index, values, bins)
-        if not self.enabled or self._unwritable:
-            return stored
-        tmp = None
-        try:
-            target = self._key(path, bins, max_pixels, space)
-            self.folder.mkdir(parents=True, exist_ok=True)
-            data = io.BytesIO()  # the archive is made in memory: a full disk cannot leave
-            np.savez_compressed(data, index=index, values=values)  # a half-closed ZipFile
-            fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".npz.tmp")
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(data.getbuffer())
-            os.replace(tmp, target)
-            tmp = None
-        except OSError as exc:
-            self._unwritable = True  # one line per run, not one per style photo
-            log.warning("histogram cache %s not written (%s); going on without it",
-                        self.folder, exc.strerror or exc)
-        finally:
-            if tmp is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(tmp)
+        if self.enabled:
+            try:
+                target = self._key(path, bins, max_pixels, space)
+            except OSError:  # the photo is gone: nothing to key its entry by
+                return stored
+            write_entry(target, compress=True, index=index, values=values)
         return stored
 
 

@@ -38,6 +38,7 @@ import numpy as np
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
 from wbcgrade.color.look_statistics import LUMA
 from wbcgrade.color.look_statistics import hats as _hats
+from wbcgrade.color.remap import interpolate_lattice, resample_lattice
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
@@ -184,25 +185,6 @@ def push_histogram(hist: np.ndarray, look: LookMap, bins: int | None = None) -> 
     keep = np.flatnonzero(flat > 0)
     points = grid_points(n)[keep]
     return soft_histogram(look(points), bins or n, flat[keep])
-
-
-def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
-    """An (m, m, m, 3) lattice LUT read trilinearly at a (size, size, size) grid -> float32."""
-    lattice = np.asarray(lattice, dtype=np.float64)
-    if lattice.shape[0] == size:
-        return lattice.astype(np.float32)
-    points = grid_points(size)
-    return _trilinear(lattice, points).reshape(size, size, size, 3).astype(np.float32)
-
-
-def _trilinear(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
-    """Interpolate (n, n, n, C) grid values at (N, 3) colours in [0, 1] -> (N, C)."""
-    from scipy.ndimage import map_coordinates
-
-    n = values.shape[0]
-    coords = (np.clip(colors, 0.0, 1.0) * (n - 1)).T
-    return np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
-                     for c in range(values.shape[-1])], axis=1)
 
 
 def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float = 1.5,
@@ -415,8 +397,8 @@ def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width:
     moved = look(points)
     projection, kept = relaxed_correspondences(push_histogram(photo, look), style, width,
                                                relaxation)
-    mass = flat[used] * _trilinear(kept[..., None], moved)[:, 0]
-    return points, _trilinear(projection, moved), mass, moved
+    mass = flat[used] * interpolate_lattice(kept[..., None], moved)[:, 0]
+    return points, interpolate_lattice(projection, moved), mass, moved
 
 
 @dataclass(frozen=True)
@@ -582,7 +564,8 @@ class SceneLook:
         if self.correction is None:
             return mapped
         flat = mapped.reshape(-1, 3)
-        return np.clip(flat + _trilinear(self.correction, flat), 0.0, 1.0).reshape(mapped.shape)
+        moved = flat + interpolate_lattice(self.correction, flat)
+        return np.clip(moved, 0.0, 1.0).reshape(mapped.shape)
 
     def lattice(self, size: int = 33) -> np.ndarray:
         """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
@@ -601,10 +584,10 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.smooth_map import _interpolation_matrix
+    from wbcgrade.color.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
-    interpolate = _interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
+    interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
     second = sparse.diags([np.ones(nodes - 1), -2.0 * np.ones(nodes), np.ones(nodes - 1)],
                           [-1, 0, 1], shape=(nodes, nodes)).tolil()
     second[0, :] = 0.0
@@ -717,7 +700,7 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     look : :class:`SceneLook` (no matches, confidence 1).
     robust : (N,) the final robust weights.
     """
-    from wbcgrade.core._cpu import fast_cpu
+    from wbcgrade.core import fast_cpu
 
     prior = prior or LookMap.identity()
     look, robust = prior, (weights if robust is None else robust)
@@ -902,10 +885,10 @@ def _natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
-    from wbcgrade.limits import read_cache_entry
+    from wbcgrade.color.cache import read_entry, write_entry
 
     found = None
-    data = read_cache_entry(path) if path is not None and path.is_file() else None
+    data = read_entry(path)
     if data is not None:
         try:
             found = PaletteStatistics(**{f: np.asarray(data[f], np.float64)
@@ -916,7 +899,7 @@ def _natural_statistics(naturals, cache_from=None):
             found = None
     if found is None:
         found = palette_statistics(naturals.at_bins(MAP_BINS))
-        _write_cache_entry(path, **{f: getattr(found, f) for f in _STAT_FIELDS})
+        write_entry(path, **{f: getattr(found, f) for f in _STAT_FIELDS})
     _NATURAL_STATISTICS[key] = found
     return found
 
@@ -1007,26 +990,20 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
 
 
 def _look_cache_path(key: str, styles=None):
-    """Where a set's look is kept: the styles' cache folder (``meta["cache_dir"]``, None
-    when the command said ``--no-cache``), else the default one."""
-    from pathlib import Path
+    """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
+    ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`);
+    None when the command said ``--no-cache``."""
+    from wbcgrade.color.cache import cache_folder, entry_path
 
-    from wbcgrade.color.histogram import default_cache_dir
-
-    meta = getattr(styles, "meta", {}) or {}
-    folder = meta["cache_dir"] if "cache_dir" in meta else default_cache_dir()
-    return None if folder is None else Path(folder) / "looks" / f"{key}.npz"
+    return entry_path(cache_folder(styles), "looks", key)
 
 
 def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
 
-    path = _look_cache_path(key, styles)
-    if path is None:
-        return None
-    from wbcgrade.limits import read_cache_entry
+    from wbcgrade.color.cache import read_entry
 
-    data = read_cache_entry(path)  # a damaged entry: removed, the look extracted again
+    data = read_entry(_look_cache_path(key, styles))  # damaged: removed, extracted again
     try:
         look = LookMap(np.array(data["coefficients"], dtype=np.float64), int(data["knots"]))
         if look.coefficients.shape != (3, 4 * look.knots) \
@@ -1042,32 +1019,11 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
 
-    _write_cache_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
-                       knots=result.look.knots, weights=result.weights, losses=result.losses,
-                       info=json.dumps(result.info))
+    from wbcgrade.color.cache import write_entry
 
-
-def _write_cache_entry(path, **arrays) -> None:
-    """Write a looks' cache entry (an ``.npz``) atomically; best effort: a cache that cannot
-    be written is skipped (None: caching is off)."""
-    import os
-    import tempfile
-
-    if path is None:
-        return
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, **arrays)
-        os.replace(tmp, path)
-    except OSError:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
+                knots=result.look.knots, weights=result.weights, losses=result.losses,
+                info=json.dumps(result.info))
 
 
 #: Styles each half of a set needs for the statistics look to be checked by its halves'

@@ -232,11 +232,11 @@ def _read_small(path: Path, working: str) -> np.ndarray:
     """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.scene import _shrink
+    from wbcgrade.color.scene import shrink_colors
 
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working)
-    small = _shrink(image.rgb(), LEARN_SIZE)
+    small = shrink_colors(image.rgb(), LEARN_SIZE)
     encoded, _ = encoding.encode(small, image.is_float)
     return np.ascontiguousarray(encoded, dtype=np.float32)
 
@@ -275,7 +275,9 @@ class Registration:
 
 
 def _luma(colors: np.ndarray) -> np.ndarray:
-    return np.asarray(colors, np.float32) @ np.float32([0.299, 0.587, 0.114])
+    from wbcgrade.color.colorspace import SYCC_LUMA
+
+    return np.asarray(colors, np.float32) @ np.float32(SYCC_LUMA)
 
 
 def _rotation_homography(shape_after: tuple[int, int], turns: int,
@@ -309,10 +311,10 @@ def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
     (at :data:`_CHECK_SIZE`), phase correlation finds no shift on most textured ones."""
     import cv2
 
-    from wbcgrade.color.scene import _shrink
+    from wbcgrade.color.scene import shrink_colors
 
-    a = _shrink(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
-    b = _shrink(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
+    a = shrink_colors(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
+    b = shrink_colors(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     h, w = a.shape
     ph, pw = h // 4, w // 4
     if ph < 16 or pw < 16:
@@ -377,14 +379,14 @@ def pair_colours(images: PairImages, registration: Registration,
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Colour pairs of a registered pair: (originals (N, 3), afters (N, 3), weights (N,)),
     drawn from the overlap by :func:`wbcgrade.color.scene.colour_pairs`."""
-    from wbcgrade.color.scene import SceneImage, SceneMatch, _shrink, colour_pairs
+    from wbcgrade.color.scene import SceneImage, SceneMatch, colour_pairs, shrink_colors
 
     before, homography = images.before, registration.homography
     h = homography / homography[2, 2]
     magnified = float(np.sqrt(abs(np.linalg.det(h[:2, :2]))))
     if magnified > 1.05:  # a smaller after: the original shrunk to its sharpness
         size = max(16, round(max(before.shape[:2]) / magnified))
-        small = _shrink(before, size)
+        small = shrink_colors(before, size)
         before, homography = small, _pixel_scale(before, small) @ homography
     empty = (np.zeros((0, 2), np.float32), np.zeros((0, 128), np.float32))
     return colour_pairs(SceneImage(before, *empty), SceneImage(images.after, *empty),

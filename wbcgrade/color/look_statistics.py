@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbcgrade.color.colorspace import REC709_LUMA
 from wbcgrade.color.histogram import grid_points
 
 __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
@@ -41,7 +42,7 @@ __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "Stat
 
 #: Rec.709 luma weights on encoded values (the look family's lightness; toning is a
 #: function of it: :data:`wbcgrade.color.remap.TONE_LUMA`).
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA = np.array(REC709_LUMA)
 #: Levels of the luma quantiles compared (black and white levels at the ends).
 QUANTILES = np.array([0.005, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
                       0.98, 0.995])

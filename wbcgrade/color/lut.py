@@ -1,8 +1,9 @@
-"""A grade as a 3-D LUT file: ``.cube`` (through colour-science) or CLF.
+"""A grade as a 3-D LUT file: ``.cube`` or CLF.
 
 :meth:`wbcgrade.color.grading.Grade.lut` makes the table; this module writes
 it. One ``.cube`` writer (:func:`write_cube`, colour-science's "Resolve
-Cube": ``LUT_3D_SIZE``, domain [0, 1], red varying fastest) serves every
+Cube" text written here, without importing colour-science: ``LUT_3D_SIZE``,
+domain [0, 1], red varying fastest) serves every
 command: ``apply --lut``, ``batch --consistent --lut``, ``video --lut`` and
 the temporary LUTs ffmpeg's ``lut3d`` reads. :func:`write_grade_lut` writes
 a grade in a colour encoding and names its spaces in the header:
@@ -43,7 +44,8 @@ from wbcgrade._publish import atomic_path
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
 
-__all__ = ["color_map_to_lut", "write_cube", "read_cube", "write_grade_lut", "lut_header",
+__all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_grade_lut",
+           "lut_header",
            "shaper_table", "check_lut_path", "check_lut_size", "check_clf_support",
            "lut_format_of",
            "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE"]
@@ -83,44 +85,63 @@ def write_cube(path: str | os.PathLike, table: np.ndarray, title: str = "wbcgrad
 
     ``shaper``: ``(curve (k,), (low, high))``, a 1D shaper over ``[low, high]``
     before the 3D table (Resolve's shaper form). Never replaces an existing
-    file unless ``overwrite``.
+    file unless ``overwrite``. The text is :func:`cube_text`'s.
     """
-    from wbcgrade.color._colour import colour
-
     path = Path(path)
     if path.suffix.lower() != ".cube":
         raise InputError(f"{path}: LUT file name must end in .cube")
-    title = safe_text(title)  # a header naming a non-UTF-8 file: its bytes as \xNN
-    comments = [safe_text(line) for line in comments or []]
-    grid = colour.LUT3D(table=np.asarray(table, dtype=np.float64), name=title,
-                        domain=np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]),
-                        size=table.shape[0], comments=list(comments or []))
-    lut, decimals = grid, 6
-    if shaper is not None:
-        curve, (low, high) = shaper
-        grid.name, grid.comments = "grade", []
-        lut, decimals = colour.LUTSequence(
-            colour.LUT3x1D(table=np.repeat(np.asarray(curve, np.float64)[:, None], 3, axis=1),
-                           name=title, domain=np.array([[low] * 3, [high] * 3]),
-                           comments=list(comments or [])), grid), 7
-    with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp:
-        colour.write_LUT(lut, tmp, decimals=decimals, method="Resolve Cube")
-        if shaper is not None:
-            _shaper_header_for_readers(tmp)
+    text = cube_text(table, title, comments, shaper)
+    with atomic_path(path, suffix=".cube", overwrite=overwrite) as tmp, \
+            open(tmp, "w", encoding="utf-8") as handle:
+        handle.write(text)
     return path
 
 
-def _shaper_header_for_readers(path: str) -> None:
-    """Rewrite a shaper ``.cube``'s header so that every reader either reads it right or
+def cube_text(table: np.ndarray, title: str = "wbcgrade", comments: list[str] | None = None,
+              shaper: tuple[np.ndarray, tuple[float, float]] | None = None) -> str:
+    """The ``.cube`` text of a (size, size, size, 3) table: colour-science's "Resolve Cube"
+    form byte for byte (``TITLE``, ``# `` comments, ``LUT_3D_SIZE``, rows with red varying
+    fastest, 6 decimals; with a shaper 7 decimals, ``LUT_1D_SIZE``,
+    ``LUT_1D_INPUT_RANGE`` and the header of :func:`_shaper_header_for_readers`),
+    written here: colour-science takes one to two seconds to import, on every ``--lut``
+    run (tests/color/test_lut_interop.py compares the two).
+    """
+    table = np.asarray(table, dtype=np.float64)
+    size = table.shape[0]
+    if table.ndim != 4 or table.shape != (size, size, size, 3) or not 2 <= size <= 256:
+        raise ValueError(f"a .cube table must be (n, n, n, 3) with 2 <= n <= 256, "
+                         f"not {table.shape}")
+    title = safe_text(title)  # a header naming a non-UTF-8 file: its bytes as \xNN
+    notes = [f"# {safe_text(line)}" for line in comments or []]
+    decimals = 6 if shaper is None else 7
+    cube = _rows(table.transpose(2, 1, 0, 3).reshape(-1, 3), decimals)  # red fastest
+    if shaper is None:
+        return "\n".join([f'TITLE "{title}"', *notes, f"LUT_3D_SIZE {size}", cube]) + "\n"
+    curve, (low, high) = shaper
+    curve = np.asarray(curve, dtype=np.float64)
+    if not 2 <= len(curve) <= 65536:
+        raise ValueError(f"a .cube shaper has 2 to 65536 entries, not {len(curve)}")
+    header = [f'TITLE "{title} - grade"', *notes, f"LUT_1D_SIZE {len(curve)}"]
+    if (low, high) != (0, 1):
+        header.append(f"LUT_1D_INPUT_RANGE {low:0.7f} {high:0.7f}")
+    header.append(f"LUT_3D_SIZE {size}")
+    ramp = _rows(np.repeat(curve[:, None], 3, axis=1), decimals)
+    return "\n".join(_shaper_header_for_readers(header) + [ramp, "", cube]) + "\n"
+
+
+def _rows(values: np.ndarray, decimals: int) -> str:
+    """(N, 3) numbers as N lines of three fixed-point numbers (no final line end)."""
+    row = " ".join([f"%0.{decimals}f"] * 3)
+    return "\n".join([row] * len(values)) % tuple(values.ravel().tolist())
+
+
+def _shaper_header_for_readers(header: list[str]) -> list[str]:
+    """A shaper ``.cube``'s header such that every reader either reads it right or
     refuses it: no ``TITLE`` (OpenColorIO's Resolve reader refuses the tag; the title
     stays as a comment), and ``LUT_3D_SIZE`` before the 1D keywords (ffmpeg's ``lut3d``,
     which has no shaper, then stops at ``LUT_1D_SIZE`` with "Invalid data" instead of
     reading the shaper's entries as the 3D table). OpenColorIO and colour-science take
     the keywords in any order (tests/color/test_lut_interop.py)."""
-    with open(path, encoding="utf-8") as handle:
-        lines = handle.read().splitlines()
-    start = next(n for n, line in enumerate(lines) if line and line[0] in "0123456789-+.")
-    header, data = lines[:start], lines[start:]
     size_3d = [line for line in header if line.startswith("LUT_3D_SIZE")]
     out = []
     for line in header:
@@ -131,9 +152,7 @@ def _shaper_header_for_readers(path: str) -> None:
         elif line.startswith("LUT_1D_SIZE"):
             out += size_3d
         out.append(line)
-    out += data
-    with open(path, "w", encoding="utf-8") as handle:
-        handle.write("\n".join(out) + "\n")
+    return out
 
 
 def read_cube(path: str | os.PathLike):

@@ -19,19 +19,22 @@ import os
 
 import numpy as np
 
-from wbcgrade.color.colorspace import SYCC_LUMA, ColorEncoding, convert, default_working_space
+from wbcgrade.color.colorspace import (
+    REC709_LUMA,
+    SYCC_LUMA,
+    ColorEncoding,
+    convert,
+    default_working_space,
+)
 from wbcgrade.color.imageio import Image, WriteOptions, output_type
 
-__all__ = ["grey_of", "output_pixels", "REC709_LUMINANCE"]
-
-#: Luminance of linear Rec.709 (BT.709 weights): the grey of scene-linear colours.
-REC709_LUMINANCE = (0.2126, 0.7152, 0.0722)
+__all__ = ["grey_of", "output_pixels"]
 
 
 def grey_of(rgb: np.ndarray, linear: bool = False) -> np.ndarray:
     """(..., 3) colours -> (...,) grey: sYCC luma of encoded values, or with ``linear``
     the Rec.709 luminance of linear ones."""
-    weights = np.asarray(REC709_LUMINANCE if linear else SYCC_LUMA, dtype=np.float32)
+    weights = np.asarray(REC709_LUMA if linear else SYCC_LUMA, dtype=np.float32)
     return np.asarray(rgb, dtype=np.float32) @ weights
 
 

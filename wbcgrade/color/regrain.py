@@ -29,7 +29,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core._jit import compiled, in_bands
+from wbcgrade.core import compiled, in_bands
 
 __all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
 

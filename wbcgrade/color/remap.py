@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
-from wbcgrade.core._jit import compiled, in_bands
+from wbcgrade.core import compiled, in_bands
 
-__all__ = ["apply_color_map", "block_means_mapped", "identity_map", "blend_map", "keep_lightness",
-           "monotone_lightness", "LUMA_WEIGHTS", "TONE_LUMA", "monochrome_toning",
+__all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
+           "identity_map", "blend_map", "keep_lightness",
+           "monotone_lightness", "TONE_LUMA", "monochrome_toning",
            "to_monochrome", "monochrome_map"]
 
 
@@ -50,7 +52,7 @@ def _mapped(table, x0, x1, x2, strength, out) -> None:  # pragma: no cover - com
 def _trilinear(colors: np.ndarray, table: np.ndarray, strength: float, out: np.ndarray,
                lo: int, hi: int) -> None:  # pragma: no cover - compiled
     """Colours lo:hi of (N, 3) ``colors`` through the map into ``out`` (one band of
-    :func:`wbcgrade.core._jit.in_bands`)."""
+    :func:`wbcgrade.core.in_bands`)."""
     for p in range(lo, hi):
         _mapped(table, colors[p, 0], colors[p, 1], colors[p, 2], strength, out[p])
 
@@ -119,6 +121,43 @@ def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
     return (mapped, source_means) if with_source else mapped
 
 
+def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
+    """An (n, n, n, C) lattice read trilinearly at a (size, size, size) grid -> float32.
+
+    The lattice-to-lattice reader (a preset's look at the map size, the explorer's
+    maps at its LUT size). At lattice nodes trilinear interpolation is separable: a
+    (size, n) linear interpolation along each axis in turn, in float64 (a millisecond,
+    where a pass over the size^3 nodes as pixels takes tens). The lattice itself when
+    ``n == size``. LUT export samples with :func:`apply_color_map` instead, so that a
+    LUT holds what the pixels get.
+    """
+    n = lattice.shape[0]
+    if n == size:
+        return np.asarray(lattice, dtype=np.float32)
+    position = np.linspace(0.0, n - 1.0, size)
+    low = np.minimum(position.astype(np.int64), n - 2)
+    frac = position - low
+    weights = np.zeros((size, n))
+    weights[np.arange(size), low] = 1.0 - frac
+    weights[np.arange(size), low + 1] += frac
+    out = np.einsum("ai,ijkc->ajkc", weights, np.asarray(lattice, dtype=np.float64))
+    out = np.einsum("bj,ajkc->abkc", weights, out)
+    out = np.einsum("ck,abkd->abcd", weights, out)
+    return out.astype(np.float32)
+
+
+def interpolate_lattice(values: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """(n, n, n, C) lattice values read trilinearly at (N, 3) colours in [0, 1] -> (N, C)
+    float64 (the fits' reader: any number of channels, float64 throughout; pixels go
+    through :func:`apply_color_map`)."""
+    from scipy.ndimage import map_coordinates
+
+    n = values.shape[0]
+    coords = (np.clip(colors, 0.0, 1.0) * (n - 1)).T
+    return np.stack([map_coordinates(values[..., c], coords, order=1, mode="nearest")
+                     for c in range(values.shape[-1])], axis=1)
+
+
 def identity_map(bins: int, dtype=np.float32) -> np.ndarray:
     """(bins, bins, bins, 3) map sending every bin to its own colour."""
     axis = np.linspace(0.0, 1.0, bins, dtype=dtype)
@@ -181,11 +220,6 @@ def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:
     return encoding.from_oklab(mapped)
 
 
-#: Luma of sRGB-encoded RGB (sYCC: BT.601 weights, as JPEG's Y'CbCr); other working
-#: spaces have their own (``ColorEncoding.luma_weights``).
-LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114])
-
-
 def monotone_lightness(color_map: np.ndarray,
                        luma_weights: np.ndarray | None = None) -> np.ndarray:
     """A colour map whose output luma never decreases when an input channel increases.
@@ -206,13 +240,14 @@ def monotone_lightness(color_map: np.ndarray,
     ----------
     color_map : (n, n, n, 3) working-space colours in [0, 1].
     luma_weights : (3,) the working encoding's luma weights, summing to 1
-        (default :data:`LUMA_WEIGHTS`, sRGB's).
+        (default sRGB's, :data:`wbcgrade.color.colorspace.SYCC_LUMA`; other working
+        spaces have their own, ``ColorEncoding.luma_weights``).
 
     Returns
     -------
     (n, n, n, 3) float32 in [0, 1].
     """
-    weights = LUMA_WEIGHTS if luma_weights is None else np.asarray(luma_weights, np.float64)
+    weights = np.asarray(SYCC_LUMA if luma_weights is None else luma_weights, np.float64)
     table = np.asarray(color_map, dtype=np.float64)
     luma = table @ weights
     target = luma.copy()

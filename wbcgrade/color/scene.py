@@ -29,21 +29,19 @@ Feature detection and matching use OpenCV.
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.cache import cache_folder, entry_path, file_key, read_entry, write_entry
+from wbcgrade.color.colorspace import SYCC_LUMA
 from wbcgrade.errors import InputError
-from wbcgrade.limits import key_bytes, read_cache_entry
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
-           "colour_pairs",
-           "style_scene_images", "has_style_images", "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
+           "colour_pairs", "style_scene_images", "has_style_images", "shrink_colors",
+           "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
 #: Long side (pixels) of the images keypoints are found on and pairs are read from.
 MATCH_SIZE = 768
@@ -116,14 +114,14 @@ class SceneMatch:
 
 
 def _lightness8(colors: np.ndarray) -> np.ndarray:
-    luma = np.asarray(colors, dtype=np.float32) @ np.float32([0.299, 0.587, 0.114])
+    luma = np.asarray(colors, dtype=np.float32) @ np.float32(SYCC_LUMA)
     return np.clip(np.rint(luma * 255.0), 0, 255).astype(np.uint8)
 
 
 def _ranked_lightness8(colors: np.ndarray) -> np.ndarray:
     """(h, w) uint8: the lightness equalised (each pixel's rank among the image's, on
     :data:`RANK_LEVELS` levels), so keypoints do not depend on the image's tone curve."""
-    luma = np.asarray(colors, dtype=np.float32) @ np.float32([0.299, 0.587, 0.114])
+    luma = np.asarray(colors, dtype=np.float32) @ np.float32(SYCC_LUMA)
     levels = np.clip(np.rint(luma * (RANK_LEVELS - 1)), 0, RANK_LEVELS - 1).astype(np.int64)
     counts = np.bincount(levels.ravel(), minlength=RANK_LEVELS).astype(np.float64)
     below = np.cumsum(counts) - counts  # pixels darker than each level
@@ -131,7 +129,9 @@ def _ranked_lightness8(colors: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(rank[levels] * 255.0), 0, 255).astype(np.uint8)
 
 
-def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
+def shrink_colors(colors: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, C) colours with their long side at most ``size`` (OpenCV's area average;
+    float32; the colours themselves when already that small)."""
     cv2 = _cv2()
     h, w = colors.shape[:2]
     scale = size / max(h, w)
@@ -145,7 +145,7 @@ def _shrink(colors: np.ndarray, size: int) -> np.ndarray:
 def scene_image(colors: np.ndarray, size: int = MATCH_SIZE) -> SceneImage:
     """Shrink (H, W, 3) working-space colours in [0, 1] and find their keypoints."""
     cv2 = _cv2()
-    small = _shrink(colors, size)
+    small = shrink_colors(colors, size)
     sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=CONTRAST)
     keypoints, descriptors = sift.detectAndCompute(_ranked_lightness8(small), None)
     if descriptors is None or not keypoints:
@@ -249,19 +249,19 @@ def colour_pairs(photo: SceneImage, style: SceneImage, match: SceneMatch,
 # ------------------------------------------------------------------------ style images
 
 
-def _scene_cache_path(path: Path, working_space: str, folder: Path) -> Path | None:
+def _scene_cache_path(path: Path, working_space: str, folder: Path | None) -> Path | None:
+    """The entry of a style photo prepared for matching: ``scenes/`` in ``folder`` (None:
+    not cached), keyed by the file, the working space and the matching settings."""
     try:
-        stat = path.stat()
+        key = (f"{file_key(path)}|{working_space}|{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|"
+               f"{SCENE_VERSION}")
     except OSError:
         return None
-    key = hashlib.sha1(key_bytes(
-        f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{working_space}|"
-        f"{MATCH_SIZE}|{MAX_FEATURES}|{CONTRAST}|{SCENE_VERSION}")).hexdigest()
-    return folder / "scenes" / f"{key}.npz"
+    return entry_path(folder, "scenes", key)
 
 
 def _read_cached(path: Path | None) -> SceneImage | None:
-    data = read_cache_entry(path)
+    data = read_entry(path)
     try:
         return SceneImage(data["colors"].astype(np.float32),
                           data["points"].astype(np.float32),
@@ -272,22 +272,8 @@ def _read_cached(path: Path | None) -> SceneImage | None:
 
 def _write_cached(path: Path | None, image: SceneImage) -> None:
     """Best effort: a cache that cannot be written is skipped."""
-    if path is None:
-        return
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, colors=image.colors.astype(np.float16), points=image.points,
-                     descriptors=image.descriptors.astype(np.float16))
-        os.replace(tmp, path)
-    except (OSError, ValueError):
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_entry(path, colors=image.colors.astype(np.float16), points=image.points,
+                descriptors=image.descriptors.astype(np.float16))
 
 
 def _read_style(path: Path, working_space: str) -> SceneImage:
@@ -320,9 +306,9 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     A :class:`~wbcgrade.color.presets.StyleSet` loaded from a folder names its
     files (``meta["files"]``); one built from arrays may carry the images
     themselves (``meta["images"]``: (H, W, 3) working-space colours); a preset
-    holds palettes only (all None). Images read from files are kept in the
-    style cache folder (``meta["cache_dir"]``, beside the histograms; None:
-    not cached), in ``scenes/``, keyed by the file and the working space.
+    holds palettes only (all None). Images read from files are kept in ``scenes/``
+    in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`, beside
+    the histograms), keyed by the file and the working space.
     """
     images: Sequence = styles.meta.get("images") or ()
     files: Sequence = styles.meta.get("files") or ()
@@ -334,9 +320,8 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
             found = scene_image(np.asarray(images[i], dtype=np.float32))
         elif i < len(files) and files[i]:
             path = Path(files[i])
-            folder = styles.meta.get("cache_dir") if cache else None
-            where = (_scene_cache_path(path, styles.working_space, Path(folder))
-                     if folder else None)
+            where = _scene_cache_path(path, styles.working_space,
+                                      cache_folder(styles) if cache else None)
             found = _IN_MEMORY.get(where) if where is not None else None
             found = found or _read_cached(where)
             if found is None:

@@ -34,8 +34,8 @@ from scipy.sparse.linalg import cg
 from wbcgrade.color.options import DEFAULT_MAP_SIZE, DEFAULT_SMOOTHNESS, DEFAULT_STIFFNESS
 from wbcgrade.color.remap import identity_map
 
-__all__ = ["fit_smooth_map", "SmoothMapFitter", "DEFAULT_MAP_SIZE", "DEFAULT_SMOOTHNESS",
-           "DEFAULT_STIFFNESS"]
+__all__ = ["fit_smooth_map", "SmoothMapFitter", "interpolation_matrix", "DEFAULT_MAP_SIZE",
+           "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS"]
 
 #: Relative residual the coarser lattices are solved to (they give the next its start).
 _START_TOL = 1e-4
@@ -46,7 +46,7 @@ _DIRECT_NODES = 4096
 REFERENCE_SIZE = 33
 
 
-def _interpolation_matrix(points: np.ndarray, size: int) -> sp.csr_matrix:
+def interpolation_matrix(points: np.ndarray, size: int) -> sp.csr_matrix:
     """(N, size^3) trilinear interpolation weights of points in [0, 1]^3 on the lattice."""
     pos = np.clip(points, 0.0, 1.0) * (size - 1)
     base = np.minimum(pos.astype(np.int64), size - 2)
@@ -219,7 +219,7 @@ def _system(points: np.ndarray, weights: np.ndarray, level: int, smoothness: flo
     reference lattice (REFERENCE_SIZE nodes) to this lattice's spacing.
     """
     ratio = (level - 1) / (REFERENCE_SIZE - 1)
-    B = _interpolation_matrix(points, level)
+    B = interpolation_matrix(points, level)
     system = (B.T @ sp.diags(weights) @ B
               + _regulariser(level, smoothness * ratio, stiffness / ratio)).tocsr()
     return B, (system + sp.eye(level ** 3) * 1e-12).tocsr()
@@ -271,7 +271,7 @@ class SmoothMapFitter:
         """(n, n, n, 3) raw map -> (size, size, size, 3) float32 smooth map, clipped to [0, 1]."""
         from scipy.linalg import cho_solve
 
-        from wbcgrade.core._cpu import fast_cpu
+        from wbcgrade.core import fast_cpu
 
         n, size = self.bins, self.size
         if raw_map.shape != (n, n, n, 3):
@@ -318,7 +318,7 @@ def fit_smooth_map(raw_map: np.ndarray, density: np.ndarray, size: int = DEFAULT
         systems.append(system)
         rhs_by_level.append(B.T @ (weights[:, None] * target))
         nodes = identity_map(level, np.float64).reshape(-1, 3)
-        prolong.append(None if i == 0 else _interpolation_matrix(nodes, levels[i - 1]))
+        prolong.append(None if i == 0 else interpolation_matrix(nodes, levels[i - 1]))
     disp = None
     if levels[0] ** 3 <= _DIRECT_NODES:
         multigrid = _Multigrid(systems, prolong)

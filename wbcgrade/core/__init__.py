@@ -2,9 +2,14 @@
 
 No files, no printing, no colours: geometry and grid resampling, barycenter
 (+ gradient), losses (masked ones too), Sinkhorn (single-grid and
-multiscale) and barycentric coordinates.
+multiscale) and barycentric coordinates; and the tools the domains' own
+kernels use: ``compiled`` (numba with a cache that never fails a run),
+``in_bands`` (a kernel over bands of rows on every core), ``fast_cpu`` and
+``n_workers`` (the core's threads; docs/architecture.md, threads).
 """
 
+from wbcgrade.core._cpu import fast_cpu, n_workers
+from wbcgrade.core._jit import compiled, in_bands
 from wbcgrade.core.barycenter import (
     BarycenterResult,
     BarycenterSolver,
@@ -55,4 +60,8 @@ __all__ = [
     "gradient_memory",
     "RowSubsetGeometry",
     "masked_loss",
+    "compiled",
+    "in_bands",
+    "fast_cpu",
+    "n_workers",
 ]

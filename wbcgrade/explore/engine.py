@@ -192,28 +192,6 @@ class _FastGrader:
         return finish_map(self.smooth.fit(raw), options, self.encoding)
 
 
-def upsample_map(color_map: np.ndarray, size: int) -> np.ndarray:
-    """A colour map sampled on a ``size``^3 lattice (its trilinear interpolation).
-
-    At lattice nodes trilinear interpolation is separable: a (size, n) linear
-    interpolation along each axis in turn (a millisecond, where a pass over
-    the size^3 nodes as pixels took tens on a busy machine).
-    """
-    n = color_map.shape[0]
-    if n == size:
-        return np.asarray(color_map, dtype=np.float32)
-    position = np.linspace(0.0, n - 1.0, size)
-    low = np.minimum(position.astype(np.int64), n - 2)
-    frac = position - low
-    weights = np.zeros((size, n))
-    weights[np.arange(size), low] = 1.0 - frac
-    weights[np.arange(size), low + 1] += frac
-    out = np.einsum("ai,ijkc->ajkc", weights, np.asarray(color_map, dtype=np.float64))
-    out = np.einsum("bj,ajkc->abkc", weights, out)
-    out = np.einsum("ck,abkd->abcd", weights, out)
-    return out.astype(np.float32)
-
-
 @dataclass
 class Session:
     """A photo and its styles, loaded once for exploring (nothing is ever written to them).
@@ -389,7 +367,9 @@ class Session:
     def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
         """The LUT the browser applies: the fast map on the exact map's lattice plus
         ``offset`` (exact minus fast map at the nearest known weights), clipped."""
-        lut = upsample_map(fast_map, self.lut_size)
+        from wbcgrade.color.remap import resample_lattice
+
+        lut = resample_lattice(fast_map, self.lut_size)
         if offset is not None:
             lut = np.clip(lut + offset, 0.0, 1.0)
         return np.ascontiguousarray(lut, dtype=np.float32)
@@ -639,10 +619,12 @@ class ExactGrader:
 
     def reference(self, settings: Settings) -> dict:
         """The exact map of ``settings`` and its offset from the fast map there."""
+        from wbcgrade.color.remap import resample_lattice
+
         exact = self.color_map(settings)
         fast = self._fast.solve(settings, _apply_weights(settings))
         return {"exact": exact,
-                "offset": (exact - upsample_map(fast, self.lut_size)).astype(np.float32)}
+                "offset": (exact - resample_lattice(fast, self.lut_size)).astype(np.float32)}
 
     def slopes(self, settings: Settings, step: float = SLOPE_STEP) -> np.ndarray:
         """How the fast map changes towards each style, at ``settings``' weights w.
@@ -656,27 +638,29 @@ class ExactGrader:
         weights = np.asarray(_apply_weights(settings))
         weights = weights / weights.sum()
         tol = self.base.transfer.tol
-        centre = upsample_map(self._fast.solve(settings, weights, tol), self.lut_size)
+        from wbcgrade.color.remap import resample_lattice
+
+        centre = resample_lattice(self._fast.solve(settings, weights, tol), self.lut_size)
         out = np.empty((len(weights), *centre.shape), dtype=np.float32)
         for s in range(len(weights)):
             towards = (1.0 - step) * weights + step * np.eye(len(weights))[s]
             moved = self._fast.solve(settings, towards, tol)
-            out[s] = (upsample_map(moved, self.lut_size) - centre) / step
+            out[s] = (resample_lattice(moved, self.lut_size) - centre) / step
         return out
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
-        from wbcgrade.color.fit import _loss_at, _problem
+        from wbcgrade.color.fit import fit_problem, loss_at
 
         fit = self.base.fit
         if self._loss_problem is None:
-            self._loss_problem = _problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
+            self._loss_problem = fit_problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),
                                           fit)
         target, hists, geometry = self._loss_problem
         out = []
         for row in rows:
             weights = np.asarray(row, dtype=np.float64)
-            out.append(_loss_at(target, hists, geometry, weights / weights.sum(), fit))
+            out.append(loss_at(target, hists, geometry, weights / weights.sum(), fit))
         return out
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from wbcgrade.core._jit import compiled
+from wbcgrade.core import compiled
 
 __all__ = ["WindingTree", "winding_numbers", "winding_numbers_exact"]
 

@@ -43,18 +43,23 @@ __all__ = ["FfmpegError", "VideoInfo", "ffmpeg_exe", "probe", "to_rgb_filter",
            "file_arg", "input_args", "pixel_format", "ffmpeg_reason", "FIELD_ORDERS"]
 
 
+#: The one line a run prints when the ``video`` extra is not installed.
+MISSING_FFMPEG = ("video needs ffmpeg: pip install 'wbcgrade[video]' "
+                  "(or: pip install imageio-ffmpeg)")
+
+
 class FfmpegError(WbcgradeError):
     """ffmpeg failed (the message is its last error line)."""
 
 
 @lru_cache(maxsize=1)
 def ffmpeg_exe() -> str:
-    """Path of the ffmpeg binary shipped in the ``imageio-ffmpeg`` wheel."""
+    """Path of the ffmpeg binary shipped in the ``imageio-ffmpeg`` wheel (the ``video`` extra:
+    ``pip install 'wbcgrade[video]'``; WbcgradeError naming it when it is missing)."""
     try:
         import imageio_ffmpeg
-    except ImportError:  # pragma: no cover - a runtime dependency
-        raise WbcgradeError("video needs the imageio-ffmpeg package "
-                            "(pip install imageio-ffmpeg)") from None
+    except ImportError:
+        raise WbcgradeError(MISSING_FFMPEG) from None
     try:
         return imageio_ffmpeg.get_ffmpeg_exe()
     except RuntimeError as exc:  # pragma: no cover - a broken install

@@ -1,0 +1,124 @@
+"""The colour domain's disk cache (wbcgrade.color.cache): any file name, a damaged entry
+rebuilt, concurrent writers, and a folder that cannot be written."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbcgrade.color import cache
+from wbcgrade.color.histogram import HistogramCache, soft_histogram
+from wbcgrade.color.options import DEFAULT_MAX_PIXELS
+
+REPO = Path(__file__).resolve().parents[2]
+
+ODD_NAMES = ["a photo with spaces.jpg", "\u00e9t\u00e9 \u5199\u771f \U0001f4f7.jpg",
+             os.fsdecode(b"caf\xe9.jpg"), "x" * 251 + ".jpg", "-rf --no-cache.jpg"]
+
+
+@pytest.mark.parametrize("name", ODD_NAMES)
+def test_an_entry_is_kept_for_any_file_name(tmp_path, name):
+    photo = tmp_path / name
+    photo.write_bytes(b"pixels")
+    store = HistogramCache(tmp_path / "cache")
+    hist = soft_histogram(np.random.default_rng(0).random((50, 3)), 5)
+    stored = store.put(photo, 5, hist)
+    assert np.array_equal(store.get(photo, 5), stored)
+    entries = list((tmp_path / "cache").iterdir())
+    assert [len(p.name) for p in entries] == [36]  # a digest, whatever the photo's name
+    other = tmp_path / ("_" + name[1:])  # a name one letter away is another entry
+    other.write_bytes(b"pixels")
+    assert store.get(other, 5) is None
+
+
+@pytest.mark.parametrize("damage", [b"", b"garbage", b"PK\x03\x04 cut short", None])
+def test_a_damaged_entry_is_a_miss_removed_then_rebuilt(tmp_path, damage):
+    photo = tmp_path / "p.jpg"
+    photo.write_bytes(b"pixels")
+    store = HistogramCache(tmp_path / "cache")
+    hist = soft_histogram(np.random.default_rng(1).random((50, 3)), 5)
+    stored = store.put(photo, 5, hist)
+    (entry,) = (tmp_path / "cache").iterdir()
+    good = entry.read_bytes()
+    entry.write_bytes(good[: len(good) // 2] if damage is None else damage)
+    assert store.get(photo, 5) is None
+    assert not entry.exists()  # removed: the next run does not read it again
+    store.put(photo, 5, hist)
+    assert np.array_equal(store.get(photo, 5), stored)
+
+
+def test_an_entry_of_the_wrong_arrays_is_a_miss(tmp_path):
+    photo = tmp_path / "p.jpg"
+    photo.write_bytes(b"pixels")
+    store = HistogramCache(tmp_path / "cache")
+    cache.write_entry(store._key(photo, 5, DEFAULT_MAX_PIXELS), other=np.zeros(3))
+    assert store.get(photo, 5) is None
+
+
+def _write_many(args: tuple[str, int]) -> int:
+    path, seed = args
+    bad = 0
+    for i in range(40):
+        values = np.full(2000, seed * 1000 + i, dtype=np.int64)
+        assert cache.write_entry(Path(path), values=values, seed=np.int64(seed))
+        read = cache.read_entry(Path(path))  # another writer may have replaced it: whole
+        if read is None or read["values"].shape != (2000,) \
+                or not (read["values"] == read["values"][0]).all():
+            bad += 1
+    return bad
+
+
+def test_concurrent_writers_leave_a_whole_entry(tmp_path):
+    path = tmp_path / "cache" / "looks" / cache.entry_name("one key")
+    with multiprocessing.get_context("spawn").Pool(4) as pool:
+        bad = pool.map(_write_many, [(str(path), seed) for seed in range(4)])
+    assert bad == [0, 0, 0, 0]  # no reader saw half an entry (nor lost one)
+    final = cache.read_entry(path)
+    assert final is not None and int(final["values"][0]) // 1000 == int(final["seed"])
+    assert [p.name for p in path.parent.iterdir()] == [path.name]  # no temporaries left
+
+
+def test_an_unwritable_folder_warns_once_and_the_value_is_still_returned(tmp_path, caplog,
+                                                                          monkeypatch):
+    monkeypatch.setattr(cache, "_WARNED", [])
+    blocker = tmp_path / "a file"
+    blocker.write_bytes(b"")
+    store = HistogramCache(blocker / "cache")  # a folder inside a file: never writable
+    photos = [tmp_path / f"{i}.jpg" for i in range(3)]
+    hist = soft_histogram(np.random.default_rng(2).random((50, 3)), 5)
+    for photo in photos:
+        photo.write_bytes(b"pixels")
+        assert store.put(photo, 5, hist).shape == (5, 5, 5)
+        assert store.get(photo, 5) is None
+    assert not cache.write_entry(cache.entry_path(blocker, "looks", "k"), a=np.zeros(2))
+    warnings = [r for r in caplog.records if "not written" in r.getMessage()]
+    assert len(warnings) == 1
+
+
+def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_path, style_dir,
+                                                                        photo):
+    """The style path (histograms, the set's look, scene images: all three kinds)."""
+    styles = style_dir
+    blocker = tmp_path / "not a folder"
+    blocker.write_bytes(b"")
+    outputs = []
+    for cache_dir in (blocker / "cache", tmp_path / "cache"):
+        out = tmp_path / f"out{len(outputs)}.png"
+        run = subprocess.run([sys.executable, "-m", "wbcgrade", "apply", str(photo),
+                              "--style", str(styles), "-o", str(out)], cwd=REPO,
+                             env=dict(os.environ, WBCGRADE_CACHE_DIR=str(cache_dir)),
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        assert "Traceback" not in run.stderr
+        outputs.append((out.read_bytes(), run.stderr))
+    (unwritable, said), (cached, _) = outputs
+    assert unwritable == cached  # the same picture with or without a cache
+    assert len([ln for ln in said.splitlines() if "not written" in ln]) == 1, said
+    kinds = {p.parent.name for p in (tmp_path / "cache").rglob("*.npz")}
+    assert kinds == {"cache", "looks", "scenes"}  # all three kinds were written there

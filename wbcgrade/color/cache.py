@@ -1,0 +1,164 @@
+"""The colour domain's disk cache: one folder, one key rule, one reader, one writer.
+
+Three things are kept between runs, each in its own place under one cache folder
+(:func:`cache_folder`):
+
+- style photos' histograms (``color.histogram.HistogramCache``): at the folder's
+  top, where they have always been;
+- a style set's look and the natural palettes' statistics (``color.look``): ``looks/``;
+- style photos prepared for scene matching (``color.scene``): ``scenes/``.
+
+An entry is one ``.npz`` archive (no pickle) named by a digest of its key text
+(:func:`entry_path`), so a key may hold any file name: unicode, spaces, a name
+that is not UTF-8, a name longer than the file system allows. The key says
+everything the value depends on (the file's path, size and time, the settings),
+so a stale entry is never found, only left behind.
+
+A cache never makes a run fail:
+
+- :func:`read_entry` treats anything that is not a readable archive (garbage,
+  zero bytes, cut short, too large) as a miss and removes it, so the value is
+  computed again and a good entry written in its place; callers treat any error
+  in using the arrays as a miss too;
+- :func:`write_entry` writes through :func:`wbcgrade._publish.atomic_path` (a
+  locked temporary beside the entry, renamed onto it), so a reader or a second
+  writer never sees half an entry; a folder that cannot be written (read-only,
+  full) is one warning line per process, and the run goes on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import logging
+import os
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from wbcgrade.errors import InputError
+from wbcgrade.limits import read_npz
+
+if TYPE_CHECKING:  # numpy is imported where arrays are written
+    import numpy as np
+
+__all__ = ["default_cache_dir", "cache_folder", "key_bytes", "entry_name", "entry_path",
+           "file_key", "read_entry", "write_entry"]
+
+log = logging.getLogger(__name__)
+
+#: Hex digits of an entry's name (128 bits of SHA-256 of its key).
+NAME_DIGITS = 32
+
+
+def default_cache_dir() -> Path:
+    """``$WBCGRADE_CACHE_DIR``, else ``$XDG_CACHE_HOME/wbcgrade``, else ``~/.cache/wbcgrade``."""
+    env = os.environ.get("WBCGRADE_CACHE_DIR")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "wbcgrade"
+
+
+def cache_folder(styles=None) -> Path | None:
+    """The cache folder of a StyleSet: its ``meta["cache_dir"]`` when it has one (None:
+    the command said ``--no-cache``), else :func:`default_cache_dir`."""
+    meta = getattr(styles, "meta", None) or {}
+    if "cache_dir" not in meta:
+        return default_cache_dir()
+    return None if meta["cache_dir"] is None else Path(meta["cache_dir"])
+
+
+def key_bytes(text: str) -> bytes:
+    """``text`` as bytes for a cache key: UTF-8, a path's undecodable bytes (``caf\\udce9``,
+    a POSIX name that is not UTF-8) as they were on disk."""
+    return text.encode("utf-8", "surrogateescape")
+
+
+def entry_name(key: str) -> str:
+    """The file name of the entry keyed by ``key`` (any text): ``<32 hex digits>.npz``.
+
+    >>> entry_name("a photo.jpg") == entry_name("a photo.jpg") != entry_name("a photo.JPG")
+    True
+    >>> len(entry_name("\\u00e9" * 10000))
+    36
+    """
+    return hashlib.sha256(key_bytes(key)).hexdigest()[:NAME_DIGITS] + ".npz"
+
+
+def entry_path(folder: str | os.PathLike | None, kind: str, key: str) -> Path | None:
+    """Where the entry of ``kind`` (a subfolder: ``"looks"``, ``"scenes"``; ``""``: the
+    folder's top) keyed by ``key`` lives under ``folder``; None when ``folder`` is None
+    (caching is off)."""
+    if folder is None:
+        return None
+    return Path(folder) / kind / entry_name(key) if kind else Path(folder) / entry_name(key)
+
+
+def file_key(path: str | os.PathLike) -> str:
+    """The part of a key that names a file as it is now: its absolute path, modification
+    time and size (an edited or replaced file gets another key). OSError when it is gone."""
+    path = Path(path)
+    stat = path.stat()
+    return f"{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
+
+
+def read_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
+    """The arrays of an entry, or None when there is none or it is unusable (then removed,
+    so that the caller computes the value again and writes a good entry in its place)."""
+    if path is None or not os.path.isfile(path):
+        return None
+    try:
+        return read_npz(path)
+    except InputError:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        return None
+
+
+_WARNED: list[str] = []  # the folder a write first failed in (one warning per process)
+_SWEPT: set[str] = set()
+_LOCK = threading.Lock()
+
+
+def write_entry(path: str | os.PathLike | None, compress: bool = False,
+                **arrays: np.ndarray) -> bool:
+    """Write an entry atomically (best effort). -> whether it was written.
+
+    The archive is made in memory first (a full disk cannot leave a half-written
+    ZipFile open), then published with :func:`wbcgrade._publish.publish_bytes`
+    without the flushes to disk: an entry a crash damages is found damaged and
+    rebuilt. A failed write is logged once per process (the cache folder is one); temporaries a
+    killed run left in it are removed the first time a process writes there.
+    ``compress``: deflate the arrays (histograms are sparse and shrink well).
+    """
+    if path is None:
+        return False
+    import numpy as np
+
+    from wbcgrade._publish import publish_bytes, remove_stale_temporaries
+
+    path = Path(path)
+    folder = str(path.parent)
+    try:
+        data = io.BytesIO()
+        (np.savez_compressed if compress else np.savez)(data, **arrays)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with _LOCK:
+            sweep = folder not in _SWEPT
+            _SWEPT.add(folder)
+        if sweep:
+            remove_stale_temporaries(path.parent)
+        publish_bytes(path, data.getvalue(), sync=False)
+        return True
+    except (OSError, InputError, ValueError) as exc:
+        with _LOCK:
+            first = not _WARNED
+            if first:
+                _WARNED.append(folder)
+        if first:  # one line per run, not one per style photo
+            reason = getattr(exc, "strerror", None) or str(exc)
+            log.warning("cache %s not written (%s); going on without it", folder, reason)
+        return False
