@@ -328,8 +328,9 @@ def nothing(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np
 #: A preset of natural palettes that replaces the shipped one (``--natural``): palettes of
 #: photos other than the benchmark's, so nothing needs holding out.
 NATURAL_FILE: str | None = None
-#: How the graded framing of a shot-matching case is shot (``--framing``): "plain", "dark"
-#: (2.5 stops under: 0.18 x its encoded values, then the look) or "flipped" (left to right).
+#: How the scenes of shot matching are shot (``--framing``): "plain", "dark" (the whole
+#: scene 2.5 stops under: 0.18 x its encoded values, then the look; both framings) or
+#: "flipped" (the graded framing flipped left to right).
 GRADED_FRAMING = "plain"
 
 
@@ -570,7 +571,10 @@ def feature_crop(img: np.ndarray, size: int) -> tuple[str, int, int] | None:
 def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> dict:
     """Grade the case's photos with every method; numbers, sheet rows and crop rows."""
     memo: dict = {}
-    if case.protocol == "shot":
+    if case.protocol == "shot" and GRADED_FRAMING == "dark":  # a dark scene: both framings
+        styles = [framings(to_8bit(LOOKS[case.look].apply(to_8bit(0.18 * photos.photo(s)))))[0]
+                  for s in case.style_sources]
+    elif case.protocol == "shot":
         styles = [framings(photos.looked(case.look, s))[0] for s in case.style_sources]
     else:
         styles = [photos.looked(case.look, s) for s in case.style_sources]
@@ -579,7 +583,7 @@ def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> 
         if case.protocol == "shot":
             photo = framings(photos.photo(name))[1]
             truth = framings(photos.looked(case.look, name))[1]
-            if GRADED_FRAMING == "dark":  # shot 2.5 stops under (sRGB-encoded: x 0.18 ~ 2.5 stops)
+            if GRADED_FRAMING == "dark":  # the scene 2.5 stops under (x 0.18 encoded values)
                 photo = to_8bit(0.18 * photo)
                 truth = to_8bit(LOOKS[case.look].apply(photo))
             elif GRADED_FRAMING == "flipped":
@@ -810,8 +814,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--natural", type=Path, help="a preset (.npz) of natural palettes of "
                         "photos other than the benchmark's, for wbcgrade's content model")
     parser.add_argument("--framing", choices=["plain", "dark", "flipped"], default="plain",
-                        help="shot matching: the graded framing as it is, 2.5 stops darker, "
-                        "or flipped left to right")
+                        help="shot matching: the scenes as they are, 2.5 stops darker (both "
+                        "framings), or the graded framing flipped left to right")
     parser.add_argument("--graded", type=int,
                         help="grade only the first K photos of each case (--quick: 3)")
     parser.add_argument("--size", type=int, help="long side in px (default 768; --quick: 384)")

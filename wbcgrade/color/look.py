@@ -652,11 +652,11 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
                 why[index] = reasons[0]
             continue
         matches[index] = match
-    if not matches and any(style is not None for style in styles):  # a flipped framing?
-        flipped, width = mirrored(photo), photo.colors.shape[1]
+    if any(style is not None for style in styles):  # a flipped framing (or a symmetric
+        flipped, width = mirrored(photo), photo.colors.shape[1]  # scene matched wrong way)?
         for index, style in enumerate(styles):
             match = match_scene(flipped, style) if style is not None else None
-            if match is not None:
+            if match is not None and match.inliers > getattr(matches.get(index), "inliers", 0):
                 matches[index] = unmirror(match, width)
                 if why is not None:
                     why.pop(index, None)
