@@ -465,7 +465,7 @@ def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
                            "16" if raw else _depth_of(like.spec.format))
     if held is not None and wanted not in held:
         if strict:
-            raise OptionError(f"--bit-depth {bit_depth}: {format_name.upper()} files hold "
+            raise OptionError(f"bit_depth {bit_depth}: {format_name.upper()} files hold "
                               f"{' or '.join(held)} only", "bit_depth")
         order = {"8": 0, "16": 1, "float": 2}
         wanted = min(held, key=lambda d: abs(order[d] - order[wanted]))

@@ -181,11 +181,11 @@ def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Pa
     path = Path(path)
     lut_format = lut_format_of(path, lut_format)
     if lut_format not in LUT_FORMATS:
-        raise InputError(f"--lut-format must be one of {', '.join(LUT_FORMATS)}")
+        raise OptionError(f"lut_format must be one of {', '.join(LUT_FORMATS)}", "lut_format")
     suffix = LUT_FORMATS[lut_format]
     if path.suffix.lower() != suffix:
-        raise InputError(f"{path}: LUT file name must end in {suffix} (--lut-format "
-                         f"{lut_format})")
+        raise OptionError(f"{path}: LUT file name must end in {suffix} (lut_format "
+                          f"{lut_format})", "lut_format")
     return path
 
 
@@ -260,8 +260,9 @@ def check_clf_support():
     try:
         import PyOpenColorIO as ocio
     except ImportError:
-        raise InputError("--lut-format clf needs the opencolorio package: "
-                         "pip install 'wbcgrade[ocio]' (or: pip install opencolorio)") from None
+        raise OptionError("lut_format clf needs the opencolorio package: "
+                          "pip install 'wbcgrade[ocio]' (or: pip install opencolorio)",
+                          "lut_format") from None
     return ocio
 
 

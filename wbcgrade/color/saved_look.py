@@ -464,9 +464,10 @@ def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
 
     from wbcgrade.errors import OptionError
 
-    for given, flag in ((consistent, "--consistent"), (lut is not None, "--lut"),
-                        (report_dir is not None, "--report")):
+    for given, name in ((consistent, "consistent"), (lut is not None, "lut"),
+                        (report_dir is not None, "report_dir")):
         if given:
-            raise OptionError(f"{flag} does not go with --look (a saved grade is already one "
-                              "grade for every photo, with no styles to report)", flag)
+            raise OptionError(f"{name} does not go with look (a saved grade is already one "
+                              "grade for every photo, with no styles to report)", name,
+                              also=("look",))
     return replace(options, spaces=replace(options.spaces, working=look.working))

@@ -165,8 +165,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     report_dir = None if report_dir is None else Path(report_dir)
     if lut is not None:
         if not consistent:
-            raise InputError("--lut needs --consistent (one grade for the series); per-photo "
-                             "LUTs come from `wbcgrade apply --lut`")
+            raise OptionError("lut needs consistent (one grade for the series); per-photo "
+                              "LUTs come from `wbcgrade apply --lut`", "lut",
+                              also=("consistent",))
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
         check_lut_size(lut_size)
