@@ -35,9 +35,8 @@ def _print_report(report, as_json: bool) -> None:
     if outcome is not None:
         for line in outcome.lines():
             click.echo(line)
-    sink = grade.info.get("sinkhorn", {})
-    if sink and not sink.get("converged", True):
-        _warn(f"the transfer Sinkhorn stopped at marginal error {sink['error']:.2g}")
+    if grade.transport is not None and not grade.transport.converged:
+        _warn(f"the transfer Sinkhorn stopped at marginal error {grade.transport.error:.2g}")
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in report.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {report.timings['total']:.1f}s)")
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
@@ -45,18 +44,21 @@ def _print_report(report, as_json: bool) -> None:
 
 def print_palette_fit(palette) -> None:
     """The weight table and the loss of a palette grade (:class:`PaletteFit`)."""
+    from wbcgrade.color.outcome import FitStart
+
     width = max(len("style"), *(len(name) for name in palette.names))
     click.echo(f"{'style':<{width}}  weight")
     click.echo(f"{'-' * width}  ------")
     for name, weight in zip(palette.names, palette.weights):
         click.echo(f"{name:<{width}}  {weight:6.3f}")
-    if palette.start == "given":
+    if palette.start is FitStart.GIVEN:
         click.echo(f"loss: {palette.loss:.4g} at the weights given with --weights")
         return
-    how = {"uniform": "fitted from uniform weights",
-           "vertex-refit": "refitted from the best single style, which beat the fit "
-                           "from uniform weights",
-           "vertex": "the best single style: no fit beat it"}.get(palette.start, palette.start)
+    how = {FitStart.UNIFORM: "fitted from uniform weights",
+           FitStart.VERTEX_REFIT: "refitted from the best single style, which beat the fit "
+                                  "from uniform weights",
+           FitStart.VERTEX: "the best single style: no fit beat it"}.get(palette.start,
+                                                                        palette.start.value)
     best = (f"; best single style {palette.best_single[0]} {palette.best_single[1]:.4g}"
             if palette.best_single is not None else "")
     click.echo(f"loss: {palette.loss:.4g} ({how}; {palette.evaluations} evaluations{best})")
@@ -122,10 +124,10 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         report = apply_photo(photo, source if look is None else look, options, output, lut,
                              lut_size, lut_format, overwrite, report_dir, progress, encode,
                              save_grade)
-    if "own_style" in report.grade.info:
+    if report.grade.own_style is not None:
         from wbcgrade.color.presets import own_style_warning
 
-        _warn(own_style_warning(str(photo), report.grade.info["own_style"]))
+        _warn(own_style_warning(str(photo), report.grade.own_style))
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")

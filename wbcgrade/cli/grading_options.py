@@ -84,7 +84,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
         if given(name):
             raise OptionError(f"--look replaces {flag}: give one of them", "--look")
     look = load_look(look_path, options.spaces.working)
-    is_json = dict(look.info).get("saved_look", {}).get("kind") == "json"
+    is_json = look.saved is not None and look.saved.is_json
     regrain_given = any(given(n) for n in ("regrain", "regrain_radius", "regrain_eps"))
     changes = {}
     if regrain_given or not is_json:

@@ -58,7 +58,7 @@ def _print_result(result, as_json: bool) -> None:
                  else "weights")
         click.echo(f"{where}: {ranked}  (loss {shot.fit.loss:.4g}, "
                    f"{len(shot.samples)} sampled frames)")
-        if not shot.grade.info.get("fit", {}).get("converged", True):
+        if not shot.fit.converged:
             _warn("the weight fit stopped before converging (raise --max-iter)")
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {result.timings['total']:.1f}s)")

@@ -100,8 +100,10 @@ class StyleSet:
     histograms : (S, n, n, n) float64, each summing to 1.
     source : folder or preset file they came from.
     width : kernel width (bins) recorded with a preset, or None.
-    meta : the preset's header; ``meta["working_space"]`` names the colour
-        space of the histograms (absent: sRGB-encoded Rec.709).
+    meta : the preset's header and what the set was made from, under string keys
+        that only this class reads: the typed properties :attr:`working_space`,
+        :attr:`look`, :attr:`converted_from`, :attr:`files`, :attr:`images` and
+        :attr:`cache_folder` are what other modules use.
     """
 
     names: list[str]
@@ -122,6 +124,32 @@ class StyleSet:
         name = self.meta.get("working_space")
         return resolve_space(name, "working space of the styles") if name \
             else default_working_space()
+
+    @property
+    def look(self) -> np.ndarray | None:
+        """(m, m, m, 3) the look a preset was made with (its own lattice), or None."""
+        return self.meta.get("look")
+
+    @property
+    def converted_from(self) -> str | None:
+        """The working space the set was converted from (:func:`styles_in_space`), or None."""
+        return self.meta.get("converted_from") or None
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        """The style photos' files (a folder's set), in the order of ``names``; () else."""
+        return tuple(self.meta.get("files") or ())
+
+    @property
+    def images(self) -> tuple:
+        """The style photos themselves ((H, W, 3) working-space colours) of a set built
+        from arrays; () else."""
+        return tuple(self.meta.get("images") or ())
+
+    @property
+    def cache_folder(self) -> str | None:
+        """The folder of the styles' histogram cache, or None (no cache, or a preset)."""
+        return self.meta.get("cache_dir")
 
     def at_bins(self, bins: int, only: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(S, bins, bins, bins) histograms re-binned to another grid.
@@ -446,9 +474,9 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
             moved = convert(centres[keep], source, working)
             hists.append(soft_histogram(moved, styles.bins, flat[keep]))
         meta = {**styles.meta, "working_space": working, "converted_from": source}
-        if styles.meta.get("look") is not None:  # the same look, converted (not re-extracted)
-            meta["look"] = look_in_space(styles.meta["look"], source, working,
-                                         max(65, styles.meta["look"].shape[0]))
+        if styles.look is not None:  # the same look, converted (not re-extracted)
+            meta["look"] = look_in_space(styles.look, source, working,
+                                         max(65, styles.look.shape[0]))
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
@@ -548,10 +576,9 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
         files.append(Path(natural))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")
-    if look is not None:
-        saved = dict(getattr(look, "info", {}) or {}).get("saved_look", {})
-        if saved.get("file"):
-            files.append(Path(saved["file"]))
+    saved = getattr(look, "saved", None)
+    if saved is not None and saved.file:
+        files.append(Path(saved.file))
     return files
 
 

@@ -328,8 +328,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
             from dataclasses import replace
 
             options = replace(options, spaces=replace(spaces, working=source.working))
-        name = str(dict(source.info).get("saved_look", {}).get("file", "saved grade"))
-        report = grade_file(plan, look_styles(source, name), options, shared=source,
+        report = grade_file(plan, look_styles(source), options, shared=source,
                             progress=progress, keep_input=False)
         report.fit = look_fit(source)
         _save_grade(plan, report.grade)

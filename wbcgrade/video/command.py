@@ -57,7 +57,7 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
         from wbcgrade.color.saved_look import look_batch_options, look_styles
 
         options = look_batch_options(options, look, report_dir=report_dir)
-        loaded = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
+        loaded = look_styles(look, str(None if look.saved is None else look.saved.file))
     with contextlib.ExitStack() as stack:  # every output published together, or none
         result = grade_planned(source, output, lut, loaded, options, settings, overwrite,
                                 progress, {"styles": time.perf_counter() - start}, stack, look)

@@ -101,7 +101,7 @@ def run_task(task: BatchTask, context: BatchContext,
         result.start = fit.start
         result.timings = dict(report.timings)
         result.color = report.color
-        result.own_style = report.grade.info.get("own_style")
+        result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
         from wbcgrade.color.report import palette_record, sheet_content, sheet_path
 

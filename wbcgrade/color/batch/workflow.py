@@ -205,7 +205,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         else:
             from wbcgrade.color.saved_look import look_styles
 
-            styles = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
+            styles = look_styles(look, str(None if look.saved is None else look.saved.file))
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
