@@ -121,9 +121,10 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
-        report = apply_photo(photo, source if look is None else look, options, output, lut,
-                             lut_size, lut_format, overwrite, report_dir, progress, encode,
-                             save_grade)
+        report = apply_photo(photo, source if look is None else look, options, output=output,
+                             lut=lut, lut_size=lut_size, lut_format=lut_format,
+                             overwrite=overwrite, report_dir=report_dir, progress=progress,
+                             encode=encode, save_grade=save_grade)
     if report.grade.own_style is not None:
         from wbcgrade.color.presets import own_style_warning
 

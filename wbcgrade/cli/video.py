@@ -160,8 +160,9 @@ def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames
                 stage(name)
 
         progress = VideoProgress(warn=_warn, frames=on_frames, stage=on_stage, **callbacks)
-        result = grade_clip(clip, output, source, options, settings, lut, overwrite,
-                            report_dir, progress, look)
+        result = grade_clip(clip, output, source, options, settings=settings, lut=lut,
+                            overwrite=overwrite, report_dir=report_dir, progress=progress,
+                            look=look)
     _print_result(result, as_json)
     if result.report is not None and not as_json:
         click.echo(f"report: {result.report}")

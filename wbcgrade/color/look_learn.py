@@ -687,7 +687,7 @@ def _output_kind(output: Path) -> str:
 
 
 def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
-                    output: str | os.PathLike, lut_size: int = 33,
+                    output: str | os.PathLike, *, lut_size: int = 33,
                     working_space: str | None = None, overwrite: bool = False,
                     warn: Callable[[str], None] | None = None,
                     progress: Callable[[int, int, str], None] | None = None) -> LearnResult:

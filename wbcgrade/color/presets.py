@@ -182,7 +182,7 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
 
 
 def load_style_folder(folder: str | os.PathLike, bins: int,
-                      cache: HistogramCache | None = None,
+                      *, cache: HistogramCache | None = None,
                       max_pixels: int = DEFAULT_MAX_PIXELS,
                       warn: Callable[[str], None] | None = None,
                       progress: Callable[[int, int, str], None] | None = None,
@@ -250,7 +250,7 @@ def check_preset_width(width: float) -> float:
     return value
 
 
-def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
+def save_preset(path: str | os.PathLike, styles: StyleSet, *, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
                 threshold: float = 1e-7, provenance: dict | None = None,
                 look: np.ndarray | None = None, compact: bool = False) -> Path:

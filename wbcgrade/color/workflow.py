@@ -106,7 +106,7 @@ def default_output_path(photo: str | os.PathLike) -> Path:
 
 
 def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
-               lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
+               *, lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
                lut_format: str | None = None, overwrite: bool = False,
                write: bool = True, encode: WriteOptions | None = None,
                saved_grade: str | os.PathLike | None = None,
@@ -186,7 +186,7 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
 
 
 def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
-                shared: Grade | None = None, progress: Progress | None = None,
+                *, shared: Grade | None = None, progress: Progress | None = None,
                 keep_input: bool = True) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
@@ -229,7 +229,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
 
 
 def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
-               shared: Grade | None = None, progress: Progress | None = None,
+               *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
                keep_input: bool = True) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
@@ -246,7 +246,8 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
     """
     progress = progress or Progress()
     timings = dict(timings or {})
-    graded = grade_photo(plan.photo, styles, options, shared, progress, keep_input)
+    graded = grade_photo(plan.photo, styles, options, shared=shared, progress=progress,
+                         keep_input=keep_input)
     grade = graded.grade
     timings.update(graded.timings)
     if plan.output is not None:
@@ -284,7 +285,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
 
 
 def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: GradeOptions,
-                output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
+                *, output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
                 lut_size: int = DEFAULT_LUT_SIZE, lut_format: str | None = None,
                 overwrite: bool = False, report_dir: str | os.PathLike | None = None,
                 progress: Progress | None = None,
@@ -314,8 +315,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                           "report_dir", also=("look",))
     reads = source_files(None if saved else source, options.map.natural,
                          source if saved else None)
-    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode,
-                      saved_grade=save_grade, reads=reads)
+    plan = plan_photo(photo, output, lut=lut, lut_size=lut_size, lut_format=lut_format,
+                      overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
         from wbcgrade.color.report import plan_report
 

@@ -92,7 +92,8 @@ def run_task(task: BatchTask, context: BatchContext,
         if target is not None:
             check_image_output(target)  # before any work
             target.parent.mkdir(parents=True, exist_ok=True)
-        report = grade_file(plan, context.styles, context.options, context.shared, progress)
+        report = grade_file(plan, context.styles, context.options, shared=context.shared,
+                            progress=progress)
         fit = report.fit if report.fit is not None else context.shared_fit
         result.names = list(context.styles.names)
         result.weights = [float(w) for w in fit.weights]
