@@ -350,9 +350,9 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
     if working:
         from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
 
-        space = resolve_space(working)
-        if space != default_working_space():
-            srgb = default_working_space()
+        srgb = default_working_space()
+        space = working if working == srgb else resolve_space(working)
+        if space != srgb:
             before = np.clip(convert(before, space, srgb), 0.0, 1.0)
             moved = np.clip(convert(moved, space, srgb), 0.0, 1.0)
     if mass is None:

@@ -113,6 +113,7 @@ class StyleSet:
     description: str = ""
     meta: dict = field(default_factory=dict)
     _resampled: dict = field(default_factory=dict, repr=False, compare=False)
+    _space: str | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def bins(self) -> int:
@@ -120,10 +121,13 @@ class StyleSet:
 
     @property
     def working_space(self) -> str:
-        """The colour space whose unit cube the histograms cover (config name)."""
-        name = self.meta.get("working_space")
-        return resolve_space(name, "working space of the styles") if name \
-            else default_working_space()
+        """The colour space whose unit cube the histograms cover (config name; resolved
+        once per set)."""
+        if self._space is None:
+            name = self.meta.get("working_space")
+            self._space = (resolve_space(name, "working space of the styles") if name
+                           else default_working_space())
+        return self._space
 
     @property
     def look(self) -> np.ndarray | None:
@@ -460,8 +464,10 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
     from wbcgrade.color.histogram import grid_points, soft_histogram
 
 
-    working = resolve_space(working_space)
     source = styles.working_space
+    if working_space == source:  # a config name already (the encoding's, a set's)
+        return styles
+    working = resolve_space(working_space)
     if working == source:
         return styles
     key = ("space", working)

@@ -47,7 +47,7 @@ from wbcgrade.color.lut import (
     check_lut_path,
     check_lut_size,
     lut_format_of,
-    write_grade_lut,
+    write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
@@ -84,7 +84,9 @@ class PhotoPlan:
     """A photo and its outputs, checked before any work (:func:`plan_photo`).
 
     ``output`` None: graded in memory only (``wbcgrade report``); ``lut`` None: no LUT.
-    Paths are resolved (links followed).
+    Paths are resolved (links followed). ``lut_format`` and ``output_format`` (the image
+    format's name, :func:`~wbcgrade.color.imageio.check_image_output`) are what the
+    checks found: the writers use them as they are.
     """
 
     photo: Path
@@ -95,6 +97,7 @@ class PhotoPlan:
     overwrite: bool = False
     encode: WriteOptions = WriteOptions()
     saved_grade: Path | None = None
+    output_format: str | None = None
 
 
 def default_output_path(photo: str | os.PathLike) -> Path:
@@ -132,8 +135,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     else:
         output = Path(output) if output is not None else default_output_path(photo)
     encode = encode or WriteOptions()
+    output_format = None
     if output is not None:
-        check_image_output(output)
+        output_format = check_image_output(output)
         check_write_options(output, encode)
     if lut is not None:
         lut_format = lut_format_of(lut, lut_format)
@@ -144,7 +148,7 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],
                                             overwrite)
     return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode,
-                     saved_grade)
+                     saved_grade, output_format)
 
 
 def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
@@ -261,17 +265,19 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
             pixels = output_pixels(graded.pixels, graded.alpha_channel, graded.image,
                                    graded.encoding, plan.output, plan.encode)
             with stage_image(plan.output, pixels, graded.image, plan.overwrite,
-                             graded.alpha_channel, plan.encode):
+                             graded.alpha_channel, plan.encode,
+                             format_name=plan.output_format):
                 timings["write"] = time.perf_counter() - start
                 if plan.lut is not None:  # written while the photo waits, published before it
                     progress.say("lut")
                     start = time.perf_counter()
                     ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-                    write_grade_lut(plan.lut, grade, graded.encoding.within_working(),
-                                    plan.lut_size, plan.lut_format,
-                                    title=f"wbcgrade {plan.photo.stem}",
-                                    comments=[f"wbcgrade grade of {plan.photo.name}: {ranked}"],
-                                    overwrite=plan.overwrite)
+                    write_checked_lut(plan.lut, plan.lut_format, grade,
+                                      graded.encoding.within_working(), plan.lut_size,
+                                      title=f"wbcgrade {plan.photo.stem}",
+                                      comments=[f"wbcgrade grade of {plan.photo.name}: "
+                                                f"{ranked}"],
+                                      overwrite=plan.overwrite)
                     lut_written = True
                     timings["lut"] = time.perf_counter() - start
         except BaseException:

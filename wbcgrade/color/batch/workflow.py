@@ -45,7 +45,7 @@ from wbcgrade.color.lut import (
     check_lut_path,
     check_lut_size,
     lut_format_of,
-    write_grade_lut,
+    write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
@@ -231,10 +231,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
             # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
             encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
-            result.lut = write_grade_lut(lut, grade, encoding, lut_size, lut_format,
-                                         title=f"wbcgrade series {Path(in_dir).name}",
-                                         comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
-                                         overwrite=overwrite)
+            result.lut = write_checked_lut(lut, lut_format, grade, encoding, lut_size,
+                                           title=f"wbcgrade series {Path(in_dir).name}",
+                                           comments=[f"wbcgrade series grade of {in_dir}: "
+                                                     f"{ranked}"],
+                                           overwrite=overwrite)
     return result
 
 
