@@ -14,6 +14,7 @@ from wbcgrade.cli.grading_options import (
     lut_format_option,
     lut_size_option,
     space_options,
+    table_options,
     take_grading_options,
     take_look,
     take_write_options,
@@ -72,22 +73,21 @@ def print_palette_fit(palette) -> None:
               help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
 @space_options
-@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Also write the grade as a 3-D LUT (.cube or .clf; its header names the "
-                   "colour spaces it expects and produces).")
+@table_options("lut", help="Also write the grade as a 3-D LUT (.cube or .clf; its header "
+                           "names the colour spaces it expects and produces).")
 @lazy_options(lut_size_option)
 @lazy_options(lut_format_option)
 @lazy_options(look_option)
 @lazy_options(write_options)
-@click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
+@table_options("overwrite", help="Replace existing output files (never PHOTO).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the report as JSON (what the grade did; no colour map).")
 @click.option("--save-grade", type=click.Path(dir_okay=False, path_type=str), default=None,
               metavar="FILE", help="Also write the grade itself to FILE (JSON), which "
               "--look FILE applies again with no fit.")
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Also write a report (what the grade did; a palette "
-              "grade's weights): JSON, CSV, a PNG sheet and index.html, into this folder.")
+@table_options("report_dir", help="Also write a report (what the grade did; a palette grade's "
+                                  "weights): JSON, CSV, a PNG sheet and index.html, into this "
+                                  "folder.")
 @click.pass_context
 def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, as_json,
           save_grade, report_dir, **kwargs):

@@ -27,6 +27,17 @@ GRADING_NAMES = ("style_dir", "preset", "mode", "natural", "bins", "fit_bins", "
                  "cache_dir", "max_image_pixels")
 
 
+def table_options(*names: str, **changes):
+    """Decorator: the options of the table's rows named (built now, in that order);
+    ``changes`` replace fields of the rows (a command's own ``help``)."""
+    def decorate(function):
+        for decorator in reversed(click_options(*names, **changes)):
+            function = decorator(function)
+        return function
+
+    return decorate
+
+
 def _options() -> list:
     """The grading options (click decorators), in the order ``--help`` shows them."""
     return click_options(*GRADING_NAMES)

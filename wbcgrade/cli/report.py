@@ -9,6 +9,7 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     space_options,
+    table_options,
     take_grading_options,
 )
 
@@ -22,14 +23,12 @@ from wbcgrade.cli.grading_options import (
 @grading_options
 @space_options
 @click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
-@click.option("--consistent", is_flag=True,
-              help="Report the one series grade (pooled palette) instead of one fit per photo.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Fit photos in N local processes.")
+@table_options("consistent", help="Report the one series grade (pooled palette) instead of "
+                                  "one fit per photo.")
+@table_options("jobs", help="Fit photos in N local processes.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Send the photos to a Dask distributed scheduler (needs wbcgrade[dask]).")
-@click.option("--overwrite", is_flag=True,
-              help="Replace the files of an existing report in the report folder.")
+@table_options("overwrite", help="Replace the files of an existing report in the report folder.")
 @click.pass_context
 def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, overwrite,
            **kwargs):
