@@ -17,7 +17,7 @@ from wbcgrade.cli.grading_options import (
 @click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
                 type=click.Path(exists=True, path_type=str))
-@click.option("-o", "--output-dir", "report_dir", default=None,
+@click.option("-o", "--output-dir", "out_dir", default=None,
               type=click.Path(file_okay=False, path_type=str),
               help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
@@ -30,7 +30,7 @@ from wbcgrade.cli.grading_options import (
               help="Send the photos to a Dask distributed scheduler (needs wbcgrade[dask]).")
 @table_options("overwrite", help="Replace the files of an existing report in the report folder.")
 @click.pass_context
-def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, overwrite,
+def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwrite,
            **kwargs):
     """What the grade does to a photo or a folder (weights with --mode palette).
 
@@ -47,7 +47,7 @@ def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, over
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)
     with batch_progress() as progress:
-        result = report_folder(target, report_dir, source, options, recursive=recursive,
+        result = report_folder(target, out_dir, source, options, recursive=recursive,
                                consistent=consistent, overwrite=overwrite, jobs=jobs,
                                scheduler=scheduler, progress=progress)
     print_summary(result, verb="reported")
