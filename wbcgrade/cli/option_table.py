@@ -17,6 +17,7 @@ options are built.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from importlib import import_module
 
 import click
@@ -99,12 +100,18 @@ class Option:
     def default_value(self):
         """The default: the library field's, a named constant's, or the row's own."""
         if self.default is FIELD_DEFAULT:
-            from wbcgrade.color.options import flat_defaults
-
-            return flat_defaults()[self.json]
+            return _field_defaults()[self.json]
         if self.lazy_default:
             return _resolve(self.default)
         return self.default
+
+
+@cache
+def _field_defaults() -> dict:
+    """The library fields' defaults by flat name (read once)."""
+    from wbcgrade.color.options import flat_defaults
+
+    return flat_defaults()
 
 
 def _resolve(name: str):
