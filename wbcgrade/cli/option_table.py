@@ -128,9 +128,9 @@ _FOLDER = click.Path(file_okay=False, path_type=str)
 OPTIONS: tuple[Option, ...] = (
     # where the grade comes from
     Option("style_dir", "--style", "Folder of style photos (non-images are skipped).",
-           type=_PATH, section=SOURCE),
+           field="style_dir", type=_PATH, section=SOURCE),
     Option("preset", "--preset", "Shipped preset name (see `wbcgrade preset list`) or a "
-           "preset .npz file.", metavar="NAME_OR_FILE", section=SOURCE),
+           "preset .npz file.", field="preset", metavar="NAME_OR_FILE", section=SOURCE),
     Option("mode", "--mode", "look: apply the look the styles share (and their own scene's, "
            "when one of them shows the photo's scene); palette: move the photo's colours onto "
            "the closest blend of the style palettes.", field="map.builder", json="mode",

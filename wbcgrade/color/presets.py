@@ -57,7 +57,7 @@ from wbcgrade.color.histogram import (
     to_sparse,
 )
 from wbcgrade.color.imageio import read_image
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_histogram_cells, read_npz
 
 __all__ = [
@@ -549,7 +549,8 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
     (:func:`styles_in_space`).
     """
     if (source.style_dir is None) == (source.preset is None):
-        raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
+        raise OptionError("give exactly one of style_dir DIR or preset NAME_OR_FILE",
+                          "style_dir", also=("preset",))
     if source.preset is not None:
         styles = load_preset(resolve_preset(source.preset))
         if working_space is None and "working_space" not in styles.meta:
