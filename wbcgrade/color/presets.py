@@ -102,8 +102,8 @@ class StyleSet:
     width : kernel width (bins) recorded with a preset, or None.
     meta : the preset's header and what the set was made from, under string keys
         that only this class reads: the typed properties :attr:`working_space`,
-        :attr:`look`, :attr:`converted_from`, :attr:`files`, :attr:`images` and
-        :attr:`cache_folder` are what other modules use.
+        :attr:`look`, :attr:`converted_from`, :attr:`files` and :attr:`images` are
+        what other modules use.
     """
 
     names: list[str]
@@ -149,11 +149,6 @@ class StyleSet:
         """The style photos themselves ((H, W, 3) working-space colours) of a set built
         from arrays; () else."""
         return tuple(self.meta.get("images") or ())
-
-    @property
-    def cache_folder(self) -> str | None:
-        """The folder of the styles' histogram cache, or None (no cache, or a preset)."""
-        return self.meta.get("cache_dir")
 
     def at_bins(self, bins: int, only: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(S, bins, bins, bins) histograms re-binned to another grid.
