@@ -36,6 +36,19 @@ def test_the_commands_options_are_the_tables_rows(command):
             assert params[row.name].default == flat_defaults()[row.json], row.name
 
 
+@pytest.mark.parametrize("command", ["apply", "batch", "report", "video"])
+def test_every_option_of_a_grading_command_is_a_table_row(command):
+    names = {row.name for row in OPTIONS}
+    params = _params(command)
+    options = {name for name, p in params.items() if isinstance(p, click.Option)}
+    assert options - names == {"help"}
+
+
+def test_a_required_row_stays_required():
+    result = CliRunner().invoke(main, ["batch", "samples", "--preset", "warm"])
+    assert result.exit_code == 2 and "Missing option '-o' / '--output-dir'" in result.output
+
+
 def test_video_has_the_tables_video_settings():
     params = _params("video")
     for name in ("sample_every", "cut_threshold", "blend_frames", "codec", "crf"):

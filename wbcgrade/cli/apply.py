@@ -69,8 +69,7 @@ def print_palette_fit(palette) -> None:
 
 @click.command("apply", cls=LazyOptionsCommand)
 @click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
+@table_options("output", help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
 @space_options
 @table_options("lut", help="Also write the grade as a 3-D LUT (.cube or .clf; its header "
@@ -80,11 +79,8 @@ def print_palette_fit(palette) -> None:
 @lazy_options(look_option)
 @lazy_options(write_options)
 @table_options("overwrite", help="Replace existing output files (never PHOTO).")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print the report as JSON (what the grade did; no colour map).")
-@click.option("--save-grade", type=click.Path(dir_okay=False, path_type=str), default=None,
-              metavar="FILE", help="Also write the grade itself to FILE (JSON), which "
-              "--look FILE applies again with no fit.")
+@table_options("as_json", help="Print the report as JSON (what the grade did; no colour map).")
+@table_options("save_grade")
 @table_options("report_dir", help="Also write a report (what the grade did; a palette grade's "
                                   "weights): JSON, CSV, a PNG sheet and index.html, into this "
                                   "folder.")

@@ -69,6 +69,8 @@ class Option:
     show_default: bool = False
     is_flag: bool = False
     expose_value: bool = True
+    required: bool = False
+    hidden: bool = False
     callback: str | None = None
     section: str = OTHER
 
@@ -89,12 +91,18 @@ class Option:
             extra["callback"] = _resolve(self.callback)
         if not self.expose_value:
             extra["expose_value"] = False
+        if self.required:  # no default: click 8.2+ takes an explicit None as a value given
+            extra["required"] = True
+        else:
+            extra["default"] = default
+        if self.hidden:
+            extra["hidden"] = True
         text = self.help
         if self.help_default is not None:
             shown = _resolve(self.help_default)
             text = text.replace("{default}", f"{shown:_}" if isinstance(shown, int)
                                 else str(shown))
-        return click.option(*(self.decls or (self.flag,)), self.name, default=default,
+        return click.option(*(self.decls or (self.flag,)), self.name,
                             show_default=self.show_default, help=text, **extra)
 
     def default_value(self):
@@ -251,11 +259,29 @@ OPTIONS: tuple[Option, ...] = (
            section=OUTPUTS),
     Option("overwrite", "--overwrite", "Replace existing output files.", field="overwrite",
            is_flag=True, default=False, section=OUTPUTS),
+    Option("output", "--output", "Output file [default: <stem>_graded.<ext> beside the input].",
+           field="output", decls=("-o", "--output"), type=_FILE, section=OUTPUTS),
+    Option("out_dir", "--output-dir", "Output folder.", field="out_dir",
+           decls=("-o", "--output-dir"), type=_FOLDER, section=OUTPUTS),
+    Option("as_json", "--json", "Print the result as JSON.", is_flag=True, default=False,
+           section=OUTPUTS),
+    Option("save_grade", "--save-grade", "Also write the grade itself to FILE (JSON), which "
+           "--look FILE applies again with no fit.", field="save_grade", type=_FILE,
+           metavar="FILE", section=OUTPUTS),
     # batch and video
+    Option("recursive", "--recursive", "Descend into sub-folders.", field="recursive",
+           decls=("-r", "--recursive"), is_flag=True, default=False),
     Option("consistent", "--consistent", "One grade for the whole series.",
            field="consistent", is_flag=True, default=False),
+    Option("force_alias", "--force", "Deprecated alias of --overwrite.", is_flag=True,
+           default=False, hidden=True),
     Option("jobs", "--jobs", "Grade photos in N local processes.", field="jobs",
            decls=("-j", "--jobs"), type=int, default=1, show_default=True),
+    Option("scheduler", "--scheduler", "Send the photos to a Dask distributed scheduler (needs "
+           "wbcgrade[dask]).", field="scheduler", metavar="ADDRESS"),
+    Option("per_shot", "--per-shot", "Detect cuts and fit one grade per shot (blended over "
+           "--blend-frames at each cut) instead of one grade for the whole clip.",
+           field="per_shot", is_flag=True, default=False),
     Option("sample_every", "--sample-every", "Seconds between the frames sampled for the fit.",
            field="sample_every", type=float,
            default="wbcgrade.video.defaults:DEFAULT_SAMPLE_EVERY", lazy_default=True,

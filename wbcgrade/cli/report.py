@@ -17,17 +17,14 @@ from wbcgrade.cli.grading_options import (
 @click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
                 type=click.Path(exists=True, path_type=str))
-@click.option("-o", "--output-dir", "out_dir", default=None,
-              type=click.Path(file_okay=False, path_type=str),
-              help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
+@table_options("out_dir", help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
 @space_options
-@click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
+@table_options("recursive")
 @table_options("consistent", help="Report the one series grade (pooled palette) instead of "
                                   "one fit per photo.")
 @table_options("jobs", help="Fit photos in N local processes.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Send the photos to a Dask distributed scheduler (needs wbcgrade[dask]).")
+@table_options("scheduler")
 @table_options("overwrite", help="Replace the files of an existing report in the report folder.")
 @click.pass_context
 def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwrite,

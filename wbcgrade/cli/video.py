@@ -61,12 +61,9 @@ def _print_result(result, as_json: bool) -> None:
 
 @click.command("video", cls=LazyOptionsCommand)
 @click.argument("clip", type=click.Path(dir_okay=False, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
+@table_options("output", help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
 @grading_options_except(*_NOT_FOR_VIDEO)
-@click.option("--per-shot", is_flag=True,
-              help="Detect cuts and fit one grade per shot (blended over --blend-frames at "
-                   "each cut) instead of one grade for the whole clip.")
+@table_options("per_shot")
 @table_options("sample_every", "cut_threshold", "blend_frames", "codec", "crf")
 @table_options("lut", help="Also write the grade as a 3-D LUT (.cube); with several shots, "
                            "<stem>_shotNN.cube per shot.")
@@ -84,7 +81,7 @@ def _print_result(result, as_json: bool) -> None:
                     "LUT ffmpeg applies is baked in the input space. Config: $OCIO, else "
                     "OpenColorIO's built-in ocio://default.")
 @table_options("overwrite", help="Replace existing output files (never CLIP).")
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+@table_options("as_json")
 @table_options("report_dir", help="Also write a contact sheet per shot (sampled frames before "
                                   "and after, what the grade did, palettes) and report.json "
                                   "into this folder.")
