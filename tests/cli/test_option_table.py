@@ -44,8 +44,8 @@ def test_every_option_of_a_grading_command_is_a_table_row(command):
     assert options - names == {"help"}
 
 
-def test_a_required_row_stays_required():
-    result = CliRunner().invoke(main, ["batch", "samples", "--preset", "warm"])
+def test_a_required_row_stays_required(tmp_path):
+    result = CliRunner().invoke(main, ["batch", str(tmp_path), "--preset", "warm"])
     assert result.exit_code == 2 and "Missing option '-o' / '--output-dir'" in result.output
 
 
