@@ -63,7 +63,7 @@ def main() -> None:
     styles = load_preset(resolve_preset(args.preset))
     graded, lut = OUT / "graded.mp4", OUT / "grade.cube"
     result = grade_video(clip, graded, styles, GradeOptions(),
-                         VideoSettings(per_shot=args.per_shot), lut=lut, overwrite=True)
+                         settings=VideoSettings(per_shot=args.per_shot), lut=lut, overwrite=True)
     start = time.perf_counter()
     subprocess.run([ffmpeg_exe(), "-hide_banner", "-loglevel", "error", "-nostdin", "-y",
                     "-i", str(clip), "-vf", f"lut3d=file={lut}:interp=tetrahedral",

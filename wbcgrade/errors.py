@@ -20,13 +20,17 @@ class NumericalError(WbcgradeError, FloatingPointError):
 class OptionError(InputError):
     """A setting (a command-line option) has an unusable value.
 
-    ``option`` names it as the command line spells it (e.g. ``"-o/--png"``);
-    the CLI reports it as a usage error (exit status 2), like click's own.
+    ``option`` names the setting as the library does (a field such as
+    ``"transfer.bins"``, or a parameter such as ``"lut_size"``), and the
+    message names it the same way; ``also`` names other settings the message
+    mentions. The CLI writes each as the flag that sets it (``--bins``) and
+    reports the error as a usage error (exit status 2), like click's own.
     """
 
-    def __init__(self, message: str, option: str) -> None:
+    def __init__(self, message: str, option: str, also: tuple[str, ...] = ()) -> None:
         super().__init__(message)
         self.option = option
+        self.also = tuple(also)
 
 
 class Terminated(KeyboardInterrupt):

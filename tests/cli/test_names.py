@@ -20,8 +20,9 @@ def test_batch_force_still_works_with_a_deprecation_warning(tmp_path):
     args = ["batch", str(photos), "-o", str(tmp_path / "out"), "--lut", "x.cube"]
     old = CliRunner().invoke(main, [*args, "--force"])
     new = CliRunner().invoke(main, [*args, "--overwrite"])
-    # Both reach the same check (--lut without --consistent); only --force warns.
-    assert old.exit_code == new.exit_code == 1
+    # Both reach the same check (--lut without --consistent, a usage error); only --force
+    # warns.
+    assert old.exit_code == new.exit_code == 2
     assert old.output.splitlines()[-1] == new.output.splitlines()[-1]
     assert "--lut needs --consistent" in new.output
     assert "--force is deprecated; use --overwrite" in old.output

@@ -369,7 +369,7 @@ def test_grade_array_in_a_working_space():
     graded, grade = grade_array(rgb, styles, opts)
     assert graded.shape == rgb.shape and np.isfinite(graded).all()
     assert 0.01 < np.abs(graded - rgb).mean() < 0.3
-    with pytest.raises(OptionError, match="--working-space: unknown colour space 'nope'"):
+    with pytest.raises(OptionError, match="spaces.working: unknown colour space 'nope'"):
         ColorEncoding.of(None, "nope")
 
 

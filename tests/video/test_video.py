@@ -248,7 +248,7 @@ def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     styles = load_preset(resolve_preset(str(THREE_STYLES)))
     opts = GradeOptions(bins=32, weights=[0.5, 0.3, 0.2], regrain=False)
     result = grade_video(clips["rgb"], tmp_path / "graded.mkv", styles, opts,
-                         VideoSettings(codec="ffv1"))
+                         settings=VideoSettings(codec="ffv1"))
     encoding = result.encoding
     assert encoding.input == encoding.working == "sRGB Encoded Rec.709 (sRGB)"
     shot = result.shots[0]

@@ -54,6 +54,9 @@ def _signals_end_cleanly():
             signal.signal(signum, handler)
 
 
+#: Exit status of a bad option (click's own usage errors exit with it too).
+USAGE_ERROR = 2
+
 _DISK_FULL = {errno.ENOSPC: "disk full", errno.EDQUOT: "disk quota exceeded",
               errno.EFBIG: "file size limit"}
 
@@ -85,12 +88,13 @@ class _Group(click.Group):
             click.echo("Interrupted.", err=True)
             sys.exit(130)
         except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
+            status = 1
             if isinstance(exc, OptionError):  # a library field -> the flag that sets it
                 from wbcgrade.cli.grading_options import flag_error
 
-                exc = flag_error(exc)
+                exc, status = flag_error(exc), USAGE_ERROR
             click.echo(f"Error: {_message(exc)}", err=True)
-            sys.exit(1)
+            sys.exit(status)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

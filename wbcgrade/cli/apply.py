@@ -14,6 +14,7 @@ from wbcgrade.cli.grading_options import (
     lut_format_option,
     lut_size_option,
     space_options,
+    table_options,
     take_grading_options,
     take_look,
     take_write_options,
@@ -35,9 +36,8 @@ def _print_report(report, as_json: bool) -> None:
     if outcome is not None:
         for line in outcome.lines():
             click.echo(line)
-    sink = grade.info.get("sinkhorn", {})
-    if sink and not sink.get("converged", True):
-        _warn(f"the transfer Sinkhorn stopped at marginal error {sink['error']:.2g}")
+    if grade.transport is not None and not grade.transport.converged:
+        _warn(f"the transfer Sinkhorn stopped at marginal error {grade.transport.error:.2g}")
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in report.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {report.timings['total']:.1f}s)")
     click.echo(f"wrote {report.output}" + (f" and {report.lut}" if report.lut else ""))
@@ -45,18 +45,21 @@ def _print_report(report, as_json: bool) -> None:
 
 def print_palette_fit(palette) -> None:
     """The weight table and the loss of a palette grade (:class:`PaletteFit`)."""
+    from wbcgrade.color.outcome import FitStart
+
     width = max(len("style"), *(len(name) for name in palette.names))
     click.echo(f"{'style':<{width}}  weight")
     click.echo(f"{'-' * width}  ------")
     for name, weight in zip(palette.names, palette.weights):
         click.echo(f"{name:<{width}}  {weight:6.3f}")
-    if palette.start == "given":
+    if palette.start is FitStart.GIVEN:
         click.echo(f"loss: {palette.loss:.4g} at the weights given with --weights")
         return
-    how = {"uniform": "fitted from uniform weights",
-           "vertex-refit": "refitted from the best single style, which beat the fit "
-                           "from uniform weights",
-           "vertex": "the best single style: no fit beat it"}.get(palette.start, palette.start)
+    how = {FitStart.UNIFORM: "fitted from uniform weights",
+           FitStart.VERTEX_REFIT: "refitted from the best single style, which beat the fit "
+                                  "from uniform weights",
+           FitStart.VERTEX: "the best single style: no fit beat it"}.get(palette.start,
+                                                                        palette.start.value)
     best = (f"; best single style {palette.best_single[0]} {palette.best_single[1]:.4g}"
             if palette.best_single is not None else "")
     click.echo(f"loss: {palette.loss:.4g} ({how}; {palette.evaluations} evaluations{best})")
@@ -66,26 +69,21 @@ def print_palette_fit(palette) -> None:
 
 @click.command("apply", cls=LazyOptionsCommand)
 @click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
+@table_options("output", help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
 @space_options
-@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Also write the grade as a 3-D LUT (.cube or .clf; its header names the "
-                   "colour spaces it expects and produces).")
+@table_options("lut", help="Also write the grade as a 3-D LUT (.cube or .clf; its header "
+                           "names the colour spaces it expects and produces).")
 @lazy_options(lut_size_option)
 @lazy_options(lut_format_option)
 @lazy_options(look_option)
 @lazy_options(write_options)
-@click.option("--overwrite", is_flag=True, help="Replace existing output files (never PHOTO).")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print the report as JSON (what the grade did; no colour map).")
-@click.option("--save-grade", type=click.Path(dir_okay=False, path_type=str), default=None,
-              metavar="FILE", help="Also write the grade itself to FILE (JSON), which "
-              "--look FILE applies again with no fit.")
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Also write a report (what the grade did; a palette "
-              "grade's weights): JSON, CSV, a PNG sheet and index.html, into this folder.")
+@table_options("overwrite", help="Replace existing output files (never PHOTO).")
+@table_options("as_json", help="Print the report as JSON (what the grade did; no colour map).")
+@table_options("save_grade")
+@table_options("report_dir", help="Also write a report (what the grade did; a palette grade's "
+                                  "weights): JSON, CSV, a PNG sheet and index.html, into this "
+                                  "folder.")
 @click.pass_context
 def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, as_json,
           save_grade, report_dir, **kwargs):
@@ -119,13 +117,14 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
-        report = apply_photo(photo, source if look is None else look, options, output, lut,
-                             lut_size, lut_format, overwrite, report_dir, progress, encode,
-                             save_grade)
-    if "own_style" in report.grade.info:
+        report = apply_photo(photo, source if look is None else look, options, output=output,
+                             lut=lut, lut_size=lut_size, lut_format=lut_format,
+                             overwrite=overwrite, report_dir=report_dir, progress=progress,
+                             encode=encode, save_grade=save_grade)
+    if report.grade.own_style is not None:
         from wbcgrade.color.presets import own_style_warning
 
-        _warn(own_style_warning(str(photo), report.grade.info["own_style"]))
+        _warn(own_style_warning(str(photo), report.grade.own_style))
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")

@@ -17,6 +17,7 @@ from wbcgrade.cli.grading_options import (
     lut_format_option,
     lut_size_option,
     space_options,
+    table_options,
     take_grading_options,
     take_look,
     take_write_options,
@@ -130,30 +131,24 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
 
 @click.command("batch", cls=LazyOptionsCommand)
 @click.argument("in_dir", type=click.Path(exists=True, file_okay=False, path_type=str))
-@click.option("-o", "--output-dir", "out_dir", required=True,
-              type=click.Path(file_okay=False, path_type=str),
-              help="Folder for the graded copies (the input tree is mirrored).")
+@table_options("out_dir", required=True,
+               help="Folder for the graded copies (the input tree is mirrored).")
 @grading_options
 @space_options
-@click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
-@click.option("--consistent", is_flag=True,
-              help="One grade for the whole series: one fit on the pooled palette of all "
-                   "photos and one colour map for every photo (costs about one fit).")
-@click.option("--overwrite", is_flag=True,
-              help="Replace existing outputs: redo photos whose output is already complete "
-                   "(and replace an existing --lut file).")
-@click.option("--force", "force_alias", is_flag=True, hidden=True,
-              help="Deprecated alias of --overwrite.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Grade photos in N local processes.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Send the photos to a Dask distributed scheduler (e.g. tcp://host:8786); "
-                   "needs `pip install 'wbcgrade[dask]'` and the same paths on the workers.")
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Also write the palette weight report into this folder.")
-@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="With --consistent: also write the series grade as a 3-D LUT (.cube or "
-                   ".clf; its header names the colour spaces).")
+@table_options("recursive")
+@table_options("consistent", help="One grade for the whole series: one fit on the pooled "
+                                  "palette of all photos and one colour map for every photo "
+                                  "(costs about one fit).")
+@table_options("overwrite", help="Replace existing outputs: redo photos whose output is already "
+                                 "complete (and replace an existing --lut file).")
+@table_options("force_alias")
+@table_options("jobs")
+@table_options("scheduler",
+               help="Send the photos to a Dask distributed scheduler (e.g. tcp://host:8786); "
+                    "needs `pip install 'wbcgrade[dask]'` and the same paths on the workers.")
+@table_options("report_dir", help="Also write the palette weight report into this folder.")
+@table_options("lut", help="With --consistent: also write the series grade as a 3-D LUT (.cube "
+                           "or .clf; its header names the colour spaces).")
 @lazy_options(lut_size_option)
 @lazy_options(lut_format_option)
 @lazy_options(look_option)

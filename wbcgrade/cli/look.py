@@ -64,10 +64,11 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
             bar.n = done
             bar.refresh()
 
-        found = extract_look_file(source, output, lut_size, lut_format, strength, natural,
-                                  working_space, overwrite,
-                                  lambda m: click.echo(f"Warning: {m}", err=True), on_style,
-                                  on_look)
+        found = extract_look_file(source, output, lut_size=lut_size, lut_format=lut_format,
+                                  strength=strength, natural=natural,
+                                  working_space=working_space, overwrite=overwrite,
+                                  warn=lambda m: click.echo(f"Warning: {m}", err=True),
+                                  on_style=on_style, on_look=on_look)
     if as_json:
         click.echo(json.dumps(found.as_dict(), indent=2))
         return
@@ -125,8 +126,9 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
             bar.clear()
             click.echo(f"Warning: {message}", err=True)
 
-        found = learn_look_file(before, after, output, lut_size, working_space, overwrite,
-                                warn, on_pair)
+        found = learn_look_file(before, after, output, lut_size=lut_size,
+                                working_space=working_space, overwrite=overwrite, warn=warn,
+                                progress=on_pair)
     if as_json:
         click.echo(json.dumps(found.as_dict(), indent=2))
         return

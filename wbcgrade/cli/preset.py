@@ -59,7 +59,7 @@ def build(folder, output, bins, width, description, overwrite, no_cache, working
     if working_space:
         from wbcgrade.color.colorspace import resolve_space
 
-        working_space = resolve_space(working_space, "--working-space")
+        working_space = resolve_space(working_space, "spaces.working")
     with style_progress() as progress:
         styles = load_style_folder(
             folder, bins, cache=HistogramCache(enabled=not no_cache),

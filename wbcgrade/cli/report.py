@@ -9,6 +9,7 @@ from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
     grading_options,
     space_options,
+    table_options,
     take_grading_options,
 )
 
@@ -16,22 +17,17 @@ from wbcgrade.cli.grading_options import (
 @click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
                 type=click.Path(exists=True, path_type=str))
-@click.option("-o", "--output-dir", "report_dir", default=None,
-              type=click.Path(file_okay=False, path_type=str),
-              help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
+@table_options("out_dir", help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
 @space_options
-@click.option("-r", "--recursive", is_flag=True, help="Descend into sub-folders.")
-@click.option("--consistent", is_flag=True,
-              help="Report the one series grade (pooled palette) instead of one fit per photo.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Fit photos in N local processes.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Send the photos to a Dask distributed scheduler (needs wbcgrade[dask]).")
-@click.option("--overwrite", is_flag=True,
-              help="Replace the files of an existing report in the report folder.")
+@table_options("recursive")
+@table_options("consistent", help="Report the one series grade (pooled palette) instead of "
+                                  "one fit per photo.")
+@table_options("jobs", help="Fit photos in N local processes.")
+@table_options("scheduler")
+@table_options("overwrite", help="Replace the files of an existing report in the report folder.")
 @click.pass_context
-def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, overwrite,
+def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwrite,
            **kwargs):
     """What the grade does to a photo or a folder (weights with --mode palette).
 
@@ -48,7 +44,7 @@ def report(ctx, target, report_dir, recursive, consistent, jobs, scheduler, over
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)
     with batch_progress() as progress:
-        result = report_folder(target, report_dir, source, options, recursive=recursive,
+        result = report_folder(target, out_dir, source, options, recursive=recursive,
                                consistent=consistent, overwrite=overwrite, jobs=jobs,
                                scheduler=scheduler, progress=progress)
     print_summary(result, verb="reported")

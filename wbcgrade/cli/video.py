@@ -12,16 +12,9 @@ from wbcgrade.cli.grading_options import (
     lazy_options,
     look_option,
     lut_size_option,
+    table_options,
     take_grading_options,
     take_look,
-)
-from wbcgrade.video.defaults import (
-    CODECS,
-    DEFAULT_BLEND,
-    DEFAULT_CODEC,
-    DEFAULT_CRF,
-    DEFAULT_CUT_THRESHOLD,
-    DEFAULT_SAMPLE_EVERY,
 )
 
 #: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
@@ -58,7 +51,7 @@ def _print_result(result, as_json: bool) -> None:
                  else "weights")
         click.echo(f"{where}: {ranked}  (loss {shot.fit.loss:.4g}, "
                    f"{len(shot.samples)} sampled frames)")
-        if not shot.grade.info.get("fit", {}).get("converged", True):
+        if not shot.fit.converged:
             _warn("the weight fit stopped before converging (raise --max-iter)")
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items() if k != "total")
     click.echo(f"time: {stages} (total {result.timings['total']:.1f}s)")
@@ -68,47 +61,30 @@ def _print_result(result, as_json: bool) -> None:
 
 @click.command("video", cls=LazyOptionsCommand)
 @click.argument("clip", type=click.Path(dir_okay=False, path_type=str))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
+@table_options("output", help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
 @grading_options_except(*_NOT_FOR_VIDEO)
-@click.option("--per-shot", is_flag=True,
-              help="Detect cuts and fit one grade per shot (blended over --blend-frames at "
-                   "each cut) instead of one grade for the whole clip.")
-@click.option("--sample-every", type=float, default=DEFAULT_SAMPLE_EVERY, show_default=True,
-              metavar="SECONDS",
-              help="Seconds between the frames sampled for the fit.")
-@click.option("--cut-threshold", type=float, default=DEFAULT_CUT_THRESHOLD, show_default=True,
-              help="--per-shot: colour change between consecutive frames (0-1) that "
-                   "starts a new shot.")
-@click.option("--blend-frames", type=int, default=DEFAULT_BLEND, show_default=True,
-              help="--per-shot: frames over which the grade changes at a cut (0: switch).")
-@click.option("--codec", type=click.Choice(tuple(CODECS)), default=DEFAULT_CODEC,
-              show_default=True,
-              help="Video encoder: x264/x265 (CRF), prores (ProRes 422 HQ, .mov), ffv1 "
-                   "(lossless, .mkv). Other streams are copied.")
-@click.option("--crf", type=int, default=DEFAULT_CRF, show_default=True,
-              help="x264/x265 constant rate factor (lower: better, larger).")
-@click.option("--lut", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Also write the grade as a 3-D LUT (.cube); with several shots, "
-                   "<stem>_shotNN.cube per shot.")
+@table_options("per_shot")
+@table_options("sample_every", "cut_threshold", "blend_frames", "codec", "crf")
+@table_options("lut", help="Also write the grade as a 3-D LUT (.cube); with several shots, "
+                           "<stem>_shotNN.cube per shot.")
 @lazy_options(lut_size_option)
 @lazy_options(look_option)
-@click.option("--input-space", default=None, metavar="NAME",
-              help="Colour space of the clip's code values (an OpenColorIO name, alias or "
-                   "role, or srgb, display-p3, linear-rec709, acescct, ...; case ignored) "
-                   "[default: from its tags: PQ (smpte2084) with BT.2020 primaries is the "
-                   "config's Rec.2100-PQ space; BT.709, BT.601, untagged and other SDR "
-                   "footage sRGB code values; HLG needs this option].")
-@click.option("--working-space", default=None, metavar="NAME",
-              help="Colour space whose unit cube the histograms, the transport and the "
-                   "colour map live in, e.g. acescct [default: sRGB-encoded Rec.709]; the "
-                   "LUT ffmpeg applies is baked in the input space. Config: $OCIO, else "
-                   "OpenColorIO's built-in ocio://default.")
-@click.option("--overwrite", is_flag=True, help="Replace existing output files (never CLIP).")
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-@click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=str),
-              default=None, help="Also write a contact sheet per shot (sampled frames before "
-              "and after, what the grade did, palettes) and report.json into this folder.")
+@table_options("input_space",
+               help="Colour space of the clip's code values (an OpenColorIO name, alias or "
+                    "role, or srgb, display-p3, linear-rec709, acescct, ...; case ignored) "
+                    "[default: from its tags: PQ (smpte2084) with BT.2020 primaries is the "
+                    "config's Rec.2100-PQ space; BT.709, BT.601, untagged and other SDR "
+                    "footage sRGB code values; HLG needs this option].")
+@table_options("working_space",
+               help="Colour space whose unit cube the histograms, the transport and the "
+                    "colour map live in, e.g. acescct [default: sRGB-encoded Rec.709]; the "
+                    "LUT ffmpeg applies is baked in the input space. Config: $OCIO, else "
+                    "OpenColorIO's built-in ocio://default.")
+@table_options("overwrite", help="Replace existing output files (never CLIP).")
+@table_options("as_json")
+@table_options("report_dir", help="Also write a contact sheet per shot (sampled frames before "
+                                  "and after, what the grade did, palettes) and report.json "
+                                  "into this folder.")
 @click.pass_context
 def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames, codec, crf,
           lut, lut_size, look_path, overwrite, as_json, report_dir, **kwargs):
@@ -160,8 +136,9 @@ def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames
                 stage(name)
 
         progress = VideoProgress(warn=_warn, frames=on_frames, stage=on_stage, **callbacks)
-        result = grade_clip(clip, output, source, options, settings, lut, overwrite,
-                            report_dir, progress, look)
+        result = grade_clip(clip, output, source, options, settings=settings, lut=lut,
+                            overwrite=overwrite, report_dir=report_dir, progress=progress,
+                            look=look)
     _print_result(result, as_json)
     if result.report is not None and not as_json:
         click.echo(f"report: {result.report}")

@@ -214,12 +214,12 @@ def canonical(short: str) -> str | None:
     return _lookup(config_path()).get(_squash(short))
 
 
-def resolve_space(name: str, option: str = "--working-space") -> str:
+def resolve_space(name: str, option: str = "spaces.working") -> str:
     """A colour space name, alias or role -> the config's colour space name.
 
     Case, spaces and punctuation do not matter (``ACEScct``, ``acescct``,
     ``display-p3``, ``Display P3``, ``lin_rec709``). Raises OptionError
-    (one line, naming ``option`` and listing the valid names) otherwise.
+    (one line, naming the setting ``option`` and listing the valid names) otherwise.
     """
     text = str(name).strip()
     found = _lookup(config_path()).get(_squash(text)) if text else None
@@ -443,7 +443,7 @@ class ColorEncoding:
         ``working_space`` None: sRGB-encoded Rec.709.
         """
         if input_space:
-            space, where = resolve_space(input_space, "--input-space"), "--input-space"
+            space, where = resolve_space(input_space, "spaces.input"), "--input-space"
         elif float_values:
             space, where = canonical("linear-rec709") or default_working_space(), "default"
         else:
@@ -466,7 +466,7 @@ class ColorEncoding:
 
     @classmethod
     def _make(cls, input_space: str, source: str, working_space: str | None) -> ColorEncoding:
-        working = (resolve_space(working_space, "--working-space") if working_space
+        working = (resolve_space(working_space, "spaces.working") if working_space
                    else default_working_space())
         linear = linear_partner(working)
         return cls(input_space, working, linear, peak(linear, working), source, config_path())

@@ -34,6 +34,7 @@ import numpy as np
 
 from wbcgrade.color.histogram import add_floor
 from wbcgrade.color.options import FitOptions
+from wbcgrade.color.outcome import FitStart
 
 __all__ = ["NONZERO_THRESHOLD", "FitSummary", "fit_geometry", "fit_problem", "loss_at",
            "vertex_losses", "fit_weights", "given_weights"]
@@ -53,10 +54,13 @@ class FitSummary:
     weights : (S,) weights on the simplex.
     loss : loss of the barycenter at ``weights`` (fit grid, the fit's loss).
     vertex_losses : (S,) loss of each style alone (weight 1 on it).
-    start : "uniform" (the fit from uniform weights was kept), "vertex-refit"
+    start : how the weights were found, a :class:`~wbcgrade.color.outcome.FitStart`
+        value: "uniform" (the fit from uniform weights was kept), "vertex-refit"
         (the refit from the best vertex won), "vertex" (the best single style
-        is the answer) or "given" (weights fixed by the user).
-    info : fit diagnostics (JSON-friendly).
+        is the answer) or "given" (weights fixed by the user) from a palette fit;
+        "preset", "scene" or "look" from the look builder; "saved" for a saved grade.
+    info : fit diagnostics (JSON-friendly; :attr:`converged` and :attr:`evaluations`
+        read it).
     time_s : wall time of the fit and the vertex checks.
     """
 
@@ -66,6 +70,21 @@ class FitSummary:
     start: str = "uniform"
     info: dict = field(default_factory=dict)
     time_s: float = 0.0
+
+    @property
+    def fit_start(self) -> FitStart:
+        """``start`` as a :class:`~wbcgrade.color.outcome.FitStart`."""
+        return FitStart(self.start)
+
+    @property
+    def converged(self) -> bool:
+        """Whether the weight fit converged (True when nothing was fitted)."""
+        return bool(self.info.get("converged", True)) if self.info else True
+
+    @property
+    def evaluations(self) -> int:
+        """Loss evaluations of the fit (0 when nothing was fitted)."""
+        return int(self.info.get("evaluations", 0)) if self.info else 0
 
     @property
     def best_vertex(self) -> int:

@@ -17,6 +17,7 @@ from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade
 from wbcgrade.color.imageio import Image
+from wbcgrade.color.outcome import FitStart
 
 __all__ = ["PhotoGrade", "GradeReport"]
 
@@ -61,10 +62,12 @@ class GradeReport:
     report: Path | None = None
 
     @property
-    def fit_start(self) -> str:
-        """How the weights were found: "uniform", "vertex-refit", "vertex", "given" or
-        "saved" (a saved grade, ``--look``: nothing fitted)."""
-        return self.fit.start if self.fit is not None else "shared"
+    def fit_start(self) -> FitStart:
+        """How the weights were found (:class:`~wbcgrade.color.outcome.FitStart`: a palette
+        fit's UNIFORM, VERTEX_REFIT, VERTEX or GIVEN; the look builder's PRESET, SCENE or
+        LOOK; SAVED for a saved grade, ``--look``; SHARED for a series' grade whose fit
+        the caller holds)."""
+        return self.fit.fit_start if self.fit is not None else FitStart.SHARED
 
     @property
     def color(self) -> dict:
@@ -91,7 +94,7 @@ class GradeReport:
             "lut": None if self.lut is None else str(self.lut),
             "styles": self.styles_source,
             "outcome": None if outcome is None else outcome.as_dict(),
-            "fit_start": self.fit_start,
+            "fit_start": self.fit_start.value,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
             **info,  # diagnostics of the fit, the look, the transport and the map
@@ -102,5 +105,5 @@ class GradeReport:
             out.update({"weights": [{"style": name, "weight": round(w, 6)}
                                     for name, w in self.grade.ranked()],
                         "loss": self.grade.loss,
-                        "fitted": self.fit_start not in ("given", "saved")})
+                        "fitted": self.fit_start.fitted})
         return out

@@ -61,9 +61,12 @@ from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
     UNCHANGED_STRENGTH,
+    FitStart,
     GradeOutcome,
     GradeSource,
     PaletteFit,
+    SavedFrom,
+    TransportCheck,
     map_change,
 )
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
@@ -116,6 +119,11 @@ class Grade:
     timings : seconds per stage.
     outcome : what the grade did, in plain terms (source, strength, size, the
         photo's change; :class:`wbcgrade.color.outcome.GradeOutcome`), or None.
+    saved : the file a saved grade was read from (:class:`~wbcgrade.color.outcome.SavedFrom`),
+        None for a grade made here.
+    own_style : the style the photo itself is (graded towards itself), or None.
+    transport : how the transfer's Sinkhorn solve ended
+        (:class:`~wbcgrade.color.outcome.TransportCheck`), None when there was none.
     """
 
     names: tuple[str, ...]
@@ -129,6 +137,9 @@ class Grade:
     info: Mapping = field(default_factory=dict)
     timings: Mapping = field(default_factory=dict)
     outcome: GradeOutcome | None = field(default=None, compare=False)
+    saved: SavedFrom | None = field(default=None, compare=False)
+    own_style: str | None = field(default=None, compare=False)
+    transport: TransportCheck | None = field(default=None, compare=False)
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -285,16 +296,16 @@ def look_map(request: MapRequest) -> BuiltMap:
     options, styles, say = request.options, request.styles, request.stage
     if options.fit.weights is not None:
         return palette_map(request)
-    if styles.meta.get("look") is not None:  # a preset made with a known look: that look
+    if styles.look is not None:  # a preset made with a known look: that look
         from wbcgrade.color.remap import resample_lattice
 
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
                          {"start": "preset", "look": "the preset's own"}, 0.0)
         size = options.map.size
-        if styles.meta.get("converted_from"):  # converted from the preset's own space: finer,
+        if styles.converted_from:  # converted from the preset's own space: finer,
             size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
-        return BuiltMap(resample_lattice(styles.meta["look"], size), None,
+        return BuiltMap(resample_lattice(styles.look, size), None,
                         {"look": {"source": "preset"}}, {}, fit)
     timings: dict[str, float] = {}
     start = time.perf_counter()
@@ -438,7 +449,7 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                                           stage or _quiet))
     start = time.perf_counter()
     finish = options
-    if built.fit.start == "preset" and options.map.monotone:
+    if built.fit.start == FitStart.PRESET and options.map.monotone:
         # a preset's look is applied as it was made (monotone in its own space already):
         # the lattice of its conversion into another space also covers colours outside
         # the preset's gamut, where a monotone pass would drag the look inside it
@@ -453,11 +464,15 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     if found is not None:  # the photo is one of the styles (the CLI warns)
         info["own_style"] = found
     color_map, strength = strengthened(color_map, options.map.strength)
+    sink = info.get("sinkhorn")
+    transport = (None if not sink else
+                 TransportCheck(bool(sink.get("converged", True)), float(sink.get("error", 0.0))))
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
                   strength=strength, regrain=options.regrain.settings,
-                  loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings)
+                  loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
+                  own_style=found, transport=transport)
     outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
 
@@ -478,9 +493,9 @@ def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
     change = map_change(grade.color_map, grade.strength, grade.working, photo_hist)
     if grade.outcome is not None:
         return grade.outcome.on_photo(change)
-    if "saved_look" in dict(grade.info):
+    if grade.saved is not None:
         return grade_outcome(grade, FitSummary(np.asarray(grade.weights), 0.0, np.zeros(0),
-                                               "saved"), photo_hist)
+                                               FitStart.SAVED.value), photo_hist)
     return grade_outcome(grade, FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0),
                                            np.zeros(0), "given"), photo_hist, "palette")
 
@@ -501,17 +516,18 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
     look_size = map_change(grade.color_map, grade.strength, grade.working)
     mean_change = (look_size if photo_hist is None else
                    map_change(grade.color_map, grade.strength, grade.working, photo_hist))
-    start = fit.start
-    if start == "saved":
-        saved = dict(grade.info.get("saved_look", {}) or {})
-        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend,
-                                  look_size, mean_change, file=saved.get("file"))
-    if start == "preset":
+    start = fit.start  # a FitStart value (a registered builder may have its own)
+    if start == FitStart.SAVED:
+        return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend, look_size,
+                                  mean_change,
+                                  file=None if grade.saved is None else grade.saved.file)
+    if start == FitStart.PRESET:
         return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
                                   blend, look_size, mean_change)
-    if start in ("scene", "look") or (builder != "palette" and grade.barycenter is None
-                                      and start not in ("given", "uniform", "vertex",
-                                                        "vertex-refit")):
+    if start in (FitStart.SCENE, FitStart.LOOK) or (
+            builder != "palette" and grade.barycenter is None
+            and start not in (FitStart.GIVEN, FitStart.UNIFORM, FitStart.VERTEX,
+                              FitStart.VERTEX_REFIT)):
         set_strength = float(look.get("set_strength", 1.0))
         confidence = float(look.get("confidence", 0.0) or 0.0)
         strength = confidence + (1.0 - confidence) * set_strength
@@ -524,20 +540,18 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
             why = (f"these {n_styles} style photos share {how} look that can be told apart "
                    "from their content" if n_styles > 1 else
                    f"the style photo shows {how} look that can be told apart from its content")
-        source = GradeSource.OWN_SCENE if start == "scene" else GradeSource.SET_LOOK
+        source = GradeSource.OWN_SCENE if start == FitStart.SCENE else GradeSource.SET_LOOK
         return GradeOutcome.judge(source, n_styles, strength, blend,
                                   look_size, mean_change, why, match=look.get("match"),
                                   confidence=confidence,
                                   extra={"set_strength": set_strength})
     order = np.argsort(-np.asarray(fit.weights), kind="stable")
     best = fit.best_vertex if len(fit.vertex_losses) else None
-    fit_info = dict(fit.info or {})
     palette = PaletteFit(tuple(grade.names[i] for i in order),
                          tuple(float(fit.weights[i]) for i in order), float(fit.loss),
-                         None if best is None or start == "given"
+                         None if best is None or start == FitStart.GIVEN
                          else (grade.names[best], float(fit.vertex_losses[best])),
-                         start, int(fit_info.get("evaluations", 0)),
-                         bool(fit_info.get("converged", True)))
+                         start, fit.evaluations, fit.converged)
     return GradeOutcome.judge(GradeSource.PALETTE, n_styles, 1.0, blend,
                               look_size, mean_change, palette=palette)
 

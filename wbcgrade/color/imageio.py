@@ -465,7 +465,7 @@ def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
                            "16" if raw else _depth_of(like.spec.format))
     if held is not None and wanted not in held:
         if strict:
-            raise OptionError(f"--bit-depth {bit_depth}: {format_name.upper()} files hold "
+            raise OptionError(f"bit_depth {bit_depth}: {format_name.upper()} files hold "
                               f"{' or '.join(held)} only", "bit_depth")
         order = {"8": 0, "16": 1, "float": 2}
         wanted = min(held, key=lambda d: abs(order[d] - order[wanted]))
@@ -661,12 +661,13 @@ def _verify_written(tmp: str, path: Path, spec: oiio.ImageSpec, decode: bool = F
 
 
 def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | None,
-             options: WriteOptions | None = None) -> tuple[oiio.ImageSpec, np.ndarray, str]:
+             options: WriteOptions | None = None,
+             format_name: str | None = None) -> tuple[oiio.ImageSpec, np.ndarray, str]:
     if pixels.ndim != 3:
         raise InputError("pixels must be (H, W, C)")
     options = options or WriteOptions()
     height, width, nchannels = pixels.shape
-    format_name = check_image_output(path)
+    format_name = format_name or check_image_output(path)
     alpha = like.alpha_channel if alpha_channel is None else alpha_channel
     spec = _output_spec(like, height, width, nchannels, format_name, alpha,
                         _pixel_type(format_name, like, options.bit_depth))
@@ -692,17 +693,19 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | N
 @contextlib.contextmanager
 def stage_image(path: str | os.PathLike, pixels: np.ndarray, like: Image,
                 overwrite: bool = False, alpha_channel: int | None = None,
-                options: WriteOptions | None = None) -> Iterator[Path]:
+                options: WriteOptions | None = None, *,
+                format_name: str | None = None) -> Iterator[Path]:
     """Write the image to a temporary file; publish it when the ``with`` body succeeds.
 
     Same arguments as :func:`write_image`; ``path`` was checked before any
-    work (:func:`wbcgrade._publish.plan_outputs`). The file is complete and
+    work (:func:`wbcgrade._publish.plan_outputs`), and ``format_name`` is what
+    :func:`check_image_output` found then (None: found here). The file is complete and
     checked when the body runs (write other outputs there: if the body
     raises, the image is not published and its temporary file is removed).
     An existing file is replaced only with ``overwrite``.
     """
     path = Path(path)
-    spec, data, format_name = _prepare(path, pixels, like, alpha_channel, options)
+    spec, data, format_name = _prepare(path, pixels, like, alpha_channel, options, format_name)
     # encoded in memory first where the system can (Linux): see _encode
     fd = _encode(path, spec, data, format_name) if hasattr(os, "memfd_create") else None
     try:

@@ -64,7 +64,7 @@ class ExtractedLook:
                 **({} if self.outcome is None else {"outcome": self.outcome.as_dict()})}
 
 
-def extract_look_file(source: StyleSource, output: str | os.PathLike, lut_size: int = 33,
+def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_size: int = 33,
                       lut_format: str | None = None, strength: float | None = None,
                       natural: str | os.PathLike | None = None,
                       working_space: str | None = None, overwrite: bool = False,

@@ -204,7 +204,7 @@ def learn_space(pairs: Sequence[PairFiles], working_space: str | None = None) ->
     from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
 
     if working_space:
-        return resolve_space(working_space, "--working-space")
+        return resolve_space(working_space, "spaces.working")
     if any(is_raw(p.before) for p in pairs):
         return resolve_space(RAW_WORKING_SPACE)
     return default_working_space()
@@ -687,7 +687,7 @@ def _output_kind(output: Path) -> str:
 
 
 def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
-                    output: str | os.PathLike, lut_size: int = 33,
+                    output: str | os.PathLike, *, lut_size: int = 33,
                     working_space: str | None = None, overwrite: bool = False,
                     warn: Callable[[str], None] | None = None,
                     progress: Callable[[int, int, str], None] | None = None) -> LearnResult:

@@ -48,7 +48,7 @@ __all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_gr
            "lut_header",
            "shaper_table", "check_lut_path", "check_lut_size", "check_clf_support",
            "lut_format_of",
-           "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE"]
+           "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE", "write_checked_lut"]
 
 DEFAULT_LUT_SIZE = 33
 #: ``--lut-format`` choices and the file name ending each needs.
@@ -179,13 +179,14 @@ def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Pa
     """``path`` as a Path when its ending suits ``lut_format`` (None: any LUT ending,
     :func:`lut_format_of`), else InputError."""
     path = Path(path)
-    lut_format = lut_format_of(path, lut_format)
+    if lut_format is None:
+        lut_format = lut_format_of(path)
     if lut_format not in LUT_FORMATS:
-        raise InputError(f"--lut-format must be one of {', '.join(LUT_FORMATS)}")
+        raise OptionError(f"lut_format must be one of {', '.join(LUT_FORMATS)}", "lut_format")
     suffix = LUT_FORMATS[lut_format]
     if path.suffix.lower() != suffix:
-        raise InputError(f"{path}: LUT file name must end in {suffix} (--lut-format "
-                         f"{lut_format})")
+        raise OptionError(f"{path}: LUT file name must end in {suffix} (lut_format "
+                          f"{lut_format})", "lut_format")
     return path
 
 
@@ -242,8 +243,16 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package);
         None: the one ``path``'s ending names.
     """
-    path = check_lut_path(path, lut_format)
     lut_format = lut_format_of(path, lut_format)
+    return write_checked_lut(check_lut_path(path, lut_format), lut_format, grade, encoding,
+                             size, title=title, comments=comments, overwrite=overwrite)
+
+
+def write_checked_lut(path: Path, lut_format: str, grade, encoding,
+                      size: int = DEFAULT_LUT_SIZE, *, title: str = "wbcgrade",
+                      comments: list[str] | None = None, overwrite: bool = False) -> Path:
+    """:func:`write_grade_lut` of a path and format checked before any work
+    (:func:`check_lut_path`, e.g. by a photo's plan): nothing is checked again."""
     baked = encoding.input != encoding.working
     table = grade.lut(size, encoding if baked else None)
     shaper = not baked and encoding.logarithmic
@@ -260,8 +269,9 @@ def check_clf_support():
     try:
         import PyOpenColorIO as ocio
     except ImportError:
-        raise InputError("--lut-format clf needs the opencolorio package: "
-                         "pip install 'wbcgrade[ocio]' (or: pip install opencolorio)") from None
+        raise OptionError("lut_format clf needs the opencolorio package: "
+                          "pip install 'wbcgrade[ocio]' (or: pip install opencolorio)",
+                          "lut_format") from None
     return ocio
 
 

@@ -25,7 +25,8 @@ from enum import Enum
 
 import numpy as np
 
-__all__ = ["GradeSource", "PaletteFit", "GradeOutcome", "UNCHANGED_CHANGE",
+__all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
+           "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice"]
 
 #: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
@@ -59,6 +60,59 @@ class GradeSource(str, Enum):
         }[self]
 
 
+class FitStart(str, Enum):
+    """How a grade's weights were found (``FitSummary.start``, ``GradeReport.fit_start``,
+    ``PaletteFit.start``; the JSON writes the value)."""
+
+    UNIFORM = "uniform"            #: a palette fit from uniform weights, kept
+    VERTEX_REFIT = "vertex-refit"  #: refitted from the best single style, which beat it
+    VERTEX = "vertex"              #: the best single style: no fit beat it
+    GIVEN = "given"                #: the weights were given (``fit.weights``): no fit
+    PRESET = "preset"              #: a preset's own look: nothing fitted
+    SCENE = "scene"                #: the look read off the style photo of the scene
+    LOOK = "look"                  #: the look the style set shares
+    SAVED = "saved"                #: a saved grade (``--look``): nothing fitted
+    SHARED = "shared"              #: a shared grade whose fit the caller holds (a series')
+
+    @property
+    def fitted(self) -> bool:
+        """Whether weights were fitted to the photo (not given, not a saved grade)."""
+        return self not in (FitStart.GIVEN, FitStart.SAVED)
+
+
+@dataclass(frozen=True)
+class SavedFrom:
+    """Where a saved grade (``--look FILE``) was read from.
+
+    Attributes
+    ----------
+    file : the file (a JSON grade or a LUT).
+    kind : "json" (a grade saved by ``--save-grade``, regrain as saved), or the LUT's
+        format ("cube", "clf", ...).
+    """
+
+    file: str
+    kind: str
+
+    @property
+    def is_json(self) -> bool:
+        return self.kind == "json"
+
+
+@dataclass(frozen=True)
+class TransportCheck:
+    """How the transfer's Sinkhorn solve ended (a palette grade's transport plan).
+
+    Attributes
+    ----------
+    converged : whether it reached its tolerance.
+    error : its marginal error when it stopped.
+    """
+
+    converged: bool
+    error: float
+
+
 @dataclass(frozen=True)
 class PaletteFit:
     """The barycentric weights of a palette grade (the paper's report).
@@ -69,7 +123,8 @@ class PaletteFit:
     weights : the S weights, same order (they sum to 1).
     loss : the fit's loss at the weights.
     best_single : the style that alone has the lowest loss, and that loss.
-    start : how the weights were found ("uniform", "vertex-refit", "vertex", "given").
+    start : how the weights were found (:class:`FitStart`: UNIFORM, VERTEX_REFIT,
+        VERTEX or GIVEN).
     evaluations : loss evaluations of the fit (0 for given weights).
     converged : whether the fit converged.
     """
@@ -78,9 +133,12 @@ class PaletteFit:
     weights: tuple[float, ...]
     loss: float
     best_single: tuple[str, float] | None = None
-    start: str = "uniform"
+    start: FitStart = FitStart.UNIFORM
     evaluations: int = 0
     converged: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", FitStart(self.start))
 
     def as_dict(self) -> dict:
         return {"weights": [{"style": n, "weight": round(w, 6)}
@@ -88,7 +146,7 @@ class PaletteFit:
                 "loss": self.loss,
                 "best_single": None if self.best_single is None else
                 {"style": self.best_single[0], "loss": self.best_single[1]},
-                "start": self.start, "evaluations": self.evaluations,
+                "start": self.start.value, "evaluations": self.evaluations,
                 "converged": self.converged}
 
 
@@ -292,9 +350,9 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
     if working:
         from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
 
-        space = resolve_space(working)
-        if space != default_working_space():
-            srgb = default_working_space()
+        srgb = default_working_space()
+        space = working if working == srgb else resolve_space(working)
+        if space != srgb:
             before = np.clip(convert(before, space, srgb), 0.0, 1.0)
             moved = np.clip(convert(moved, space, srgb), 0.0, 1.0)
     if mass is None:

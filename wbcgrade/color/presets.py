@@ -57,7 +57,7 @@ from wbcgrade.color.histogram import (
     to_sparse,
 )
 from wbcgrade.color.imageio import read_image
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_histogram_cells, read_npz
 
 __all__ = [
@@ -100,8 +100,10 @@ class StyleSet:
     histograms : (S, n, n, n) float64, each summing to 1.
     source : folder or preset file they came from.
     width : kernel width (bins) recorded with a preset, or None.
-    meta : the preset's header; ``meta["working_space"]`` names the colour
-        space of the histograms (absent: sRGB-encoded Rec.709).
+    meta : the preset's header and what the set was made from, under string keys
+        that only this class reads: the typed properties :attr:`working_space`,
+        :attr:`look`, :attr:`converted_from`, :attr:`files` and :attr:`images` are
+        what other modules use.
     """
 
     names: list[str]
@@ -111,6 +113,7 @@ class StyleSet:
     description: str = ""
     meta: dict = field(default_factory=dict)
     _resampled: dict = field(default_factory=dict, repr=False, compare=False)
+    _space: str | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def bins(self) -> int:
@@ -118,10 +121,34 @@ class StyleSet:
 
     @property
     def working_space(self) -> str:
-        """The colour space whose unit cube the histograms cover (config name)."""
-        name = self.meta.get("working_space")
-        return resolve_space(name, "working space of the styles") if name \
-            else default_working_space()
+        """The colour space whose unit cube the histograms cover (config name; resolved
+        once per set)."""
+        if self._space is None:
+            name = self.meta.get("working_space")
+            self._space = (resolve_space(name, "working space of the styles") if name
+                           else default_working_space())
+        return self._space
+
+    @property
+    def look(self) -> np.ndarray | None:
+        """(m, m, m, 3) the look a preset was made with (its own lattice), or None."""
+        return self.meta.get("look")
+
+    @property
+    def converted_from(self) -> str | None:
+        """The working space the set was converted from (:func:`styles_in_space`), or None."""
+        return self.meta.get("converted_from") or None
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        """The style photos' files (a folder's set), in the order of ``names``; () else."""
+        return tuple(self.meta.get("files") or ())
+
+    @property
+    def images(self) -> tuple:
+        """The style photos themselves ((H, W, 3) working-space colours) of a set built
+        from arrays; () else."""
+        return tuple(self.meta.get("images") or ())
 
     def at_bins(self, bins: int, only: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """(S, bins, bins, bins) histograms re-binned to another grid.
@@ -154,7 +181,7 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
 
 
 def load_style_folder(folder: str | os.PathLike, bins: int,
-                      cache: HistogramCache | None = None,
+                      *, cache: HistogramCache | None = None,
                       max_pixels: int = DEFAULT_MAX_PIXELS,
                       warn: Callable[[str], None] | None = None,
                       progress: Callable[[int, int, str], None] | None = None,
@@ -222,7 +249,7 @@ def check_preset_width(width: float) -> float:
     return value
 
 
-def save_preset(path: str | os.PathLike, styles: StyleSet, width: float = DEFAULT_PRESET_WIDTH,
+def save_preset(path: str | os.PathLike, styles: StyleSet, *, width: float = DEFAULT_PRESET_WIDTH,
                 description: str = "", overwrite: bool = False,
                 threshold: float = 1e-7, provenance: dict | None = None,
                 look: np.ndarray | None = None, compact: bool = False) -> Path:
@@ -432,8 +459,10 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
     from wbcgrade.color.histogram import grid_points, soft_histogram
 
 
-    working = resolve_space(working_space)
     source = styles.working_space
+    if working_space == source:  # a config name already (the encoding's, a set's)
+        return styles
+    working = resolve_space(working_space)
     if working == source:
         return styles
     key = ("space", working)
@@ -446,9 +475,9 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
             moved = convert(centres[keep], source, working)
             hists.append(soft_histogram(moved, styles.bins, flat[keep]))
         meta = {**styles.meta, "working_space": working, "converted_from": source}
-        if styles.meta.get("look") is not None:  # the same look, converted (not re-extracted)
-            meta["look"] = look_in_space(styles.meta["look"], source, working,
-                                         max(65, styles.meta["look"].shape[0]))
+        if styles.look is not None:  # the same look, converted (not re-extracted)
+            meta["look"] = look_in_space(styles.look, source, working,
+                                         max(65, styles.look.shape[0]))
         styles._resampled[key] = StyleSet(list(styles.names), np.stack(hists), styles.source,
                                           styles.width, styles.description, meta)
     return styles._resampled[key]
@@ -515,7 +544,8 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
     (:func:`styles_in_space`).
     """
     if (source.style_dir is None) == (source.preset is None):
-        raise InputError("give exactly one of --style DIR or --preset NAME_OR_FILE")
+        raise OptionError("give exactly one of style_dir DIR or preset NAME_OR_FILE",
+                          "style_dir", also=("preset",))
     if source.preset is not None:
         styles = load_preset(resolve_preset(source.preset))
         if working_space is None and "working_space" not in styles.meta:
@@ -548,10 +578,9 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
         files.append(Path(natural))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")
-    if look is not None:
-        saved = dict(getattr(look, "info", {}) or {}).get("saved_look", {})
-        if saved.get("file"):
-            files.append(Path(saved["file"]))
+    saved = getattr(look, "saved", None)
+    if saved is not None and saved.file:
+        files.append(Path(saved.file))
     return files
 
 

@@ -45,6 +45,7 @@ import numpy as np
 
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade
+from wbcgrade.color.outcome import FitStart, SavedFrom
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError
@@ -209,7 +210,8 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
     color_map = _decode_array(entry.get("map", {}), where)
     return Grade(names=tuple(names), weights=weights, color_map=color_map,
                  working=working or "", strength=strength, regrain=regrain, loss=loss,
-                 info={"saved_look": {"file": where, "kind": "json"}})
+                 info={"saved_look": {"file": where, "kind": "json"}},
+                 saved=SavedFrom(where, "json"))
 
 
 def _header_space(lines: list[str]) -> str | None:
@@ -399,7 +401,8 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     -------
     Grade whose ``color_map`` is the saved map (a LUT's table, strength 1 and
     no regrain settings: the caller decides), ``working`` the config's name
-    of its space, ``info["saved_look"]`` the file and its kind.
+    of its space, ``saved`` the file and its kind (also under ``info["saved_look"]``,
+    for the JSON).
     """
     from wbcgrade.color.colorspace import default_working_space
 
@@ -422,7 +425,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
         space = grade.working or default_working_space()
         return Grade(grade.names, grade.weights, grade.color_map,
                      _resolve(space, path, "working space"), grade.strength, grade.regrain,
-                     grade.loss, info=grade.info)
+                     grade.loss, info=grade.info, saved=grade.saved)
     if suffix not in LOOK_SUFFIXES:
         raise InputError(f"{path}: a saved grade must end in .json or one of "
                          f"{', '.join(LOOK_SUFFIXES)}")
@@ -437,11 +440,16 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
         space = default_working_space()
     kind = suffix.lstrip(".")
     return Grade(names=(path.stem,), weights=np.ones(1), color_map=table, working=space,
-                 info={"saved_look": {"file": str(path), "kind": kind}})
+                 info={"saved_look": {"file": str(path), "kind": kind}},
+                 saved=SavedFrom(str(path), kind))
 
 
-def look_styles(grade: Grade, source: str) -> StyleSet:
-    """A stand-in style set for a saved grade (its names; no histograms: nothing is fitted)."""
+def look_styles(grade: Grade, source: str | None = None) -> StyleSet:
+    """A stand-in style set for a saved grade (its names; no histograms: nothing is fitted).
+
+    ``source``: what the set is called (default: the saved grade's file)."""
+    if source is None:
+        source = str(grade.saved.file) if grade.saved is not None else "saved grade"
     return StyleSet(names=list(grade.names),
                     histograms=np.zeros((len(grade.names), 1, 1, 1)), source=source)
 
@@ -450,7 +458,7 @@ def look_fit(grade: Grade) -> FitSummary:
     """The weights of a saved grade, as a fit summary (start "saved": nothing was fitted)."""
     return FitSummary(np.asarray(grade.weights, dtype=np.float64),
                       float(grade.loss) if grade.loss is not None else 0.0,
-                      np.zeros(len(grade.names)), "saved", dict(grade.info), 0.0)
+                      np.zeros(len(grade.names)), FitStart.SAVED.value, dict(grade.info), 0.0)
 
 
 def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
@@ -464,9 +472,10 @@ def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
 
     from wbcgrade.errors import OptionError
 
-    for given, flag in ((consistent, "--consistent"), (lut is not None, "--lut"),
-                        (report_dir is not None, "--report")):
+    for given, name in ((consistent, "consistent"), (lut is not None, "lut"),
+                        (report_dir is not None, "report_dir")):
         if given:
-            raise OptionError(f"{flag} does not go with --look (a saved grade is already one "
-                              "grade for every photo, with no styles to report)", flag)
+            raise OptionError(f"{name} does not go with look (a saved grade is already one "
+                              "grade for every photo, with no styles to report)", name,
+                              also=("look",))
     return replace(options, spaces=replace(options.spaces, working=look.working))

@@ -300,7 +300,7 @@ _IN_MEMORY_MAX = 64
 def has_style_images(styles) -> bool:
     """Whether a StyleSet names its photos' files or carries their images (a folder's
     does, a preset's does not): whether :func:`style_scene_images` has anything to match."""
-    return bool(styles.meta.get("images") or styles.meta.get("files"))
+    return bool(styles.images or styles.files)
 
 
 def style_scene_images(styles, progress: Callable[[int, int], None] | None = None,
@@ -308,14 +308,14 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     """The style photos prepared for matching, one per style (None where there is none).
 
     A :class:`~wbcgrade.color.presets.StyleSet` loaded from a folder names its
-    files (``meta["files"]``); one built from arrays may carry the images
-    themselves (``meta["images"]``: (H, W, 3) working-space colours); a preset
+    files (``styles.files``); one built from arrays may carry the images
+    themselves (``styles.images``: (H, W, 3) working-space colours); a preset
     holds palettes only (all None). Images read from files are kept in ``scenes/``
     in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`, beside
     the histograms), keyed by the file and the working space.
     """
-    images: Sequence = styles.meta.get("images") or ()
-    files: Sequence = styles.meta.get("files") or ()
+    images: Sequence = styles.images
+    files: Sequence = styles.files
     out: list[SceneImage | None] = []
     n = len(styles.names)
     for i in range(n):

@@ -47,7 +47,7 @@ from wbcgrade.color.lut import (
     check_lut_path,
     check_lut_size,
     lut_format_of,
-    write_grade_lut,
+    write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
@@ -84,7 +84,9 @@ class PhotoPlan:
     """A photo and its outputs, checked before any work (:func:`plan_photo`).
 
     ``output`` None: graded in memory only (``wbcgrade report``); ``lut`` None: no LUT.
-    Paths are resolved (links followed).
+    Paths are resolved (links followed). ``lut_format`` and ``output_format`` (the image
+    format's name, :func:`~wbcgrade.color.imageio.check_image_output`) are what the
+    checks found: the writers use them as they are.
     """
 
     photo: Path
@@ -95,6 +97,7 @@ class PhotoPlan:
     overwrite: bool = False
     encode: WriteOptions = WriteOptions()
     saved_grade: Path | None = None
+    output_format: str | None = None
 
 
 def default_output_path(photo: str | os.PathLike) -> Path:
@@ -106,7 +109,7 @@ def default_output_path(photo: str | os.PathLike) -> Path:
 
 
 def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None,
-               lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
+               *, lut: str | os.PathLike | None = None, lut_size: int = DEFAULT_LUT_SIZE,
                lut_format: str | None = None, overwrite: bool = False,
                write: bool = True, encode: WriteOptions | None = None,
                saved_grade: str | os.PathLike | None = None,
@@ -132,8 +135,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     else:
         output = Path(output) if output is not None else default_output_path(photo)
     encode = encode or WriteOptions()
+    output_format = None
     if output is not None:
-        check_image_output(output)
+        output_format = check_image_output(output)
         check_write_options(output, encode)
     if lut is not None:
         lut_format = lut_format_of(lut, lut_format)
@@ -144,7 +148,7 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],
                                             overwrite)
     return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode,
-                     saved_grade)
+                     saved_grade, output_format)
 
 
 def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
@@ -186,7 +190,7 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
 
 
 def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
-                shared: Grade | None = None, progress: Progress | None = None,
+                *, shared: Grade | None = None, progress: Progress | None = None,
                 keep_input: bool = True) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
@@ -229,7 +233,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
 
 
 def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
-               shared: Grade | None = None, progress: Progress | None = None,
+               *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
                keep_input: bool = True) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
@@ -246,7 +250,8 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
     """
     progress = progress or Progress()
     timings = dict(timings or {})
-    graded = grade_photo(plan.photo, styles, options, shared, progress, keep_input)
+    graded = grade_photo(plan.photo, styles, options, shared=shared, progress=progress,
+                         keep_input=keep_input)
     grade = graded.grade
     timings.update(graded.timings)
     if plan.output is not None:
@@ -260,17 +265,19 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
             pixels = output_pixels(graded.pixels, graded.alpha_channel, graded.image,
                                    graded.encoding, plan.output, plan.encode)
             with stage_image(plan.output, pixels, graded.image, plan.overwrite,
-                             graded.alpha_channel, plan.encode):
+                             graded.alpha_channel, plan.encode,
+                             format_name=plan.output_format):
                 timings["write"] = time.perf_counter() - start
                 if plan.lut is not None:  # written while the photo waits, published before it
                     progress.say("lut")
                     start = time.perf_counter()
                     ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
-                    write_grade_lut(plan.lut, grade, graded.encoding.within_working(),
-                                    plan.lut_size, plan.lut_format,
-                                    title=f"wbcgrade {plan.photo.stem}",
-                                    comments=[f"wbcgrade grade of {plan.photo.name}: {ranked}"],
-                                    overwrite=plan.overwrite)
+                    write_checked_lut(plan.lut, plan.lut_format, grade,
+                                      graded.encoding.within_working(), plan.lut_size,
+                                      title=f"wbcgrade {plan.photo.stem}",
+                                      comments=[f"wbcgrade grade of {plan.photo.name}: "
+                                                f"{ranked}"],
+                                      overwrite=plan.overwrite)
                     lut_written = True
                     timings["lut"] = time.perf_counter() - start
         except BaseException:
@@ -284,7 +291,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
 
 
 def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: GradeOptions,
-                output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
+                *, output: str | os.PathLike | None = None, lut: str | os.PathLike | None = None,
                 lut_size: int = DEFAULT_LUT_SIZE, lut_format: str | None = None,
                 overwrite: bool = False, report_dir: str | os.PathLike | None = None,
                 progress: Progress | None = None,
@@ -310,12 +317,12 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     progress = progress or Progress()
     saved = isinstance(source, Grade)
     if saved and report_dir is not None:
-        raise OptionError("--report needs styles to compare with; a saved --look has none",
-                          "--report")
+        raise OptionError("report_dir needs styles to compare with; a saved look has none",
+                          "report_dir", also=("look",))
     reads = source_files(None if saved else source, options.map.natural,
                          source if saved else None)
-    plan = plan_photo(photo, output, lut, lut_size, lut_format, overwrite, encode=encode,
-                      saved_grade=save_grade, reads=reads)
+    plan = plan_photo(photo, output, lut=lut, lut_size=lut_size, lut_format=lut_format,
+                      overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
         from wbcgrade.color.report import plan_report
 
@@ -328,8 +335,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
             from dataclasses import replace
 
             options = replace(options, spaces=replace(spaces, working=source.working))
-        name = str(dict(source.info).get("saved_look", {}).get("file", "saved grade"))
-        report = grade_file(plan, look_styles(source, name), options, shared=source,
+        report = grade_file(plan, look_styles(source), options, shared=source,
                             progress=progress, keep_input=False)
         report.fit = look_fit(source)
         _save_grade(plan, report.grade)

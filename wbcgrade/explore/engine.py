@@ -356,8 +356,8 @@ class Session:
         return FitResult(weights=tuple(float(w) for w in summary.weights),
                          loss=float(summary.loss),
                          vertex_losses=tuple(float(v) for v in summary.vertex_losses),
-                         start=summary.start, converged=bool(summary.info.get("converged", True)),
-                         evaluations=int(summary.info.get("evaluations", 0)),
+                         start=summary.start, converged=summary.converged,
+                         evaluations=summary.evaluations,
                          time_s=summary.time_s)
 
     def fast_map(self, settings: Settings) -> np.ndarray:

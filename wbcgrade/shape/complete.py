@@ -231,6 +231,7 @@ def check_database_size(paths: Sequence[Path]) -> None:
 def load_shape(
     path: str | os.PathLike,
     resolution: int = DEFAULT_RESOLUTION,
+    *,
     align: bool = False,
     supersample: int | None = None,
     reference: VoxelShape | None = None,
@@ -479,6 +480,7 @@ def make_target(density: np.ndarray, missing: float = 0.0) -> np.ndarray:
 def project(
     density: np.ndarray,
     database: Sequence[np.ndarray],
+    *,
     names: Sequence[str] | None = None,
     missing: float = 0.0,
     loss: str = DEFAULT_LOSS,
@@ -700,6 +702,7 @@ def placement_shift(first: np.ndarray, second: np.ndarray, occupancy: np.ndarray
 def complete_shape(
     partial: VoxelShape,
     database: Sequence[VoxelShape],
+    *,
     missing: float | None = None,
     loss: str = DEFAULT_LOSS,
     euclidean: bool = False,

@@ -26,7 +26,7 @@ __all__ = ["grade_clip"]
 
 
 def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
-               styles: StyleSource, options: GradeOptions, settings: VideoSettings | None = None,
+               styles: StyleSource, options: GradeOptions, *, settings: VideoSettings | None = None,
                lut: str | os.PathLike | None = None, overwrite: bool = False,
                report_dir: str | os.PathLike | None = None,
                progress: VideoProgress | None = None, look=None) -> VideoResult:
@@ -57,10 +57,12 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
         from wbcgrade.color.saved_look import look_batch_options, look_styles
 
         options = look_batch_options(options, look, report_dir=report_dir)
-        loaded = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
+        loaded = look_styles(look, str(None if look.saved is None else look.saved.file))
     with contextlib.ExitStack() as stack:  # every output published together, or none
-        result = grade_planned(source, output, lut, loaded, options, settings, overwrite,
-                                progress, {"styles": time.perf_counter() - start}, stack, look)
+        result = grade_planned(source, output, lut=lut, styles=loaded, options=options,
+                               settings=settings, overwrite=overwrite, progress=progress,
+                               timings={"styles": time.perf_counter() - start}, stack=stack,
+                               look=look)
         if report_dir is not None:
             result.report = write_video_report(report_dir, result, loaded, overwrite, stack)
     return result

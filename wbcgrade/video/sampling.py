@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.defaults import DEFAULT_CUT_THRESHOLD, DEFAULT_MIN_SHOT, DEFAULT_SAMPLE_EVERY
 from wbcgrade.video.ffmpeg import VideoInfo, decode_frames
 
@@ -90,9 +90,9 @@ def scan(path: str | os.PathLike, info: VideoInfo, sample_every: float = DEFAULT
     progress : called with the number of frames decoded so far.
     """
     if not (np.isfinite(sample_every) and sample_every > 0):
-        raise InputError("--sample-every must be a positive number of seconds")
+        raise OptionError("sample_every must be a positive number of seconds", "sample_every")
     if not 0 < cut_threshold < 1:
-        raise InputError("--cut-threshold must be between 0 and 1")
+        raise OptionError("cut_threshold must be between 0 and 1", "cut_threshold")
     step = max(1, round(sample_every * info.fps))
     shortest = max(1, round(min_shot * info.fps))
     width, height = analysis_size(info, max_side)

@@ -58,7 +58,7 @@ _TAGGED: dict[tuple[str, str | None], tuple[str, ...]] = {
 def _first_known(candidates: tuple[str, ...]) -> str | None:
     for name in candidates:
         try:
-            return resolve_space(name, "--input-space")
+            return resolve_space(name, "spaces.input")
         except OptionError:
             continue
     return None

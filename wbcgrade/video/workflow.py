@@ -416,7 +416,7 @@ class VideoProgress(Progress):
 
 
 def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: StyleSet,
-                options: GradeOptions, settings: VideoSettings | None = None,
+                options: GradeOptions, *, settings: VideoSettings | None = None,
                 lut: str | os.PathLike | None = None, overwrite: bool = False,
                 progress: VideoProgress | None = None,
                 timings: dict[str, float] | None = None) -> VideoResult:
@@ -441,10 +441,11 @@ def grade_video(source: str | os.PathLike, output: str | os.PathLike, styles: St
     ffmpeg is killed and the temporary files removed.
     """
     settings = settings or VideoSettings()
-    planned = plan_video(source, output, lut, settings, overwrite)
+    source, output, lut = plan_video(source, output, lut, settings, overwrite)
     with contextlib.ExitStack() as stack:
-        return grade_planned(*planned, styles, options, settings, overwrite,
-                              progress or VideoProgress(), timings, stack)
+        return grade_planned(source, output, lut=lut, styles=styles, options=options,
+                             settings=settings, overwrite=overwrite,
+                             progress=progress or VideoProgress(), timings=timings, stack=stack)
 
 
 #: Prefix of the work folders in the system's temporary folder (``$TMPDIR``).
@@ -527,7 +528,7 @@ def _writing_in(folder: Path) -> Iterator[None]:
                          "TMPDIR to a folder with space") from None
 
 
-def grade_planned(source: Path, output: Path, lut: Path | None, styles: StyleSet,
+def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: StyleSet,
                    options: GradeOptions, settings: VideoSettings, overwrite: bool,
                    progress: VideoProgress, timings: dict[str, float] | None,
                    stack: contextlib.ExitStack, look: Grade | None = None) -> VideoResult:

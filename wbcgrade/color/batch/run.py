@@ -24,7 +24,7 @@ from wbcgrade.color.workflow import Progress
 __all__ = ["run_batch"]
 
 
-def run_batch(plan: BatchPlan, context: BatchContext, consistent: bool = False,
+def run_batch(plan: BatchPlan, context: BatchContext, *, consistent: bool = False,
               jobs: int = 1, scheduler: str | None = None,
               on_result: Callable[[FileResult], None] | None = None,
               progress: Progress | None = None,

@@ -92,7 +92,8 @@ def run_task(task: BatchTask, context: BatchContext,
         if target is not None:
             check_image_output(target)  # before any work
             target.parent.mkdir(parents=True, exist_ok=True)
-        report = grade_file(plan, context.styles, context.options, context.shared, progress)
+        report = grade_file(plan, context.styles, context.options, shared=context.shared,
+                            progress=progress)
         fit = report.fit if report.fit is not None else context.shared_fit
         result.names = list(context.styles.names)
         result.weights = [float(w) for w in fit.weights]
@@ -101,7 +102,7 @@ def run_task(task: BatchTask, context: BatchContext,
         result.start = fit.start
         result.timings = dict(report.timings)
         result.color = report.color
-        result.own_style = report.grade.info.get("own_style")
+        result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
         from wbcgrade.color.report import palette_record, sheet_content, sheet_path
 

@@ -45,7 +45,7 @@ from wbcgrade.color.lut import (
     check_lut_path,
     check_lut_size,
     lut_format_of,
-    write_grade_lut,
+    write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
@@ -165,8 +165,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     report_dir = None if report_dir is None else Path(report_dir)
     if lut is not None:
         if not consistent:
-            raise InputError("--lut needs --consistent (one grade for the series); per-photo "
-                             "LUTs come from `wbcgrade apply --lut`")
+            raise OptionError("lut needs consistent (one grade for the series); per-photo "
+                              "LUTs come from `wbcgrade apply --lut`", "lut",
+                              also=("consistent",))
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
         check_lut_size(lut_size)
@@ -204,7 +205,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         else:
             from wbcgrade.color.saved_look import look_styles
 
-            styles = look_styles(look, str(dict(look.info).get("saved_look", {}).get("file")))
+            styles = look_styles(look, str(None if look.saved is None else look.saved.file))
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
@@ -230,10 +231,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
             # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
             encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
-            result.lut = write_grade_lut(lut, grade, encoding, lut_size, lut_format,
-                                         title=f"wbcgrade series {Path(in_dir).name}",
-                                         comments=[f"wbcgrade series grade of {in_dir}: {ranked}"],
-                                         overwrite=overwrite)
+            result.lut = write_checked_lut(lut, lut_format, grade, encoding, lut_size,
+                                           title=f"wbcgrade series {Path(in_dir).name}",
+                                           comments=[f"wbcgrade series grade of {in_dir}: "
+                                                     f"{ranked}"],
+                                           overwrite=overwrite)
     return result
 
 

@@ -1,0 +1,89 @@
+"""The one option table (wbcgrade/cli/option_table.py): click options, JSON keys and the
+error names come from it, and every bad option exits 2."""
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from wbcgrade.cli import USAGE_ERROR, main
+from wbcgrade.cli.grading_options import flag_error
+from wbcgrade.cli.option_table import OPTIONS, flag_of
+from wbcgrade.color.options import FLAT_FIELDS, GradeOptions, flat_defaults
+from wbcgrade.errors import OptionError
+
+
+def _params(command: str) -> dict[str, click.Parameter]:
+    group = main.commands[command]
+    return {p.name: p for p in group.get_params(click.Context(group))}
+
+
+@pytest.mark.parametrize("row", [r for r in OPTIONS if r.json is not None],
+                         ids=lambda r: r.name)
+def test_a_rows_json_key_is_the_libraries_flat_name_of_its_field(row):
+    group, name = FLAT_FIELDS[row.json]
+    assert row.field == f"{group}.{name}"
+    assert row.json in GradeOptions().flat()
+
+
+@pytest.mark.parametrize("command", ["apply", "batch", "report", "video"])
+def test_the_commands_options_are_the_tables_rows(command):
+    params = _params(command)
+    rows = [r for r in OPTIONS if r.name in params]
+    assert len(rows) >= 20
+    for row in rows:
+        assert row.flag in params[row.name].opts, (command, row.name)
+        if row.json is not None and row.default is not None and not row.is_flag:
+            assert params[row.name].default == flat_defaults()[row.json], row.name
+
+
+@pytest.mark.parametrize("command", ["apply", "batch", "report", "video"])
+def test_every_option_of_a_grading_command_is_a_table_row(command):
+    names = {row.name for row in OPTIONS}
+    params = _params(command)
+    options = {name for name, p in params.items() if isinstance(p, click.Option)}
+    assert options - names == {"help"}
+
+
+def test_a_required_row_stays_required(tmp_path):
+    result = CliRunner().invoke(main, ["batch", str(tmp_path), "--preset", "warm"])
+    assert result.exit_code == 2 and "Missing option '-o' / '--output-dir'" in result.output
+
+
+def test_video_has_the_tables_video_settings():
+    params = _params("video")
+    for name in ("sample_every", "cut_threshold", "blend_frames", "codec", "crf"):
+        assert params[name].opts == [flag_of[next(r.field for r in OPTIONS if r.name == name)]]
+
+
+@pytest.mark.parametrize("field, message, shown", [
+    ("transfer.bins", "transfer.bins must be between 4 and 256",
+     "--bins must be between 4 and 256"),
+    ("map.strength", "map.strength must be in [0, 4]", "--strength must be in [0, 4]"),
+    ("lut_format", "out.cube: LUT file name must end in .clf (lut_format clf)",
+     "out.cube: LUT file name must end in .clf (--lut-format clf)"),
+])
+def test_library_errors_name_fields_and_the_cli_their_flags(field, message, shown):
+    error = flag_error(OptionError(message, field))
+    assert str(error) == shown and error.option == flag_of[field]
+
+
+def test_other_settings_a_message_names_become_flags_too():
+    error = flag_error(OptionError("lut needs consistent (one grade); `apply --lut` writes "
+                                   "per-photo LUTs", "lut", also=("consistent",)))
+    assert str(error) == ("--lut needs --consistent (one grade); `apply --lut` writes "
+                          "per-photo LUTs")
+
+
+@pytest.mark.parametrize("args", [
+    ["--mode", "palette", "--bins", "3"],   # the library's range (exited 1 before)
+    ["--strength", "9"],
+    ["--mode", "palette", "--weights", "1,x"],
+    ["--working-space", "no-such-space"],
+    ["--bins", "64"],                       # a palette option without --mode palette
+    ["--quality", "0"],                     # click's own range check
+])
+def test_every_bad_option_exits_2_naming_its_flag(tmp_path, args):
+    result = CliRunner().invoke(main, ["apply", str(tmp_path / "missing.jpg"), "--preset",
+                                       "warm", *args])
+    assert result.exit_code == USAGE_ERROR == 2, result.output
+    assert args[-2] in result.output
