@@ -103,7 +103,7 @@ def test_names_resolve_through_aliases_and_roles_case_insensitively():
 
 
 def test_an_unknown_space_is_an_option_error_listing_the_valid_names():
-    with pytest.raises(OptionError) as caught:
+    with pytest.raises(OptionError, match="no-such-space") as caught:
         cs.resolve_space("no-such-space", "--input-space")
     message = str(caught.value)
     assert "\n" not in message and "--input-space" in message

@@ -109,11 +109,11 @@ def test_smooth_map_validates_its_input():
     from wbcgrade.color.smooth_map import SmoothMapFitter
 
     raw, density = _split_map(8)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"raw_map must be \(n, n, n, 3\) and density"):
         fit_smooth_map(raw, density[:4])
     with pytest.raises(ValueError, match="too large"):
         SmoothMapFitter(density, 33)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"raw_map must be \(8, 8, 8, 3\)"):
         SmoothMapFitter(density, 9).fit(raw[:4, :4, :4])
     with pytest.raises(ValueError):
         fit_smooth_map(raw, density, smoothness=0, stiffness=0)
@@ -232,7 +232,7 @@ def test_look_options_are_validated(field, value):
     from wbcgrade.color.options import FLAT_FIELDS
     from wbcgrade.errors import OptionError
 
-    with pytest.raises(OptionError) as caught:
+    with pytest.raises(OptionError, match="must") as caught:
         GradeOptions(**{field: value})
     assert caught.value.option == ".".join(FLAT_FIELDS[field])  # the field, e.g. map.size
     assert str(caught.value).startswith(caught.value.option)

@@ -313,7 +313,7 @@ def test_a_malformed_cube_is_one_line_naming_the_file_and_the_fault(tmp_path, ph
                                                                      words):
     path = tmp_path / "bad.cube"
     path.write_text(text)
-    with pytest.raises(InputError) as caught:
+    with pytest.raises(InputError, match="bad.cube") as caught:
         load_look(path)
     message = str(caught.value)
     assert message.startswith(str(path)) and all(w in message for w in words), message
@@ -343,7 +343,7 @@ def test_the_remap_refuses_a_map_of_one_node():
 def test_a_wrong_typed_grade_json_field_is_one_line(tmp_path, saved, photo, field, value,
                                                     words):
     path = _write_look(tmp_path / "grade.json", dict(saved, **{field: value}))
-    with pytest.raises(InputError) as caught:
+    with pytest.raises(InputError, match="grade.json") as caught:
         load_look(path)
     assert str(caught.value).startswith(str(path))
     assert all(w in str(caught.value) for w in words), caught.value

@@ -64,7 +64,7 @@ def test_apply_with_huge_weights_grades(tmp_path, style_dir, photo):
 def test_a_preset_that_is_not_a_zip_names_no_numpy_option(tmp_path, photo):
     fake = tmp_path / "fake.npz"
     fake.write_bytes(b"this is not an archive at all" * 4)
-    with pytest.raises(InputError) as info:
+    with pytest.raises(InputError, match="fake.npz") as info:
         load_preset(fake)
     assert "allow_pickle" not in str(info.value) and "not a zip" in str(info.value)
     line = _one_error_line(run("apply", photo, "--preset", fake, *FAST_ARGS))

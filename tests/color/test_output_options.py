@@ -67,7 +67,7 @@ def test_bit_depth(tmp_path, warm_look):
                  "-o", tmp_path / "c.jpg")
     assert result.exit_code != 0 and "JPEG" in result.output
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "c.jpg").exists()
-    with pytest.raises(OptionError):
+    with pytest.raises(OptionError, match="quality must be between 1 and 100"):
         WriteOptions(quality=101)
 
 

@@ -74,7 +74,7 @@ def test_graded_photo_is_closer_to_the_barycenter(scene, fast_options):
     np.testing.assert_allclose(replace(grade, strength=0.0).apply(rgb), rgb, atol=1e-6)
     np.testing.assert_allclose(replace(grade, strength=0.5).apply(rgb), 0.5 * (rgb + graded),
                                atol=1e-5)
-    with pytest.raises(AttributeError):  # a grade is frozen
+    with pytest.raises(AttributeError, match="strength"):  # a grade is frozen
         grade.strength = 0.0
 
 
@@ -118,7 +118,7 @@ def test_given_weights_skip_the_fit(scene, fast_options):
 
 @pytest.mark.parametrize("text", ["a,b", "", "-1,2", "0,0"])
 def test_bad_weights(text):
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match="comma-separated numbers|non-negative finite numbers"):
         parse_weights(text)
 
 

@@ -368,9 +368,9 @@ def test_solve_reaches_the_fixed_point_and_a_warm_start_from_a_coarse_grid_saves
 def test_solve_rejects_bad_warm_starts():
     geom = GridGeometry((6, 6), 0.05)
     solver = BarycenterSolver(blobs((6, 6), 2, np.random.default_rng(0)), geom, 10)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"init_log_scalings must have shape \(2, 6, 6\)"):
         solver.solve([0.5, 0.5], init_log_scalings=np.zeros((2, 5, 6)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="init_log_scalings contain NaN"):
         solver.solve([0.5, 0.5], init_log_scalings=np.full((2, 6, 6), np.nan))
 
 

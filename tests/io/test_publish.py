@@ -66,7 +66,7 @@ def test_domain_writers_from_threads(tmp_path):
 def test_failure_removes_the_temporary_and_keeps_the_target(tmp_path):
     target = tmp_path / "keep.txt"
     target.write_text("old")
-    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+    with pytest.raises(RuntimeError, match="writer failed"), atomic_path(target) as tmp:
         assert os.path.basename(tmp).startswith(f".keep{TEMP_MARK}")
         with open(tmp, "w") as handle:
             handle.write("half")

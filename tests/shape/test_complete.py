@@ -109,7 +109,7 @@ def test_missing_fraction_and_target():
     assert estimate_missing_fraction(full, [half]) == 0.0
     target = make_target(np.ones((4, 4, 4)), missing=0.25)
     assert target.sum() == pytest.approx(0.75)
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"missing fraction must be in \[0, 1\), got 1.0"):
         make_target(np.ones((4, 4, 4)), missing=1.0)
 
 
