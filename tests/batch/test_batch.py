@@ -11,9 +11,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
 from wbcgrade.color.fit import fit_weights
 from wbcgrade.color.options import FitOptions, GradeOptions
@@ -52,8 +51,8 @@ def folders(tmp_path_factory) -> tuple[Path, Path]:
 
 
 def _batch(photos: Path, styles: Path, out: Path, *extra: str):
-    return CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style", str(styles),
-                                     "-r", *FAST, *extra])
+    return run_cli("batch", str(photos), "-o", str(out), "--style", str(styles),
+                   "-r", *FAST, *extra)
 
 
 def _pixels(path: Path) -> np.ndarray:
@@ -235,11 +234,11 @@ def test_scheduler_errors_are_one_line(folders, tmp_path, monkeypatch):
     assert "pip install 'wbcgrade[dask]'" in result.output.strip().splitlines()[-1]
 
 
-def test_report_files_are_valid(folders, tmp_path):
+def test_report_files_are_valid(folders, tmp_path, cli):
     photos, styles = folders
     out = tmp_path / "report"
-    result = CliRunner().invoke(main, ["report", str(photos), "-o", str(out), "--style",
-                                       str(styles), "-r", *FAST])
+    result = cli("report", str(photos), "-o", str(out), "--style",
+                 str(styles), "-r", *FAST)
     assert result.exit_code == 1, result.output  # the broken photo
     document = json.loads((out / "report.json").read_text())
     entries = document["photos"]
@@ -268,11 +267,11 @@ def test_report_files_are_valid(folders, tmp_path):
     assert not list(photos.rglob("*_graded*"))  # report writes no graded photos
 
 
-def test_report_one_photo_with_preset(folders, tmp_path):
+def test_report_one_photo_with_preset(folders, tmp_path, cli):
     photos, _ = folders
     out = tmp_path / "one"
-    result = CliRunner().invoke(main, ["report", str(photos / "chelsea.jpg"), "-o", str(out),
-                                       "--preset", "warm", *FAST])
+    result = cli("report", str(photos / "chelsea.jpg"), "-o", str(out),
+                 "--preset", "warm", *FAST)
     assert result.exit_code == 0, result.output
     rows = list(csv.reader(open(out / "weights.csv", newline="")))
     assert len(rows) == 2 and rows[1][0] == "chelsea.jpg"
@@ -391,13 +390,12 @@ def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
     assert np.any(np.all(np.abs(pixels - 0.5) < 1e-6, axis=2))  # the pictures are there
 
 
-def test_apply_report_option_writes_a_report(folders, tmp_path):
+def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
     photos, styles = folders
-    result = CliRunner().invoke(main, [
+    result = cli(
         "apply", str(photos / "chelsea.jpg"), "--style", str(styles), "-o", str(tmp_path / "c.jpg"),
         "--mode", "palette", "--bins", "8", "--fit-bins", "6", "--max-iter", "3",
-        "--iterations", "10", "--no-cache", "--report", str(tmp_path / "report"),
-    ])
+        "--iterations", "10", "--no-cache", "--report", str(tmp_path / "report"))
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "report" / "report.json").read_text())
     assert [p["photo"] for p in report["photos"]] == ["chelsea.jpg"]

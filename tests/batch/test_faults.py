@@ -10,12 +10,11 @@ import time
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 from tests.color.test_faults import KILLED_WRITER, hidden_files, noise, wbcgrade
+from tests.conftest import run_cli
 from wbcgrade._publish import TEMP_MARK, lock_folder
-from wbcgrade.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +30,8 @@ def shoot(tmp_path_factory) -> tuple[Path, Path]:
 
 
 def _batch(photos: Path, styles: Path, out: Path, *extra: str):
-    return CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style",
-                                     str(styles), "-r", *FAST, *extra])
+    return run_cli("batch", str(photos), "-o", str(out), "--style",
+                   str(styles), "-r", *FAST, *extra)
 
 
 def _age(path: Path, seconds: float = 3600) -> None:

@@ -16,17 +16,13 @@ import time
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.batch.records import RESULTS_FOLDER
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
 
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")

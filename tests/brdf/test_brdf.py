@@ -12,11 +12,9 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from wbcgrade.brdf import analytic, io, merl, render, sampled, sampling
 from wbcgrade.brdf.fit import DEFAULT_LOSS, brdf_histograms, fit_brdf
-from wbcgrade.cli import main
 from wbcgrade.core import Loss, barycenter, barycenter_gradient, get_loss
 from wbcgrade.core.losses import EntropicTransportLoss
 from wbcgrade.core.masked import masked_loss
@@ -358,26 +356,23 @@ def test_render_sphere(setup, tmp_path):
     assert back.spec().width == 96 and back.spec().nchannels == 3
 
 
-def test_cli_synth_and_fit(tmp_path):
-    runner = CliRunner()
+def test_cli_synth_and_fit(tmp_path, cli):
     database = tmp_path / "db"
-    result = runner.invoke(main, ["brdf", "synth", "-o", str(database), "--material",
-                                  "white-lambert", "--material", "brushed-steel-ward",
-                                  "--directions", "32"])
+    result = cli("brdf", "synth", "-o", str(database), "--material",
+                 "white-lambert", "--material", "brushed-steel-ward",
+                 "--directions", "32")
     assert result.exit_code == 0, result.output
     assert [p.name for p in io.database_files(database)] == [
         "brushed-steel-ward.npz", "white-lambert.binary"]
-    result = runner.invoke(main, ["brdf", "synth", "-o", str(tmp_path / "ref"), "--material",
-                                  "brushed-gold-ward", "--directions", "32"])
+    result = cli("brdf", "synth", "-o", str(tmp_path / "ref"), "--material",
+                 "brushed-gold-ward", "--directions", "32")
     assert result.exit_code == 0, result.output
     measured = tmp_path / "ref" / "brushed-gold-ward.npz"
     out = tmp_path / "fit.binary"
-    result = runner.invoke(main, [
-        "brdf", "fit", str(measured), "--database", str(database),
+    result = cli("brdf", "fit", str(measured), "--database", str(database),
         "--keep", "0.3", "--keep", "0.15",
         "--directions", "32", "--fit-directions", "6", "--loss", "quadratic",
-        "--max-iter", "4", "--iterations", "20", "-o", str(out), "--json",
-    ])
+        "--max-iter", "4", "--iterations", "20", "-o", str(out), "--json")
     assert result.exit_code == 0, result.output
     report = json.loads(result.output[result.output.index("{"):])
     assert [f["label"] for f in report["fits"]] == ["full", "keep 30%", "keep 15%"]
@@ -391,7 +386,7 @@ def test_cli_synth_and_fit(tmp_path):
     assert io.load_brdf(out, sampling.hemisphere_directions(32)).shape == (32, 32, 3)
 
 
-def test_cli_prints_weights_and_psnr(tmp_path):
+def test_cli_prints_weights_and_psnr(tmp_path, cli):
     directions = sampling.hemisphere_directions(24)
     database = tmp_path / "db"
     database.mkdir()
@@ -401,10 +396,9 @@ def test_cli_prints_weights_and_psnr(tmp_path):
     measured = io.write_sampled(tmp_path / "bronze.npz", analytic.sample_material(
         analytic.material_by_name("bronze-ggx-0.25"), directions), directions)
     out = tmp_path / "fit.npz"
-    result = CliRunner().invoke(main, [
-        "brdf", "fit", str(measured), "--database", str(database), "--keep", "0.5",
+    result = cli("brdf", "fit", str(measured), "--database", str(database), "--keep", "0.5",
         "--directions", "24", "--fit-directions", "4", "--max-iter", "3", "--n-iter", "15",
-        "-o", str(out), "--no-png"])
+        "-o", str(out), "--no-png")
     assert result.exit_code == 0, result.output
     lines = result.output.splitlines()
     assert lines[lines.index(next(x for x in lines if x.startswith("material"))) + 1][0] == "-"
@@ -444,13 +438,12 @@ def _corrupt_inputs(tmp_path):
     ]
 
 
-def test_cli_errors_are_one_line(tmp_path):
+def test_cli_errors_are_one_line(tmp_path, cli):
     """Bad files (size, header, NaN, mismatched samplings): one line, exit 1, no traceback."""
-    runner = CliRunner()
     for measured, database, message in _corrupt_inputs(tmp_path):
-        result = runner.invoke(main, ["brdf", "fit", str(measured), "--database", str(database),
-                                      "--directions", "8", "--no-png",
-                                      "-o", str(tmp_path / "out.npz")])
+        result = cli("brdf", "fit", str(measured), "--database", str(database),
+                     "--directions", "8", "--no-png",
+                     "-o", str(tmp_path / "out.npz"))
         text = result.output.strip()
         assert result.exit_code == 1, (measured, text)
         assert text.startswith("Error:") and "\n" not in text, text

@@ -9,16 +9,11 @@ import shutil
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture

@@ -28,10 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.options import FitOptions, RegrainOptions
 from wbcgrade.color.presets import load_preset
 from wbcgrade.color.remap import apply_color_map
@@ -40,9 +39,6 @@ from wbcgrade.errors import InputError, OptionError
 
 REPO = Path(__file__).resolve().parents[2]
 
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def refused(result, *words) -> str:
@@ -368,21 +364,21 @@ def styles(tmp_path) -> Path:
 
 
 @pytest.mark.parametrize("damage", [b"garbage", b"", b"PK\x03\x04 cut short"])
-def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles, damage):
+def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles, damage, cli):
     cache = tmp_path / "cache"
     args = ["--mode", "palette", "--bins", "16", "--fit-bins", "8", "--max-iter", "10",
             "--iterations", "30"]
     env = {"WBCGRADE_CACHE_DIR": str(cache)}
-    first = CliRunner(env=env).invoke(main, ["apply", str(photo), "--style", str(styles),
-                                             "-o", str(tmp_path / "a.png"), *args])
+    first = cli("apply", str(photo), "--style", str(styles),
+                "-o", str(tmp_path / "a.png"), *args, env=env)
     assert first.exit_code == 0, first.output
     entries = sorted(cache.rglob("*.npz"))
     assert len(entries) >= 3
     good = {path: path.read_bytes() for path in entries}
     for path in entries:
         path.write_bytes(damage)
-    again = CliRunner(env=env).invoke(main, ["apply", str(photo), "--style", str(styles),
-                                             "-o", str(tmp_path / "b.png"), *args])
+    again = cli("apply", str(photo), "--style", str(styles),
+                "-o", str(tmp_path / "b.png"), *args, env=env)
     assert again.exit_code == 0, again.output
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
     for path in entries:  # healed: each entry rewritten as a good one

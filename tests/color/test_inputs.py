@@ -8,18 +8,13 @@ import shutil
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.presets import load_preset, load_style_folder, save_preset
 from wbcgrade.color.report import _csv_text, csv_cell
 from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def _one_error_line(result) -> str:

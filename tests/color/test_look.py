@@ -213,31 +213,28 @@ def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     assert np.quantile(pulled, 0.99) < 0.05
 
 
-def test_look_mode_and_look_extract_through_the_commands(tmp_path):
+def test_look_mode_and_look_extract_through_the_commands(tmp_path, cli):
     """``apply --mode look`` takes the grade path's "look" map builder; ``look extract``
     writes the set's look as a LUT and, like every command, refuses an existing file."""
     import json
 
-    from click.testing import CliRunner
-
     from tests.color.conftest import small_copy
-    from wbcgrade.cli import main
     from wbcgrade.color.lut import read_cube
 
     # a preset of palettes only (no look of its own): the look is extracted
     palettes = str(Path(__file__).resolve().parents[1] / "data" / "three_samples.npz")
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", palettes, "-o",
-                                       str(tmp_path / "o.png"), "--json", "--no-cache"])
+    result = cli("apply", str(photo), "--preset", palettes, "-o",
+                 str(tmp_path / "o.png"), "--json", "--no-cache")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["map"]["builder"] == "look" and report["fit_start"] == "look"
     assert report["outcome"]["source"] == "set-look" and "weights" not in report
     lut = tmp_path / "look.cube"
     args = ["look", "extract", "--preset", palettes, "-o", str(lut), "--lut-size", "9"]
-    assert CliRunner().invoke(main, args).exit_code == 0
+    assert cli(*args).exit_code == 0
     assert read_cube(lut).size == 9
-    result = CliRunner().invoke(main, args)
+    result = cli(*args)
     assert result.exit_code == 1 and "file exists (use --overwrite" in result.output
 
 
@@ -255,14 +252,12 @@ def test_shrinking_keeps_what_the_styles_agree_on_and_drops_what_they_do_not():
     assert torn.amplitude() < 0.25 * pooled.amplitude()  # (0.2^2 / (0.2^2 + 1/4) = 0.14)
 
 
-def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
+def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path, cli):
     """The shipped presets carry the look they were made with: the look grade applies it as
     it is (no estimate), `look extract` writes it, and a preset with a broken look is refused."""
     import OpenImageIO as oiio
-    from click.testing import CliRunner
 
     from tests.color.conftest import small_copy
-    from wbcgrade.cli import main
     from wbcgrade.color.lut import read_cube
     from wbcgrade.color.presets import load_preset, resolve_preset, save_preset
     from wbcgrade.color.remap import interpolate_lattice, resample_lattice
@@ -273,8 +268,8 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
     assert look.shape == (33, 33, 33, 3)
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.png", 96)
     out = tmp_path / "o.png"
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--no-regrain",
-                                       "-o", str(out)])
+    result = cli("apply", str(photo), "--preset", "warm", "--no-regrain",
+                 "-o", str(out))
     assert result.exit_code == 0, result.output
     pixels = oiio.ImageBuf(str(photo)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
     graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
@@ -282,8 +277,8 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
     assert np.abs(graded - expected).max() <= 1.5 / 255
     assert np.abs(graded - pixels).mean() > 5 / 255  # and the look is not a small one
     cube = tmp_path / "look.cube"
-    assert CliRunner().invoke(main, ["look", "extract", "--preset", "warm", "--strength", "1",
-                                     "-o", str(cube)]).exit_code == 0
+    assert cli("look", "extract", "--preset", "warm", "--strength", "1",
+               "-o", str(cube)).exit_code == 0
     assert np.abs(read_cube(cube).table - resample_lattice(look, 33)).max() < 1e-4
     broken = look.copy()
     broken[0, 0, 0, 0] = np.nan

@@ -22,10 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main as cli
+from tests.conftest import run_cli
 from wbcgrade.color import colorspace as cs
 from wbcgrade.color.imageio import read_image
 
@@ -41,10 +40,10 @@ def photo(tmp_path_factory) -> Path:
 
 def graded_with_lut(photo: Path, folder: Path, working: str, name: str) -> tuple[Path, Path]:
     out, lut = folder / f"{name}.png", folder / name
-    result = CliRunner().invoke(cli, ["apply", str(photo), "--preset", "warm", "-o", str(out),
-                                      "--working-space", working, "--lut", str(lut),
-                                      *(["--lut-format", "clf"] if name.endswith(".clf")
-                                        else []), *FAST])
+    result = run_cli("apply", str(photo), "--preset", "warm", "-o", str(out),
+                     "--working-space", working, "--lut", str(lut),
+                     *(["--lut-format", "clf"] if name.endswith(".clf")
+                       else []), *FAST)
     assert result.exit_code == 0, result.output
     return out, lut
 

@@ -8,10 +8,9 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.cli.grading_options import PALETTE_ONLY
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, grade_array, grade_outcome
@@ -20,10 +19,6 @@ from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.outcome import GradeOutcome, GradeSource, map_change
 from wbcgrade.color.presets import load_preset, look_in_space, resolve_preset
 from wbcgrade.color.remap import identity_map
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def _look_grade(color_map, set_strength, n=3, strength=1.0):

@@ -8,18 +8,13 @@ import shutil
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import WriteOptions, read_image
 from wbcgrade.color.lut import write_cube
 from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import OptionError
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.colorspace import ColorEncoding, canonical
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import write_cube
@@ -48,9 +47,6 @@ def ramp_mosaic(height: int = 48, width: int = 512) -> np.ndarray:
     """A grey ramp from black to the white level, left to right (every photosite)."""
     return np.round(np.linspace(0.0, 1.0, width)[None, :] * WHITE).repeat(height, 0)
 
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def test_raw_reads_as_scene_linear_aces(tmp_path):

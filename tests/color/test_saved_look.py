@@ -7,15 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import read_image
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def codes(path) -> np.ndarray:

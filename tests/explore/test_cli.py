@@ -11,14 +11,8 @@ import time
 import urllib.request
 from pathlib import Path
 
-from click.testing import CliRunner
-
+from tests.conftest import run_cli as run
 from tests.explore.conftest import PRESET, WBCGRADE, command_env
-from wbcgrade.cli import main
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def test_explore_is_a_command_with_its_options():

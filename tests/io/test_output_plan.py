@@ -14,10 +14,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 
 
 def _digest(folder: Path) -> dict[str, str]:
@@ -26,7 +25,7 @@ def _digest(folder: Path) -> dict[str, str]:
 
 
 def _run(*args) -> object:
-    return CliRunner().invoke(main, [*map(str, args)])
+    return run_cli(*map(str, args))
 
 
 @pytest.fixture(scope="module")

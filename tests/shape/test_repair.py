@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from click.testing import CliRunner
 
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import complete_shape, intersection_over_union, load_shape
 from wbcgrade.shape.mesh import edge_counts, normalize_mesh, read_mesh, voxelize
@@ -103,8 +102,8 @@ def test_sheet_of_triangles_is_refused(tmp_path):
 
 
 def _complete(args):
-    return CliRunner().invoke(main, ["shape", "complete", *args, "-n", "12", "--iterations",
-                                     "20", "--max-iter", "2", "--quiet"])
+    return run_cli("shape", "complete", *args, "-n", "12", "--iterations",
+                   "20", "--max-iter", "2", "--quiet")
 
 
 def test_cli_completes_a_mesh_with_holes_with_one_warning(tmp_path, cow_with_holes):

@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import THREE_STYLES
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.color.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
@@ -75,7 +74,7 @@ def clips(tmp_path_factory) -> dict[str, Path]:
 
 
 def run(*args):
-    return CliRunner().invoke(main, ["video", *map(str, args)])
+    return run_cli("video", *map(str, args))
 
 
 def refused(result, *words) -> str:

@@ -28,10 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import THREE_STYLES
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.color.colorspace import convert
 from wbcgrade.color.lut import read_cube
 from wbcgrade.color.remap import apply_color_map
@@ -84,7 +83,7 @@ def clips(tmp_path_factory) -> dict[str, Path]:
 
 
 def run(*args) -> object:
-    result = CliRunner().invoke(main, ["video", *map(str, args)])
+    result = run_cli("video", *map(str, args))
     return result
 
 
