@@ -310,3 +310,12 @@ def test_the_link_checks_catch_what_they_should():
     assert LINK.findall("see [x](docs/a.md#b) and ![y](z.png) but not `[u](v)`") == \
         ["docs/a.md#b", "z.png", "v"]
     assert "v" not in LINK.findall(_prose("`[u](v)`"))
+
+
+def test_ci_runs_the_readme_test_command_verbatim():
+    """The README's second set-up command (install with the test extra, run the tests) is
+    the one ``.ci/run`` runs: the two are kept in step."""
+    setup = bash_blocks(README.read_text("utf-8"))[:2]
+    assert "pytest" in setup[1][1] and "pip install ." in setup[0][1], setup
+    ci = (ROOT / ".ci" / "run").read_text("utf-8").splitlines()
+    assert setup[1][1].strip() in [line.strip() for line in ci]
