@@ -71,6 +71,7 @@ def local_run(folders, tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
     photos, styles = folders
     for name in GOOD:
@@ -119,6 +120,7 @@ def test_batch_grades_good_files_and_reports_bad_ones(folders, local_run):
         assert not plan_batch(photos, out, recursive=True, force=True).done
 
 
+@pytest.mark.slow
 def test_good_folder_exits_zero(folders, tmp_path):
     photos, styles = folders
     clean = tmp_path / "clean"
@@ -137,6 +139,7 @@ def _write_png(path: Path, pixels: np.ndarray) -> None:
     assert buf.write(str(path)), buf.geterror()
 
 
+@pytest.mark.slow
 def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     photos, styles = folders
     # b.png holds a.png's pixels on its left half: one colour map for the series grades
@@ -167,6 +170,7 @@ def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     assert not np.array_equal(graded_a, left)
 
 
+@pytest.mark.slow
 def test_the_series_lut_is_baked_for_the_photos_input_space(folders, tmp_path):
     """``--consistent --lut`` with ``--input-space``: the LUT takes the photos' own code
     values (it was baked for sRGB whatever the input space was), so applying it to a
@@ -193,6 +197,7 @@ def test_the_series_lut_is_baked_for_the_photos_input_space(folders, tmp_path):
         assert error.max() <= 3 and error.mean() < 0.6, (name, error.max(), error.mean())
 
 
+@pytest.mark.slow
 def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     photos, styles = folders
@@ -217,6 +222,7 @@ def test_dask_and_process_pool_match_a_local_run(folders, local_run, tmp_path):
                                       _pixels(local_run / name))
 
 
+@pytest.mark.slow
 def test_scheduler_errors_are_one_line(folders, tmp_path, monkeypatch):
     import sys
 
@@ -234,6 +240,7 @@ def test_scheduler_errors_are_one_line(folders, tmp_path, monkeypatch):
     assert "pip install 'wbcgrade[dask]'" in result.output.strip().splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_report_files_are_valid(folders, tmp_path, cli):
     photos, styles = folders
     out = tmp_path / "report"
@@ -267,6 +274,7 @@ def test_report_files_are_valid(folders, tmp_path, cli):
     assert not list(photos.rglob("*_graded*"))  # report writes no graded photos
 
 
+@pytest.mark.slow
 def test_report_one_photo_with_preset(folders, tmp_path, cli):
     photos, _ = folders
     out = tmp_path / "one"
@@ -287,6 +295,7 @@ def test_fit_is_never_worse_than_the_best_single_style():
     assert fit.weights.argmax() == 1
 
 
+@pytest.mark.slow
 def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
     import contextlib
 
@@ -317,6 +326,7 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
     _pixels(calls[0])  # complete and readable
 
 
+@pytest.mark.slow
 def test_report_hook_for_apply(folders, tmp_path):
     from wbcgrade.color.report import report_from_grade
     from wbcgrade.color.workflow import grade_file, plan_photo
@@ -337,6 +347,7 @@ def test_report_hook_for_apply(folders, tmp_path):
     assert entry["loss"] == pytest.approx(graded.fit.loss)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("start", ["vertex-refit", "vertex", "given"])
 def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatch, start):
     """Vertex refits and given weights were labelled "uniform", and every vertex loss was
@@ -390,6 +401,7 @@ def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
     assert np.any(np.all(np.abs(pixels - 0.5) < 1e-6, axis=2))  # the pictures are there
 
 
+@pytest.mark.slow
 def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
     photos, styles = folders
     result = cli(

@@ -46,6 +46,7 @@ def folders(tmp_path) -> tuple[Path, Path]:
     return photos, styles
 
 
+@pytest.mark.slow
 def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path, folders, fits,
                                                                        cli):
     photos, styles = folders
@@ -92,6 +93,7 @@ def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path,
     assert "strength: ignored" in result.stderr
 
 
+@pytest.mark.slow
 def test_report_of_a_copy_the_batch_did_not_record_says_so(tmp_path, folders, fits, cli):
     photos, styles = folders
     out = tmp_path / "out"

@@ -288,6 +288,7 @@ def test_losses_keep_warm_starts_within_one_fit_only(setup):
     np.testing.assert_allclose(warm_grad, cold_grad, atol=1e-4 * np.abs(cold_grad).max())
 
 
+@pytest.mark.slow
 def test_known_weights_are_recovered(setup):
     """The default loss recovers the weights of a target that is a barycenter of the
     database, from all measurements and from 10% of them."""
@@ -305,6 +306,7 @@ def test_known_weights_are_recovered(setup):
     assert sparse.kept_fraction == pytest.approx(0.1, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_decimated_fit_psnr_within_2db_of_full_fit(setup):
     """The paper's robustness claim with the default loss, on a material outside the database."""
     directions, geometry, database, subset = setup
@@ -356,6 +358,7 @@ def test_render_sphere(setup, tmp_path):
     assert back.spec().width == 96 and back.spec().nchannels == 3
 
 
+@pytest.mark.slow
 def test_cli_synth_and_fit(tmp_path, cli):
     database = tmp_path / "db"
     result = cli("brdf", "synth", "-o", str(database), "--material",

@@ -3,6 +3,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from wbcgrade import __version__
 from wbcgrade.cli import main
 
@@ -42,6 +44,7 @@ def test_help_imports_neither_numba_nor_the_core():
     assert run.stdout.splitlines()[-1] == "HEAVY", run.stdout.splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_demo_example_recovers_weights():
     run = subprocess.run(
         [sys.executable, str(ROOT / "examples" / "demo.py"), "--size", "8", "--styles", "3",

@@ -194,6 +194,7 @@ def test_default_and_explicit_srgb_write_the_same_bytes(tmp_path, photo, cli):
 
 # --- the same photo in two spaces grades to the same colours -----------------------------
 
+@pytest.mark.slow
 def test_a_display_p3_photo_and_its_srgb_copy_grade_alike(tmp_path, cli):
     srgb = read_image(small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)).rgb()
     srgb = 0.05 + 0.9 * srgb  # away from the faces of the cube: inside both gamuts
@@ -223,6 +224,7 @@ def _acescg_exr(path: Path) -> Path:
                        {"chromaticities": (oiio.TypeDesc("float[8]"), AP1)})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("working", ["acescct", "srgb"])
 def test_an_acescg_exr_keeps_values_above_one(tmp_path, working, cli):
     src = _acescg_exr(tmp_path / "cg.exr")
@@ -300,6 +302,7 @@ def test_presets_record_their_working_space_and_convert(tmp_path, style_dir, cli
 
 # --- LUTs ---------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_luts_name_their_spaces(tmp_path, photo, cli):
     from wbcgrade.color._colour import colour
 
@@ -330,6 +333,7 @@ def test_luts_name_their_spaces(tmp_path, photo, cli):
             assert read.size == 9
 
 
+@pytest.mark.slow
 def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch, cli):
     lut = tmp_path / "g.clf"
     args = ["apply", str(photo), "--preset", "warm", "--working-space", "acescct", "--lut",
@@ -376,6 +380,7 @@ def test_histograms_live_on_the_unit_cube_of_the_working_space():
     assert 0.05 < encoded.min() and encoded.max() < 0.56
 
 
+@pytest.mark.slow
 def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path, cli):
     src = _acescg_exr(tmp_path / "cg.exr")
     result = cli("report", str(src), "--preset", "warm", "--working-space",
@@ -421,6 +426,7 @@ def _oklab_lightness(acescg: np.ndarray) -> np.ndarray:
     return colour.XYZ_to_Oklab(xyz)[..., 0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("working", ["acescct", "srgb"])
 def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, working, cli):
     """An ACEScg EXR with highlights above 1: --preserve-luminance keeps each pixel's
@@ -443,6 +449,7 @@ def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, worki
     assert changes[False].mean() > 3 * changes[True].mean()
 
 
+@pytest.mark.slow
 def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     """--monotone orders the map by the working encoding's own luma: sYCC's BT.601
     weights for sRGB, the AP1 primaries' luminance for ACEScct."""

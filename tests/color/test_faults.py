@@ -60,6 +60,7 @@ def _apply_args(photo: Path, out: Path) -> list[str]:
 
 # -- 1, 2: a full disk ------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ext", ["png", "jpg"])
 def test_a_write_that_hits_the_file_size_limit_is_an_error_not_a_file(tmp_path, ext):
     """PNG reported the short write only via geterror() (published as success); libjpeg
@@ -126,6 +127,7 @@ def _age(path: Path, seconds: float = 3600) -> None:
     os.utime(path, (old, old))
 
 
+@pytest.mark.slow
 def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo, cli):
     out = tmp_path / "chelsea_graded.jpg"
     killed = subprocess.run([sys.executable, "-c", KILLED_WRITER, str(out), "kill"],
@@ -178,6 +180,7 @@ def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_gr
         f"Error: {tmp_path / 'x.xyz'}: cannot write this file type")
 
 
+@pytest.mark.slow
 def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch, cli):
     import wbcgrade.color.lut as lut_module
 
@@ -227,6 +230,7 @@ def test_a_decompression_bomb_is_refused_from_its_header(tmp_path, cli):
         assert "over the limit of 200 megapixels" in lines[0] and "--max-image-pixels" in lines[0]
 
 
+@pytest.mark.slow
 def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch, cli):
     small = write_array(tmp_path / "small.png", np.full((20, 30, 3), 0.5, np.float32), "uint8")
     try:

@@ -88,6 +88,7 @@ def _write_look(path: Path, entry: dict) -> Path:
 # ------------------------------------------------------------------ 1: the regrain hang
 
 
+@pytest.mark.slow
 def test_a_huge_regrain_radius_is_refused_and_the_library_bounds_its_window(tmp_path, saved):
     with pytest.raises(OptionError, match="at most 1"):
         RegrainOptions(radius=1e9)
@@ -116,6 +117,7 @@ def test_a_huge_regrain_radius_is_refused_and_the_library_bounds_its_window(tmp_
     assert float(done.stdout) == 0.0
 
 
+@pytest.mark.slow
 def test_the_regrain_radius_option_is_a_one_line_usage_error(tmp_path, photo):
     command = ["apply", photo, "--preset", "warm", "--regrain-radius", "1e9",
                "-o", tmp_path / "out.png", *FAST_ARGS]
@@ -148,6 +150,7 @@ def test_an_output_naming_a_style_photo_is_refused_even_with_overwrite(tmp_path,
     assert not (tmp_path / "out.png").exists()
 
 
+@pytest.mark.slow
 def test_the_look_file_is_never_replaced_by_lut(tmp_path, photo):
     look = tmp_path / "mylook.cube"
     run("apply", photo, "--preset", "warm", "-o", tmp_path / "a.png", "--lut", look,
@@ -213,6 +216,7 @@ def test_a_good_hand_made_preset_loads(tmp_path):
     assert styles.names == ["a", "b"] and styles.histograms.shape == (2, 8, 8, 8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["styles", "tib_header", "compressed_look", "structured"])
 def test_preset_bombs_are_one_line_under_2_gb(tmp_path, case):
     path = tmp_path / f"{case}.npz"
@@ -249,6 +253,7 @@ def test_preset_bombs_are_one_line_under_2_gb(tmp_path, case):
     assert len(done.stdout.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(tmp_path,
                                                                                 saved):
     import base64
@@ -271,6 +276,7 @@ def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(
     assert str(path) in done.stdout and "400^3" in done.stdout
 
 
+@pytest.mark.slow
 def test_a_spi3d_declaring_500_cubed_is_refused_before_its_table_is_made(tmp_path):
     path = tmp_path / "big.spi3d"
     path.write_text("SPILUT 1.0\n3 3\n500 500 500\n0 0 0 0.5 0.5 0.5\n")
@@ -326,6 +332,7 @@ def test_the_remap_refuses_a_map_of_one_node():
 # ------------------------------------------------------------------ 6, 9: grade JSON fields
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("field, value, words", [
     ("version", None, ['"version"', "null"]),
     ("version", "x", ['"version"', '"x"']),
@@ -363,6 +370,7 @@ def styles(tmp_path) -> Path:
     return folder
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", [b"garbage", b"", b"PK\x03\x04 cut short"])
 def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles, damage, cli):
     cache = tmp_path / "cache"
@@ -386,6 +394,7 @@ def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles,
         assert np.load(path).files == np.load(__import__("io").BytesIO(good[path])).files
 
 
+@pytest.mark.slow
 def test_a_style_folder_with_a_name_that_is_not_utf8_works_with_the_cache(tmp_path, photo,
                                                                            styles):
     name = os.fsdecode(b"caf\xe9.jpg")

@@ -48,6 +48,7 @@ def test_huge_finite_weights_are_equal_weights():
         parse_weights("inf,1")
 
 
+@pytest.mark.slow
 def test_apply_with_huge_weights_grades(tmp_path, style_dir, photo):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "out.png", "--json",
                  "--weights", "1e308,1e308,1e308,1e308", *FAST_ARGS)

@@ -68,6 +68,7 @@ def test_a_pair_of_framings_of_one_scene_gives_back_the_look():
     assert error(pair.look, warm_look, right) < 0.35 * identity
 
 
+@pytest.mark.slow
 def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
     contents = [scene(s) for s in range(10, 16)]
     others = [scene(s) for s in range(20, 24)]
@@ -132,6 +133,7 @@ def everyday_scene(seed, size=48):
     return np.clip(image + rng.normal(0, 0.02, image.shape), 0.0, 1.0)
 
 
+@pytest.mark.slow
 def test_a_look_every_style_shows_is_applied_and_one_the_styles_disagree_on_is_not(
         monkeypatch):
     """The transport extraction (the statistics one: tests/color/test_look_statistics.py,
@@ -181,6 +183,7 @@ def sample(name, width=96):
     return np.asarray(small.get_pixels(oiio.FLOAT))[..., :3].astype(np.float64)
 
 
+@pytest.mark.slow
 def test_the_photo_is_matched_with_its_own_scene_and_weighs_most():
     images = [sample(n) for n in ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")]
     styles = np.stack([image_histogram(warm_look(halves(i)[0]), 32) for i in images])
@@ -191,6 +194,7 @@ def test_the_photo_is_matched_with_its_own_scene_and_weighs_most():
         assert found.confidence > 0.0
 
 
+@pytest.mark.slow
 def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     image = scene(41, regions=8)
     left, right = halves(image)
@@ -213,6 +217,7 @@ def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     assert np.quantile(pulled, 0.99) < 0.05
 
 
+@pytest.mark.slow
 def test_look_mode_and_look_extract_through_the_commands(tmp_path, cli):
     """``apply --mode look`` takes the grade path's "look" map builder; ``look extract``
     writes the set's look as a LUT and, like every command, refuses an existing file."""
@@ -314,6 +319,7 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
     assert len(looks()) == 2  # a second look: not the first one read back under others
 
 
+@pytest.mark.slow
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""
     import wbcgrade.core

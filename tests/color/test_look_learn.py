@@ -68,6 +68,7 @@ def photo_error(grade, look, photo):
     return float(np.mean(np.abs(graded - truth)) / np.mean(np.abs(photo - truth)))
 
 
+@pytest.mark.slow
 def test_a_known_look_is_learned_from_pairs_and_reproduced_on_another_photo(tmp_path, photos):
     import OpenImageIO as oiio
 
@@ -89,6 +90,7 @@ def test_a_known_look_is_learned_from_pairs_and_reproduced_on_another_photo(tmp_
     assert not result.look.monochrome
 
 
+@pytest.mark.slow
 def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos):
     def edit(name, looked):
         h, w = looked.shape[:2]
@@ -121,6 +123,7 @@ def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos)
     assert edited.held_out < plain.held_out + 0.5
 
 
+@pytest.mark.slow
 def test_black_and_white_afters_give_a_black_and_white_look(tmp_path, photos):
     before, after = make_pairs(tmp_path, photos, look=grey)
     result = learn_look_file(before, after, tmp_path / "bw.json", lut_size=17)
@@ -136,6 +139,7 @@ def test_black_and_white_afters_give_a_black_and_white_look(tmp_path, photos):
     assert data["learned"]["monochrome"] is True
 
 
+@pytest.mark.slow
 def test_bad_pairs_are_reported_one_line_each_and_the_others_used(tmp_path, photos):
     before, after = make_pairs(tmp_path, photos)
     write(before / "lonely.jpg", photos["sunset"])  # no edited version
@@ -157,6 +161,7 @@ def test_bad_pairs_are_reported_one_line_each_and_the_others_used(tmp_path, phot
     assert photo_error(load_look(tmp_path / "look.cube"), warm_look, photos["sunset"]) < 0.2
 
 
+@pytest.mark.slow
 def test_a_pair_with_another_look_or_a_local_edit_is_named_and_weighs_little(tmp_path, photos):
     def cool(rgb):
         return np.clip(rgb * [0.8, 0.95, 1.2] + [0.0, 0.02, 0.05], 0.0, 1.0)
@@ -181,6 +186,7 @@ def test_a_pair_with_another_look_or_a_local_edit_is_named_and_weighs_little(tmp
     assert photo_error(load_look(tmp_path / "look.cube"), warm_look, photos["bridge"]) < 0.35
 
 
+@pytest.mark.slow
 def test_the_command_prints_the_report_and_writes_a_look_apply_uses(tmp_path, photos, cli):
     before, after = make_pairs(tmp_path, photos)
     result = cli("look", "learn", str(before), str(after), "-o",
@@ -267,6 +273,7 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
     assert result.used[0].delta_e < 1.5
 
 
+@pytest.mark.slow
 def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):
     from tests.color.test_raw import write_dng
     from wbcgrade.color.colorspace import ColorEncoding
@@ -296,6 +303,7 @@ def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_
     assert applied.exit_code == 0, applied.output
 
 
+@pytest.mark.slow
 def test_a_learned_black_and_white_lut_stays_black_and_white_through_apply(tmp_path, photos, cli):
     """`apply --look` regrains a LUT by default; regrain keeps the input's colour edges,
     and the grade makes a black-and-white map's output black and white again."""

@@ -80,6 +80,7 @@ def error_255(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(gap.max()), float(gap.mean())
 
 
+@pytest.mark.slow
 def test_a_plain_cube_reads_alike_in_colour_ocio_and_ffmpeg(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "srgb", "plain.cube")
     source, expected = pixels(photo), pixels(graded)
@@ -102,6 +103,7 @@ def _through_acescg(photo: Path, lut: Path, apply) -> np.ndarray:
     return np.clip(cs.convert(apply(lut, linear), acescct, "sRGB Encoded Rec.709 (sRGB)"), 0, 1)
 
 
+@pytest.mark.slow
 def test_a_shaper_cube_reads_right_in_colour_and_ocio_and_ffmpeg_refuses_it(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "acescct", "shaper.cube")
     expected = pixels(graded)
@@ -114,6 +116,7 @@ def test_a_shaper_cube_reads_right_in_colour_and_ocio_and_ffmpeg_refuses_it(phot
     assert "Invalid data" in run.stderr
 
 
+@pytest.mark.slow
 def test_a_clf_reads_right_in_ocio(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "acescct", "grade.clf")
     worst, mean = error_255(_through_acescg(photo, lut, with_ocio), pixels(graded))

@@ -28,6 +28,7 @@ def warm_look(tmp_path_factory):
     return folder / "warm.cube"
 
 
+@pytest.mark.slow
 def test_quality_sets_the_jpeg_size(tmp_path, warm_look):
     sizes = {}
     for quality in (50, 90, None):
@@ -50,6 +51,7 @@ def test_quality_sets_the_jpeg_size(tmp_path, warm_look):
     assert result.exit_code != 0 and not (tmp_path / "zero.jpg").exists()
 
 
+@pytest.mark.slow
 def test_bit_depth(tmp_path, warm_look):
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
     for depth, name, expected in (("16", "a.png", oiio.UINT16), ("float", "a.tif", oiio.FLOAT),
@@ -66,6 +68,7 @@ def test_bit_depth(tmp_path, warm_look):
         WriteOptions(quality=101)
 
 
+@pytest.mark.slow
 def test_grey_in_grey_out(tmp_path, warm_look, style_dir, rng):
     grey = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "rgb.png")
     pixels = read_image(grey).pixels.mean(axis=2, keepdims=True)

@@ -184,6 +184,7 @@ def test_own_style_is_found_only_for_the_photo_itself_at_a_large_weight(tmp_path
     assert own_style(hist(small), styles, names, [0, 1, 0])["style"] == "coffee"
 
 
+@pytest.mark.slow
 def test_apply_warns_in_one_line_when_the_photo_is_one_of_the_styles(tmp_path, cli):
 
     from tests.color.conftest import FAST_ARGS, small_copy

@@ -63,6 +63,7 @@ def test_raw_reads_as_scene_linear_aces(tmp_path):
     assert encoding.input == canonical("aces2065-1") and encoding.working == canonical("acescct")
 
 
+@pytest.mark.slow
 def test_raw_grades_end_to_end_keeping_its_tonal_range(tmp_path, style_dir):
     dng = write_dng(tmp_path / "ramp.dng", ramp_mosaic())
     before = dng.read_bytes()
@@ -111,6 +112,7 @@ def test_bad_raw_gets_one_line_error(tmp_path, damage):
     assert "Traceback" not in result.output and not (tmp_path / "out.jpg").exists()
 
 
+@pytest.mark.slow
 def test_batch_grades_raw_photos_into_tiffs(tmp_path, style_dir):
     folder = tmp_path / "shoot"
     folder.mkdir()

@@ -23,6 +23,7 @@ def error(mapped, truth):
     return float(np.mean(np.abs(mapped - truth)))
 
 
+@pytest.mark.slow
 def test_two_framings_of_a_scene_match_and_other_scenes_do_not(photos):
     prepared = {n: scene_image(warm_look(halves(p)[0]).astype(np.float32))
                 for n, p in photos.items()}
@@ -37,6 +38,7 @@ def test_two_framings_of_a_scene_match_and_other_scenes_do_not(photos):
         assert all(m is None for m in others), name
 
 
+@pytest.mark.slow
 def test_the_look_read_off_the_overlap_is_the_look(photos):
     image = photos["aitzgorri"]
     left, right = halves(image)
@@ -86,6 +88,7 @@ def test_no_scene_without_a_match_and_none_from_palettes_alone(photos):
     assert find_scene_look(photos["coffee"].astype(np.float32), palettes_only) is None
 
 
+@pytest.mark.slow
 def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, monkeypatch, cli):
     """``apply --mode look --style DIR``: the folder's graded framing of the photo's scene
     gives the look; the grade lands close to the truth and the report names the scene."""

@@ -11,6 +11,8 @@ import time
 import urllib.request
 from pathlib import Path
 
+import pytest
+
 from tests.conftest import run_cli as run
 from tests.explore.conftest import PRESET, WBCGRADE, command_env
 
@@ -60,6 +62,7 @@ def _workers() -> set[int]:
     return found
 
 
+@pytest.mark.slow
 def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     before = _workers()
     process = subprocess.Popen(
@@ -93,6 +96,7 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     assert not (_workers() - before), "the job worker outlived the server"
 
 
+@pytest.mark.slow
 def test_a_worker_still_starting_is_stopped_with_the_server(server):
     """Closed while its worker process still imports, the job queue kills it (else it
     outlived the server until its imports were done)."""

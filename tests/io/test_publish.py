@@ -47,6 +47,7 @@ def test_threads_writing_one_target_never_collide_or_leak(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_domain_writers_from_threads(tmp_path):
     directions = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
     values = np.ones((2, 2, 3))

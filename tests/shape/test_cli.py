@@ -35,6 +35,7 @@ def _run(args):
     return run_cli("shape", *args)
 
 
+@pytest.mark.slow
 def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     out = tmp_path / "done.ply"
     result = _run(["complete", str(partial), "-d", str(database), "-o", str(out), "--json", *FAST])
@@ -49,6 +50,7 @@ def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     assert (tmp_path / "done.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_complete_prints_a_weight_table_for_euclidean(tmp_path, database, partial):
     out = tmp_path / "mix.obj"
     result = _run(

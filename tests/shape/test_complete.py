@@ -56,6 +56,7 @@ def test_kl_gradient_matches_finite_differences_on_a_3d_grid(loss):
         assert grad @ direction == pytest.approx(numeric, rel=1e-4, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_slab_cut_from_a_barycenter_is_completed():
     n, n_iter = 16, 60
     database = voxel_shapes(n)  # box, sphere, torus
@@ -152,6 +153,7 @@ def test_alignment_picks_the_axes_signs_that_match_the_reference(tmp_path):
     assert iou > intersection_over_union(unguided.occupancy > 0.5, reference.occupancy > 0.5)
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_schedule_recovers_translation_weights():
     n = 32
     left = density_from_volume(ball(n, 0.15, (0.35, 0.5, 0.5)))

@@ -40,6 +40,7 @@ def database():
     return [load_shape(SAMPLES / name, 20, keep_mesh=True) for name in DATABASE]
 
 
+@pytest.mark.slow
 def test_winding_numbers_tree_matches_exact_sum_and_closes_holes():
     sphere = trimesh.creation.icosphere(subdivisions=3)
     open_sphere = holed(sphere, [(0.0, 0.0, 1.0)], 0.5)  # a cap of the sphere removed
@@ -84,6 +85,7 @@ def test_cut_and_capped_mesh_is_voxelised(database):
     assert shape.voxel_volume == pytest.approx(0.84 * elephant.voxel_volume, rel=0.15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("source", ["holes", "cut"])
 def test_completion_ranks_the_source_shape_first(source, cow_with_holes, database):
     path, expected = (cow_with_holes, "cow") if source == "holes" else (CUT, "elephant")
@@ -106,6 +108,7 @@ def _complete(args):
                    "20", "--max-iter", "2", "--quiet")
 
 
+@pytest.mark.slow
 def test_cli_completes_a_mesh_with_holes_with_one_warning(tmp_path, cow_with_holes):
     result = _complete([str(cow_with_holes), "-d", str(SAMPLES / "cow.off"),
                         "-d", str(SAMPLES / "elephant.off"), "-o", str(tmp_path / "c.obj")])
