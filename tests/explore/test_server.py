@@ -201,6 +201,7 @@ def _digest(path):
     return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns
 
 
+@pytest.mark.slow
 def test_photo_and_styles_are_never_written(server, photo):
     preset = resolve_preset(PRESET)
     before = {p: _digest(p) for p in (photo, preset)}
