@@ -52,6 +52,7 @@ def test_the_look_read_off_the_overlap_is_the_look(photos):
     assert error(found.look(right), truth) < 0.15 * error(right, truth)
 
 
+@pytest.mark.slow
 def test_dark_and_flipped_framings_find_their_scene_and_its_look(photos):
     """A framing shot two and a half stops darker (the keypoints are found on ranked
     lightness: a tone curve does not change them), or flipped left to right (matched on

@@ -57,6 +57,7 @@ def test_winding_numbers_tree_matches_exact_sum_and_closes_holes():
     assert winding_numbers(open_sphere.triangles, np.array([[0, 0, 0], [0, 0, 0.8]])).min() > 0.5
 
 
+@pytest.mark.slow
 def test_open_mesh_is_voxelised_like_the_closed_one(cow_with_holes):
     with pytest.raises(InputError, match="not closed"):
         read_mesh(cow_with_holes)  # strict reading still refuses it
