@@ -118,9 +118,9 @@ def test_smooth_map_validates_its_input():
         SmoothMapFitter(density, 33)
     with pytest.raises(ValueError, match=r"raw_map must be \(8, 8, 8, 3\)"):
         SmoothMapFitter(density, 9).fit(raw[:4, :4, :4])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="not both 0"):
         fit_smooth_map(raw, density, smoothness=0, stiffness=0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="density is empty"):
         fit_smooth_map(raw, np.zeros_like(density))
 
 
