@@ -49,8 +49,8 @@ import numpy as np
 from scipy import ndimage
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The full photo set (the README's figures): ``--photo-dir``, else $WBCGRADE_PHOTOS, else
-#: this folder beside the clone when it is there.
+#: The full photo set (the figures of docs/benchmarks.md): ``--photo-dir``, else
+#: $WBCGRADE_PHOTOS, else this folder beside the clone when it is there.
 DEFAULT_PHOTOS = ROOT.parent / "shared" / "data" / "photos"
 #: A clone's own photos (``samples/``), used when the full set is not found.
 SAMPLE_PHOTOS = ROOT / "samples"
@@ -61,7 +61,7 @@ STYLE_SETS = {
 }
 #: Photos in neither set: skies, fog, foliage, wood, saturated paint, a dark forest.
 DEFAULT_PHOTOS_GRADED = ["picosdeeuropa", "life", "china", "friends", "brushes", "aitzgorri"]
-#: The same benchmark on a clone's samples/ (smaller sets; figures not the README's).
+#: The same benchmark on a clone's samples/ (smaller sets; figures not those of docs/benchmarks.md).
 SAMPLE_SETS = {"warm": ["coffee", "flower", "sunset"], "cool": ["bridge", "astronaut"]}
 SAMPLE_PHOTOS_GRADED = ["aitzgorri", "chelsea", "seeding"]
 
@@ -83,7 +83,8 @@ def photo_source(photo_dir: Path | None) -> tuple[Path, dict, list[str]]:
             return Path(photo_dir), SAMPLE_SETS, SAMPLE_PHOTOS_GRADED
         raise SystemExit(f"--photo-dir {photo_dir}: the benchmark's photos are not all there")
     print(f"photo set not found ({DEFAULT_PHOTOS}; set --photo-dir or $WBCGRADE_PHOTOS): "
-          f"using the clone's {SAMPLE_PHOTOS} (smaller sets, not the README's figures)",
+          f"using the clone's {SAMPLE_PHOTOS} (smaller sets, not the figures of "
+          "docs/benchmarks.md)",
           file=sys.stderr)
     return SAMPLE_PHOTOS, SAMPLE_SETS, SAMPLE_PHOTOS_GRADED
 

@@ -6,6 +6,7 @@ import tempfile
 
 import numpy as np
 import pytest
+from click.testing import CliRunner, Result
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -34,6 +35,23 @@ def _system_temporary_folder_in_basetemp(tmp_path_factory):
         os.environ.pop("TMPDIR", None)
     else:
         os.environ["TMPDIR"] = before_env
+
+
+def run_cli(*args: object, env: dict[str, str] | None = None) -> Result:
+    """``wbcgrade ARGS...`` run in this process through click's runner, every argument made a
+    string (paths too); ``env`` sets environment variables for the run. Returns click's
+    ``Result`` (``exit_code``, ``output``, ``exception``). Module-level helpers call this;
+    tests take the :func:`cli` fixture."""
+    from wbcgrade.cli import main  # here, so that collecting the doctests imports no CLI
+
+    return CliRunner(env=env).invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture
+def cli():
+    """The command line: ``cli("apply", photo, "--preset", "warm")`` runs ``wbcgrade apply
+    ...`` in this process and returns click's ``Result`` (see :func:`run_cli`)."""
+    return run_cli
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""Known-weight recovery with each loss: the figures quoted in the README's BRDF section.
+"""Known-weight recovery with each loss: the figures quoted in docs/brdf.md.
 
 The target is itself a barycenter of the database (weights 0.5 / 0 / 0.3 / 0 /
 0.2 / 0 on the first six catalogue materials), so a loss that is zero only at

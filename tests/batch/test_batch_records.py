@@ -9,12 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from tqdm import tqdm
 
 import wbcgrade.color.grading as grading
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
-from wbcgrade.cli import main
 
 
 @pytest.fixture
@@ -48,11 +46,13 @@ def folders(tmp_path) -> tuple[Path, Path]:
     return photos, styles
 
 
-def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path, folders, fits):
+@pytest.mark.slow
+def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path, folders, fits,
+                                                                       cli):
     photos, styles = folders
     out = tmp_path / "out"
-    result = CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style",
-                                       str(styles), *FAST])
+    result = cli("batch", str(photos), "-o", str(out), "--style",
+                 str(styles), *FAST)
     assert result.exit_code == 0, result.output
     assert fits.count("grade") == 2 and "fit" in fits
     # one line per photo (not a terminal here): name, weights, loss, time
@@ -69,7 +69,7 @@ def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path,
 
     fits.clear()
     report_dir = tmp_path / "report"
-    result = CliRunner().invoke(main, ["report", str(out), "-o", str(report_dir)])
+    result = cli("report", str(out), "-o", str(report_dir))
     assert result.exit_code == 0, result.output
     assert fits == []  # nothing graded
     assert "reported 2, skipped 0, failed 0" in result.stdout
@@ -83,24 +83,25 @@ def test_report_on_a_batch_output_reads_its_results_and_grades_nothing(tmp_path,
         assert (report_dir / entry["sheet"]).is_file()
     assert (report_dir / "weights.csv").read_text().count("\n") == 3
     # the batch's grades are reported whatever the options; other styles are refused
-    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "r2"),
-                                       "--preset", "warm"])
+    result = cli("report", str(out), "-o", str(tmp_path / "r2"),
+                 "--preset", "warm")
     assert result.exit_code == 1 and fits == []
     assert result.output.strip().splitlines()[-1].startswith(f"Error: {out} holds the graded")
-    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "r3"),
-                                       "--style", str(styles), "--strength", "0.5"])
+    result = cli("report", str(out), "-o", str(tmp_path / "r3"),
+                 "--style", str(styles), "--strength", "0.5")
     assert result.exit_code == 0 and fits == []
     assert "strength: ignored" in result.stderr
 
 
-def test_report_of_a_copy_the_batch_did_not_record_says_so(tmp_path, folders, fits):
+@pytest.mark.slow
+def test_report_of_a_copy_the_batch_did_not_record_says_so(tmp_path, folders, fits, cli):
     photos, styles = folders
     out = tmp_path / "out"
     args = ["batch", str(photos), "-o", str(out), "--style", str(styles), *FAST]
-    assert CliRunner().invoke(main, args).exit_code == 0
+    assert cli(*args).exit_code == 0
     small_copy(SAMPLES / "flower.jpg", out / "stranger.jpg", 32)
     fits.clear()
-    result = CliRunner().invoke(main, ["report", str(out), "-o", str(tmp_path / "report")])
+    result = cli("report", str(out), "-o", str(tmp_path / "report"))
     assert result.exit_code == 1 and fits == []
     assert "failed   stranger.jpg: no result recorded by the batch" in result.stdout
 

@@ -10,12 +10,11 @@ import time
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 from tests.color.test_faults import KILLED_WRITER, hidden_files, noise, wbcgrade
+from tests.conftest import run_cli
 from wbcgrade._publish import TEMP_MARK, lock_folder
-from wbcgrade.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +30,8 @@ def shoot(tmp_path_factory) -> tuple[Path, Path]:
 
 
 def _batch(photos: Path, styles: Path, out: Path, *extra: str):
-    return CliRunner().invoke(main, ["batch", str(photos), "-o", str(out), "--style",
-                                     str(styles), "-r", *FAST, *extra])
+    return run_cli("batch", str(photos), "-o", str(out), "--style",
+                   str(styles), "-r", *FAST, *extra)
 
 
 def _age(path: Path, seconds: float = 3600) -> None:
@@ -40,6 +39,7 @@ def _age(path: Path, seconds: float = 3600) -> None:
     os.utime(path, (old, old))
 
 
+@pytest.mark.slow
 def test_a_full_disk_fails_one_photo_and_the_batch_goes_on(shoot, tmp_path):
     """libjpeg ended the whole batch on the first failed write: no summary, later photos
     never graded, a hidden temporary left."""
@@ -62,6 +62,7 @@ def test_a_full_disk_fails_one_photo_and_the_batch_goes_on(shoot, tmp_path):
     assert run.returncode == 0 and "graded 1, skipped 2, failed 0" in run.stdout, run.stdout
 
 
+@pytest.mark.slow
 def test_a_rerun_removes_the_temporaries_of_a_killed_run(shoot, tmp_path):
     photos, styles = shoot
     out = tmp_path / "out"
@@ -81,6 +82,7 @@ def test_a_rerun_removes_the_temporaries_of_a_killed_run(shoot, tmp_path):
     assert not stale.exists() and not old_style.exists()
 
 
+@pytest.mark.slow
 def test_a_rerun_removes_the_record_temporaries_of_a_killed_run(shoot, tmp_path):
     """A batch killed while recording a photo's result left its temporary in
     ``.wbcgrade-results/`` for good; the next run removes it (and keeps the records)."""
@@ -133,6 +135,7 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
 def test_workers_stop_when_the_batch_is_killed(shoot, tmp_path):
     """SIGKILL of the parent of `batch -j 2` left its workers grading for minutes."""
@@ -171,6 +174,7 @@ def test_workers_stop_when_the_batch_is_killed(shoot, tmp_path):
                 os.kill(pid, signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_relative_paths_work_with_a_scheduler(shoot, tmp_path):
     """Dask workers run in another folder: relative paths failed every photo."""
     distributed = pytest.importorskip("distributed")
@@ -216,6 +220,7 @@ def test_outputs_are_checked_before_any_work(shoot, tmp_path, monkeypatch):
         f"Error: {tmp_path / 'nodir'}: output folder does not exist")
 
 
+@pytest.mark.slow
 def test_a_device_or_pipe_in_the_output_folder_is_not_replaced(shoot, tmp_path):
     photos, styles = shoot
     out = tmp_path / "out"
@@ -228,6 +233,7 @@ def test_a_device_or_pipe_in_the_output_folder_is_not_replaced(shoot, tmp_path):
     assert (out / "chelsea.jpg").is_fifo()
 
 
+@pytest.mark.slow
 def test_a_second_batch_into_the_same_folder_is_refused(shoot, tmp_path):
     photos, styles = shoot
     out = tmp_path / "out"

@@ -16,17 +16,13 @@ import time
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.batch.records import RESULTS_FOLDER
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
 
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +47,7 @@ def _recorded(out: Path) -> list[str]:
         if folder.is_dir() else []
 
 
+@pytest.mark.slow
 def test_a_published_photo_with_no_record_is_graded_again(shoot, tmp_path):
     photos, styles = shoot
     out = tmp_path / "out"
@@ -73,6 +70,7 @@ def test_a_published_photo_with_no_record_is_graded_again(shoot, tmp_path):
     assert len(entries) == 3
 
 
+@pytest.mark.slow
 def test_sigterm_to_a_parallel_batch_stops_its_workers_and_the_rerun_heals(shoot, tmp_path):
     photos, styles = tmp_path / "photos", shoot[1]
     for i in range(10):

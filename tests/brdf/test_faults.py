@@ -7,11 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
+from tests.conftest import run_cli
 from wbcgrade.brdf import analytic, io, sampled, sampling
 from wbcgrade.brdf import fit as fit_module
-from wbcgrade.cli import main
 from wbcgrade.errors import InputError, NumericalError
 
 N = 24
@@ -40,10 +39,10 @@ def files(tmp_path):
 
 
 def _fit(measured, database, tmp_path, *extra):
-    return CliRunner().invoke(main, [
+    return run_cli(
         "brdf", "fit", str(measured), "--database", str(database), "--directions", str(N),
         "--fit-directions", "4", "--max-iter", "3", "--n-iter", "15", "--no-png",
-        "-o", str(tmp_path / "fit.npz"), *extra])
+        "-o", str(tmp_path / "fit.npz"), *extra)
 
 
 def test_psnr_of_huge_values_is_that_of_the_scaled_ones():
@@ -54,7 +53,7 @@ def test_psnr_of_huge_values_is_that_of_the_scaled_ones():
     assert np.isfinite(expected)
     assert sampled.psnr(reference * 1e300, estimate * 1e300) == pytest.approx(expected)
     assert sampled.psnr(reference, reference) == float("inf")
-    with pytest.raises(NumericalError):
+    with pytest.raises(NumericalError, match="NaN or infinite"):
         sampled.psnr(reference, np.full_like(reference, np.nan))
 
 

@@ -5,20 +5,18 @@ from __future__ import annotations
 import os
 
 import pytest
-from click.testing import CliRunner
 
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 
 
 @pytest.fixture
 def brdfs(tmp_path):
-    runner = CliRunner()
     for folder, materials in (("db", ["white-lambert", "brushed-steel-ward"]),
                               ("ref", ["brushed-gold-ward"])):
         args = ["brdf", "synth", "-o", str(tmp_path / folder), "--directions", "32"]
         for material in materials:
             args += ["--material", material]
-        assert runner.invoke(main, args).exit_code == 0
+        assert run_cli(*args).exit_code == 0
     return tmp_path / "ref" / "brushed-gold-ward.npz", tmp_path / "db"
 
 
@@ -33,8 +31,8 @@ def no_fit(monkeypatch):
 
 
 def _fit(measured, database, *extra):
-    return CliRunner().invoke(main, ["brdf", "fit", str(measured), "--database", str(database),
-                                     "--directions", "32", *extra])
+    return run_cli("brdf", "fit", str(measured), "--database", str(database),
+                   "--directions", "32", *extra)
 
 
 def test_missing_output_folder_is_refused_before_the_fit(brdfs, tmp_path, no_fit):

@@ -24,6 +24,7 @@ def files(tmp_path):
     return reference, tmp_path / "db"
 
 
+@pytest.mark.slow
 def test_fit_measurement_writes_and_reports(tmp_path, files):
     measured, database = files
     seen = []
@@ -41,6 +42,7 @@ def test_fit_measurement_writes_and_reports(tmp_path, files):
     assert all(sum(f["weights"].values()) == pytest.approx(1.0) for f in record["fits"])
 
 
+@pytest.mark.slow
 def test_outputs_are_checked_before_any_work(tmp_path, files):
     measured, database = files
     out, png = fit_outputs(measured, database, keeps=(0.25,))

@@ -3,7 +3,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from click.testing import CliRunner
+import pytest
 
 from wbcgrade import __version__
 from wbcgrade.cli import main
@@ -11,11 +11,10 @@ from wbcgrade.cli import main
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_version_and_help():
-    runner = CliRunner()
-    result = runner.invoke(main, ["--version"])
+def test_version_and_help(cli):
+    result = cli("--version")
     assert result.exit_code == 0 and __version__ in result.output
-    result = runner.invoke(main, ["--help"])
+    result = cli("--help")
     assert result.exit_code == 0
     for command in ("apply", "batch", "brdf", "preset", "report", "shape", "video"):
         assert command in result.output
@@ -45,6 +44,7 @@ def test_help_imports_neither_numba_nor_the_core():
     assert run.stdout.splitlines()[-1] == "HEAVY", run.stdout.splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_demo_example_recovers_weights():
     run = subprocess.run(
         [sys.executable, str(ROOT / "examples" / "demo.py"), "--size", "8", "--styles", "3",
@@ -55,20 +55,20 @@ def test_demo_example_recovers_weights():
     assert len(report["fitted_weights"]) == 3
 
 
-def test_bad_option_is_one_line_error_without_traceback():
-    result = CliRunner().invoke(main, ["brdf", "synth", "--count", "0", "-o", "x"])
+def test_bad_option_is_one_line_error_without_traceback(cli):
+    result = cli("brdf", "synth", "--count", "0", "-o", "x")
     assert result.exit_code == 2 and isinstance(result.exception, SystemExit)
     assert "Error" in result.output and "--count" in result.output
 
 
-def test_library_error_becomes_one_line_message(tmp_path):
-    result = CliRunner().invoke(main, ["apply", str(tmp_path / "missing.jpg"), "--preset", "warm"])
+def test_library_error_becomes_one_line_message(tmp_path, cli):
+    result = cli("apply", str(tmp_path / "missing.jpg"), "--preset", "warm")
     assert result.exit_code == 1 and isinstance(result.exception, SystemExit)
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("Error:") and "missing.jpg" in lines[0]
 
 
-def test_library_warnings_reach_the_user_as_one_line():
+def test_library_warnings_reach_the_user_as_one_line(cli):
     import warnings
 
     import click
@@ -84,7 +84,7 @@ def test_library_warnings_reach_the_user_as_one_line():
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always")
-            result = CliRunner().invoke(main, ["warns"])
+            result = cli("warns")
     finally:
         main.commands.pop("warns")
     assert result.exit_code == 0

@@ -3,23 +3,22 @@
 from __future__ import annotations
 
 import click
-from click.testing import CliRunner
 
 from wbcgrade.cli import main
 
 
-def test_overwrite_is_the_name_and_force_is_hidden():
+def test_overwrite_is_the_name_and_force_is_hidden(cli):
     for command in (["apply"], ["batch"], ["preset", "build"]):
-        text = CliRunner().invoke(main, [*command, "--help"]).output
+        text = cli(*command, "--help").output
         assert "--overwrite" in text and "--force" not in text, command
 
 
-def test_batch_force_still_works_with_a_deprecation_warning(tmp_path):
+def test_batch_force_still_works_with_a_deprecation_warning(tmp_path, cli):
     photos = tmp_path / "in"
     photos.mkdir()
     args = ["batch", str(photos), "-o", str(tmp_path / "out"), "--lut", "x.cube"]
-    old = CliRunner().invoke(main, [*args, "--force"])
-    new = CliRunner().invoke(main, [*args, "--overwrite"])
+    old = cli(*args, "--force")
+    new = cli(*args, "--overwrite")
     # Both reach the same check (--lut without --consistent, a usage error); only --force
     # warns.
     assert old.exit_code == new.exit_code == 2

@@ -101,6 +101,7 @@ def test_an_unwritable_folder_warns_once_and_the_value_is_still_returned(tmp_pat
     assert len(warnings) == 1
 
 
+@pytest.mark.slow
 def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_path, style_dir,
                                                                         photo):
     """The style path (histograms, the set's look, scene images: all three kinds)."""

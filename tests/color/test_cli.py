@@ -9,16 +9,11 @@ import shutil
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture
@@ -29,6 +24,7 @@ def styles(tmp_path, style_dir):
     return folder
 
 
+@pytest.mark.slow
 def test_apply_with_style_folder_json_and_lut(tmp_path, styles):
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.png")
     result = run("apply", photo, "--style", styles, "--lut", tmp_path / "grade.cube",
@@ -61,6 +57,7 @@ def test_apply_with_style_folder_json_and_lut(tmp_path, styles):
     assert 0 < np.abs(by_lut - graded).mean() < 0.05
 
 
+@pytest.mark.slow
 def test_apply_table_weights_and_strength(tmp_path, styles, photo):
     out = tmp_path / "out.jpg"
     result = run("apply", photo, "--style", styles, "-o", out, "--weights", "1,1,0,0",
@@ -76,6 +73,7 @@ def test_apply_table_weights_and_strength(tmp_path, styles, photo):
     assert read_image(out).pixels.shape == read_image(photo).pixels.shape
 
 
+@pytest.mark.slow
 def test_apply_json_says_whether_the_weights_were_fitted(tmp_path, styles, photo):
     """"fitted" was always true, also for --weights."""
     given = run("apply", photo, "--style", styles, "-o", tmp_path / "a.jpg", "--weights",
@@ -90,6 +88,7 @@ def test_apply_json_says_whether_the_weights_were_fitted(tmp_path, styles, photo
     assert fitted["fit"]["start"] == fitted["fit_start"]
 
 
+@pytest.mark.slow
 def test_preset_build_list_and_apply(tmp_path, styles, photo):
     preset_file = tmp_path / "mine.npz"
     result = run("preset", "build", styles, "-o", preset_file, "--bins", 16, "--no-cache")
@@ -104,6 +103,7 @@ def test_preset_build_list_and_apply(tmp_path, styles, photo):
     assert {"grace_hopper", "china", "wine"} <= set(result.stdout.split())
 
 
+@pytest.mark.slow
 def test_apply_keeps_16bit_rgba_and_orientation(tmp_path, styles, rng):
     pixels = rng.random((12, 20, 4)).astype(np.float32)
     photo = write_array(tmp_path / "in.tif", pixels, "uint16", {"Orientation": 8})
@@ -120,6 +120,7 @@ def test_apply_keeps_16bit_rgba_and_orientation(tmp_path, styles, rng):
     np.testing.assert_array_equal(data[:, :, 3], expected_alpha)
 
 
+@pytest.mark.slow
 def test_apply_exr_keeps_values_above_one(tmp_path, styles, rng):
     linear = (rng.random((10, 12, 3)) * 0.5).astype(np.float32)
     linear[0, 0] = [4.0, 2.0, 1.0]
@@ -192,6 +193,7 @@ def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, mes
     assert (tmp_path / "existing.jpg").read_bytes() == b"keep me"
 
 
+@pytest.mark.slow
 def test_options_are_validated_once_per_run(tmp_path, styles, monkeypatch):
     """The options of a run are made and checked once (the CLI made them, then the
     pipeline validated them again three times), each error naming its flag."""

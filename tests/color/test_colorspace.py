@@ -16,10 +16,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, THREE_STYLES, small_copy, write_array
-from wbcgrade.cli import main as cli
 from wbcgrade.color import colorspace as cs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import HistogramCache, image_histogram
@@ -103,16 +101,16 @@ def test_names_resolve_through_aliases_and_roles_case_insensitively():
 
 
 def test_an_unknown_space_is_an_option_error_listing_the_valid_names():
-    with pytest.raises(OptionError) as caught:
+    with pytest.raises(OptionError, match="no-such-space") as caught:
         cs.resolve_space("no-such-space", "--input-space")
     message = str(caught.value)
     assert "\n" not in message and "--input-space" in message
     assert cs.resolve_space("acescct") in message and "display-p3" in message
 
 
-def test_unknown_space_on_the_command_line_is_one_line_without_traceback(tmp_path, photo):
-    result = CliRunner().invoke(cli, ["apply", str(photo), "--preset", "warm", "--working-space",
-                                      "Rec.9999", "-o", str(tmp_path / "o.jpg"), *FAST])
+def test_unknown_space_on_the_command_line_is_one_line_without_traceback(tmp_path, photo, cli):
+    result = cli("apply", str(photo), "--preset", "warm", "--working-space",
+                 "Rec.9999", "-o", str(tmp_path / "o.jpg"), *FAST)
     assert result.exit_code != 0 and "Traceback" not in result.output
     assert result.exception is None or isinstance(result.exception, SystemExit)
     lines = [line for line in result.output.splitlines() if line.strip()]
@@ -183,13 +181,12 @@ def test_the_encoding_agrees_with_colour_science_and_opencolorio(tmp_path):
         np.testing.assert_allclose(got[inside], expected[inside], atol=2e-5)
 
 
-def test_default_and_explicit_srgb_write_the_same_bytes(tmp_path, photo):
-    runner = CliRunner()
+def test_default_and_explicit_srgb_write_the_same_bytes(tmp_path, photo, cli):
     outs = []
     for extra in ([], ["--input-space", "sRGB", "--working-space", "srgb_tx"]):
         out = tmp_path / f"o{len(outs)}.jpg"
-        result = runner.invoke(cli, ["apply", str(photo), "--preset", "warm", "-o", str(out),
-                                     *FAST, *extra])
+        result = cli("apply", str(photo), "--preset", "warm", "-o", str(out),
+                     *FAST, *extra)
         assert result.exit_code == 0, result.output
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
@@ -197,17 +194,17 @@ def test_default_and_explicit_srgb_write_the_same_bytes(tmp_path, photo):
 
 # --- the same photo in two spaces grades to the same colours -----------------------------
 
-def test_a_display_p3_photo_and_its_srgb_copy_grade_alike(tmp_path):
+@pytest.mark.slow
+def test_a_display_p3_photo_and_its_srgb_copy_grade_alike(tmp_path, cli):
     srgb = read_image(small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)).rgb()
     srgb = 0.05 + 0.9 * srgb  # away from the faces of the cube: inside both gamuts
     p3 = cs.convert(srgb, cs.resolve_space("srgb"), cs.resolve_space("display-p3"))
     assert np.abs(p3 - srgb).max() > 0.03  # really different numbers
     a = write_array(tmp_path / "srgb.png", srgb, "uint16")
     b = write_with_icc(tmp_path / "p3.png", p3, icc_profile("Display P3"))
-    runner = CliRunner()
     for src in (a, b):
-        result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--json",
-                                     "-o", str(src.with_name(src.stem + "_g.png")), *FAST])
+        result = cli("apply", str(src), "--preset", "warm", "--json",
+                     "-o", str(src.with_name(src.stem + "_g.png")), *FAST)
         assert result.exit_code == 0, result.output
     graded_srgb = read_image(tmp_path / "srgb_g.png").rgb()
     out_p3 = read_image(tmp_path / "p3_g.png")
@@ -227,15 +224,15 @@ def _acescg_exr(path: Path) -> Path:
                        {"chromaticities": (oiio.TypeDesc("float[8]"), AP1)})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("working", ["acescct", "srgb"])
-def test_an_acescg_exr_keeps_values_above_one(tmp_path, working):
+def test_an_acescg_exr_keeps_values_above_one(tmp_path, working, cli):
     src = _acescg_exr(tmp_path / "cg.exr")
     before = read_image(src).rgb()
     assert before.max() > 4
-    runner = CliRunner()
     out = tmp_path / f"g_{working}.exr"
-    result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--working-space",
-                                 working, "-o", str(out), "--json", *FAST])
+    result = cli("apply", str(src), "--preset", "warm", "--working-space",
+                 working, "-o", str(out), "--json", *FAST)
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)
     assert report["color"]["input_space"] == cs.resolve_space("acescg")
@@ -250,9 +247,9 @@ def test_an_acescg_exr_keeps_values_above_one(tmp_path, working):
     assert np.abs(after - before).mean() > 0.005  # graded
     # strength 0: the conversion there and back is the identity, values above 1 included
     same = tmp_path / f"s_{working}.exr"
-    result = runner.invoke(cli, ["apply", str(src), "--preset", "warm", "--working-space",
-                                 working, "--strength", "0", "--no-regrain", "-o", str(same),
-                                 *FAST])
+    result = cli("apply", str(src), "--preset", "warm", "--working-space",
+                 working, "--strength", "0", "--no-regrain", "-o", str(same),
+                 *FAST)
     assert result.exit_code == 0, result.output
     np.testing.assert_allclose(read_image(same).rgb(), before, rtol=2e-4, atol=2e-5)
 
@@ -281,7 +278,7 @@ def test_style_histograms_are_cached_per_working_space(tmp_path, style_dir):
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 2 * len(srgb.names)
 
 
-def test_presets_record_their_working_space_and_convert(tmp_path, style_dir):
+def test_presets_record_their_working_space_and_convert(tmp_path, style_dir, cli):
     old = load_preset(THREE_STYLES)  # written before working spaces were recorded
     assert "working_space" not in old.meta and old.working_space == cs.resolve_space("srgb")
     srgb = load_style_folder(style_dir, 32)
@@ -290,8 +287,8 @@ def test_presets_record_their_working_space_and_convert(tmp_path, style_dir):
     saved = load_preset(path)
     assert saved.meta["working_space"] == cs.resolve_space("acescct")
     built = tmp_path / "built.npz"
-    result = CliRunner().invoke(cli, ["preset", "build", str(style_dir), "-o", str(built),
-                                      "--working-space", "ACEScct", "--no-cache"])
+    result = cli("preset", "build", str(style_dir), "-o", str(built),
+                 "--working-space", "ACEScct", "--no-cache")
     assert result.exit_code == 0 and "ACEScct" in result.output, result.output
     assert load_preset(built).working_space == cs.resolve_space("acescct")
     converted = styles_in_space(srgb, "acescct")
@@ -305,15 +302,15 @@ def test_presets_record_their_working_space_and_convert(tmp_path, style_dir):
 
 # --- LUTs ---------------------------------------------------------------------------------
 
-def test_luts_name_their_spaces(tmp_path, photo):
+@pytest.mark.slow
+def test_luts_name_their_spaces(tmp_path, photo, cli):
     from wbcgrade.color._colour import colour
 
-    runner = CliRunner()
     for working, name in (("srgb", "plain.cube"), ("acescct", "shaper.cube")):
         lut = tmp_path / name
-        result = runner.invoke(cli, ["apply", str(photo), "--preset", "warm", "--working-space",
-                                     working, "--lut", str(lut), "--lut-size", "9",
-                                     "-o", str(tmp_path / f"{name}.jpg"), *FAST])
+        result = cli("apply", str(photo), "--preset", "warm", "--working-space",
+                     working, "--lut", str(lut), "--lut-size", "9",
+                     "-o", str(tmp_path / f"{name}.jpg"), *FAST)
         assert result.exit_code == 0, result.output
         header = [line for line in lut.read_text().splitlines() if line.startswith("#")]
         space = cs.resolve_space(working)
@@ -336,7 +333,8 @@ def test_luts_name_their_spaces(tmp_path, photo):
             assert read.size == 9
 
 
-def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch):
+@pytest.mark.slow
+def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch, cli):
     lut = tmp_path / "g.clf"
     args = ["apply", str(photo), "--preset", "warm", "--working-space", "acescct", "--lut",
             str(lut), "--lut-format", "clf", "--lut-size", "9", "-o", str(tmp_path / "o.jpg"),
@@ -344,17 +342,17 @@ def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch):
     try:
         import PyOpenColorIO  # noqa: F401
     except ImportError:
-        result = CliRunner().invoke(cli, args)
+        result = cli(*args)
         assert result.exit_code != 0 and "pip install" in result.output
         assert not lut.exists() and not (tmp_path / "o.jpg").exists()
         return
-    result = CliRunner().invoke(cli, args)
+    result = cli(*args)
     assert result.exit_code == 0, result.output
     root = ET.parse(lut).getroot()
     text = " ".join(e.text or "" for e in root.iter() if e.tag.endswith("Description"))
     assert "input space: ACEScg" in text and "output space: ACEScct" in text
     monkeypatch.setitem(__import__("sys").modules, "PyOpenColorIO", None)
-    result = CliRunner().invoke(cli, [*args[:-len(FAST)], "--overwrite", *FAST])
+    result = cli(*args[:-len(FAST)], "--overwrite", *FAST)
     assert result.exit_code != 0 and "pip install" in result.output
 
 
@@ -382,10 +380,11 @@ def test_histograms_live_on_the_unit_cube_of_the_working_space():
     assert 0.05 < encoded.min() and encoded.max() < 0.56
 
 
-def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path):
+@pytest.mark.slow
+def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path, cli):
     src = _acescg_exr(tmp_path / "cg.exr")
-    result = CliRunner().invoke(cli, ["report", str(src), "--preset", "warm", "--working-space",
-                                      "acescct", "-o", str(tmp_path / "rep"), *FAST])
+    result = cli("report", str(src), "--preset", "warm", "--working-space",
+                 "acescct", "-o", str(tmp_path / "rep"), *FAST)
     assert result.exit_code == 0, result.output
     document = json.loads((tmp_path / "rep" / "report.json").read_text())
     assert document["color"]["working_space"] == cs.resolve_space("acescct")
@@ -397,7 +396,7 @@ def test_the_report_records_the_spaces_and_shows_srgb_pictures(tmp_path):
     assert sheet.shape[0] > 100 and 0.05 < sheet.mean() < 0.95
 
 
-def test_ocio_environment_variable_names_the_config(tmp_path, monkeypatch):
+def test_ocio_environment_variable_names_the_config(tmp_path, monkeypatch, cli):
     monkeypatch.setenv("OCIO", str(tmp_path / "missing.ocio"))
     assert cs.config_path() == str(tmp_path / "missing.ocio")
     with pytest.raises(InputError, match=r"missing.ocio \(\$OCIO\) could not be read "
@@ -406,8 +405,8 @@ def test_ocio_environment_variable_names_the_config(tmp_path, monkeypatch):
     garbage = tmp_path / "garbage.ocio"  # issue 21, case 15: not "unknown colour space"
     garbage.write_text("ocio_profile_version: [\n")
     monkeypatch.setenv("OCIO", str(garbage))
-    result = CliRunner().invoke(cli, ["apply", "x.jpg", "--preset", "warm", "--working-space",
-                                      "acescct", "-o", str(tmp_path / "o.jpg")])
+    result = cli("apply", "x.jpg", "--preset", "warm", "--working-space",
+                 "acescct", "-o", str(tmp_path / "o.jpg"))
     assert result.exit_code != 0 and "unknown colour space" not in result.output
     assert result.output.startswith(f"Error: OpenColorIO config {garbage} ($OCIO) could not "
                                     "be read") and "unset OCIO" in result.output
@@ -427,8 +426,9 @@ def _oklab_lightness(acescg: np.ndarray) -> np.ndarray:
     return colour.XYZ_to_Oklab(xyz)[..., 0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("working", ["acescct", "srgb"])
-def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, working):
+def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, working, cli):
     """An ACEScg EXR with highlights above 1: --preserve-luminance keeps each pixel's
     lightness to 1 % in ACEScct as in the default space (it once decoded ACEScct values
     as sRGB); without it the same grade moves lightness far more."""
@@ -438,9 +438,9 @@ def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, worki
     changes = {}
     for extra in ([], ["--preserve-luminance"]):
         out = tmp_path / f"g{len(changes)}.exr"
-        result = CliRunner().invoke(cli, ["apply", str(src), "--preset", "warm",
-                                          "--working-space", working, "-o", str(out), *extra,
-                                          *FAST_ARGS])
+        result = cli("apply", str(src), "--preset", "warm",
+                     "--working-space", working, "-o", str(out), *extra,
+                     *FAST_ARGS)
         assert result.exit_code == 0, result.output
         after = read_image(out).rgb()
         changes[bool(extra)] = np.abs(_oklab_lightness(after) - lightness) / lightness
@@ -449,6 +449,7 @@ def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, worki
     assert changes[False].mean() > 3 * changes[True].mean()
 
 
+@pytest.mark.slow
 def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     """--monotone orders the map by the working encoding's own luma: sYCC's BT.601
     weights for sRGB, the AP1 primaries' luminance for ACEScct."""

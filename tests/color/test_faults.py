@@ -17,11 +17,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, write_array
 from wbcgrade import _publish
-from wbcgrade.cli import main
 from wbcgrade.color.imageio import (
     Image,
     check_output_path,
@@ -62,6 +60,7 @@ def _apply_args(photo: Path, out: Path) -> list[str]:
 
 # -- 1, 2: a full disk ------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ext", ["png", "jpg"])
 def test_a_write_that_hits_the_file_size_limit_is_an_error_not_a_file(tmp_path, ext):
     """PNG reported the short write only via geterror() (published as success); libjpeg
@@ -128,7 +127,8 @@ def _age(path: Path, seconds: float = 3600) -> None:
     os.utime(path, (old, old))
 
 
-def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo):
+@pytest.mark.slow
+def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo, cli):
     out = tmp_path / "chelsea_graded.jpg"
     killed = subprocess.run([sys.executable, "-c", KILLED_WRITER, str(out), "kill"],
                             capture_output=True, timeout=60)
@@ -150,7 +150,7 @@ def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo):
         assert live.stdout.readline().strip() == "ready"
         (live_tmp,) = [p for p in tmp_path.iterdir() if p.name.startswith(".other.")]
         _age(live_tmp)
-        result = CliRunner().invoke(main, _apply_args(tmp_path / "chelsea.jpg", out))
+        result = cli(*_apply_args(tmp_path / "chelsea.jpg", out))
         assert result.exit_code == 0, result.output
         assert not stale.exists() and not old_style.exists()
         assert unrelated.exists() and live_tmp.exists()
@@ -173,14 +173,15 @@ def no_grading(monkeypatch):
     monkeypatch.setattr(workflow, "grade_photo", forbidden)
 
 
-def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_grading):
-    result = CliRunner().invoke(main, _apply_args(photo, tmp_path / "x.xyz"))
+def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_grading, cli):
+    result = cli(*_apply_args(photo, tmp_path / "x.xyz"))
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1].startswith(
         f"Error: {tmp_path / 'x.xyz'}: cannot write this file type")
 
 
-def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch):
+@pytest.mark.slow
+def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch, cli):
     import wbcgrade.color.lut as lut_module
 
     def full_disk(*args, **kwargs):
@@ -188,7 +189,7 @@ def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch):
 
     monkeypatch.setattr(lut_module, "write_cube", full_disk)
     out, lut = tmp_path / "graded.jpg", tmp_path / "grade.cube"
-    result = CliRunner().invoke(main, [*_apply_args(photo, out), "--lut", str(lut)])
+    result = cli(*_apply_args(photo, out), "--lut", str(lut))
     assert result.exit_code == 1
     assert "No space left on device" in result.output
     assert not out.exists() and not lut.exists()
@@ -211,7 +212,7 @@ def bomb_png(path: Path, width: int = 60000, height: int = 60000) -> Path:
     return path
 
 
-def test_a_decompression_bomb_is_refused_from_its_header(tmp_path):
+def test_a_decompression_bomb_is_refused_from_its_header(tmp_path, cli):
     bomb = bomb_png(tmp_path / "bomb.png")
     start = time.perf_counter()
     # Refused by our pixel limit, or (OpenImageIO >= 3.2) already by OpenImageIO's own
@@ -220,7 +221,7 @@ def test_a_decompression_bomb_is_refused_from_its_header(tmp_path):
     with pytest.raises(InputError, match=refusal):
         read_image(bomb)
     assert time.perf_counter() - start < 1.0
-    result = CliRunner().invoke(main, ["apply", str(bomb), "--preset", "warm", *FAST_ARGS])
+    result = cli("apply", str(bomb), "--preset", "warm", *FAST_ARGS)
     assert result.exit_code == 1
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.output
@@ -229,7 +230,8 @@ def test_a_decompression_bomb_is_refused_from_its_header(tmp_path):
         assert "over the limit of 200 megapixels" in lines[0] and "--max-image-pixels" in lines[0]
 
 
-def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch):
+@pytest.mark.slow
+def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch, cli):
     small = write_array(tmp_path / "small.png", np.full((20, 30, 3), 0.5, np.float32), "uint8")
     try:
         set_max_image_pixels(599)
@@ -243,11 +245,11 @@ def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch):
             read_image(small)
         # The command-line option wins over the environment, for this run only.
         out = tmp_path / "out.jpg"
-        result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "-o",
-                                           str(out), "--max-image-pixels", "100000", *FAST_ARGS])
+        result = cli("apply", str(photo), "--preset", "warm", "-o",
+                     str(out), "--max-image-pixels", "100000", *FAST_ARGS)
         assert result.exit_code == 0, result.output
-        result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "-o",
-                                           str(tmp_path / "out2.jpg"), *FAST_ARGS])
+        result = cli("apply", str(photo), "--preset", "warm", "-o",
+                     str(tmp_path / "out2.jpg"), *FAST_ARGS)
         assert result.exit_code == 1 and "over the limit of 0.0001 megapixels" in result.output
     finally:
         set_max_image_pixels(None)
@@ -255,12 +257,12 @@ def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch):
 
 # -- 12: outputs that are not regular files --------------------------------------------------
 
-def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading):
+def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading, cli):
     with pytest.raises(InputError, match="not a regular file"):
         check_output_path("/dev/null", overwrite=True)
     fifo = tmp_path / "graded.jpg"
     os.mkfifo(fifo)
-    result = CliRunner().invoke(main, [*_apply_args(photo, fifo), "--overwrite"])
+    result = cli(*_apply_args(photo, fifo), "--overwrite")
     assert result.exit_code == 1
     assert "not a regular file" in result.output.strip().splitlines()[-1]
     assert fifo.is_fifo()

@@ -18,6 +18,7 @@ def _image_and_map(rng, h=61, w=47, size=9):
     return rgb, table
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("step", [1, 2, 3, 5])
 @pytest.mark.parametrize("strength", [1.0, 0.6])
 def test_block_means_of_the_mapped_image(rng, step, strength):
@@ -78,6 +79,7 @@ def test_box_means_are_scipys_uniform_filter(rng, shape, radius):
     np.testing.assert_allclose(regrain_module._box(x, radius), expected, rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_window_models_solve_the_regularised_local_fit(rng):
     """Each window's A, b are the ridge regression of the change on the guide over the
     window (the covariances of every pixel in it, numpy's solver), at an inner pixel."""

@@ -24,6 +24,7 @@ def scene(style_dir, tmp_path_factory):
     return pixels, png, load_style_folder(style_dir, opts.transfer.bins), opts
 
 
+@pytest.mark.slow
 def test_an_array_is_graded_as_apply_grades_its_file(scene):
     pixels, png, styles, opts = scene
     graded, grade = grade_array(pixels, styles, opts)
@@ -38,6 +39,7 @@ def test_an_array_is_graded_as_apply_grades_its_file(scene):
     assert grade.info["fit"]["start"] in ("uniform", "vertex-refit", "vertex")
 
 
+@pytest.mark.slow
 def test_grading_in_place_gives_the_same_pixels_and_keeps_the_input_when_asked(scene):
     """apply grades a photo's pixels where they are when nothing looks at the ungraded
     ones afterwards; the result is the same, and by default the input is kept."""
@@ -51,6 +53,7 @@ def test_grading_in_place_gives_the_same_pixels_and_keeps_the_input_when_asked(s
     assert not np.array_equal(in_place.image.pixels, ungraded)
 
 
+@pytest.mark.slow
 def test_integer_and_float_arrays_give_the_same_grade(scene):
     pixels, _, styles, opts = scene
     as_int, _ = grade_array(pixels, styles, opts)
@@ -69,6 +72,7 @@ def test_bad_arrays_are_refused(scene, bad, message):
         grade_array(bad, styles, opts)
 
 
+@pytest.mark.slow
 def test_grouped_options_and_the_former_flat_ones_are_the_same(scene):
     """grade_array(rgb, styles, options) takes the grouped options; the former flat
     settings still work, as GradeOptions(...) or as keywords."""

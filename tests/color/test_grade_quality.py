@@ -46,6 +46,7 @@ def _split_map(n: int = 32) -> tuple[np.ndarray, np.ndarray]:
     return raw, density
 
 
+@pytest.mark.slow
 def test_smooth_map_has_no_jumps_where_the_raw_map_splits_a_colour():
     raw, density = _split_map()
     smooth = fit_smooth_map(raw, density, size=33)
@@ -69,6 +70,7 @@ def test_smooth_map_keeps_a_smooth_raw_map():
     assert np.abs(on_grid - affine).max() < 2e-3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("size", [17, 8])
 def test_smooth_map_solves_its_least_squares_problem(size):
     """Multigrid-preconditioned CG (17: lattices 5, 9, 17) and Jacobi CG (8: no
@@ -105,19 +107,20 @@ def test_smooth_map_solves_its_least_squares_problem(size):
         shifted, density, size=size, smoothness=smoothness, stiffness=stiffness)).max() < 2e-5
 
 
+@pytest.mark.slow
 def test_smooth_map_validates_its_input():
     from wbcgrade.color.smooth_map import SmoothMapFitter
 
     raw, density = _split_map(8)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"raw_map must be \(n, n, n, 3\) and density"):
         fit_smooth_map(raw, density[:4])
     with pytest.raises(ValueError, match="too large"):
         SmoothMapFitter(density, 33)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"raw_map must be \(8, 8, 8, 3\)"):
         SmoothMapFitter(density, 9).fit(raw[:4, :4, :4])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="not both 0"):
         fit_smooth_map(raw, density, smoothness=0, stiffness=0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="density is empty"):
         fit_smooth_map(raw, np.zeros_like(density))
 
 
@@ -202,6 +205,7 @@ def test_keep_lightness_keeps_oklab_lightness():
     assert np.abs(kept - identity_map(9)).max() > 0.1  # the colour still changed
 
 
+@pytest.mark.slow
 def test_default_grade_is_a_lattice_lut_with_regrain(scene):
     rgb, style_dir = scene
     from wbcgrade.color.presets import load_style_folder
@@ -232,12 +236,13 @@ def test_look_options_are_validated(field, value):
     from wbcgrade.color.options import FLAT_FIELDS
     from wbcgrade.errors import OptionError
 
-    with pytest.raises(OptionError) as caught:
+    with pytest.raises(OptionError, match="must") as caught:
         GradeOptions(**{field: value})
     assert caught.value.option == ".".join(FLAT_FIELDS[field])  # the field, e.g. map.size
     assert str(caught.value).startswith(caught.value.option)
 
 
+@pytest.mark.slow
 def test_histogram_of_regrained_output_still_lands_near_the_palette(scene):
     """Regrain keeps grain, not the input's palette: the graded palette moves as much."""
     rgb, style_dir = scene

@@ -42,7 +42,7 @@ def test_image_histogram_subsamples_and_weights_by_alpha(rng):
     rgb[:, 100:] = 1.0  # fully transparent white half must not count
     hist = image_histogram(rgb, 8, alpha, max_pixels=5000)
     assert hist[-1, -1, -1] < 0.01
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match="fully transparent"):
         image_histogram(rgb, 8, np.zeros_like(alpha))
 
 

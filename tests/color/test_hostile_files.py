@@ -18,6 +18,7 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 
@@ -44,6 +45,7 @@ def _ok(run: subprocess.CompletedProcess) -> None:
     assert b"Traceback" not in run.stderr
 
 
+@pytest.mark.slow
 def test_apply_reads_and_writes_names_that_are_not_utf8(tmp_path):
     photos = _photos(tmp_path / "in")
     folder = tmp_path / os.fsdecode(b"out\xff")
@@ -56,6 +58,7 @@ def test_apply_reads_and_writes_names_that_are_not_utf8(tmp_path):
     assert sorted(os.listdir(folder)) == sorted([out.name, lut.name])  # no temporaries
 
 
+@pytest.mark.slow
 def test_batch_and_report_go_through_names_that_are_not_utf8(tmp_path):
     photos = _photos(tmp_path / "in")
     for jobs in ("1", "2"):
@@ -68,6 +71,7 @@ def test_batch_and_report_go_through_names_that_are_not_utf8(tmp_path):
     assert (report / "index.html").is_file() and len(list((report / "sheets").iterdir())) == 2
 
 
+@pytest.mark.slow
 def test_a_full_disk_under_the_histogram_cache_is_one_line(tmp_path):
     """Every cache file the run creates writes into /dev/full (ENOSPC from the kernel)."""
     styles = tmp_path / "styles"

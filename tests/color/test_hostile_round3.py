@@ -28,10 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.options import FitOptions, RegrainOptions
 from wbcgrade.color.presets import load_preset
 from wbcgrade.color.remap import apply_color_map
@@ -40,9 +39,6 @@ from wbcgrade.errors import InputError, OptionError
 
 REPO = Path(__file__).resolve().parents[2]
 
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def refused(result, *words) -> str:
@@ -92,6 +88,7 @@ def _write_look(path: Path, entry: dict) -> Path:
 # ------------------------------------------------------------------ 1: the regrain hang
 
 
+@pytest.mark.slow
 def test_a_huge_regrain_radius_is_refused_and_the_library_bounds_its_window(tmp_path, saved):
     with pytest.raises(OptionError, match="at most 1"):
         RegrainOptions(radius=1e9)
@@ -120,6 +117,7 @@ def test_a_huge_regrain_radius_is_refused_and_the_library_bounds_its_window(tmp_
     assert float(done.stdout) == 0.0
 
 
+@pytest.mark.slow
 def test_the_regrain_radius_option_is_a_one_line_usage_error(tmp_path, photo):
     command = ["apply", photo, "--preset", "warm", "--regrain-radius", "1e9",
                "-o", tmp_path / "out.png", *FAST_ARGS]
@@ -152,6 +150,7 @@ def test_an_output_naming_a_style_photo_is_refused_even_with_overwrite(tmp_path,
     assert not (tmp_path / "out.png").exists()
 
 
+@pytest.mark.slow
 def test_the_look_file_is_never_replaced_by_lut(tmp_path, photo):
     look = tmp_path / "mylook.cube"
     run("apply", photo, "--preset", "warm", "-o", tmp_path / "a.png", "--lut", look,
@@ -217,6 +216,7 @@ def test_a_good_hand_made_preset_loads(tmp_path):
     assert styles.names == ["a", "b"] and styles.histograms.shape == (2, 8, 8, 8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["styles", "tib_header", "compressed_look", "structured"])
 def test_preset_bombs_are_one_line_under_2_gb(tmp_path, case):
     path = tmp_path / f"{case}.npz"
@@ -253,6 +253,7 @@ def test_preset_bombs_are_one_line_under_2_gb(tmp_path, case):
     assert len(done.stdout.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(tmp_path,
                                                                                 saved):
     import base64
@@ -275,6 +276,7 @@ def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(
     assert str(path) in done.stdout and "400^3" in done.stdout
 
 
+@pytest.mark.slow
 def test_a_spi3d_declaring_500_cubed_is_refused_before_its_table_is_made(tmp_path):
     path = tmp_path / "big.spi3d"
     path.write_text("SPILUT 1.0\n3 3\n500 500 500\n0 0 0 0.5 0.5 0.5\n")
@@ -313,7 +315,7 @@ def test_a_malformed_cube_is_one_line_naming_the_file_and_the_fault(tmp_path, ph
                                                                      words):
     path = tmp_path / "bad.cube"
     path.write_text(text)
-    with pytest.raises(InputError) as caught:
+    with pytest.raises(InputError, match="bad.cube") as caught:
         load_look(path)
     message = str(caught.value)
     assert message.startswith(str(path)) and all(w in message for w in words), message
@@ -330,6 +332,7 @@ def test_the_remap_refuses_a_map_of_one_node():
 # ------------------------------------------------------------------ 6, 9: grade JSON fields
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("field, value, words", [
     ("version", None, ['"version"', "null"]),
     ("version", "x", ['"version"', '"x"']),
@@ -343,7 +346,7 @@ def test_the_remap_refuses_a_map_of_one_node():
 def test_a_wrong_typed_grade_json_field_is_one_line(tmp_path, saved, photo, field, value,
                                                     words):
     path = _write_look(tmp_path / "grade.json", dict(saved, **{field: value}))
-    with pytest.raises(InputError) as caught:
+    with pytest.raises(InputError, match="grade.json") as caught:
         load_look(path)
     assert str(caught.value).startswith(str(path))
     assert all(w in str(caught.value) for w in words), caught.value
@@ -367,22 +370,23 @@ def styles(tmp_path) -> Path:
     return folder
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", [b"garbage", b"", b"PK\x03\x04 cut short"])
-def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles, damage):
+def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles, damage, cli):
     cache = tmp_path / "cache"
     args = ["--mode", "palette", "--bins", "16", "--fit-bins", "8", "--max-iter", "10",
             "--iterations", "30"]
     env = {"WBCGRADE_CACHE_DIR": str(cache)}
-    first = CliRunner(env=env).invoke(main, ["apply", str(photo), "--style", str(styles),
-                                             "-o", str(tmp_path / "a.png"), *args])
+    first = cli("apply", str(photo), "--style", str(styles),
+                "-o", str(tmp_path / "a.png"), *args, env=env)
     assert first.exit_code == 0, first.output
     entries = sorted(cache.rglob("*.npz"))
     assert len(entries) >= 3
     good = {path: path.read_bytes() for path in entries}
     for path in entries:
         path.write_bytes(damage)
-    again = CliRunner(env=env).invoke(main, ["apply", str(photo), "--style", str(styles),
-                                             "-o", str(tmp_path / "b.png"), *args])
+    again = cli("apply", str(photo), "--style", str(styles),
+                "-o", str(tmp_path / "b.png"), *args, env=env)
     assert again.exit_code == 0, again.output
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
     for path in entries:  # healed: each entry rewritten as a good one
@@ -390,6 +394,7 @@ def test_a_damaged_cache_entry_is_rebuilt_not_a_failure(tmp_path, photo, styles,
         assert np.load(path).files == np.load(__import__("io").BytesIO(good[path])).files
 
 
+@pytest.mark.slow
 def test_a_style_folder_with_a_name_that_is_not_utf8_works_with_the_cache(tmp_path, photo,
                                                                            styles):
     name = os.fsdecode(b"caf\xe9.jpg")

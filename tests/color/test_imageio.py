@@ -164,9 +164,9 @@ def test_write_refuses_input_and_existing_files(tmp_path):
 
 def test_failed_write_leaves_nothing(tmp_path):
     image = read_image(write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8"))
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match="missing: output folder does not exist"):
         write_image(tmp_path / "missing" / "out.png", image.pixels, image)
-    with pytest.raises((InputError, OSError)):
+    with pytest.raises((InputError, OSError), match=r"pixels must be \(H, W, C\)"):
         write_image(tmp_path / "out.png", image.pixels[:, :, :1].squeeze(), image)
     assert _listed(tmp_path / "a.png") == ["a.png"]
 

@@ -8,18 +8,13 @@ import shutil
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.presets import load_preset, load_style_folder, save_preset
 from wbcgrade.color.report import _csv_text, csv_cell
 from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def _one_error_line(result) -> str:
@@ -53,6 +48,7 @@ def test_huge_finite_weights_are_equal_weights():
         parse_weights("inf,1")
 
 
+@pytest.mark.slow
 def test_apply_with_huge_weights_grades(tmp_path, style_dir, photo):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "out.png", "--json",
                  "--weights", "1e308,1e308,1e308,1e308", *FAST_ARGS)
@@ -64,7 +60,7 @@ def test_apply_with_huge_weights_grades(tmp_path, style_dir, photo):
 def test_a_preset_that_is_not_a_zip_names_no_numpy_option(tmp_path, photo):
     fake = tmp_path / "fake.npz"
     fake.write_bytes(b"this is not an archive at all" * 4)
-    with pytest.raises(InputError) as info:
+    with pytest.raises(InputError, match="fake.npz") as info:
         load_preset(fake)
     assert "allow_pickle" not in str(info.value) and "not a zip" in str(info.value)
     line = _one_error_line(run("apply", photo, "--preset", fake, *FAST_ARGS))

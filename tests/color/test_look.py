@@ -68,6 +68,7 @@ def test_a_pair_of_framings_of_one_scene_gives_back_the_look():
     assert error(pair.look, warm_look, right) < 0.35 * identity
 
 
+@pytest.mark.slow
 def test_extraction_finds_the_look_when_the_content_model_holds_the_scenes():
     contents = [scene(s) for s in range(10, 16)]
     others = [scene(s) for s in range(20, 24)]
@@ -132,6 +133,7 @@ def everyday_scene(seed, size=48):
     return np.clip(image + rng.normal(0, 0.02, image.shape), 0.0, 1.0)
 
 
+@pytest.mark.slow
 def test_a_look_every_style_shows_is_applied_and_one_the_styles_disagree_on_is_not(
         monkeypatch):
     """The transport extraction (the statistics one: tests/color/test_look_statistics.py,
@@ -181,6 +183,7 @@ def sample(name, width=96):
     return np.asarray(small.get_pixels(oiio.FLOAT))[..., :3].astype(np.float64)
 
 
+@pytest.mark.slow
 def test_the_photo_is_matched_with_its_own_scene_and_weighs_most():
     images = [sample(n) for n in ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")]
     styles = np.stack([image_histogram(warm_look(halves(i)[0]), 32) for i in images])
@@ -191,6 +194,7 @@ def test_the_photo_is_matched_with_its_own_scene_and_weighs_most():
         assert found.confidence > 0.0
 
 
+@pytest.mark.slow
 def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     image = scene(41, regions=8)
     left, right = halves(image)
@@ -213,31 +217,29 @@ def test_a_colour_the_photo_lacks_stays_out_of_the_grade():
     assert np.quantile(pulled, 0.99) < 0.05
 
 
-def test_look_mode_and_look_extract_through_the_commands(tmp_path):
+@pytest.mark.slow
+def test_look_mode_and_look_extract_through_the_commands(tmp_path, cli):
     """``apply --mode look`` takes the grade path's "look" map builder; ``look extract``
     writes the set's look as a LUT and, like every command, refuses an existing file."""
     import json
 
-    from click.testing import CliRunner
-
     from tests.color.conftest import small_copy
-    from wbcgrade.cli import main
     from wbcgrade.color.lut import read_cube
 
     # a preset of palettes only (no look of its own): the look is extracted
     palettes = str(Path(__file__).resolve().parents[1] / "data" / "three_samples.npz")
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", palettes, "-o",
-                                       str(tmp_path / "o.png"), "--json", "--no-cache"])
+    result = cli("apply", str(photo), "--preset", palettes, "-o",
+                 str(tmp_path / "o.png"), "--json", "--no-cache")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["map"]["builder"] == "look" and report["fit_start"] == "look"
     assert report["outcome"]["source"] == "set-look" and "weights" not in report
     lut = tmp_path / "look.cube"
     args = ["look", "extract", "--preset", palettes, "-o", str(lut), "--lut-size", "9"]
-    assert CliRunner().invoke(main, args).exit_code == 0
+    assert cli(*args).exit_code == 0
     assert read_cube(lut).size == 9
-    result = CliRunner().invoke(main, args)
+    result = cli(*args)
     assert result.exit_code == 1 and "file exists (use --overwrite" in result.output
 
 
@@ -255,14 +257,12 @@ def test_shrinking_keeps_what_the_styles_agree_on_and_drops_what_they_do_not():
     assert torn.amplitude() < 0.25 * pooled.amplitude()  # (0.2^2 / (0.2^2 + 1/4) = 0.14)
 
 
-def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
+def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path, cli):
     """The shipped presets carry the look they were made with: the look grade applies it as
     it is (no estimate), `look extract` writes it, and a preset with a broken look is refused."""
     import OpenImageIO as oiio
-    from click.testing import CliRunner
 
     from tests.color.conftest import small_copy
-    from wbcgrade.cli import main
     from wbcgrade.color.lut import read_cube
     from wbcgrade.color.presets import load_preset, resolve_preset, save_preset
     from wbcgrade.color.remap import interpolate_lattice, resample_lattice
@@ -273,8 +273,8 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
     assert look.shape == (33, 33, 33, 3)
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "c.png", 96)
     out = tmp_path / "o.png"
-    result = CliRunner().invoke(main, ["apply", str(photo), "--preset", "warm", "--no-regrain",
-                                       "-o", str(out)])
+    result = cli("apply", str(photo), "--preset", "warm", "--no-regrain",
+                 "-o", str(out))
     assert result.exit_code == 0, result.output
     pixels = oiio.ImageBuf(str(photo)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
     graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3].reshape(-1, 3)
@@ -282,8 +282,8 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path):
     assert np.abs(graded - expected).max() <= 1.5 / 255
     assert np.abs(graded - pixels).mean() > 5 / 255  # and the look is not a small one
     cube = tmp_path / "look.cube"
-    assert CliRunner().invoke(main, ["look", "extract", "--preset", "warm", "--strength", "1",
-                                     "-o", str(cube)]).exit_code == 0
+    assert cli("look", "extract", "--preset", "warm", "--strength", "1",
+               "-o", str(cube)).exit_code == 0
     assert np.abs(read_cube(cube).table - resample_lattice(look, 33)).max() < 1e-4
     broken = look.copy()
     broken[0, 0, 0, 0] = np.nan
@@ -319,6 +319,7 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
     assert len(looks()) == 2  # a second look: not the first one read back under others
 
 
+@pytest.mark.slow
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""
     import wbcgrade.core

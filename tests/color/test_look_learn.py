@@ -4,10 +4,8 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.test_look import LUMA, sample, warm_look
-from wbcgrade.cli import main
 from wbcgrade.color.histogram import grid_points
 from wbcgrade.color.look_learn import learn_look, learn_look_file, pair_files
 from wbcgrade.color.saved_look import load_look
@@ -70,6 +68,7 @@ def photo_error(grade, look, photo):
     return float(np.mean(np.abs(graded - truth)) / np.mean(np.abs(photo - truth)))
 
 
+@pytest.mark.slow
 def test_a_known_look_is_learned_from_pairs_and_reproduced_on_another_photo(tmp_path, photos):
     import OpenImageIO as oiio
 
@@ -91,6 +90,7 @@ def test_a_known_look_is_learned_from_pairs_and_reproduced_on_another_photo(tmp_
     assert not result.look.monochrome
 
 
+@pytest.mark.slow
 def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos):
     def edit(name, looked):
         h, w = looked.shape[:2]
@@ -123,6 +123,7 @@ def test_resized_cropped_and_turned_afters_learn_the_same_look(tmp_path, photos)
     assert edited.held_out < plain.held_out + 0.5
 
 
+@pytest.mark.slow
 def test_black_and_white_afters_give_a_black_and_white_look(tmp_path, photos):
     before, after = make_pairs(tmp_path, photos, look=grey)
     result = learn_look_file(before, after, tmp_path / "bw.json", lut_size=17)
@@ -138,6 +139,7 @@ def test_black_and_white_afters_give_a_black_and_white_look(tmp_path, photos):
     assert data["learned"]["monochrome"] is True
 
 
+@pytest.mark.slow
 def test_bad_pairs_are_reported_one_line_each_and_the_others_used(tmp_path, photos):
     before, after = make_pairs(tmp_path, photos)
     write(before / "lonely.jpg", photos["sunset"])  # no edited version
@@ -159,6 +161,7 @@ def test_bad_pairs_are_reported_one_line_each_and_the_others_used(tmp_path, phot
     assert photo_error(load_look(tmp_path / "look.cube"), warm_look, photos["sunset"]) < 0.2
 
 
+@pytest.mark.slow
 def test_a_pair_with_another_look_or_a_local_edit_is_named_and_weighs_little(tmp_path, photos):
     def cool(rgb):
         return np.clip(rgb * [0.8, 0.95, 1.2] + [0.0, 0.02, 0.05], 0.0, 1.0)
@@ -183,11 +186,11 @@ def test_a_pair_with_another_look_or_a_local_edit_is_named_and_weighs_little(tmp
     assert photo_error(load_look(tmp_path / "look.cube"), warm_look, photos["bridge"]) < 0.35
 
 
-def test_the_command_prints_the_report_and_writes_a_look_apply_uses(tmp_path, photos):
+@pytest.mark.slow
+def test_the_command_prints_the_report_and_writes_a_look_apply_uses(tmp_path, photos, cli):
     before, after = make_pairs(tmp_path, photos)
-    runner = CliRunner()
-    result = runner.invoke(main, ["look", "learn", str(before), str(after), "-o",
-                                  str(tmp_path / "look.json"), "--json"])
+    result = cli("look", "learn", str(before), str(after), "-o",
+                 str(tmp_path / "look.json"), "--json")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     for key in ("output", "working_space", "pairs_used", "delta_e", "held_out_delta_e",
@@ -199,14 +202,14 @@ def test_the_command_prints_the_report_and_writes_a_look_apply_uses(tmp_path, ph
         assert key in pair
     assert 0 < report["delta_e"] <= report["held_out_delta_e"] < 3
     # plain words
-    words = runner.invoke(main, ["look", "learn", str(before), str(after), "-o",
-                                 str(tmp_path / "look.cube")])
+    words = cli("look", "learn", str(before), str(after), "-o",
+                str(tmp_path / "look.cube"))
     assert words.exit_code == 0 and "held out" in words.stdout and "wrote" in words.stdout
     # apply --look uses it as it is
     photo = write(tmp_path / "sunset.png", photos["sunset"])
     out = tmp_path / "graded.png"
-    applied = runner.invoke(main, ["apply", str(photo), "--look", str(tmp_path / "look.json"),
-                                   "-o", str(out)])
+    applied = cli("apply", str(photo), "--look", str(tmp_path / "look.json"),
+                  "-o", str(out))
     assert applied.exit_code == 0, applied.output
     assert out.is_file()
 
@@ -215,25 +218,24 @@ def test_the_command_prints_the_report_and_writes_a_look_apply_uses(tmp_path, ph
     (["-o", "{tmp}/look.png"], "must be written as .cube, .clf or .json"),
     (["-o", "{tmp}/look.cube", "--lut-size", "1"], "--lut-size"),
 ])
-def test_command_errors_are_one_line(tmp_path, photos, args, says):
+def test_command_errors_are_one_line(tmp_path, photos, args, says, cli):
     before, after = make_pairs(tmp_path, photos, names=STYLE[:1])
-    result = CliRunner().invoke(main, ["look", "learn", str(before), str(after)]
+    result = cli(*["look", "learn", str(before), str(after)]
                                 + [a.format(tmp=tmp_path) for a in args])
     assert result.exit_code != 0
     assert says in result.output
     assert "Traceback" not in result.output
 
 
-def test_no_usable_pair_fails_in_one_line_after_naming_each(tmp_path, photos):
+def test_no_usable_pair_fails_in_one_line_after_naming_each(tmp_path, photos, cli):
     before, after = tmp_path / "before", tmp_path / "after"
     before.mkdir()
     after.mkdir()
     write(before / "a.jpg", photos["sunset"])
     write(after / "a.png", warm_look(photos["bridge"]))  # another scene
     write(before / "b.jpg", photos["coffee"])
-    runner = CliRunner()
-    result = runner.invoke(main, ["look", "learn", str(before), str(after), "-o",
-                                  str(tmp_path / "look.cube")])
+    result = cli("look", "learn", str(before), str(after), "-o",
+                 str(tmp_path / "look.cube"))
     assert result.exit_code == 1
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert any(line.startswith("Warning: a:") and "another scene" in line for line in lines)
@@ -242,8 +244,8 @@ def test_no_usable_pair_fails_in_one_line_after_naming_each(tmp_path, photos):
     assert lines[-1].startswith("Error:") and "no usable" in lines[-1]
     assert not (tmp_path / "look.cube").exists()
     # a file and a folder do not pair
-    mixed = runner.invoke(main, ["look", "learn", str(before / "a.jpg"), str(after), "-o",
-                                 str(tmp_path / "look.cube")])
+    mixed = cli("look", "learn", str(before / "a.jpg"), str(after), "-o",
+                str(tmp_path / "look.cube"))
     assert mixed.exit_code != 0 and "two photos or two folders" in mixed.output
 
 
@@ -271,7 +273,8 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
     assert result.used[0].delta_e < 1.5
 
 
-def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos):
+@pytest.mark.slow
+def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):
     from tests.color.test_raw import write_dng
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.imageio import read_image
@@ -295,12 +298,13 @@ def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_
     assert all(p.registered == "same framing" for p in result.used)
     assert result.delta_e < 4.0  # the camera's rendering clips what ACEScct keeps
     graded = tmp_path / "graded.tif"
-    applied = CliRunner().invoke(main, ["apply", str(before / "SUNSET.DNG"), "--look",
-                                        str(tmp_path / "look.cube"), "-o", str(graded)])
+    applied = cli("apply", str(before / "SUNSET.DNG"), "--look",
+                  str(tmp_path / "look.cube"), "-o", str(graded))
     assert applied.exit_code == 0, applied.output
 
 
-def test_a_learned_black_and_white_lut_stays_black_and_white_through_apply(tmp_path, photos):
+@pytest.mark.slow
+def test_a_learned_black_and_white_lut_stays_black_and_white_through_apply(tmp_path, photos, cli):
     """`apply --look` regrains a LUT by default; regrain keeps the input's colour edges,
     and the grade makes a black-and-white map's output black and white again."""
     import OpenImageIO as oiio
@@ -310,8 +314,8 @@ def test_a_learned_black_and_white_lut_stays_black_and_white_through_apply(tmp_p
     photo = write(tmp_path / "sunset.png", photos["sunset"])
     for flags in ((), ("--no-regrain",)):
         out = tmp_path / f"graded{len(flags)}.png"
-        result = CliRunner().invoke(main, ["apply", str(photo), "--look", str(tmp_path / "bw.cube"),
-                                           "-o", str(out), *flags])
+        result = cli("apply", str(photo), "--look", str(tmp_path / "bw.cube"),
+                     "-o", str(out), *flags)
         assert result.exit_code == 0, result.output
         pixels = oiio.ImageBuf(str(out)).get_pixels(oiio.UINT8).astype(int)
         assert (pixels.max(-1) - pixels.min(-1)).max() == 0, flags

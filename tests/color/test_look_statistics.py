@@ -197,6 +197,7 @@ def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tm
     assert len(naturals.meta["own"].names) == 3 and len(naturals.names) > 3
 
 
+@pytest.mark.slow
 def test_black_and_white_histograms_rebinned_from_a_finer_grid_hold_no_colour():
     """Style histograms come at the transfer grid (64^3, 128^3) and are re-binned to 32^3:
     the colour both binnings blur a grey into is taken off, so the set stays black and

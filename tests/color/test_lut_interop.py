@@ -22,10 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main as cli
+from tests.conftest import run_cli
 from wbcgrade.color import colorspace as cs
 from wbcgrade.color.imageio import read_image
 
@@ -41,10 +40,10 @@ def photo(tmp_path_factory) -> Path:
 
 def graded_with_lut(photo: Path, folder: Path, working: str, name: str) -> tuple[Path, Path]:
     out, lut = folder / f"{name}.png", folder / name
-    result = CliRunner().invoke(cli, ["apply", str(photo), "--preset", "warm", "-o", str(out),
-                                      "--working-space", working, "--lut", str(lut),
-                                      *(["--lut-format", "clf"] if name.endswith(".clf")
-                                        else []), *FAST])
+    result = run_cli("apply", str(photo), "--preset", "warm", "-o", str(out),
+                     "--working-space", working, "--lut", str(lut),
+                     *(["--lut-format", "clf"] if name.endswith(".clf")
+                       else []), *FAST)
     assert result.exit_code == 0, result.output
     return out, lut
 
@@ -81,6 +80,7 @@ def error_255(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(gap.max()), float(gap.mean())
 
 
+@pytest.mark.slow
 def test_a_plain_cube_reads_alike_in_colour_ocio_and_ffmpeg(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "srgb", "plain.cube")
     source, expected = pixels(photo), pixels(graded)
@@ -103,6 +103,7 @@ def _through_acescg(photo: Path, lut: Path, apply) -> np.ndarray:
     return np.clip(cs.convert(apply(lut, linear), acescct, "sRGB Encoded Rec.709 (sRGB)"), 0, 1)
 
 
+@pytest.mark.slow
 def test_a_shaper_cube_reads_right_in_colour_and_ocio_and_ffmpeg_refuses_it(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "acescct", "shaper.cube")
     expected = pixels(graded)
@@ -115,6 +116,7 @@ def test_a_shaper_cube_reads_right_in_colour_and_ocio_and_ffmpeg_refuses_it(phot
     assert "Invalid data" in run.stderr
 
 
+@pytest.mark.slow
 def test_a_clf_reads_right_in_ocio(photo, tmp_path):
     graded, lut = graded_with_lut(photo, tmp_path, "acescct", "grade.clf")
     worst, mean = error_255(_through_acescg(photo, lut, with_ocio), pixels(graded))

@@ -8,10 +8,9 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.cli.grading_options import PALETTE_ONLY
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, grade_array, grade_outcome
@@ -20,10 +19,6 @@ from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.outcome import GradeOutcome, GradeSource, map_change
 from wbcgrade.color.presets import load_preset, look_in_space, resolve_preset
 from wbcgrade.color.remap import identity_map
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def _look_grade(color_map, set_strength, n=3, strength=1.0):
@@ -72,6 +67,7 @@ def test_outcome_round_trips_through_json():
     assert back == outcome
 
 
+@pytest.mark.slow
 def test_palette_grade_carries_its_weights_and_a_look_grade_none(photo, style_dir):
     rgb = read_image(photo).rgb()
     styles = load_preset(resolve_preset("warm"))
@@ -96,6 +92,7 @@ def test_outcome_mean_change_matches_the_pixels(photo):
 # ------------------------------------------------------------------------ the terminal
 
 
+@pytest.mark.slow
 def test_style_folder_grade_says_what_it_did_without_a_weight_table(tmp_path, photo,
                                                                      style_dir):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "o.jpg", "--no-cache")
@@ -132,6 +129,7 @@ def test_strength_above_one_strengthens_a_grade(tmp_path, photo):
     assert grade.outcome.blend == 2.0
 
 
+@pytest.mark.slow
 def test_palette_mode_prints_the_weights_and_the_loss(tmp_path, photo, style_dir):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "o.jpg", *FAST_ARGS)
     assert result.exit_code == 0, result.output
@@ -176,6 +174,7 @@ def test_palette_options_are_refused_in_look_mode(tmp_path, photo, flag):
     assert len(result.output.strip().splitlines()) == 1  # one line, no traceback
 
 
+@pytest.mark.slow
 def test_preset_weights_with_palette_mode_work(tmp_path, photo):
     result = run("apply", photo, "--preset", "warm", "--mode", "palette", "--weights",
                  "1,0,0,0,0,0", "--bins", "16", "-o", tmp_path / "o.jpg")
@@ -311,6 +310,7 @@ def test_batch_lines_and_report_of_a_look_grade_have_no_weights(tmp_path, photo)
     assert "weights" not in json.dumps(photos)
 
 
+@pytest.mark.slow
 def test_look_extract_says_when_the_lut_does_nothing(tmp_path, style_dir):
     result = run("look", "extract", style_dir, "-o", tmp_path / "l.cube", "--strength", "0",
                  "--no-cache")

@@ -8,18 +8,13 @@ import shutil
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import WriteOptions, read_image
 from wbcgrade.color.lut import write_cube
 from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import OptionError
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +28,7 @@ def warm_look(tmp_path_factory):
     return folder / "warm.cube"
 
 
+@pytest.mark.slow
 def test_quality_sets_the_jpeg_size(tmp_path, warm_look):
     sizes = {}
     for quality in (50, 90, None):
@@ -55,6 +51,7 @@ def test_quality_sets_the_jpeg_size(tmp_path, warm_look):
     assert result.exit_code != 0 and not (tmp_path / "zero.jpg").exists()
 
 
+@pytest.mark.slow
 def test_bit_depth(tmp_path, warm_look):
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
     for depth, name, expected in (("16", "a.png", oiio.UINT16), ("float", "a.tif", oiio.FLOAT),
@@ -67,10 +64,11 @@ def test_bit_depth(tmp_path, warm_look):
                  "-o", tmp_path / "c.jpg")
     assert result.exit_code != 0 and "JPEG" in result.output
     assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "c.jpg").exists()
-    with pytest.raises(OptionError):
+    with pytest.raises(OptionError, match="quality must be between 1 and 100"):
         WriteOptions(quality=101)
 
 
+@pytest.mark.slow
 def test_grey_in_grey_out(tmp_path, warm_look, style_dir, rng):
     grey = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "rgb.png")
     pixels = read_image(grey).pixels.mean(axis=2, keepdims=True)

@@ -184,25 +184,24 @@ def test_own_style_is_found_only_for_the_photo_itself_at_a_large_weight(tmp_path
     assert own_style(hist(small), styles, names, [0, 1, 0])["style"] == "coffee"
 
 
-def test_apply_warns_in_one_line_when_the_photo_is_one_of_the_styles(tmp_path):
-    from click.testing import CliRunner
+@pytest.mark.slow
+def test_apply_warns_in_one_line_when_the_photo_is_one_of_the_styles(tmp_path, cli):
 
     from tests.color.conftest import FAST_ARGS, small_copy
-    from wbcgrade.cli import main
 
     styles = tmp_path / "styles"
     styles.mkdir()
     for name in ("coffee", "flower", "sunset"):
         small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 96)
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "mine.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(photo), "--style", str(styles), "-o",
-                                       str(tmp_path / "out.jpg"), *FAST_ARGS])
+    result = cli("apply", str(photo), "--style", str(styles), "-o",
+                 str(tmp_path / "out.jpg"), *FAST_ARGS)
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if "own palette" in line]
     assert len(warnings) == 1
     assert warnings[0].startswith(f"Warning: {photo} is graded towards its own palette "
                                   "(style 'coffee' has weight ")
     other = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.jpg", 64)
-    result = CliRunner().invoke(main, ["apply", str(other), "--style", str(styles), "-o",
-                                       str(tmp_path / "cat_out.jpg"), *FAST_ARGS])
+    result = cli("apply", str(other), "--style", str(styles), "-o",
+                 str(tmp_path / "cat_out.jpg"), *FAST_ARGS)
     assert result.exit_code == 0 and "own palette" not in result.stderr

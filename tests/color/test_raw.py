@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.colorspace import ColorEncoding, canonical
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import write_cube
@@ -49,9 +48,6 @@ def ramp_mosaic(height: int = 48, width: int = 512) -> np.ndarray:
     return np.round(np.linspace(0.0, 1.0, width)[None, :] * WHITE).repeat(height, 0)
 
 
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
-
 
 def test_raw_reads_as_scene_linear_aces(tmp_path):
     image = read_image(write_dng(tmp_path / "ramp.dng", ramp_mosaic()))
@@ -67,6 +63,7 @@ def test_raw_reads_as_scene_linear_aces(tmp_path):
     assert encoding.input == canonical("aces2065-1") and encoding.working == canonical("acescct")
 
 
+@pytest.mark.slow
 def test_raw_grades_end_to_end_keeping_its_tonal_range(tmp_path, style_dir):
     dng = write_dng(tmp_path / "ramp.dng", ramp_mosaic())
     before = dng.read_bytes()
@@ -115,6 +112,7 @@ def test_bad_raw_gets_one_line_error(tmp_path, damage):
     assert "Traceback" not in result.output and not (tmp_path / "out.jpg").exists()
 
 
+@pytest.mark.slow
 def test_batch_grades_raw_photos_into_tiffs(tmp_path, style_dir):
     folder = tmp_path / "shoot"
     folder.mkdir()

@@ -7,15 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli as run
 from wbcgrade.color.imageio import read_image
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def codes(path) -> np.ndarray:
@@ -27,6 +22,7 @@ def photo(tmp_path):
     return small_copy(SAMPLES / "chelsea.jpg", tmp_path / "cat.png", width=160)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("space", [None, "acescct"])
 def test_look_from_json_cube_and_clf_reproduces_the_grade(tmp_path, photo, style_dir, space):
     spaces = [] if space is None else ["--working-space", space]
@@ -54,6 +50,7 @@ def test_look_from_json_cube_and_clf_reproduces_the_grade(tmp_path, photo, style
                   - codes(tmp_path / "coffee_grade.cube.png")).max() <= 1
 
 
+@pytest.mark.slow
 def test_look_flags_and_refusals(tmp_path, photo, style_dir):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original.png",
                  "--lut", tmp_path / "grade.cube", *FAST_ARGS)
@@ -81,6 +78,7 @@ def test_look_flags_and_refusals(tmp_path, photo, style_dir):
     assert not (tmp_path / "x.png").exists()
 
 
+@pytest.mark.slow
 def test_batch_takes_a_look(tmp_path, photo, style_dir):
     result = run("apply", photo, "--style", style_dir, "-o", tmp_path / "original.png",
                  "--save-grade", tmp_path / "grade.json", *FAST_ARGS)
@@ -97,6 +95,7 @@ def test_batch_takes_a_look(tmp_path, photo, style_dir):
     assert result.exit_code != 0 and "--consistent" in result.output
 
 
+@pytest.mark.slow
 def test_video_takes_a_look(tmp_path):
     from wbcgrade.color.lut import write_cube
     from wbcgrade.color.remap import identity_map

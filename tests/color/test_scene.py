@@ -23,6 +23,7 @@ def error(mapped, truth):
     return float(np.mean(np.abs(mapped - truth)))
 
 
+@pytest.mark.slow
 def test_two_framings_of_a_scene_match_and_other_scenes_do_not(photos):
     prepared = {n: scene_image(warm_look(halves(p)[0]).astype(np.float32))
                 for n, p in photos.items()}
@@ -37,6 +38,7 @@ def test_two_framings_of_a_scene_match_and_other_scenes_do_not(photos):
         assert all(m is None for m in others), name
 
 
+@pytest.mark.slow
 def test_the_look_read_off_the_overlap_is_the_look(photos):
     image = photos["aitzgorri"]
     left, right = halves(image)
@@ -50,6 +52,7 @@ def test_the_look_read_off_the_overlap_is_the_look(photos):
     assert error(found.look(right), truth) < 0.15 * error(right, truth)
 
 
+@pytest.mark.slow
 def test_dark_and_flipped_framings_find_their_scene_and_its_look(photos):
     """A framing shot two and a half stops darker (the keypoints are found on ranked
     lightness: a tone curve does not change them), or flipped left to right (matched on
@@ -86,15 +89,14 @@ def test_no_scene_without_a_match_and_none_from_palettes_alone(photos):
     assert find_scene_look(photos["coffee"].astype(np.float32), palettes_only) is None
 
 
-def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, monkeypatch):
+@pytest.mark.slow
+def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, monkeypatch, cli):
     """``apply --mode look --style DIR``: the folder's graded framing of the photo's scene
     gives the look; the grade lands close to the truth and the report names the scene."""
     import json
 
     import OpenImageIO as oiio
-    from click.testing import CliRunner
 
-    from wbcgrade.cli import main
 
     monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
@@ -111,8 +113,8 @@ def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, 
     right = halves(photos["coffee"])[1]
     write(tmp_path / "photo.png", right)
     out = tmp_path / "out.png"
-    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
-                                       str(styles), "--mode", "look", "-o", str(out), "--json"])
+    result = cli("apply", str(tmp_path / "photo.png"), "--style",
+                 str(styles), "--mode", "look", "-o", str(out), "--json")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["fit_start"] == "scene"
@@ -125,16 +127,16 @@ def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, 
     cached = list((tmp_path / "cache" / "scenes").glob("*.npz"))
     assert len(cached) == 3
     again = tmp_path / "again.png"
-    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
-                                       str(styles), "--mode", "look", "-o", str(again)])
+    result = cli("apply", str(tmp_path / "photo.png"), "--style",
+                 str(styles), "--mode", "look", "-o", str(again))
     assert result.exit_code == 0, result.output
     assert np.abs(oiio.ImageBuf(str(again)).get_pixels(oiio.FLOAT)[..., :3]
                   - graded).max() <= 1.5 / 255  # the cache keeps colours in half floats
     # --no-cache reads the photos and writes no cache
-    result = CliRunner().invoke(main, ["apply", str(tmp_path / "photo.png"), "--style",
-                                       str(styles), "--mode", "look", "-o",
-                                       str(tmp_path / "uncached.png"), "--no-cache",
-                                       "--cache-dir", str(tmp_path / "other")])
+    result = cli("apply", str(tmp_path / "photo.png"), "--style",
+                 str(styles), "--mode", "look", "-o",
+                 str(tmp_path / "uncached.png"), "--no-cache",
+                 "--cache-dir", str(tmp_path / "other"))
     assert result.exit_code == 0, result.output
     assert not (tmp_path / "other").exists()
 

@@ -56,6 +56,7 @@ def scene(style_dir, tmp_path_factory):
     return read_image(photo).rgb(), style_dir
 
 
+@pytest.mark.slow
 def test_graded_photo_is_closer_to_the_barycenter(scene, fast_options):
     rgb, style_dir = scene
     styles = load_style_folder(style_dir, fast_options.transfer.bins)
@@ -74,10 +75,11 @@ def test_graded_photo_is_closer_to_the_barycenter(scene, fast_options):
     np.testing.assert_allclose(replace(grade, strength=0.0).apply(rgb), rgb, atol=1e-6)
     np.testing.assert_allclose(replace(grade, strength=0.5).apply(rgb), 0.5 * (rgb + graded),
                                atol=1e-5)
-    with pytest.raises(AttributeError):  # a grade is frozen
+    with pytest.raises(AttributeError, match="strength"):  # a grade is frozen
         grade.strength = 0.0
 
 
+@pytest.mark.slow
 def test_grading_against_its_own_palette_changes_little(scene):
     rgb, _ = scene
     opts = GradeOptions(mode="palette", bins=24, fit_bins=8, max_iter=10, n_iter=30)
@@ -86,6 +88,7 @@ def test_grading_against_its_own_palette_changes_little(scene):
     assert np.abs(graded - rgb).mean() < 1 / 255
 
 
+@pytest.mark.slow
 def test_default_transfer_kernel_keeps_colourfulness(scene):
     """A map built with the fit's wide kernel dulls the photo; the default does not."""
     rgb, style_dir = scene
@@ -102,6 +105,7 @@ def test_default_transfer_kernel_keeps_colourfulness(scene):
     assert chroma_sharp > 1.2 * chroma_blurred
 
 
+@pytest.mark.slow
 def test_given_weights_skip_the_fit(scene, fast_options):
     rgb, style_dir = scene
     from wbcgrade.color.grading import grade_encoded
@@ -118,7 +122,7 @@ def test_given_weights_skip_the_fit(scene, fast_options):
 
 @pytest.mark.parametrize("text", ["a,b", "", "-1,2", "0,0"])
 def test_bad_weights(text):
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match="comma-separated numbers|non-negative finite numbers"):
         parse_weights(text)
 
 

@@ -53,6 +53,7 @@ def test_converged_barycenter_matches_pot_log_domain(rng):
     np.testing.assert_allclose(P / P.sum(), ref / ref.sum(), atol=1e-7 * ref.max())
 
 
+@pytest.mark.slow
 def test_barycenter_of_translated_gaussians_is_displacement_interpolation():
     n = 100
     x = np.linspace(0, 1, n)
@@ -160,6 +161,7 @@ def _corner_histograms(n, rng):
     return H
 
 
+@pytest.mark.slow
 def test_fast_log_domain_gradient_is_the_exact_one(monkeypatch):
     """12^3, a 0.25-bin kernel: plain scalings underflow, the shifted log-domain products run
     (their per-block second pass included) and match the per-entry log-sum-exp and finite
@@ -368,9 +370,9 @@ def test_solve_reaches_the_fixed_point_and_a_warm_start_from_a_coarse_grid_saves
 def test_solve_rejects_bad_warm_starts():
     geom = GridGeometry((6, 6), 0.05)
     solver = BarycenterSolver(blobs((6, 6), 2, np.random.default_rng(0)), geom, 10)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"init_log_scalings must have shape \(2, 6, 6\)"):
         solver.solve([0.5, 0.5], init_log_scalings=np.zeros((2, 5, 6)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="init_log_scalings contain NaN"):
         solver.solve([0.5, 0.5], init_log_scalings=np.full((2, 6, 6), np.nan))
 
 
@@ -421,6 +423,7 @@ class _OutsideGeometry(Geometry):
         return self.inner.cost_matrix()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gamma", [0.05, 0.0004])  # scaling domain, then log domain
 def test_a_geometry_with_only_the_public_contract_runs_barycenters_and_gradients(gamma, rng):
     grid = GridGeometry((7, 6), gamma=gamma)

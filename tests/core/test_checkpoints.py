@@ -97,6 +97,7 @@ def test_schedule_reverses_each_iteration_once_within_budget(n_iter, slots):
     assert counter.states == 0 and counter.records == 0  # nothing left behind
 
 
+@pytest.mark.slow
 def test_schedule_costs_fall_with_memory_and_beat_bisection():
     costs = [extra_steps(60, s, 2) for s in range(0, 130)]
     assert all(a >= b for a, b in zip(costs, costs[1:]))

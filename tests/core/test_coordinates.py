@@ -30,6 +30,7 @@ def test_known_weights_are_recovered(shape, n_histograms, loss):
     np.testing.assert_allclose(fit.barycenter, barycenter(H, fit.weights, geom, n_iter=30))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", ["l1", "wasserstein"])
 @pytest.mark.parametrize("shape, n_histograms", [((12, 12), 3), ((8, 8, 8), 4)])
 def test_fit_is_no_worse_than_the_true_weights(shape, n_histograms, loss):

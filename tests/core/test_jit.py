@@ -29,6 +29,7 @@ print(twice(21.0), float(np.abs(apply_color_map(colors, identity) - colors).max(
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform == "win32", reason="RLIMIT_FSIZE is POSIX")
 def test_a_cache_that_cannot_be_written_costs_a_compilation_not_the_run(tmp_path: Path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}

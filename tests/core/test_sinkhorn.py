@@ -74,6 +74,7 @@ def test_a_batch_solves_each_problem(problem, rng):
                                    single.log_b - single.log_b.mean(), atol=1e-5)
 
 
+@pytest.mark.slow
 def test_a_large_relaxation_is_balanced_transport_and_a_small_one_is_not(problem):
     p, q, geometry = problem
     balanced = _plan(sinkhorn(p, q, geometry, tol=1e-10, max_iter=5000), geometry)

@@ -15,6 +15,7 @@ import threading
 
 import numba
 import numpy as np
+import pytest
 from threadpoolctl import threadpool_info
 
 from tests.core.helpers import blobs
@@ -118,6 +119,7 @@ print(sorted(inside) == [(1,) * len(before)], blas() == before)
 """
 
 
+@pytest.mark.slow
 def test_overlapping_fast_cpu_calls_keep_blas_single_threaded_and_restore_it():
     run = subprocess.run([sys.executable, "-c", _OVERLAP], capture_output=True, text=True,
                          timeout=300)
@@ -163,6 +165,7 @@ print(seen[0] == (1,) * len(before), seen[1] == before, max(before) > 1)
 """
 
 
+@pytest.mark.slow
 def test_the_last_thread_out_restores_the_count_the_first_one_saved():
     run = subprocess.run([sys.executable, "-c", _HANDOVER], capture_output=True, text=True,
                          timeout=300)
@@ -209,6 +212,7 @@ print(numba.threading_layer(), len(same), all(same))
 """
 
 
+@pytest.mark.slow
 def test_workqueue_layer_is_serialised_not_aborted():
     env = {**os.environ, "NUMBA_THREADING_LAYER": "workqueue"}
     run = subprocess.run([sys.executable, "-c", _WORKQUEUE], capture_output=True, text=True,

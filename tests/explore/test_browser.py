@@ -160,6 +160,7 @@ def click(driver, element_id: str) -> None:
     driver.find_element("id", element_id).click()
 
 
+@pytest.mark.slow
 def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, downloads,
                                                                      tmp_path):
     from selenium.webdriver.common.keys import Keys
@@ -264,6 +265,7 @@ def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, do
     assert np.abs(applied - through_lut).max() <= 1 / 255 + 1e-6
 
 
+@pytest.mark.slow
 def test_a_style_folder_opens_on_its_look_with_apply_s_strength(browser, tmp_path,
                                                               monkeypatch):
     styles = tmp_path / "styles"
@@ -319,6 +321,7 @@ def test_a_style_folder_opens_on_its_look_with_apply_s_strength(browser, tmp_pat
     assert os.environ["WBCGRADE_CACHE_DIR"] == str(cache)
 
 
+@pytest.mark.slow
 def test_the_palette_mode_drags_and_exports_what_apply_writes(server, browser, downloads,
                                                              photo, tmp_path):
     studio = server.studio

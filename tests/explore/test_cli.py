@@ -11,14 +11,10 @@ import time
 import urllib.request
 from pathlib import Path
 
-from click.testing import CliRunner
+import pytest
 
+from tests.conftest import run_cli as run
 from tests.explore.conftest import PRESET, WBCGRADE, command_env
-from wbcgrade.cli import main
-
-
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def test_explore_is_a_command_with_its_options():
@@ -66,6 +62,7 @@ def _workers() -> set[int]:
     return found
 
 
+@pytest.mark.slow
 def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     before = _workers()
     process = subprocess.Popen(
@@ -99,6 +96,7 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     assert not (_workers() - before), "the job worker outlived the server"
 
 
+@pytest.mark.slow
 def test_a_worker_still_starting_is_stopped_with_the_server(server):
     """Closed while its worker process still imports, the job queue kills it (else it
     outlived the server until its imports were done)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import shlex
 
 import numpy as np
+import pytest
 
 from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import PRESET
@@ -13,6 +14,7 @@ from wbcgrade.explore.engine import ExactGrader, load_session
 from wbcgrade.explore.settings import settings_from_json
 
 
+@pytest.mark.slow
 def test_preview_near_a_known_exact_map_follows_the_exact_grade(server):
     """Corrected by the exact map at w0, the preview at w1 is closer to the exact map at w1
     than both the uncorrected preview and the exact map at w0 (the nearest one known)."""

@@ -18,6 +18,8 @@ import socket
 import subprocess
 import time
 
+import pytest
+
 from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import PRESET, ROOT, WBCGRADE, command_env
 from wbcgrade.explore import server as server_module
@@ -74,6 +76,7 @@ def test_a_stalled_request_is_dropped_after_the_socket_time_limit(server, monkey
     assert answer.startswith(b"HTTP/1.1 200"), answer
 
 
+@pytest.mark.slow
 def test_a_photo_named_in_bytes_exports_and_ctrl_c_is_quiet(tmp_path):
     name = os.fsdecode(b"chat\xe9.png")
     photo = tmp_path / name

@@ -79,6 +79,7 @@ def test_bad_look_requests_get_a_json_error(server, body, message, save_dir):
     assert api(server, "look", {})[0] == 200
 
 
+@pytest.mark.slow
 def test_a_save_is_apply_s_photo_under_a_new_name_in_the_save_folder(server, photo, save_dir):
     stem = photo.stem
     taken = save_dir / f"{stem}_explore_1.png"
@@ -109,6 +110,7 @@ def test_a_save_is_apply_s_photo_under_a_new_name_in_the_save_folder(server, pho
     assert np.abs(graded - through).max() <= 1 / 255 + 1e-6
 
 
+@pytest.mark.slow
 def test_a_palette_save_is_the_exact_mix_shown(server, photo, save_dir):
     weights = [0.2, 0.5, 0.3]
     status, _, body = api(server, "save", {"mode": "palette", "weights": weights,
@@ -123,6 +125,7 @@ def test_a_palette_save_is_the_exact_mix_shown(server, photo, save_dir):
     assert np.abs(graded - expected).max() <= 1 / 255 + 1e-6
 
 
+@pytest.mark.slow
 def test_a_blend_of_two_looks_is_their_mix_and_its_save_carries_its_grade(server, save_dir,
                                                                           photo):
     state = _state(server)

@@ -141,6 +141,7 @@ def test_older_preview_requests_of_a_page_are_dropped(server):
     assert status == 409 and json.loads(payload)["stale"] is True
 
 
+@pytest.mark.slow
 def test_exact_lut_and_exports_are_the_library_grade(server, tmp_path):
     studio = server.studio
     body = {"weights": [0.25, 0.25, 0.5], "strength": 0.8}
@@ -172,6 +173,7 @@ def test_exact_lut_and_exports_are_the_library_grade(server, tmp_path):
     assert status == 400 and "size must be one of" in error_of(payload)
 
 
+@pytest.mark.slow
 def test_slopes_come_with_the_exact_map_they_start_from(server):
     fitted = server.studio.fitted.as_json()
     status, headers, payload = api(server, "slopes", fitted)
@@ -199,6 +201,7 @@ def _digest(path):
     return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns
 
 
+@pytest.mark.slow
 def test_photo_and_styles_are_never_written(server, photo):
     preset = resolve_preset(PRESET)
     before = {p: _digest(p) for p in (photo, preset)}
@@ -209,6 +212,7 @@ def test_photo_and_styles_are_never_written(server, photo):
     assert sorted(p.name for p in photo.parent.iterdir()) == listing
 
 
+@pytest.mark.slow
 def test_a_newer_job_replaces_one_still_waiting(server):
     """Coalescing: while one job runs, a newer job of its kind replaces the one waiting."""
     import threading

@@ -36,6 +36,7 @@ def test_in_process_runs_in_order_with_the_local_callbacks():
     assert {pid for _, (_, pid, _) in pairs} == {os.getpid()}
 
 
+@pytest.mark.slow
 def test_local_processes_get_the_context_once_and_the_setup():
     items = list(range(8))
     with Executor({"factor": 2}, jobs=2, worker_setup=mark_worker) as executor:
@@ -50,6 +51,7 @@ def test_local_processes_get_the_context_once_and_the_setup():
     assert all(again[i][0] == 5 * i and again[i][2] == "5" for i in items)
 
 
+@pytest.mark.slow
 def test_an_error_in_a_worker_reaches_the_caller():
     with Executor({"factor": 1}, jobs=2) as executor, \
             pytest.raises(ValueError, match="negative item -1"):

@@ -14,10 +14,9 @@ import shutil
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 
 
 def _digest(folder: Path) -> dict[str, str]:
@@ -26,7 +25,7 @@ def _digest(folder: Path) -> dict[str, str]:
 
 
 def _run(*args) -> object:
-    return CliRunner().invoke(main, [*map(str, args)])
+    return run_cli(*map(str, args))
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +36,7 @@ def styles(tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.mark.slow
 def test_batch_never_writes_through_a_link_back_into_the_input_tree(tmp_path, styles):
     """Case 1: out/sub -> ../in made in/sub/x.jpg's output in/x.jpg itself: the input
     was replaced by the graded coffee photo, exit 0."""
@@ -54,6 +54,7 @@ def test_batch_never_writes_through_a_link_back_into_the_input_tree(tmp_path, st
     assert (out / "x.jpg").is_file() and "Traceback" not in result.output
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("foreign", ["other-size", "older-than-the-photo"])
 def test_batch_never_replaces_a_file_it_did_not_write(tmp_path, styles, foreign):
     """Case 2: a file in the output folder that is older than its photo or of another
@@ -85,6 +86,7 @@ def _report_folder(folder: Path, name: str = "index.html") -> dict[str, str]:
     return _digest(folder)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["index.html", "weights.csv", "report.json",
                                   "sheets/x.jpg.png"])
 def test_report_never_replaces_a_report_it_did_not_write(tmp_path, styles, name):
@@ -104,6 +106,7 @@ def test_report_never_replaces_a_report_it_did_not_write(tmp_path, styles, name)
         assert document["photos"][0]["photo"] == "x.jpg"
 
 
+@pytest.mark.slow
 def test_apply_report_never_replaces_a_report_it_did_not_write(tmp_path, styles):
     """Case 3 (``apply --report``): checked with the photo's outputs, before any work."""
     photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "x.jpg", 48)

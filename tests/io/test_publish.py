@@ -47,6 +47,7 @@ def test_threads_writing_one_target_never_collide_or_leak(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_domain_writers_from_threads(tmp_path):
     directions = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
     values = np.ones((2, 2, 3))
@@ -66,7 +67,7 @@ def test_domain_writers_from_threads(tmp_path):
 def test_failure_removes_the_temporary_and_keeps_the_target(tmp_path):
     target = tmp_path / "keep.txt"
     target.write_text("old")
-    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+    with pytest.raises(RuntimeError, match="writer failed"), atomic_path(target) as tmp:
         assert os.path.basename(tmp).startswith(f".keep{TEMP_MARK}")
         with open(tmp, "w") as handle:
             handle.write("half")

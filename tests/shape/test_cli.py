@@ -7,10 +7,9 @@ import json
 import numpy as np
 import pytest
 import trimesh
-from click.testing import CliRunner
 
+from tests.conftest import run_cli
 from tests.shape.helpers import ball, synthetic_meshes
-from wbcgrade.cli import main
 
 FAST = ["--resolution", "12", "--iterations", "20", "--max-iter", "3", "--quiet"]
 
@@ -33,9 +32,10 @@ def partial(tmp_path):
 
 
 def _run(args):
-    return CliRunner().invoke(main, ["shape", *args])
+    return run_cli("shape", *args)
 
 
+@pytest.mark.slow
 def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     out = tmp_path / "done.ply"
     result = _run(["complete", str(partial), "-d", str(database), "-o", str(out), "--json", *FAST])
@@ -50,6 +50,7 @@ def test_complete_writes_mesh_volume_png_and_json(tmp_path, database, partial):
     assert (tmp_path / "done.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_complete_prints_a_weight_table_for_euclidean(tmp_path, database, partial):
     out = tmp_path / "mix.obj"
     result = _run(
@@ -129,14 +130,14 @@ def test_output_never_overwrites_an_input(tmp_path, database, partial):
     _assert_one_line_error(result, "overwrite")
 
 
-def test_without_the_shape_extra_a_one_line_hint(monkeypatch, tmp_path):
+def test_without_the_shape_extra_a_one_line_hint(monkeypatch, tmp_path, cli):
     """trimesh and scikit-image are the ``shape`` extra: a base install says how to add
     them instead of failing with an ImportError traceback."""
     import sys
 
     monkeypatch.setitem(sys.modules, "trimesh", None)  # as if not installed
-    result = CliRunner().invoke(main, ["shape", "project", str(tmp_path / "v.npy"),
-                                       str(tmp_path)])
+    result = cli("shape", "project", str(tmp_path / "v.npy"),
+                 str(tmp_path))
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert result.output.strip() == ("Error: wbcgrade shape needs trimesh: "
                                      "pip install 'wbcgrade[shape]'")

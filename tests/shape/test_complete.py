@@ -56,6 +56,7 @@ def test_kl_gradient_matches_finite_differences_on_a_3d_grid(loss):
         assert grad @ direction == pytest.approx(numeric, rel=1e-4, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_slab_cut_from_a_barycenter_is_completed():
     n, n_iter = 16, 60
     database = voxel_shapes(n)  # box, sphere, torus
@@ -109,7 +110,7 @@ def test_missing_fraction_and_target():
     assert estimate_missing_fraction(full, [half]) == 0.0
     target = make_target(np.ones((4, 4, 4)), missing=0.25)
     assert target.sum() == pytest.approx(0.75)
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"missing fraction must be in \[0, 1\), got 1.0"):
         make_target(np.ones((4, 4, 4)), missing=1.0)
 
 
@@ -152,6 +153,7 @@ def test_alignment_picks_the_axes_signs_that_match_the_reference(tmp_path):
     assert iou > intersection_over_union(unguided.occupancy > 0.5, reference.occupancy > 0.5)
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_schedule_recovers_translation_weights():
     n = 32
     left = density_from_volume(ball(n, 0.15, (0.35, 0.5, 0.5)))

@@ -39,6 +39,7 @@ def _largest_error(mesh: trimesh.Trimesh, first: np.ndarray, second: np.ndarray)
     return float(np.abs(a - b).max() * (N - 1))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "axis", "fraction", "from_top"), [
     ("cow.off", 0, 0.3, True),
     ("elephant.off", 1, 0.3, True),
@@ -59,6 +60,7 @@ def test_a_cut_mesh_is_placed_where_it_was_on_its_whole(name, axis, fraction, fr
     assert 0.6 < placement.explained <= 1.05
 
 
+@pytest.mark.slow
 def test_placement_with_rotation_turns_a_partial_back():
     whole = read_mesh(SAMPLES / "cow.off")
     frame = normalization_transform(whole)

@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from click.testing import CliRunner
 
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.errors import InputError
 from wbcgrade.shape.complete import complete_shape, intersection_over_union, load_shape
 from wbcgrade.shape.mesh import edge_counts, normalize_mesh, read_mesh, voxelize
@@ -41,6 +40,7 @@ def database():
     return [load_shape(SAMPLES / name, 20, keep_mesh=True) for name in DATABASE]
 
 
+@pytest.mark.slow
 def test_winding_numbers_tree_matches_exact_sum_and_closes_holes():
     sphere = trimesh.creation.icosphere(subdivisions=3)
     open_sphere = holed(sphere, [(0.0, 0.0, 1.0)], 0.5)  # a cap of the sphere removed
@@ -57,6 +57,7 @@ def test_winding_numbers_tree_matches_exact_sum_and_closes_holes():
     assert winding_numbers(open_sphere.triangles, np.array([[0, 0, 0], [0, 0, 0.8]])).min() > 0.5
 
 
+@pytest.mark.slow
 def test_open_mesh_is_voxelised_like_the_closed_one(cow_with_holes):
     with pytest.raises(InputError, match="not closed"):
         read_mesh(cow_with_holes)  # strict reading still refuses it
@@ -85,6 +86,7 @@ def test_cut_and_capped_mesh_is_voxelised(database):
     assert shape.voxel_volume == pytest.approx(0.84 * elephant.voxel_volume, rel=0.15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("source", ["holes", "cut"])
 def test_completion_ranks_the_source_shape_first(source, cow_with_holes, database):
     path, expected = (cow_with_holes, "cow") if source == "holes" else (CUT, "elephant")
@@ -103,10 +105,11 @@ def test_sheet_of_triangles_is_refused(tmp_path):
 
 
 def _complete(args):
-    return CliRunner().invoke(main, ["shape", "complete", *args, "-n", "12", "--iterations",
-                                     "20", "--max-iter", "2", "--quiet"])
+    return run_cli("shape", "complete", *args, "-n", "12", "--iterations",
+                   "20", "--max-iter", "2", "--quiet")
 
 
+@pytest.mark.slow
 def test_cli_completes_a_mesh_with_holes_with_one_warning(tmp_path, cow_with_holes):
     result = _complete([str(cow_with_holes), "-d", str(SAMPLES / "cow.off"),
                         "-d", str(SAMPLES / "elephant.off"), "-o", str(tmp_path / "c.obj")])

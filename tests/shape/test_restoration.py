@@ -49,6 +49,7 @@ def test_cut_mesh_removes_the_end_and_closes_the_cut():
     assert itself.iou_partial < 0.95 and itself.cut_fraction > 0.05
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "fraction", "from_top"),
     [("elephant.off", 0.3, True), ("triceratops.off", 0.25, False), ("bull.ply", 0.35, True),
@@ -91,6 +92,7 @@ def _is_added_colour(image: np.ndarray) -> np.ndarray:
     return (image.max(axis=-1) > 0.15) & (np.abs(norm - rgb / rgb.max()).max(axis=-1) < 0.12)
 
 
+@pytest.mark.slow
 def test_sheet_draws_the_input_and_the_added_part_in_the_input_frame(tmp_path):
     whole = read_mesh(SAMPLES / "cow.off")
     partial = cut_mesh(whole, 1, 0.3, from_top=False)  # the legs

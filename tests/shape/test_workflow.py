@@ -17,6 +17,7 @@ from wbcgrade.shape.workflow import complete_mesh_file, project_volume_file
 FAST = {"resolution": 12, "n_iter": 20, "max_iter": 3}
 
 
+@pytest.mark.slow
 def test_complete_mesh_file_reports_progress_and_files(tmp_path):
     folder = tmp_path / "db"
     folder.mkdir()

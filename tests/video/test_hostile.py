@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import THREE_STYLES
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.color.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
@@ -75,7 +74,7 @@ def clips(tmp_path_factory) -> dict[str, Path]:
 
 
 def run(*args):
-    return CliRunner().invoke(main, ["video", *map(str, args)])
+    return run_cli("video", *map(str, args))
 
 
 def refused(result, *words) -> str:
@@ -103,6 +102,7 @@ def outputs(folder: Path) -> list[str]:
 
 # --- 4: alpha ----------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, codec, suffix", [("alpha.mov", "prores", ".mov"),
                                                  ("rgba.mov", "ffv1", ".mkv")])
 def test_alpha_is_carried_through_untouched_and_the_colour_graded(clips, tmp_path, name, codec,
@@ -118,6 +118,7 @@ def test_alpha_is_carried_through_untouched_and_the_colour_graded(clips, tmp_pat
     assert np.abs(after[..., :3] - before[..., :3]).mean() > 5 * 257  # the colours graded
 
 
+@pytest.mark.slow
 def test_transparent_pixels_do_not_count_in_the_grade(tmp_path):
     """A clip whose left half is transparent magenta grades as its opaque right half alone."""
     half = tmp_path / "half.mov"
@@ -151,6 +152,7 @@ def test_a_truncated_clip_is_refused_not_graded_short(clips, tmp_path):
     assert outputs(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_a_clip_cut_by_stream_copy_is_graded_to_its_visible_length(clips, tmp_path):
     """Not a truncation: the probe counts 50 packets, 37 frames are shown; all 37 come out."""
     out = tmp_path / "graded.mp4"
@@ -165,6 +167,7 @@ def test_a_clip_cut_by_stream_copy_is_graded_to_its_visible_length(clips, tmp_pa
 
 # --- 7: every output together or none ----------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_lut_that_cannot_be_written_publishes_no_clip(clips, tmp_path, monkeypatch):
     """A full disk under --lut (case 15 too: the message names the LUT, not a bare
     [Errno 28]); a rerun then works (nothing left that 'exists')."""
@@ -189,6 +192,7 @@ def test_a_lut_that_cannot_be_written_publishes_no_clip(clips, tmp_path, monkeyp
     assert outputs(tmp_path) == ["grade.cube", "graded.mkv"]
 
 
+@pytest.mark.slow
 def test_a_report_that_cannot_be_written_publishes_no_clip(clips, tmp_path, monkeypatch):
     import wbcgrade.video.report as report
 
@@ -204,6 +208,7 @@ def test_a_report_that_cannot_be_written_publishes_no_clip(clips, tmp_path, monk
 
 # --- 8: bit depth and interlacing --------------------------------------------------------------
 
+@pytest.mark.slow
 def test_twelve_bits_are_kept_where_the_codec_can_and_said_where_not(clips, tmp_path):
     kept = tmp_path / "x265.mp4"
     result = run(clips["hevc12.mp4"], "-o", kept, "--codec", "x265", *FAST)
@@ -216,6 +221,7 @@ def test_twelve_bits_are_kept_where_the_codec_can_and_said_where_not(clips, tmp_
     assert "--codec x265" in warning[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("codec, suffix", [("x264", ".mp4"), ("ffv1", ".mkv")])
 def test_interlaced_footage_keeps_its_field_order(clips, tmp_path, codec, suffix):
     assert probe(clips["interlaced.mp4"]).field_order == "tt"
@@ -227,6 +233,7 @@ def test_interlaced_footage_keeps_its_field_order(clips, tmp_path, codec, suffix
 
 # --- 9: playlists ------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, text", [
     ("list.ffconcat", "ffconcat version 1.0\nfile 'fifo.mp4'\n"),
     ("list.m3u8", "#EXTM3U\n#EXT-X-TARGETDURATION:1\n#EXTINF:1,\nfifo.ts\n#EXT-X-ENDLIST\n")])
@@ -264,6 +271,7 @@ def _wait_for_work_folder(proc: subprocess.Popen, temp: Path) -> None:
         time.sleep(0.005)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
 def test_sigterm_and_sighup_clean_up_like_ctrl_c(clips, tmp_path, signum):
     temp, out = tmp_path / "tmp", tmp_path / "out"
@@ -278,6 +286,7 @@ def test_sigterm_and_sighup_clean_up_like_ctrl_c(clips, tmp_path, signum):
     assert _work_folders(temp) == [] and outputs(out) == []
 
 
+@pytest.mark.slow
 def test_the_work_folder_of_a_killed_run_is_removed_by_the_next(clips, tmp_path):
     temp, out = tmp_path / "tmp", tmp_path / "out"
     temp.mkdir()
@@ -324,6 +333,7 @@ def test_an_odd_size_the_codec_cannot_store_is_ffmpegs_reason_before_the_fit(cli
 
 # --- 15: a full TMPDIR ---------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_full_temporary_folder_is_named(clips, tmp_path, monkeypatch):
     import wbcgrade.video.workflow as workflow
 

@@ -31,7 +31,7 @@ def test_a_signal_just_after_the_work_folder_is_made_still_removes_it(tmp_path, 
     monkeypatch.setattr(os, "mkdir", mkdir_then_signal)
     previous = signal.signal(signal.SIGTERM, terminate)
     try:
-        with pytest.raises(Terminated):
+        with pytest.raises(Terminated, match=str(int(signal.SIGTERM))):
             with workflow.work_folder():
                 pytest.fail("the signal was not handled before the work began")
     finally:

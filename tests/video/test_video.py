@@ -28,10 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from tests.color.conftest import THREE_STYLES
-from wbcgrade.cli import main
+from tests.conftest import run_cli
 from wbcgrade.color.colorspace import convert
 from wbcgrade.color.lut import read_cube
 from wbcgrade.color.remap import apply_color_map
@@ -84,7 +83,7 @@ def clips(tmp_path_factory) -> dict[str, Path]:
 
 
 def run(*args) -> object:
-    result = CliRunner().invoke(main, ["video", *map(str, args)])
+    result = run_cli("video", *map(str, args))
     return result
 
 
@@ -112,6 +111,7 @@ def digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+@pytest.mark.slow
 def test_default_x264_keeps_frames_rate_audio_tags_and_writes_lut_and_report(clips, tmp_path):
     out, lut, report = tmp_path / "graded.mp4", tmp_path / "grade.cube", tmp_path / "report"
     result = run(clips["x264"], "-o", out, *FAST, "--lut", lut, "--report", report)
@@ -136,6 +136,7 @@ def test_default_x264_keeps_frames_rate_audio_tags_and_writes_lut_and_report(cli
     assert "weights" not in shot and "loss" not in shot
 
 
+@pytest.mark.slow
 def test_every_frame_is_the_lut_applied_to_the_input_and_nothing_flickers(clips, tmp_path):
     out, lut = tmp_path / "graded.mkv", tmp_path / "grade.cube"
     result = run(clips["rgb"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS, "--lut", lut)
@@ -150,6 +151,7 @@ def test_every_frame_is_the_lut_applied_to_the_input_and_nothing_flickers(clips,
     assert mean_steps(after).max() <= mean_steps(before).max() + 1 / 255
 
 
+@pytest.mark.slow
 def test_per_shot_two_grades_blended_at_the_cut_and_no_jump_elsewhere(clips, tmp_path):
     out, lut = tmp_path / "graded.mkv", tmp_path / "grade.cube"
     result = run(clips["cut"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS, "--per-shot",
@@ -234,6 +236,7 @@ def _json(result) -> dict:
     return json.loads(result.output[result.output.index("{"):])
 
 
+@pytest.mark.slow
 def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     """A shot's grade is the one grade path of photos on its frames' pooled palette, and its
     LUT the map sampled at the LUT's nodes (sRGB footage graded in sRGB)."""
@@ -263,6 +266,7 @@ def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     assert np.array_equal(shot.table, color_map_to_lut(before.color_map, 33).astype(np.float32))
 
 
+@pytest.mark.slow
 def test_explicit_srgb_spaces_equal_the_default(clips, tmp_path):
     outputs = {}
     for name, spaces in (("default", []),
@@ -286,6 +290,7 @@ def acescct(clips, tmp_path_factory) -> dict:
     return {"output": out, "lut": lut, "json": document}
 
 
+@pytest.mark.slow
 def test_acescct_working_space_bakes_the_lut_in_the_clips_encoding(clips, acescct, tmp_path):
     out, lut, color = acescct["output"], acescct["lut"], acescct["json"]["color"]
     assert (color["input_space"], color["working_space"]) == ("sRGB Encoded Rec.709 (sRGB)",
@@ -347,6 +352,7 @@ def test_unknown_spaces_are_one_line_errors(clips, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_pq_clip_is_graded_in_its_rec2100_pq_space(clips, acescct, tmp_path):
     out, lut = tmp_path / "graded.mkv", tmp_path / "grade.cube"
     document = _json(run(clips["pq"], "-o", out, "--codec", "ffv1", *FAST, *WEIGHTS,

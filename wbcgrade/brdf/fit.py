@@ -25,14 +25,14 @@ wasserstein``). Entropic ``W`` is not smallest at ``P = q``: it is lower for
 a blurrier ``P`` (more entropy), so it pulls the weights towards broad
 materials. On a target that is itself a barycenter of the six sample
 materials with weights 0.5 / 0 / 0.3 / 0 / 0.2 / 0 (N = 288,
-``samples/brdf/recovery.py``) it returns the weights given in the README,
+``samples/brdf/recovery.py``) it returns the weights given in ``docs/brdf.md``,
 with the white Lambert material taking a weight the target does not have.
 The default is therefore the *Sinkhorn divergence*
 ``S(P, q) = W(P, q) - W(P, P) / 2 - W(q, q) / 2`` (Feydy et al. 2019): the
 same entropic Wasserstein loss with its self-transport bias removed, zero
 at ``P = q``, still a transport loss (it compares lobes by how far their
 mass must move, not bin by bin). It recovers the known weights from all
-and from 10% of the measurements (README), for twice the Sinkhorn solves
+and from 10% of the measurements (``docs/brdf.md``), for twice the Sinkhorn solves
 of ``W``; its gradient is checked against finite differences on the
 hemisphere (``tests/brdf``).
 

@@ -1,7 +1,7 @@
 """``wbcgrade explore``: steer the grade ``apply`` gives a photo in a live local page, then
 save the photo or export the grade.
 
-The pieces (the README's "Explore" section has the user's view):
+The pieces (``docs/explore.md`` has the user's view):
 
 - :mod:`.engine`: the one module that calls the colour library (load the
   photo and styles, fit, fast and exact colour maps, LUT export, the
