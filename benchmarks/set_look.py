@@ -34,8 +34,8 @@ def style_photos(count: int) -> list[Path]:
 
 
 def one_run(files: list[Path], warm_cache: Path | None) -> dict[str, float]:
-    from wbcgrade.color import look
     from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import load_style_folder
 
     look._SET_LOOKS.clear()

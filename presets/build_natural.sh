@@ -1,6 +1,6 @@
 #!/bin/sh
 # Rebuild the natural (ungraded) palettes shipped in wbcgrade/color/data/natural.npz,
-# the content model of look extraction (wbcgrade/color/look.py).
+# the content model of look extraction (wbcgrade/color/look/set_extraction.py).
 # Run from the repository root:
 #   python presets/gather_natural.py CORPUS      # photos of presets/natural_corpus.csv
 #   sh presets/build_natural.sh CORPUS/photos

@@ -154,7 +154,7 @@ TABLE_HEAD = """# Natural palettes
 
 `natural.npz` holds the colour histograms (32³ bins, sRGB-encoded, stored
 compact: 16-bit bins) of the {count} ungraded photos below. Look extraction
-(`wbcgrade/color/look.py`) uses them as its model of what ungraded palettes look
+(`wbcgrade/color/look/set_extraction.py`) uses them as its model of what ungraded palettes look
 like. Only the histograms are shipped, never the photos.
 
 The photos come from Debian (bookworm) packages; `presets/natural_corpus.csv`

@@ -34,7 +34,7 @@ from tests.conftest import run_cli as run
 from wbcgrade.color.options import FitOptions, RegrainOptions
 from wbcgrade.color.presets import load_preset
 from wbcgrade.color.remap import apply_color_map
-from wbcgrade.color.saved_look import load_look
+from wbcgrade.color.saved_grade import load_look
 from wbcgrade.errors import InputError, OptionError
 
 REPO = Path(__file__).resolve().parents[2]
@@ -265,7 +265,7 @@ def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(
     path = _write_look(tmp_path / "bomb.json", entry)
     assert path.stat().st_size < 2 * 2 ** 20
     done = in_small_memory(f"""
-        from wbcgrade.color.saved_look import load_look
+        from wbcgrade.color.saved_grade import load_look
         from wbcgrade.errors import InputError
         try:
             load_look({str(path)!r})
@@ -281,7 +281,7 @@ def test_a_spi3d_declaring_500_cubed_is_refused_before_its_table_is_made(tmp_pat
     path = tmp_path / "big.spi3d"
     path.write_text("SPILUT 1.0\n3 3\n500 500 500\n0 0 0 0.5 0.5 0.5\n")
     done = in_small_memory(f"""
-        from wbcgrade.color.saved_look import load_look
+        from wbcgrade.color.saved_grade import load_look
         from wbcgrade.errors import InputError
         try:
             load_look({str(path)!r})

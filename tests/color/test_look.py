@@ -138,7 +138,7 @@ def test_a_look_every_style_shows_is_applied_and_one_the_styles_disagree_on_is_n
         monkeypatch):
     """The transport extraction (the statistics one: tests/color/test_look_statistics.py,
     on photos with more colours than these four-band scenes)."""
-    from wbcgrade.color import look
+    from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
     monkeypatch.setattr(look, "SET_LOOK_METHOD", "transport")
@@ -244,7 +244,7 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path, cli):
 
 
 def test_shrinking_keeps_what_the_styles_agree_on_and_drops_what_they_do_not():
-    from wbcgrade.color.look import _shrunk
+    from wbcgrade.color.look.set_extraction import _shrunk
 
     rng = np.random.default_rng(3)
     colors = rng.random((3000, 3))
@@ -293,7 +293,7 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path, cli):
 
 def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypatch):
     """The disk cache is keyed by the extraction's settings as well as the histograms."""
-    from wbcgrade.color import look
+    from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
     def style_set(images):
@@ -312,7 +312,7 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
     monkeypatch.setattr(look, "_SET_LOOKS", {})  # a new process: only the disk cache is left
     assert look.set_look(styles, naturals).info == first.info  # read back from disk
     monkeypatch.setattr(look, "_SET_LOOKS", {})
-    from wbcgrade.color import look_statistics
+    from wbcgrade.color.look import statistics as look_statistics
 
     monkeypatch.setattr(look_statistics, "CONTENT_BIAS", 0.0)
     look.set_look(styles, naturals)
@@ -323,7 +323,7 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""
     import wbcgrade.core
-    from wbcgrade.color import look
+    from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
     def style_set(images):

@@ -1,4 +1,4 @@
-"""``look learn``: before/after pairs become a look (wbcgrade.color.look_learn, the command)."""
+"""``look learn``: before/after pairs become a look (wbcgrade.color.look.learn, the command)."""
 
 import json
 
@@ -7,8 +7,8 @@ import pytest
 
 from tests.color.test_look import LUMA, sample, warm_look
 from wbcgrade.color.histogram import grid_points
-from wbcgrade.color.look_learn import learn_look, learn_look_file, pair_files
-from wbcgrade.color.saved_look import load_look
+from wbcgrade.color.look.learn import learn_look, learn_look_file, pair_files
+from wbcgrade.color.saved_grade import load_look
 
 STYLE = ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")
 WIDTH = 240
@@ -327,7 +327,7 @@ def test_a_crop_of_the_original_shape_is_not_laid_on_it_turned():
     the window's own envelope), and the pair taught the look a mirror image of the scene."""
     import cv2
 
-    from wbcgrade.color.look_learn import PairImages, pair_colours, register_pair
+    from wbcgrade.color.look.learn import PairImages, pair_colours, register_pair
 
     before = sample("bridge", 480).astype(np.float32)
     looked = warm_look(before).astype(np.float32)

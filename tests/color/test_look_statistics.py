@@ -1,10 +1,10 @@
-"""A set's look from statistics content hardly moves (wbcgrade.color.look_statistics)."""
+"""A set's look from statistics content hardly moves (wbcgrade.color.look.statistics)."""
 
 import numpy as np
 import pytest
 
 from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.look_statistics import (
+from wbcgrade.color.look.statistics import (
     LUMA,
     QUANTILES,
     palette_statistics,
@@ -140,7 +140,7 @@ def test_few_natural_palettes_still_give_a_finite_look(n_naturals):
 
 
 def test_the_grade_applies_the_statistics_look_of_a_style_set_as_far_as_its_halves_agree():
-    from wbcgrade.color import look
+    from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
     def style_set(images):

@@ -17,7 +17,7 @@ from hypothesis.extra.numpy import arrays
 from wbcgrade.color.colorspace import ColorEncoding, convert, resolve_space
 from wbcgrade.color.lut import read_cube, write_cube
 from wbcgrade.color.options import FitOptions, MapOptions, RegrainOptions
-from wbcgrade.color.saved_look import load_look, look_dict, look_from_dict
+from wbcgrade.color.saved_grade import load_look, look_dict, look_from_dict
 from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError, OptionError
 

@@ -110,7 +110,7 @@ def test_video_takes_a_look(tmp_path):
 
 def test_cube_files_read_back_as_written(tmp_path, rng):
     from wbcgrade.color.lut import write_cube
-    from wbcgrade.color.saved_look import SAMPLED_LUT_SIZE, load_look
+    from wbcgrade.color.saved_grade import SAMPLED_LUT_SIZE, load_look
 
     table = rng.random((5, 5, 5, 3))
     path = write_cube(tmp_path / "r.cube", table)

@@ -1,4 +1,4 @@
-"""The photo's own scene among the style photos (wbcgrade.color.scene): found, and its look
+"""The photo's own scene among the style photos (wbcgrade.color.look.scene): found, and its look
 read off the overlap; photos of other scenes are not matched."""
 
 from pathlib import Path
@@ -8,7 +8,7 @@ import pytest
 
 from tests.color.test_look import halves, sample, warm_look
 from wbcgrade.color.look import find_scene_look, fit_scene_look
-from wbcgrade.color.scene import match_scene, scene_image
+from wbcgrade.color.look.scene import match_scene, scene_image
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 NAMES = ("aitzgorri", "coffee", "flower", "seeding", "sunset")

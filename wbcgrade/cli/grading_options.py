@@ -85,7 +85,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
 
     from click.core import ParameterSource
 
-    from wbcgrade.color.saved_look import load_look
+    from wbcgrade.color.saved_grade import load_look
     from wbcgrade.errors import OptionError
 
     def given(name: str) -> bool:

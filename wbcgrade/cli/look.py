@@ -50,7 +50,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
 
     from wbcgrade.cli._progress import style_progress
     from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.look_extract import extract_look_file
+    from wbcgrade.color.look.extract import extract_look_file
     from wbcgrade.color.presets import StyleSource
     from wbcgrade.errors import OptionError
 
@@ -114,7 +114,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     """
     from tqdm import tqdm
 
-    from wbcgrade.color.look_learn import learn_look_file
+    from wbcgrade.color.look.learn import learn_look_file
 
     with tqdm(desc="pairs", unit="pair", disable=None, leave=False) as bar:
         def on_pair(done: int, total: int, name: str) -> None:

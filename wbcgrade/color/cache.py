@@ -6,7 +6,7 @@ Three things are kept between runs, each in its own place under one cache folder
 - style photos' histograms (``color.histogram.HistogramCache``): at the folder's
   top, where they have always been;
 - a style set's look and the natural palettes' statistics (``color.look``): ``looks/``;
-- style photos prepared for scene matching (``color.scene``): ``scenes/``.
+- style photos prepared for scene matching (``color.look.scene``): ``scenes/``.
 
 An entry is one ``.npz`` archive (no pickle) named by a digest of its key text
 (:func:`entry_path`), so a key may hold any file name: unicode, spaces, a name

@@ -394,7 +394,7 @@ def _config_name(path: str, version: str) -> str:
 #: order, the grey of written files, the scene and pair matchers' 8-bit lightness.
 SYCC_LUMA = (0.299, 0.587, 0.114)
 #: The Rec.709 primaries' weights (BT.709): of linear values their luminance (the grey
-#: of scene-linear pixels), of encoded ones the look family's luma (look_statistics.LUMA).
+#: of scene-linear pixels), of encoded ones the look family's luma (look.statistics.LUMA).
 REC709_LUMA = (0.2126, 0.7152, 0.0722)
 
 

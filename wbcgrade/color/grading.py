@@ -11,8 +11,8 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
      (:func:`wbcgrade.color.fit.fit_weights`: barycentric coordinates never
      worse than the best single style), then the fitted palette, Sinkhorn
      and the smooth map (:func:`wbcgrade.color.transfer.transport_map`);
-   - "look" (:func:`look_map`): the look the style set shares
-     (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
+   - "look" (:func:`wbcgrade.color.look.builder.look_map`): the look the style
+     set shares (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
      photo by how sure it is that a style shows the photo's own scene;
 
 3. the map finished in the working space's own terms (monotone in its
@@ -25,8 +25,9 @@ A series (``batch --consistent``, a video shot) takes the same path with a
 pooled histogram (:class:`wbcgrade.color.histogram.PaletteSum`).
 
 Other ways of building the map plug in with :func:`register_map_builder`:
-a builder takes a :class:`MapRequest` (the photo's histograms, the styles
-in the working space, the options, the encoding, progress callbacks) and
+a builder (:mod:`wbcgrade.color.builders`) takes a :class:`MapRequest` (the
+photo's histograms, the styles in the working space, the options, the
+encoding, progress callbacks, the grade path itself for a palette grade) and
 returns a :class:`BuiltMap` (the map before finishing, the palette it aimed
 at, diagnostics, timings, and the weights with how sure it is of them).
 
@@ -49,13 +50,21 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
 
 import numpy as np
 
+from wbcgrade.color.builders import (
+    BuiltMap,
+    FitCallback,
+    MapRequest,
+    PhotoHistograms,
+    palette_map,
+    quiet,
+)
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary, fit_weights
-from wbcgrade.color.histogram import image_histogram, resample_histogram
+from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.look.builder import look_map
 from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.outcome import (
@@ -75,7 +84,6 @@ from wbcgrade.color.remap import (
     apply_color_map,
     identity_map,
     keep_lightness,
-    monochrome_map,
     monochrome_toning,
     monotone_lightness,
     to_monochrome,
@@ -87,17 +95,9 @@ __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
            "grade_histograms", "grade_outcome", "outcome_on_photo", "strengthened",
            "grade_encoded", "grade_array"]
 
-FitCallback = Callable[[int, np.ndarray, float], None]
-
-#: Nodes per axis (at least) of a preset's look converted into another working space
-#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills 0.07-0.55 of ACEScct's
-#: cube, where 33 nodes left a JPEG graded in ACEScct 1.2/255 from the sRGB grade on
-#: average (99th percentile 8.5), 65 nodes 0.36 (3.8) (kodak-2383 on samples/coffee.jpg).
-CONVERTED_LOOK_SIZE = 65
 
 
-def _quiet(name: str) -> None:
-    """A stage callback that says nothing."""
+
 
 
 @dataclass(frozen=True)
@@ -191,25 +191,6 @@ class Grade:
 # ------------------------------------------------------------------------------ builders
 
 
-@dataclass(frozen=True)
-class PhotoHistograms:
-    """A photo's (or a series') histograms: ``fit`` on the fit grid, ``transfer`` on the
-    transfer grid, both of working-space colours; :meth:`at` gives other grids."""
-
-    fit: np.ndarray
-    transfer: np.ndarray
-    pixels: tuple | None = field(default=None, repr=False, compare=False)
-
-    def at(self, bins: int) -> np.ndarray:
-        """The histogram on a ``bins``^3 grid: binned from the pixels when there are
-        some (a photo), else re-binned from the transfer grid's (a pooled series)."""
-        for hist in (self.transfer, self.fit):
-            if hist.shape[0] == bins:
-                return hist
-        if self.pixels is not None:
-            encoded, alpha, limit = self.pixels
-            return image_histogram(encoded, bins, alpha, limit)
-        return resample_histogram(self.transfer, bins)
 
 
 def photo_histograms(encoded: np.ndarray, options: GradeOptions,
@@ -222,180 +203,14 @@ def photo_histograms(encoded: np.ndarray, options: GradeOptions,
                            (encoded, alpha, limit))
 
 
-@dataclass(frozen=True)
-class MapRequest:
-    """What a map builder gets.
-
-    Attributes
-    ----------
-    photo : the photo's (or series') histograms.
-    styles : the style set, in the working space.
-    options : every setting of the grade.
-    encoding : the colour encoding (working space) of the grade.
-    callback : ``callback(n_evaluations, weights, loss)`` of a weight fit, or None.
-    stage : ``stage(name)`` as each stage starts (progress).
-    """
-
-    photo: PhotoHistograms
-    styles: StyleSet
-    options: GradeOptions
-    encoding: ColorEncoding
-    callback: FitCallback | None = None
-    stage: Callable[[str], None] = _quiet
 
 
-class BuiltMap(NamedTuple):
-    """What a map builder returns: the map before finishing, the palette it aimed at
-    (or None), diagnostics, seconds per stage, and the weights with how sure the
-    builder is of them (a :class:`~wbcgrade.color.fit.FitSummary`)."""
-
-    color_map: np.ndarray
-    palette: np.ndarray | None
-    info: dict
-    timings: dict
-    fit: FitSummary
 
 
-def palette_map(request: MapRequest) -> BuiltMap:
-    """The "palette" builder: the weights (never worse than one style alone), then the
-    map onto their barycenter palette (:func:`wbcgrade.color.transfer.transport_map`)."""
-    # imported here: the transport and its smooth map (scipy.sparse, ~0.1 s) are needed to
-    # build a palette grade, not to apply a saved one
-    from wbcgrade.color.transfer import transport_map
-
-    options, styles = request.options, request.styles
-    request.stage("fit")
-    fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
-                      request.callback)
-    color_map, palette, info, timings = transport_map(request.photo.transfer, styles,
-                                                      fit.weights, options, request.stage)
-    return BuiltMap(color_map, palette, info, {"fit": fit.time_s, **timings}, fit)
 
 
-def look_map(request: MapRequest) -> BuiltMap:
-    """The "look" builder: the set's look, corrected towards the photo's scene.
-
-    The colour map is the look the style set shares
-    (:func:`wbcgrade.color.look.look_color_map`, content modelled by the
-    natural palettes of ``map.natural``), moved towards the photo's palette
-    grade (the "palette" builder with a KL fit and relaxed transport) by how
-    sure it is that a style shows the photo's own scene. Fixed weights
-    (``fit.weights``) give the palette grade.
-    """
-    from wbcgrade.color.look import (
-        MAP_BINS,
-        SCENE_LOSS,
-        SCENE_RELAXATION,
-        find_scene_look,
-        load_naturals,
-        look_color_map,
-        set_look_base,
-    )
-    from wbcgrade.color.scene import has_style_images
-
-    options, styles, say = request.options, request.styles, request.stage
-    if options.fit.weights is not None:
-        return palette_map(request)
-    if styles.look is not None:  # a preset made with a known look: that look
-        from wbcgrade.color.remap import resample_lattice
-
-        n_styles = len(styles.names)
-        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
-                         {"start": "preset", "look": "the preset's own"}, 0.0)
-        size = options.map.size
-        if styles.converted_from:  # converted from the preset's own space: finer,
-            size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
-        return BuiltMap(resample_lattice(styles.look, size), None,
-                        {"look": {"source": "preset"}}, {}, fit)
-    timings: dict[str, float] = {}
-    start = time.perf_counter()
-    say("histograms")
-    photo_hist = request.photo.at(MAP_BINS)
-    timings["histograms"] = time.perf_counter() - start
-    say("look")
-    start = time.perf_counter()
-    naturals = load_naturals(options.map.natural, styles.working_space)
-    n_styles = len(styles.names)
-    if request.photo.pixels is not None:
-        base, extracted, strength = set_look_base(styles, naturals, None, photo_hist)
-        timings["look"] = time.perf_counter() - start
-        say("scene")
-        start = time.perf_counter()
-        no_scene: dict[str, str] = {}
-        scene = find_scene_look(request.photo.pixels[0], styles, base, why=no_scene)
-        timings["scene"] = time.perf_counter() - start
-        if scene is not None and scene.confidence > 0:
-            size = options.map.size
-            base_map = base.lattice(size)
-            color_map = base_map + scene.confidence * (scene.lattice(size) - base_map)
-            total = sum(scene.matches.values())
-            weights = np.full(n_styles, (1.0 - scene.confidence) / n_styles)
-            for index, inliers in scene.matches.items():
-                weights[index] += scene.confidence * inliers / total
-            best = max(scene.matches, key=scene.matches.get)
-            info = {"look": {"set_amplitude": extracted.look.amplitude(),
-                             "set_strength": strength,
-                             "match": styles.names[best], "confidence": scene.confidence,
-                             "scene": {styles.names[i]: n for i, n in scene.matches.items()},
-                             "scene_residual": scene.residual, "pairs": scene.pairs,
-                             **extracted.info}}
-            # per style: the pair residual where it shows the scene, the cube's diagonal elsewhere
-            alone = np.full(n_styles, float(np.sqrt(3.0)))
-            alone[list(scene.matches)] = scene.residual
-            fit = FitSummary(weights, scene.residual, alone, "scene",
-                             {"start": "scene", "match": styles.names[best],
-                              "confidence": scene.confidence}, sum(timings.values()))
-            return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit)
-        if has_style_images(styles):
-            # the style photos were looked at and none shows this scene: the set's look
-            # (a palette that merely resembles the photo's is no better sign of its scene)
-            info = {"look": {"set_amplitude": extracted.look.amplitude(),
-                             "set_strength": strength, "match": None,
-                             "confidence": 0.0, **extracted.info,
-                             "no_scene": no_scene}}
-            fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
-                             "look", {"start": "look", "match": None, "confidence": 0.0},
-                             sum(timings.values()))
-            return BuiltMap(_as_set_look(base.lattice(options.map.size), extracted), None, info,
-                            timings, fit)
-        start = time.perf_counter()
-    base, photo, info = look_color_map(photo_hist, styles, naturals)
-    timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
-    confidence = photo.confidence
-    weights = np.full(n_styles, 1.0 / n_styles)
-    color_map = base.lattice(options.map.size)
-    fit_info: dict = {"start": "look", "match": info["look"]["match"],
-                      "confidence": confidence}
-    if confidence > 0:
-        scene_options = GradeOptions(
-            replace(options.fit, loss=SCENE_LOSS),
-            replace(options.transfer,
-                    relaxation=options.transfer.relaxation or SCENE_RELAXATION),
-            replace(options.map, builder="palette"), options.regrain, options.spaces)
-        scene, summary = grade_histograms(request.photo, styles, scene_options,
-                                          request.encoding, None,
-                                          lambda name: say(f"palette {name}"))
-        for name, seconds in scene.timings.items():
-            timings[f"palette {name}"] = seconds
-        base_map = base.lattice(scene.color_map.shape[0])
-        color_map = (base_map + confidence * (scene.color_map - base_map)).astype(np.float32)
-        weights = confidence * np.asarray(summary.weights) + (1.0 - confidence) * weights
-        fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
-                                 "loss": summary.loss}
-        info.update({k: v for k, v in scene.info.items() if k != "fit"})
-    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
-                     fit_info, sum(timings.values()))
-    if info["look"].get("monochrome"):
-        color_map = monochrome_map(color_map)
-    return BuiltMap(color_map, None, info, timings, fit)
 
 
-def _as_set_look(color_map: np.ndarray, extracted) -> np.ndarray:
-    """The map as the set's look has it: exactly black and white (or toned) when every
-    style photo is (a scene read off such a style is too), float32."""
-    if extracted.info.get("monochrome"):
-        return monochrome_map(color_map)
-    return np.asarray(color_map, dtype=np.float32)
 
 
 #: Map builders by name (``map.builder``): MapRequest -> BuiltMap.
@@ -445,8 +260,11 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     if name not in MAP_BUILDERS:
         raise OptionError(f"map.builder must be one of {', '.join(MAP_BUILDERS)}",
                           "map.builder")
+    def palette_grade(other: GradeOptions, stage: Callable[[str], None]):
+        return grade_histograms(photo, styles, other, encoding, None, stage)
+
     built = MAP_BUILDERS[name](MapRequest(photo, styles, options, encoding, callback,
-                                          stage or _quiet))
+                                          stage or quiet, palette_grade))
     start = time.perf_counter()
     finish = options
     if built.fit.start == FitStart.PRESET and options.map.monotone:

@@ -217,7 +217,7 @@ class MapOptions:
         :func:`wbcgrade.color.grading.register_map_builder`; :data:`MODES`:
         "look" (the default): the look the style set shares, or the look read
         off the style photos that show the photo's own scene
-        (:mod:`wbcgrade.color.scene`); "palette": the fitted barycenter
+        (:mod:`wbcgrade.color.look.scene`); "palette": the fitted barycenter
         palette, (unbalanced) Sinkhorn, smooth map, the paper's colour transfer).
     natural : preset file (.npz) of ungraded photos, or a folder of the user's own
         ungraded photos, the content model of the "look" builder; None: the shipped one.

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import SYCC_LUMA
-from wbcgrade.color.look_statistics import LUMA as LOOK_LUMA
+from wbcgrade.color.colorspace import REC709_LUMA, SYCC_LUMA
 from wbcgrade.core import compiled, in_bands
 
 __all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
@@ -269,8 +268,10 @@ def monotone_lightness(color_map: np.ndarray,
     return out.astype(np.float32)
 
 
-#: Luma of the look family (Rec.709 weights on encoded values) that toning is a function of.
-TONE_LUMA = LOOK_LUMA
+#: Luma of the look family (Rec.709 weights on encoded values) that toning is a function of
+#: (the same weights as :data:`wbcgrade.color.look.statistics.LUMA`; imported from the
+#: colour space here, as the look package imports this module).
+TONE_LUMA = np.array(REC709_LUMA)
 
 
 def monochrome_toning(color_map: np.ndarray, tol: float = 2e-3

@@ -307,7 +307,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
       and the photo gets its own grade (:func:`grade_file`); with
       ``report_dir`` the palette weight report is written too;
     - a :class:`~wbcgrade.color.grading.Grade` (a saved grade,
-      :func:`wbcgrade.color.saved_look.load_look`): applied as it is, in its
+      :func:`wbcgrade.color.saved_grade.load_look`): applied as it is, in its
       own working space, nothing fitted (``fit_start`` "saved"); a report
       needs styles, so ``report_dir`` is an OptionError.
 
@@ -328,7 +328,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
 
         plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
     if saved:
-        from wbcgrade.color.saved_look import look_fit, look_styles
+        from wbcgrade.color.saved_grade import look_fit, look_styles
 
         spaces = options.spaces
         if spaces.working != source.working:
@@ -361,7 +361,7 @@ def _save_grade(plan: PhotoPlan, grade: Grade) -> None:
     import json
 
     from wbcgrade._publish import publish_bytes
-    from wbcgrade.color.saved_look import look_dict
+    from wbcgrade.color.saved_grade import look_dict
 
     entry = look_dict(grade)
     if grade.outcome is not None:

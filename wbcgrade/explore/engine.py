@@ -445,7 +445,7 @@ def _publish_grade(path: Path, grade) -> None:
     import json
 
     from wbcgrade._publish import publish_bytes
-    from wbcgrade.color.saved_look import look_dict
+    from wbcgrade.color.saved_grade import look_dict
 
     publish_bytes(path, json.dumps(look_dict(grade), indent=1).encode("utf-8"),
                   overwrite=False)

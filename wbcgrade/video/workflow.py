@@ -567,7 +567,7 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
             from wbcgrade.color.grading import grade_outcome
-            from wbcgrade.color.saved_look import look_fit
+            from wbcgrade.color.saved_grade import look_fit
 
             grade, fit = look, look_fit(look)
             grade = replace(grade, outcome=grade_outcome(grade, fit, None))

@@ -106,7 +106,7 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite)
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
-        from wbcgrade.color.saved_look import look_fit
+        from wbcgrade.color.saved_grade import look_fit
 
         context.shared, context.shared_fit = look, look_fit(look)
     if encode is not None:
@@ -153,13 +153,13 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     grade, also written as a LUT to ``lut``; with ``report_dir`` the palette
     weight report is written there. Returns the result (``result.lut`` None
     when no photo was graded, so no series grade was made). ``look``: a saved
-    grade (:func:`wbcgrade.color.saved_look.load_look`) applied to every photo
+    grade (:func:`wbcgrade.color.saved_grade.load_look`) applied to every photo
     instead of a fit; ``encode``: JPEG/WebP quality and bit depth of the outputs.
     """
     progress = progress or BatchProgress()
     _check_jobs(jobs)
     if look is not None:
-        from wbcgrade.color.saved_look import look_batch_options
+        from wbcgrade.color.saved_grade import look_batch_options
 
         options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
@@ -203,7 +203,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         if look is None:
             styles = _load(source, options, progress)
         else:
-            from wbcgrade.color.saved_look import look_styles
+            from wbcgrade.color.saved_grade import look_styles
 
             styles = look_styles(look, str(None if look.saved is None else look.saved.file))
         settings = batch_settings(styles, options, consistent)

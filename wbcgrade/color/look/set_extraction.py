@@ -1,4 +1,4 @@
-"""Looks: the global colour map a set of graded photos share, apart from their content.
+"""The look of a set: the global colour map a set of graded photos share, apart from their content.
 
 A folder of style photos is usually one look ``T`` applied to various scenes.
 Each style palette is modelled as ``s_m ~ T # P_N(w_m)``: a Wasserstein
@@ -18,45 +18,40 @@ alternates
 Content differs from style to style and averages out in the pool; what the
 styles share is the look.
 
-The map family (:class:`LookMap`) is what a colourist's look is made of:
-each output channel is the input channel plus a sum of smooth 1-D curves of
-R, G, B and luma (``T_o(x) = x_o + sum_c f_oc(x_c) + g_o(Y)``). It holds
-per-channel tone curves, any 3x3 matrix (saturation, white balance), an
-ASC CDL grade followed by saturation exactly, and split toning by lightness
-closely; it cannot repaint one hue into an unrelated one, so a look fitted
-to a few style photos stays a look.
+What a grade uses of it: :func:`set_look` (by summary statistics by default,
+or the transport iteration above; cached on disk), its reliability from two
+halves of the set (:func:`set_look_halves`, :func:`look_reliability`), the
+look at that strength (:func:`set_look_base`), as a LUT (:func:`set_look_map`),
+and the natural palettes that model content (:func:`natural_palettes`,
+:func:`load_naturals`) with their statistics.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
-from wbcgrade.color.look_statistics import LUMA
-from wbcgrade.color.look_statistics import hats as _hats
-from wbcgrade.color.remap import interpolate_lattice, resample_lattice
+from wbcgrade.color.histogram import add_floor, grid_points
+from wbcgrade.color.look.family import (
+    DEFAULT_KNOTS,
+    DEFAULT_SMOOTHNESS,
+    DEFAULT_WIDTH,
+    LookMap,
+    fit_geometry,
+    fit_look_map,
+    look_coordinates,
+    look_correspondences,
+    push_histogram,
+)
+from wbcgrade.color.remap import resample_lattice
 
-__all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
-           "LookResult", "extract_look", "look_coordinates", "PairFit", "fit_pair",
-           "PhotoLook", "photo_look", "SceneLook", "fit_scene_look", "find_scene_look",
-           "fit_correction", "fit_pairs_look",
-           "set_look_base", "set_look_halves", "look_reliability"]
+__all__ = ["LookResult", "extract_look", "set_look", "set_look_base", "set_look_halves",
+           "look_reliability", "set_look_map", "natural_palettes", "load_naturals",
+           "statistics_set_look"]
 
-
-#: Knots of each 1-D curve, evenly spaced on [0, 1].
-DEFAULT_KNOTS = 9
-
-#: Settings chosen on ``benchmarks/look.py``: plan kernel (bins of a 32^3 grid),
-#: KL relaxation of both marginals, curve smoothness and pull towards the prior
-#: (of a pair's look: :func:`fit_pair`).
-DEFAULT_WIDTH = 1.0
-DEFAULT_RELAXATION = 0.01
-DEFAULT_SMOOTHNESS = 0.03
-DEFAULT_RIDGE = 0.01
 #: Relaxation and pull towards the identity of a SET's look (:func:`extract_look`).
 #: A relaxation of 0.01 leaves out of the plan any move longer than about 0.1 of
 #: the cube (moving that far costs more than dropping the mass), and looks move
@@ -80,177 +75,6 @@ SET_RIDGE = 1e-3
 #: 0.61 (0.6) to 0.53 (1.0): every style's content is the average natural palette,
 #: and the coordinates are not fitted.
 DEFAULT_CONTENT_SHRINK = 1.0
-
-
-@dataclass(frozen=True)
-class LookMap:
-    """A smooth global colour map: identity plus curves of R, G, B and luma per channel.
-
-    ``T_o(x) = x_o + sum_j coefficients[o, j] * features_j(x)`` with the
-    features the hat functions of each of R, G, B and luma (``knots`` each).
-
-    Attributes
-    ----------
-    coefficients : (3, 4 * knots) float64; all zero is the identity.
-    knots : knots per curve.
-    """
-
-    coefficients: np.ndarray
-    knots: int = DEFAULT_KNOTS
-
-    @classmethod
-    def identity(cls, knots: int = DEFAULT_KNOTS) -> LookMap:
-        return cls(np.zeros((3, 4 * knots)), knots)
-
-    @staticmethod
-    def features(rgb: np.ndarray, knots: int = DEFAULT_KNOTS) -> np.ndarray:
-        """(N, 3) colours in [0, 1] -> (N, 4 * knots) feature matrix."""
-        rgb = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
-        luma = rgb @ LUMA
-        return np.concatenate([_hats(rgb[:, 0], knots), _hats(rgb[:, 1], knots),
-                               _hats(rgb[:, 2], knots), _hats(luma, knots)], axis=1)
-
-    def __call__(self, rgb: np.ndarray) -> np.ndarray:
-        """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
-        rgb = np.asarray(rgb, dtype=np.float64)
-        flat = rgb.reshape(-1, 3)
-        out = flat + self.features(flat, self.knots) @ self.coefficients.T
-        return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
-
-    def lattice(self, size: int = 33) -> np.ndarray:
-        """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
-        return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
-
-    def amplitude(self, size: int = 17) -> float:
-        """Mean displacement |T(x) - x| over the colour cube (0 for the identity)."""
-        points = grid_points(size)
-        return float(np.mean(np.linalg.norm(self(points) - points, axis=1)))
-
-
-def _second_difference(knots: int) -> np.ndarray:
-    d = np.zeros((knots - 2, knots))
-    for i in range(knots - 2):
-        d[i, i:i + 3] = (1.0, -2.0, 1.0)
-    return d
-
-
-def fit_look_map(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
-                 prior: LookMap | None = None, smoothness: float = 3e-3,
-                 ridge: float = 1e-3, knots: int = DEFAULT_KNOTS) -> LookMap:
-    """The :class:`LookMap` that best moves ``sources`` onto ``targets`` (weighted least squares).
-
-    Minimises ``sum_i w_i |T(x_i) - y_i|^2 + ridge |theta - theta_prior|^2
-    + smoothness |D2 theta|^2`` (``D2``: second differences along each curve;
-    the weights are normalised to sum 1, so both penalties are in colour
-    units squared whatever the number of points).
-
-    Parameters
-    ----------
-    sources, targets : (N, 3) colours in [0, 1].
-    weights : (N,) non-negative.
-    prior : the map the ridge pulls towards (default the identity).
-    """
-    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
-    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    weights = np.asarray(weights, dtype=np.float64).ravel()
-    total = weights.sum()
-    if not total > 0:
-        return prior if prior is not None else LookMap.identity(knots)
-    weights = weights / total
-    if prior is None or prior.knots != knots:
-        prior = LookMap.identity(knots)
-    features = LookMap.features(sources, knots)
-    n_features = features.shape[1]
-    weighted = features * weights[:, None]
-    gram = features.T @ weighted
-    d2 = _second_difference(knots)
-    block = d2.T @ d2
-    penalty = np.zeros((n_features, n_features))
-    for g in range(4):
-        sl = slice(g * knots, (g + 1) * knots)
-        penalty[sl, sl] = smoothness * block
-    system = gram + penalty + ridge * np.eye(n_features)
-    rhs = weighted.T @ (targets - sources) + ridge * prior.coefficients.T
-    coefficients = np.linalg.solve(system, rhs).T
-    return LookMap(coefficients, knots)
-
-
-def push_histogram(hist: np.ndarray, look: LookMap, bins: int | None = None) -> np.ndarray:
-    """The histogram of the colours of ``hist`` moved through ``look`` (soft binning).
-
-    (n, n, n) -> (bins, bins, bins), default ``bins = n``; sums to 1.
-    """
-    n = hist.shape[0]
-    flat = hist.ravel()
-    keep = np.flatnonzero(flat > 0)
-    points = grid_points(n)[keep]
-    return soft_histogram(look(points), bins or n, flat[keep])
-
-
-def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float = 1.5,
-                            relaxation: float = 0.01, n_iter: int = 300,
-                            floor: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    """Where each colour of ``source`` goes under unbalanced transport to ``target``.
-
-    Entropic transport on the (n, n, n) grid with both marginals relaxed by
-    ``relaxation * KL`` (scalings raised to ``rho / (rho + gamma)``; Chizat et
-    al. 2018), solved in the log domain.
-
-    Parameters
-    ----------
-    source, target : (n, n, n) histograms.
-    width : kernel standard deviation in bins.
-
-    Returns
-    -------
-    projection : (n, n, n, 3) barycentric projection ``(K (b x)) / (K b)`` of every bin.
-    kept : (n, n, n) share of each source bin's mass the plan moves (0..~1).
-    """
-    from wbcgrade.core import GridGeometry
-
-    n = source.shape[0]
-    geometry = GridGeometry.with_width((n,) * 3, width)
-    tau = relaxation / (relaxation + geometry.gamma)
-    log_p = np.log(add_floor(source / source.sum(), floor))
-    log_q = np.log(add_floor(target / target.sum(), floor))
-    f = np.zeros_like(log_p)
-    g = np.zeros_like(log_q)
-    for _ in range(n_iter):
-        f_new = tau * (log_p - geometry.log_apply(g))
-        g = tau * (log_q - geometry.log_apply(f_new))
-        change = np.max(np.abs(f_new - f))
-        f = f_new
-        if change < 1e-6:
-            break
-    log_kb = geometry.log_apply(g)
-    axis = np.linspace(0.0, 1.0, n)
-    shifted = [axis.reshape(shape) + 1.0 for shape in ((n, 1, 1), (1, n, 1), (1, 1, n))]
-    projection = np.stack(
-        [np.exp(geometry.log_apply(g + np.log(np.broadcast_to(s, g.shape))) - log_kb) - 1.0
-         for s in shifted], axis=-1)
-    kept = np.exp(f + log_kb - log_p)
-    return np.clip(projection, 0.0, 1.0), np.clip(kept, 0.0, 1.0)
-
-
-def _fit_geometry(bins: int):
-    from wbcgrade.core import GridGeometry
-
-    return GridGeometry((bins,) * 3, 2.0 * (1.5 / (bins - 1)) ** 2)
-
-
-def look_coordinates(target: np.ndarray, palettes: np.ndarray, floor: float = 1e-4,
-                     max_iter: int = 15) -> tuple[np.ndarray, float]:
-    """KL barycentric coordinates of ``target`` (m, m, m) over ``palettes`` (K, m, m, m).
-
-    Returns (weights (K,), loss).
-    """
-    from wbcgrade.core import barycentric_coordinates
-
-    bins = target.shape[0]
-    result = barycentric_coordinates(
-        add_floor(target, floor), np.stack([add_floor(h, floor) for h in palettes]),
-        _fit_geometry(bins), loss="kl", n_iter=30, max_iter=max_iter, tol=1e-5)
-    return np.asarray(result.weights, dtype=np.float64), float(result.loss)
 
 
 @dataclass
@@ -303,7 +127,7 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
     natural_map = naturals[map_bins]
     style_weights = (np.ones(n_styles) if style_weights is None
                      else np.asarray(style_weights, dtype=np.float64))
-    geometry = _fit_geometry(map_bins)
+    geometry = fit_geometry(map_bins)
     all_weights = np.zeros((n_styles, len(natural_map)))
     losses = np.zeros(n_styles)
     average = content_shrink >= 1.0  # every style's content: the average natural palette
@@ -325,7 +149,7 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
                 keep = np.flatnonzero(weights > 1e-3)
                 content = barycenter(np.stack([add_floor(h, 1e-6) for h in natural_map[keep]]),
                                      weights[keep] / weights[keep].sum(), geometry, 60)
-            points, moved_to, mass, _ = _correspondences(content, styles[map_bins][m], look,
+            points, moved_to, mass, _ = look_correspondences(content, styles[map_bins][m], look,
                                                          width, relaxation)
             sources.append(points)
             targets.append(moved_to)
@@ -386,337 +210,6 @@ def _shrunk(pooled: LookMap, each: list[LookMap], size: int = 17) -> LookMap:
                         1e-4, 1e-6, pooled.knots)
 
 
-def _correspondences(photo: np.ndarray, style: np.ndarray, look: LookMap, width: float,
-                     relaxation: float):
-    """Colours of ``photo`` (n^3 grid), where ``look`` then the relaxed plan to ``style`` send
-    them, and the mass each moved: (points (N, 3), targets (N, 3), mass (N,), moved (N, 3))."""
-    n = photo.shape[0]
-    flat = photo.ravel()
-    used = np.flatnonzero(flat > 1e-7)
-    points = grid_points(n)[used]
-    moved = look(points)
-    projection, kept = relaxed_correspondences(push_histogram(photo, look), style, width,
-                                               relaxation)
-    mass = flat[used] * interpolate_lattice(kept[..., None], moved)[:, 0]
-    return points, interpolate_lattice(projection, moved), mass, moved
-
-
-@dataclass(frozen=True)
-class PairFit:
-    """The look that moves one photo's palette onto one style's.
-
-    Attributes
-    ----------
-    look : the fitted map.
-    residual : mean squared distance (colour units) still left between the
-        photo's colours after the map and where the relaxed plan sends them:
-        small when the style is the photo's own scene in some look.
-    kept : share of the photo's mass the relaxed plan moved.
-    overlap : shared mass of the mapped photo's histogram and the style's
-        (each blurred by half a bin; 1 = the same palette): high when the
-        style shows the photo's own scene.
-    """
-
-    look: LookMap
-    residual: float
-    kept: float
-    overlap: float = 0.0
-
-
-def fit_pair(photo: np.ndarray, style: np.ndarray, prior: LookMap | None = None,
-             rounds: int = 2, width: float = DEFAULT_WIDTH,
-             relaxation: float = DEFAULT_RELAXATION, smoothness: float = DEFAULT_SMOOTHNESS,
-             ridge: float = DEFAULT_RIDGE) -> PairFit:
-    """Fit the look taking a photo's palette to a style palette (same (n, n, n) grid).
-
-    Starts at ``prior`` (default identity) and alternates ``rounds`` times a
-    relaxed plan from the mapped palette to the style and a refit of the map
-    (pulled towards ``prior`` by ``ridge``).
-    """
-    prior = prior or LookMap.identity()
-    look = prior
-    for _ in range(rounds):
-        points, targets, mass, _ = _correspondences(photo, style, look, width, relaxation)
-        look = fit_look_map(points, targets, mass, prior, smoothness, ridge, prior.knots)
-    _, targets, mass, moved = _correspondences(photo, style, look, width, relaxation)
-    total = max(float(mass.sum()), 1e-300)
-    residual = float(np.sum(mass * np.sum((targets - moved) ** 2, axis=1)) / total)
-    return PairFit(look, residual, float(mass.sum() / photo.sum()),
-                   _overlap(push_histogram(photo, look), style))
-
-
-def _overlap(first: np.ndarray, second: np.ndarray, blur: float = 0.5) -> float:
-    """Shared mass of two histograms, each blurred by ``blur`` bins and normalised."""
-    from scipy.ndimage import gaussian_filter
-
-    a = gaussian_filter(first / first.sum(), blur, mode="constant")
-    b = gaussian_filter(second / second.sum(), blur, mode="constant")
-    return float(np.minimum(a / a.sum(), b / b.sum()).sum())
-
-
-@dataclass(frozen=True)
-class PhotoLook:
-    """The look for one photo: the set's look, corrected towards its own scene when found.
-
-    Attributes
-    ----------
-    look : the map to apply.
-    match : index of the style whose scene fits the photo best.
-    confidence : in [0, 1], how far the correction towards that style was taken.
-    residuals : (S,) :attr:`PairFit.residual` of every style.
-    overlap : :attr:`PairFit.overlap` of the match.
-    """
-
-    look: LookMap
-    match: int
-    confidence: float
-    residuals: np.ndarray
-    overlap: float = 0.0
-
-    @property
-    def weights(self) -> np.ndarray:
-        """(S,) weight of each style in the grade: ``confidence`` on the match, rest shared."""
-        n = len(self.residuals)
-        weights = np.full(n, (1.0 - self.confidence) / n)
-        weights[self.match] += self.confidence
-        return weights
-
-
-#: Match ratio (best residual over the median of the others) at or above which
-#: no style counts as the photo's own scene, and at or below which one surely does.
-UNSURE_RATIO = 0.75
-SURE_RATIO = 0.35
-#: Overlap of the mapped photo's palette with the match's at or below which the
-#: match is not the photo's scene, and at or above which it surely is
-#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
-UNSURE_OVERLAP = 0.55
-SURE_OVERLAP = 0.65
-
-
-def photo_look(photo: np.ndarray, styles: np.ndarray, set_look: LookMap | None = None,
-               **fit_options) -> PhotoLook:
-    """The look to apply to a photo graded towards a style set.
-
-    Every style gets a :func:`fit_pair` from the photo starting at the set's
-    look; the style left with the smallest residual is the photo's scene
-    candidate. How sure that is: the product of two ramps, one on its
-    residual against the others' (ratio to their median: ``SURE_RATIO`` or
-    less is sure, ``UNSURE_RATIO`` or more is not) and one on how much of
-    the mapped palette it shares (``UNSURE_OVERLAP`` .. ``SURE_OVERLAP``). A
-    wrong match repaints the photo, so both must agree. The map moves from
-    the set's look towards that pair's look by the confidence (coefficients
-    blended: the family is linear).
-
-    Parameters
-    ----------
-    photo : (n, n, n) the photo's histogram.
-    styles : (S, n, n, n) the style histograms on the same grid.
-    set_look : the set's look (:func:`extract_look`; default identity).
-    """
-    set_look = set_look or LookMap.identity()
-    fits = [fit_pair(photo, style, set_look, **fit_options) for style in styles]
-    residuals = np.array([fit.residual for fit in fits])
-    match = int(np.argmin(residuals))
-    if len(fits) > 1:
-        ratio = residuals[match] / max(float(np.median(np.delete(residuals, match))), 1e-300)
-        sure_of_ratio = np.clip((UNSURE_RATIO - ratio) / (UNSURE_RATIO - SURE_RATIO), 0.0, 1.0)
-    else:
-        sure_of_ratio = 1.0
-    overlap = fits[match].overlap
-    sure_of_overlap = np.clip((overlap - UNSURE_OVERLAP) / (SURE_OVERLAP - UNSURE_OVERLAP),
-                              0.0, 1.0)
-    confidence = float(sure_of_ratio * sure_of_overlap)
-    chosen = fits[match].look
-    coefficients = set_look.coefficients + confidence * (chosen.coefficients
-                                                         - set_look.coefficients)
-    return PhotoLook(LookMap(coefficients, set_look.knots), match, confidence, residuals,
-                     overlap)
-
-
-# --------------------------------------------------------------------------- the photo's own scene
-
-
-@dataclass(frozen=True)
-class SceneLook:
-    """The look read off style photos that show the photo's own scene.
-
-    Attributes
-    ----------
-    look : the map family fitted to the colour pairs of the overlaps.
-    matches : {style index: agreeing keypoints} of the styles that show the scene.
-    confidence : in [0, 1], how far the grade follows this look rather than the set's.
-    residual : median distance (colour units) left between the pairs after ``look``.
-    pairs : colour pairs the fit used.
-    correction : (m, m, m, 3) smooth displacement lattice added after ``look``
-        (what the family cannot hold; zero where no pair says otherwise), or None.
-    """
-
-    look: LookMap
-    matches: dict
-    confidence: float
-    residual: float
-    pairs: int
-    correction: np.ndarray | None = None
-
-    def __call__(self, rgb: np.ndarray) -> np.ndarray:
-        """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
-        mapped = self.look(rgb)
-        if self.correction is None:
-            return mapped
-        flat = mapped.reshape(-1, 3)
-        moved = flat + interpolate_lattice(self.correction, flat)
-        return np.clip(moved, 0.0, 1.0).reshape(mapped.shape)
-
-    def lattice(self, size: int = 33) -> np.ndarray:
-        """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
-        return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
-
-
-def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
-                   nodes: int = 9, smoothness: float = 1e-3, ridge: float = 1e-6) -> np.ndarray:
-    """The smooth displacement lattice that best moves ``sources`` onto ``targets``.
-
-    Minimises ``sum_i w_i |x_i + D(x_i) - y_i|^2 + smoothness |L D|^2 + ridge |D|^2``
-    over the (nodes, nodes, nodes, 3) lattice ``D`` read trilinearly (``L``:
-    second differences along each axis; weights normalised to sum 1). Solved
-    as one sparse system (scipy.sparse).
-    """
-    import scipy.sparse as sparse
-    from scipy.sparse.linalg import splu
-
-    from wbcgrade.color.smooth_map import interpolation_matrix
-
-    weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
-    interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
-    second = sparse.diags([np.ones(nodes - 1), -2.0 * np.ones(nodes), np.ones(nodes - 1)],
-                          [-1, 0, 1], shape=(nodes, nodes)).tolil()
-    second[0, :] = 0.0
-    second[nodes - 1, :] = 0.0
-    second = second.tocsr()
-    eye = sparse.identity(nodes, format="csr")
-    curvature = (sparse.kron(sparse.kron(second, eye), eye)
-                 + sparse.kron(sparse.kron(eye, second), eye)
-                 + sparse.kron(sparse.kron(eye, eye), second))
-    weighted = interpolate.T @ sparse.diags(weights)
-    system = (weighted @ interpolate + smoothness * (curvature.T @ curvature)
-              + ridge * sparse.identity(nodes ** 3)).tocsc()
-    solve = splu(system)
-    moves = np.asarray(targets, dtype=np.float64) - sources
-    correction = np.stack([solve.solve(weighted @ moves[:, c]) for c in range(3)], axis=-1)
-    return correction.reshape(nodes, nodes, nodes, 3)
-
-
-#: Median pair residual (colour units) at or below which the matched scene fits
-#: surely, and at or above which the overlap is not one look of one scene
-#: (moved content, another place that happens to share keypoints).
-SURE_RESIDUAL = 0.04
-UNSURE_RESIDUAL = 0.10
-#: Pull of the scene fit towards its prior and smoothness of its curves (pairs
-#: are plentiful: the prior only fills colours the overlap lacks).
-SCENE_RIDGE = 1e-3
-SCENE_SMOOTHNESS = 3e-3
-
-
-def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
-                   rounds: int = 3, correct: bool = True,
-                   why: dict[int, str] | None = None) -> SceneLook | None:
-    """Fit the look on pixel pairs of the style photos that show the photo's scene.
-
-    Parameters
-    ----------
-    photo : :class:`~wbcgrade.color.scene.SceneImage` of the photo.
-    styles : a SceneImage (or None) per style.
-    prior : the map the fit falls back on for colours no overlap shows
-        (default identity).
-    rounds : robust refits (pairs far from the fit, e.g. content that moved
-        between the shots, weigh less each round).
-    correct : add the smooth lattice correction (:func:`fit_correction`, 9^3)
-        for what the map family cannot hold (measured on ``benchmarks/look.py``'s
-        shot matching: +0.05 to +0.2 recovered on film and bleach-bypass looks).
-
-    why : filled with the reason each style (by index) does not show the scene.
-
-    Returns None when no style shows the scene.
-    """
-    from wbcgrade.color.scene import colour_pairs, match_scene, mirrored, unmirror
-
-    prior = prior or LookMap.identity()
-    matches = {}
-    for index, style in enumerate(styles):
-        if style is None:
-            continue
-        reasons: list[str] = []
-        match = match_scene(photo, style, why=reasons)
-        if match is None:
-            if why is not None and reasons:
-                why[index] = reasons[0]
-            continue
-        matches[index] = match
-    if any(style is not None for style in styles):  # a flipped framing (or a symmetric
-        flipped, width = mirrored(photo), photo.colors.shape[1]  # scene matched wrong way)?
-        for index, style in enumerate(styles):
-            match = match_scene(flipped, style) if style is not None else None
-            if match is not None and match.inliers > getattr(matches.get(index), "inliers", 0):
-                matches[index] = unmirror(match, width)
-                if why is not None:
-                    why.pop(index, None)
-    parts = []
-    for index, match in matches.items():
-        sources, targets, weights = colour_pairs(photo, styles[index], match)
-        parts.append((sources, targets, weights * match.sureness / max(len(weights), 1)))
-    if not matches or not any(p[2].sum() > 0 for p in parts):
-        return None
-    sources, targets, weights = (np.concatenate(column) for column in zip(*parts))
-    fitted, _ = fit_pairs_look(sources, targets, weights, prior, rounds, correct)
-    sure_of_pairs = float(np.clip((UNSURE_RESIDUAL - fitted.residual)
-                                  / (UNSURE_RESIDUAL - SURE_RESIDUAL), 0.0, 1.0))
-    sureness = max(match.sureness for match in matches.values())
-    return replace(fitted, matches={i: m.inliers for i, m in matches.items()},
-                   confidence=sureness * sure_of_pairs)
-
-
-def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
-                   prior: LookMap | None = None, rounds: int = 3, correct: bool = True,
-                   robust: np.ndarray | None = None) -> tuple[SceneLook, np.ndarray]:
-    """The look of colour pairs (before, after): the map family, robustly, and its correction.
-
-    What :func:`fit_scene_look` fits to the pairs of a matched scene (and
-    ``wbcgrade look learn`` to a photographer's before/after pairs): the
-    :class:`LookMap` refitted ``rounds`` times with Cauchy weights (pairs far
-    from the fit, such as content that moved or a local edit, weigh less each
-    round), then the smooth lattice correction (:func:`fit_correction`, 9^3)
-    of what the family cannot hold.
-
-    Parameters
-    ----------
-    sources, targets : (N, 3) colours in [0, 1].
-    weights : (N,) non-negative.
-    prior : the map the ridge pulls towards (default identity).
-    robust : (N,) weights to start from instead of ``weights`` (a previous
-        fit's robust weights: the rounds go on from there).
-
-    Returns
-    -------
-    look : :class:`SceneLook` (no matches, confidence 1).
-    robust : (N,) the final robust weights.
-    """
-    from wbcgrade.core import fast_cpu
-
-    prior = prior or LookMap.identity()
-    look, robust = prior, (weights if robust is None else robust)
-    with fast_cpu():  # small products: OpenBLAS's threads cost 10-80x on a busy machine
-        for _ in range(rounds):
-            look = fit_look_map(sources, targets, robust, prior, SCENE_SMOOTHNESS, SCENE_RIDGE,
-                                prior.knots)
-            distance = np.linalg.norm(look(sources) - targets, axis=1)
-            scale = max(float(np.median(distance)), 1e-3)
-            robust = weights / (1.0 + (distance / (2.0 * scale)) ** 2)  # Cauchy
-        mapped = look(sources)
-        residual = float(np.median(np.linalg.norm(mapped - targets, axis=1)))
-        correction = fit_correction(mapped, targets, robust) if correct else None
-    return SceneLook(look, {}, 1.0, residual, int(len(sources)), correction), robust
-
-
 # --------------------------------------------------------------------------- grading with looks
 
 #: Strength of the set's own look when the set has a single style (no halves to
@@ -725,13 +218,6 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
 #: cross-content, 36 photos at 768 px, relaxation 0.01: 0.7 / 0.85 / 1.0
 #: recovered +0.10 / +0.12 / +0.13, worst photo -0.11 / -0.18 / -0.27).
 SET_LOOK_STRENGTH = 0.7
-
-#: The per-photo correction towards the photo's own scene (when a style shows
-#: it): the palette grade with this loss and relaxation (benchmarks/look.py,
-#: shot matching: KL with rho = 0.01 recovers +0.33 against -0.05 for the
-#: quadratic, balanced fit).
-SCENE_LOSS = "kl"
-SCENE_RELAXATION = 0.01
 
 #: Grids of the look fits: coordinates on 16^3, plans and maps on 32^3.
 FIT_BINS = 16
@@ -780,7 +266,7 @@ def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
 def _natural_path():
     from pathlib import Path
 
-    return Path(__file__).with_name("data") / "natural.npz"
+    return Path(__file__).parents[1] / "data" / "natural.npz"
 
 
 _SET_LOOKS: dict[tuple, LookResult] = {}
@@ -844,8 +330,8 @@ _NATURAL_STATISTICS: dict[str, object] = {}
 
 
 def statistics_settings() -> tuple:
-    """The settings of :mod:`wbcgrade.color.look_statistics` a set's look depends on."""
-    from wbcgrade.color import look_statistics as stats
+    """The settings of :mod:`wbcgrade.color.look.statistics` a set's look depends on."""
+    from wbcgrade.color.look import statistics as stats
 
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS)
@@ -873,10 +359,10 @@ def _palettes_digest(palettes) -> str:
 
 
 def _natural_statistics(naturals, cache_from=None):
-    """:func:`~wbcgrade.color.look_statistics.palette_statistics` of the natural palettes,
+    """:func:`~wbcgrade.color.look.statistics.palette_statistics` of the natural palettes,
     once per process and set of palettes, and kept on disk in the looks' cache folder
     (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
-    from wbcgrade.color.look_statistics import QUANTILES, PaletteStatistics, palette_statistics
+    from wbcgrade.color.look.statistics import QUANTILES, PaletteStatistics, palette_statistics
 
     key = _palettes_digest(naturals) + repr(statistics_settings())
     if key in _NATURAL_STATISTICS:
@@ -906,7 +392,7 @@ def _natural_statistics(naturals, cache_from=None):
 
 def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookResult:
     """The look a style set shares, from statistics content hardly moves
-    (:func:`wbcgrade.color.look_statistics.statistics_look`), fitted into the
+    (:func:`wbcgrade.color.look.statistics.statistics_look`), fitted into the
     :class:`LookMap` family on the colours natural photos hold (and, less, all others).
 
     Parameters
@@ -914,7 +400,7 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     styles, naturals : StyleSets in one working space.
     """
     from wbcgrade.color.histogram import resample_histogram
-    from wbcgrade.color.look_statistics import (
+    from wbcgrade.color.look.statistics import (
         palette_statistics,
         statistics_look,
         tinted_statistics,
@@ -1118,61 +604,6 @@ def _histogram_colors(hist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     flat = np.asarray(hist, dtype=np.float64).ravel()
     used = np.flatnonzero(flat > 0)
     return grid_points(hist.shape[0])[used], flat[used]
-
-
-def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = None,
-                    progress: Callable[[int, int], None] | None = None,
-                    why: dict[str, str] | None = None) -> SceneLook | None:
-    """The look read off the style photos that show the photo's own scene, if any do.
-
-    Parameters
-    ----------
-    photo_colors : (H, W, 3) the photo's working-space colours in [0, 1].
-    styles : StyleSet whose ``meta`` names its files or carries its images
-        (:func:`~wbcgrade.color.scene.style_scene_images`); a preset has none.
-    prior : what colours absent from every overlap get (default identity).
-    """
-    from wbcgrade.color.scene import scene_image, style_scene_images
-
-    style_images = style_scene_images(styles, progress)
-    if not any(image is not None for image in style_images):
-        return None
-    reasons: dict[int, str] = {}
-    found = fit_scene_look(scene_image(photo_colors), style_images, prior, why=reasons)
-    if why is not None:
-        why.update({styles.names[i]: reason for i, reason in reasons.items()})
-    return found
-
-
-def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
-                   set_strength: float | None = None) -> tuple[LookMap, PhotoLook, dict]:
-    """The set's look and how sure it is that a style shows the photo's own scene.
-
-    Parameters
-    ----------
-    photo_hist : (n, n, n) the photo's histogram (any grid; re-binned to 32^3).
-    styles : StyleSet.
-    naturals : StyleSet of ungraded palettes (default the shipped ones).
-
-    Returns
-    -------
-    base : the set's look at ``set_strength`` (what a photo of another scene gets;
-        None: its reliability on the photo's colours, :func:`set_look_base`).
-    photo : the :class:`PhotoLook` (match, confidence, residuals).
-    info : JSON-friendly diagnostics.
-    """
-    from wbcgrade.color.histogram import resample_histogram
-
-    base, extracted, set_strength = set_look_base(styles, naturals, set_strength, photo_hist)
-    photo = photo_look(resample_histogram(photo_hist, MAP_BINS), styles.at_bins(MAP_BINS), base)
-    info = {"look": {"set_amplitude": extracted.look.amplitude(),
-                     "set_strength": set_strength,
-                     "match": styles.names[photo.match],
-                     "confidence": photo.confidence,
-                     "overlap": photo.overlap,
-                     "residuals": [float(r) for r in photo.residuals],
-                     **extracted.info}}
-    return base, photo, info
 
 
 def set_look_map(styles, naturals=None, strength: float | None = None,

@@ -1,6 +1,6 @@
 """``wbcgrade look extract``: the look a set of style photos shares, written as a LUT.
 
-The files around :func:`wbcgrade.color.look.set_look_map` (which does the
+The files around :func:`wbcgrade.color.look.set_extraction.set_look_map` (which does the
 mathematics): the LUT is planned and checked before any work
 (:func:`wbcgrade._publish.plan_outputs`), the styles are loaded in the
 working space, the look is extracted against the natural palettes (the
@@ -19,7 +19,7 @@ import numpy as np
 from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grading import Grade
-from wbcgrade.color.look import load_naturals, set_look_map
+from wbcgrade.color.look.set_extraction import load_naturals, set_look_map
 from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,

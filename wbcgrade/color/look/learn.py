@@ -18,12 +18,12 @@ colour after it. The steps:
    four rotations) is resized onto it and checked patch by patch (phase
    correlation, which tone and colour changes do not disturb); otherwise
    keypoints and a homography as for a style photo of the photo's own scene
-   (:func:`wbcgrade.color.scene.match_scene`). A pair of different scenes
+   (:func:`wbcgrade.color.look.scene.match_scene`). A pair of different scenes
    matches neither and is reported.
 4. **Fit** (:func:`learn_look`): colour pairs of each overlap
-   (:func:`wbcgrade.color.scene.colour_pairs`, edges down-weighted), every
+   (:func:`wbcgrade.color.look.scene.colour_pairs`, edges down-weighted), every
    pair weighing the same, fitted as a scene look is
-   (:func:`wbcgrade.color.look.fit_pairs_look`: tone curves and colour
+   (:func:`wbcgrade.color.look.scene_fit.fit_pairs_look`: tone curves and colour
    mixing, Cauchy-robust refits so that local edits such as a healed spot
    or a masked sky weigh little, then a smooth lattice correction). When
    every after is black and white the look's output is made grey.
@@ -33,7 +33,7 @@ colour after it. The steps:
    without them), and a warning for a pair that disagrees with the others.
 
 :func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
-saved grade (``.json``) that :func:`wbcgrade.color.saved_look.load_look`
+saved grade (``.json``) that :func:`wbcgrade.color.saved_grade.load_look`
 reads: ``apply --look``, ``batch --look`` and ``video --look`` use it.
 """
 
@@ -232,7 +232,7 @@ def _read_small(path: Path, working: str) -> np.ndarray:
     """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.scene import shrink_colors
+    from wbcgrade.color.look.scene import shrink_colors
 
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working)
@@ -311,7 +311,7 @@ def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
     (at :data:`_CHECK_SIZE`), phase correlation finds no shift on most textured ones."""
     import cv2
 
-    from wbcgrade.color.scene import shrink_colors
+    from wbcgrade.color.look.scene import shrink_colors
 
     a = shrink_colors(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     b = shrink_colors(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
@@ -339,10 +339,10 @@ def register_pair(images: PairImages) -> Registration | None:
 
     The cheap case first (the after is the original resized, perhaps turned
     by a multiple of 90 degrees: checked by :func:`_aligned`), then keypoints
-    and a homography (:func:`wbcgrade.color.scene.match_scene`: crops,
+    and a homography (:func:`wbcgrade.color.look.scene.match_scene`: crops,
     resized crops, turns).
     """
-    from wbcgrade.color.scene import match_scene, scene_image
+    from wbcgrade.color.look.scene import match_scene, scene_image
 
     before, after = images.before, images.after
     aspect = before.shape[1] / before.shape[0]
@@ -378,8 +378,8 @@ def pair_colours(images: PairImages, registration: Registration,
                  max_pairs: int = PAIRS_PER_PHOTO, seed: int = 0
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Colour pairs of a registered pair: (originals (N, 3), afters (N, 3), weights (N,)),
-    drawn from the overlap by :func:`wbcgrade.color.scene.colour_pairs`."""
-    from wbcgrade.color.scene import SceneImage, SceneMatch, colour_pairs, shrink_colors
+    drawn from the overlap by :func:`wbcgrade.color.look.scene.colour_pairs`."""
+    from wbcgrade.color.look.scene import SceneImage, SceneMatch, colour_pairs, shrink_colors
 
     before, homography = images.before, registration.homography
     h = homography / homography[2, 2]
@@ -430,7 +430,7 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
     """Fit the parts' pairs, each part weighing the same.
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
-    from wbcgrade.color.look import fit_pairs_look
+    from wbcgrade.color.look.scene_fit import fit_pairs_look
 
     sources = np.concatenate([p[0] for p in parts])
     targets = np.concatenate([p[1] for p in parts])
@@ -640,9 +640,9 @@ def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray)
     a local edit (a healed spot, a masked sky) changed. The pair's own look (robust, no
     correction) misses them by more than :data:`_LOCAL_DISTANCE` and four times its
     median distance. Pixels on edges and texture (``weights`` below :data:`_FLAT`, as
-    :func:`wbcgrade.color.scene.colour_pairs` gives them) are not counted: a look applied
+    :func:`wbcgrade.color.look.scene.colour_pairs` gives them) are not counted: a look applied
     before or after resizing differs there."""
-    from wbcgrade.color.look import fit_pairs_look
+    from wbcgrade.color.look.scene_fit import fit_pairs_look
 
     own, _ = fit_pairs_look(sources, targets, weights, rounds=2, correct=False)
     distance = np.linalg.norm(own(sources) - targets, axis=1)
@@ -714,7 +714,7 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.grading import Grade
     from wbcgrade.color.lut import check_lut_size, write_grade_lut
-    from wbcgrade.color.saved_look import look_dict
+    from wbcgrade.color.saved_grade import look_dict
 
     output = Path(output)
     kind = _output_kind(output)

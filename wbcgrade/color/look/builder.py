@@ -1,0 +1,188 @@
+"""The "look" map builder (``--mode look``, the default grade): the set's look,
+moved towards the photo's own scene by how sure it is that a style shows it.
+
+:func:`look_map` is the builder the grade path calls
+(:data:`wbcgrade.color.grading.MAP_BUILDERS`); :func:`look_color_map` is the
+set's look with the palette test of the photo's scene (:func:`photo_look`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from wbcgrade.color.builders import BuiltMap, MapRequest, palette_map
+from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.look.family import LookMap
+from wbcgrade.color.look.scene_fit import PhotoLook, find_scene_look, photo_look
+from wbcgrade.color.look.set_extraction import MAP_BINS, load_naturals, set_look_base
+from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.remap import monochrome_map
+
+__all__ = ["look_map", "look_color_map"]
+
+#: The per-photo correction towards the photo's own scene (when a style shows
+#: it): the palette grade with this loss and relaxation (benchmarks/look.py,
+#: shot matching: KL with rho = 0.01 recovers +0.33 against -0.05 for the
+#: quadratic, balanced fit).
+SCENE_LOSS = "kl"
+SCENE_RELAXATION = 0.01
+
+
+def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
+                   set_strength: float | None = None) -> tuple[LookMap, PhotoLook, dict]:
+    """The set's look and how sure it is that a style shows the photo's own scene.
+
+    Parameters
+    ----------
+    photo_hist : (n, n, n) the photo's histogram (any grid; re-binned to 32^3).
+    styles : StyleSet.
+    naturals : StyleSet of ungraded palettes (default the shipped ones).
+
+    Returns
+    -------
+    base : the set's look at ``set_strength`` (what a photo of another scene gets;
+        None: its reliability on the photo's colours, :func:`set_look_base`).
+    photo : the :class:`PhotoLook` (match, confidence, residuals).
+    info : JSON-friendly diagnostics.
+    """
+    from wbcgrade.color.histogram import resample_histogram
+
+    base, extracted, set_strength = set_look_base(styles, naturals, set_strength, photo_hist)
+    photo = photo_look(resample_histogram(photo_hist, MAP_BINS), styles.at_bins(MAP_BINS), base)
+    info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                     "set_strength": set_strength,
+                     "match": styles.names[photo.match],
+                     "confidence": photo.confidence,
+                     "overlap": photo.overlap,
+                     "residuals": [float(r) for r in photo.residuals],
+                     **extracted.info}}
+    return base, photo, info
+
+
+#: Nodes per axis (at least) of a preset's look converted into another working space
+#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills 0.07-0.55 of ACEScct's
+#: cube, where 33 nodes left a JPEG graded in ACEScct 1.2/255 from the sRGB grade on
+#: average (99th percentile 8.5), 65 nodes 0.36 (3.8) (kodak-2383 on samples/coffee.jpg).
+CONVERTED_LOOK_SIZE = 65
+
+
+def look_map(request: MapRequest) -> BuiltMap:
+    """The "look" builder: the set's look, corrected towards the photo's scene.
+
+    The colour map is the look the style set shares
+    (:func:`look_color_map`, content modelled by the
+    natural palettes of ``map.natural``), moved towards the photo's palette
+    grade (the "palette" builder with a KL fit and relaxed transport) by how
+    sure it is that a style shows the photo's own scene. Fixed weights
+    (``fit.weights``) give the palette grade.
+    """
+    from wbcgrade.color.look.scene import has_style_images
+
+    options, styles, say = request.options, request.styles, request.stage
+    if options.fit.weights is not None:
+        return palette_map(request)
+    if styles.look is not None:  # a preset made with a known look: that look
+        from wbcgrade.color.remap import resample_lattice
+
+        n_styles = len(styles.names)
+        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
+                         {"start": "preset", "look": "the preset's own"}, 0.0)
+        size = options.map.size
+        if styles.converted_from:  # converted from the preset's own space: finer,
+            size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
+        return BuiltMap(resample_lattice(styles.look, size), None,
+                        {"look": {"source": "preset"}}, {}, fit)
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    say("histograms")
+    photo_hist = request.photo.at(MAP_BINS)
+    timings["histograms"] = time.perf_counter() - start
+    say("look")
+    start = time.perf_counter()
+    naturals = load_naturals(options.map.natural, styles.working_space)
+    n_styles = len(styles.names)
+    if request.photo.pixels is not None:
+        base, extracted, strength = set_look_base(styles, naturals, None, photo_hist)
+        timings["look"] = time.perf_counter() - start
+        say("scene")
+        start = time.perf_counter()
+        no_scene: dict[str, str] = {}
+        scene = find_scene_look(request.photo.pixels[0], styles, base, why=no_scene)
+        timings["scene"] = time.perf_counter() - start
+        if scene is not None and scene.confidence > 0:
+            size = options.map.size
+            base_map = base.lattice(size)
+            color_map = base_map + scene.confidence * (scene.lattice(size) - base_map)
+            total = sum(scene.matches.values())
+            weights = np.full(n_styles, (1.0 - scene.confidence) / n_styles)
+            for index, inliers in scene.matches.items():
+                weights[index] += scene.confidence * inliers / total
+            best = max(scene.matches, key=scene.matches.get)
+            info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                             "set_strength": strength,
+                             "match": styles.names[best], "confidence": scene.confidence,
+                             "scene": {styles.names[i]: n for i, n in scene.matches.items()},
+                             "scene_residual": scene.residual, "pairs": scene.pairs,
+                             **extracted.info}}
+            # per style: the pair residual where it shows the scene, the cube's diagonal elsewhere
+            alone = np.full(n_styles, float(np.sqrt(3.0)))
+            alone[list(scene.matches)] = scene.residual
+            fit = FitSummary(weights, scene.residual, alone, "scene",
+                             {"start": "scene", "match": styles.names[best],
+                              "confidence": scene.confidence}, sum(timings.values()))
+            return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit)
+        if has_style_images(styles):
+            # the style photos were looked at and none shows this scene: the set's look
+            # (a palette that merely resembles the photo's is no better sign of its scene)
+            info = {"look": {"set_amplitude": extracted.look.amplitude(),
+                             "set_strength": strength, "match": None,
+                             "confidence": 0.0, **extracted.info,
+                             "no_scene": no_scene}}
+            fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
+                             "look", {"start": "look", "match": None, "confidence": 0.0},
+                             sum(timings.values()))
+            return BuiltMap(_as_set_look(base.lattice(options.map.size), extracted), None, info,
+                            timings, fit)
+        start = time.perf_counter()
+    base, photo, info = look_color_map(photo_hist, styles, naturals)
+    timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
+    confidence = photo.confidence
+    weights = np.full(n_styles, 1.0 / n_styles)
+    color_map = base.lattice(options.map.size)
+    fit_info: dict = {"start": "look", "match": info["look"]["match"],
+                      "confidence": confidence}
+    if confidence > 0:
+        scene_options = GradeOptions(
+            replace(options.fit, loss=SCENE_LOSS),
+            replace(options.transfer,
+                    relaxation=options.transfer.relaxation or SCENE_RELAXATION),
+            replace(options.map, builder="palette"), options.regrain, options.spaces)
+        if request.palette_grade is None:
+            raise ValueError("the look builder needs MapRequest.palette_grade (the grade "
+                             "path gives it)")
+        scene, summary = request.palette_grade(scene_options,
+                                               lambda name: say(f"palette {name}"))
+        for name, seconds in scene.timings.items():
+            timings[f"palette {name}"] = seconds
+        base_map = base.lattice(scene.color_map.shape[0])
+        color_map = (base_map + confidence * (scene.color_map - base_map)).astype(np.float32)
+        weights = confidence * np.asarray(summary.weights) + (1.0 - confidence) * weights
+        fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
+                                 "loss": summary.loss}
+        info.update({k: v for k, v in scene.info.items() if k != "fit"})
+    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
+                     fit_info, sum(timings.values()))
+    if info["look"].get("monochrome"):
+        color_map = monochrome_map(color_map)
+    return BuiltMap(color_map, None, info, timings, fit)
+
+
+def _as_set_look(color_map: np.ndarray, extracted) -> np.ndarray:
+    """The map as the set's look has it: exactly black and white (or toned) when every
+    style photo is (a scene read off such a style is too), float32."""
+    if extracted.info.get("monochrome"):
+        return monochrome_map(color_map)
+    return np.asarray(color_map, dtype=np.float32)
