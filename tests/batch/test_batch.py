@@ -354,8 +354,8 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
     evaluated a second time for the report."""
     from dataclasses import replace
 
+    import wbcgrade.color.builders as builders
     import wbcgrade.color.fit as fit_module
-    import wbcgrade.color.grading as grading
     from wbcgrade.color.report import report_from_grade
     from wbcgrade.color.workflow import grade_file, plan_photo
 
@@ -363,7 +363,7 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
     opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10,
                         weights=[1.0, 1.0, 0.0] if start == "given" else None)
     style_set = load_style_folder(styles, 8)
-    fit = grading.fit_weights
+    fit = builders.fit_weights
 
     def labelled(*args, **kwargs):
         summary = fit(*args, **kwargs)
@@ -371,7 +371,7 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
             summary = replace(summary, start=start, info={**summary.info, "start": start})
         return summary
 
-    monkeypatch.setattr(grading, "fit_weights", labelled)
+    monkeypatch.setattr(builders, "fit_weights", labelled)
     graded = grade_file(plan_photo(photos / "chelsea.jpg", tmp_path / "c.jpg"), style_set, opts)
     calls = []
     monkeypatch.setattr(fit_module, "vertex_losses", lambda *a: calls.append(a))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from tqdm import tqdm
 
+import wbcgrade.color.builders as builders
 import wbcgrade.color.grading as grading
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 
@@ -19,7 +20,7 @@ from tests.batch.test_batch import FAST, SAMPLES, small_copy
 def fits(monkeypatch) -> list[str]:
     """Every weight fit and every pass of the grade path, by name, as they happen."""
     calls: list[str] = []
-    fit, grade = grading.fit_weights, grading.grade_histograms
+    fit, grade = builders.fit_weights, grading.grade_histograms
 
     def counted_fit(*args, **kwargs):
         calls.append("fit")
@@ -29,7 +30,7 @@ def fits(monkeypatch) -> list[str]:
         calls.append("grade")
         return grade(*args, **kwargs)
 
-    monkeypatch.setattr(grading, "fit_weights", counted_fit)
+    monkeypatch.setattr(builders, "fit_weights", counted_fit)  # the "palette" builder's
     monkeypatch.setattr(grading, "grade_histograms", counted_grade)
     return calls
 

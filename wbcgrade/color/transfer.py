@@ -1,7 +1,7 @@
 """The transport map: fitted palette -> (unbalanced) Sinkhorn -> smooth map (§5.1).
 
 What the "palette" map builder (``map.builder = "palette"``,
-:func:`wbcgrade.color.grading.palette_map`) does once the weights are
+:func:`wbcgrade.color.builders.palette_map`) does once the weights are
 fitted (:func:`transport_map`):
 
 1. the palette: the styles' barycenter with the fitted weights, on the
@@ -134,7 +134,7 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
     """The colour map moving a photo's colours onto the styles' palette at ``weights``.
 
     The palette, the plan and the smooth map (see the module docstring); the
-    "palette" map builder (:func:`wbcgrade.color.grading.palette_map`) after
+    "palette" map builder (:func:`wbcgrade.color.builders.palette_map`) after
     the weight fit.
 
     Parameters
