@@ -86,7 +86,7 @@ def test_smooth_map_solves_its_least_squares_problem(size):
     smoothness, stiffness = 3e-3, 1e-4
     weights = (density / density.sum()).ravel()
     points = identity_map(20, np.float64).reshape(-1, 3)
-    B = smooth_map._interpolation_matrix(points, size)
+    B = smooth_map.interpolation_matrix(points, size)
     ratio = (size - 1) / (smooth_map.REFERENCE_SIZE - 1)
     system = (B.T @ sp.diags(weights) @ B + sp.eye(size ** 3) * 1e-12
               + smooth_map._regulariser(size, smoothness * ratio, stiffness / ratio)).tocsc()
