@@ -139,6 +139,93 @@ def test_black_and_white_afters_give_a_black_and_white_look(tmp_path, photos):
     assert data["learned"]["monochrome"] is True
 
 
+def sepia(rgb):
+    """A toned black-and-white film: the grey film's luma plus a warm brown tint that is
+    strongest in the mid-tones."""
+    luma = grey(rgb)[..., 0]
+    tint = np.array([0.07, 0.005, -0.08]) * (4.0 * luma * (1.0 - luma))[..., None]
+    return np.clip(luma[..., None] + tint, 0.0, 1.0)
+
+
+def selenium(rgb):
+    """A split toning: cool purple shadows, neutral highlights."""
+    luma = grey(rgb)[..., 0]
+    tint = np.array([0.01, -0.03, 0.04]) * np.clip(1.0 - 1.6 * luma, 0.0, 1.0)[..., None]
+    return np.clip(luma[..., None] + tint, 0.0, 1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("toner", [sepia, selenium])
+def test_toned_afters_give_a_toned_look(tmp_path, photos, toner):
+    """Sepia or selenium afters (every colour its luma plus a tint of that luma) learn a
+    look whose every output is so: a colourful photo comes out toned, its chroma no more
+    than the afters hold, in the toning's hue at each lightness."""
+    from wbcgrade.color.remap import TONE_LUMA
+
+    before, after = make_pairs(tmp_path, photos, look=toner)
+    (after / "coffee.png").unlink()
+    write(after / "coffee.jpg", toner(photos["coffee"]))
+    result = learn_look_file(before, after, tmp_path / "toned.cube")
+    assert len(result.used) == len(STYLE)
+    assert result.look.toned and not result.look.monochrome
+    assert all(p.toned for p in result.used)
+    assert result.as_dict()["toned"] is True
+    afters = np.concatenate([toner(photos[n]).reshape(-1, 3) for n in STYLE])
+    afters_chroma = float(np.ptp(afters, axis=1).max())
+    grade = load_look(tmp_path / "toned.cube")
+    photo = photos["sunset"]  # colourful, in no pair
+    assert np.ptp(photo, axis=-1).max() > 4 * afters_chroma
+    graded = grade.apply(photo.astype(np.float32)).reshape(-1, 3).astype(np.float64)
+    assert np.ptp(graded, axis=1).max() <= afters_chroma + 0.01
+    truth = toner(photo).reshape(-1, 3)
+    assert np.mean(np.abs(graded - truth)) < 0.25 * np.mean(np.abs(photo.reshape(-1, 3) - truth))
+    # at each lightness the tint the afters hold, in hue and in strength
+    after_luma, luma = afters @ TONE_LUMA, graded @ TONE_LUMA
+    compared = 0
+    for lo in np.arange(0.1, 0.8, 0.1):
+        band, held = (luma >= lo) & (luma < lo + 0.1), (after_luma >= lo) & (after_luma < lo + 0.1)
+        if band.sum() < 50 or held.sum() < 50:
+            continue
+        tint = (graded[band] - luma[band, None]).mean(axis=0)
+        true_tint = (afters[held] - after_luma[held, None]).mean(axis=0)
+        if np.linalg.norm(true_tint) < 0.01:
+            continue
+        compared += 1
+        cosine = tint @ true_tint / (np.linalg.norm(tint) * np.linalg.norm(true_tint))
+        assert cosine > 0.95, (lo, tint, true_tint)
+        assert 0.7 < np.linalg.norm(tint) / np.linalg.norm(true_tint) < 1.4, (lo, tint, true_tint)
+    assert compared >= 2
+
+
+def test_colour_afters_are_not_taken_for_toned(photos):
+    """A look that keeps some colour (bleach bypass-like: most saturation gone) is a colour
+    look; a photo's own colours are not a toning."""
+    from wbcgrade.color.look.learn import _tint_spread
+
+    for name in ("sunset", "coffee", "bridge"):
+        photo = photos[name]
+        luma = (photo @ LUMA)[..., None]
+        assert _tint_spread(photo) > 0.05
+        assert _tint_spread(luma + 0.3 * (photo - luma)) > 0.03
+        assert _tint_spread(sepia(photo)) < 0.02
+
+
+def test_an_original_with_no_colour_says_nothing_of_toning(tmp_path, photos):
+    """A toned after of a grey original (a night sky, an overcast scene) is no sign that
+    the look takes colour away: the pair is neither toned nor colour."""
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look.learn import PairFiles, read_pair
+
+    photo = photos["sunset"]
+    dull = np.repeat((photo @ LUMA)[..., None], 3, axis=-1)
+    pair = PairFiles("dull", write(tmp_path / "dull.png", dull),
+                     write(tmp_path / "dull-edit.png", sepia(dull)))
+    assert read_pair(pair, default_working_space()).toned is None
+    pair = PairFiles("bright", write(tmp_path / "bright.png", photo),
+                     write(tmp_path / "bright-edit.png", sepia(photo)))
+    assert read_pair(pair, default_working_space()).toned is True
+
+
 @pytest.mark.slow
 def test_bad_pairs_are_reported_one_line_each_and_the_others_used(tmp_path, photos):
     before, after = make_pairs(tmp_path, photos)

@@ -107,7 +107,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     file name (IMG_1.CR2 with IMG_1.jpg; an export's -edit or _copy ending
     does not count). Edited versions may be resized, cropped, turned by 90
     degrees or of another format. The look (tone curves, colour mixing and a
-    smooth correction; black and white when every edit is) is fitted to the
+    smooth correction; black and white or toned when every edit is) is fitted to the
     pixels of all pairs and written for `apply --look`, `batch --look` and
     `video --look`. Each pair that cannot be used is named with the reason;
     the others are used.
@@ -136,7 +136,8 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
         held = "" if pair.held_out is None else f", {pair.held_out:.1f} held out"
         click.echo(f"  {pair.name}: {pair.registered}; CIEDE2000 {pair.delta_e:.1f}{held}")
     n = len(found.used)
-    kind = "black-and-white look" if found.look.monochrome else "look"
+    kind = ("black-and-white look" if found.look.monochrome else
+            "toned black-and-white look" if found.look.toned else "look")
     held = ("" if found.held_out is None else
             f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
     click.echo(f"wrote {found.output}: the {kind} of {n} before/after pair{'s' * (n != 1)} "

@@ -26,7 +26,11 @@ colour after it. The steps:
    (:func:`wbcgrade.color.look.scene_fit.fit_pairs_look`: tone curves and colour
    mixing, Cauchy-robust refits so that local edits such as a healed spot
    or a masked sky weigh little, then a smooth lattice correction). When
-   every after is black and white the look's output is made grey.
+   every after is black and white the look's output is made grey; when every
+   after is toned (sepia, selenium: one tint per lightness) or black and
+   white, the output is its luma plus the tint the look gives grey of that
+   luma (:func:`wbcgrade.color.remap.to_monochrome`), so that no colour of a
+   photo survives the look.
 5. **Report**: the mean CIEDE2000 between each after and the look applied
    to its original, fitted and held out (the pairs split into
    :data:`LEARN_FOLDS` folds, each fold's pairs predicted by a look fitted
@@ -53,7 +57,7 @@ from wbcgrade.errors import InputError, first_line
 __all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
-           "PAIRS_PER_PHOTO", "MONO_CHROMA", "KEYPOINT_SIZE"]
+           "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE"]
 
 #: Long side (pixels) the photos are registered and sampled at (the scene match's size).
 LEARN_SIZE = 768
@@ -65,6 +69,15 @@ LEARN_FOLDS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
 MONO_CHROMA = 0.02
+#: An after whose colours lie within this of a tint per lightness (:func:`_tint_spread`)
+#: is toned (sepia, selenium), when its original's do not (twice this: an original with
+#: so little colour, a night sky, says nothing of whether the look keeps colour).
+#: Measured on ``benchmarks/learn.py``'s photos at 512 px: a sepia 0.007-0.009 (0.011-0.013
+#: as a JPEG); the sixteen film looks' afters 0.056 to 0.41, but for the near-black
+#: Hubble field (0.006-0.042; its original 0.026, the other originals 0.15-0.30).
+TONED_SPREAD = 0.02
+_TONE_BANDS = 32
+_TONE_FLAT = 0.05
 #: Long side (pixels) keypoints are found on when the cheap registration fails (crops);
 #: the homography is then scaled to :data:`LEARN_SIZE`. Pairs of one scene under a look
 #: agree on 60 or more keypoints at this size in ``benchmarks/learn.py``.
@@ -220,12 +233,15 @@ class PairImages:
     before, after : (h, w, 3) float32 working-space colours in [0, 1], long side
         at most :data:`LEARN_SIZE` (each keeps its own shape).
     monochrome : whether the after is black and white (:data:`MONO_CHROMA`).
+    toned : whether the after is toned, not black and white (:data:`TONED_SPREAD`);
+        None when the original holds too little colour to tell.
     """
 
     name: str
     before: np.ndarray
     after: np.ndarray
     monochrome: bool
+    toned: bool | None = False
 
 
 def _read_small(path: Path, working: str) -> np.ndarray:
@@ -249,8 +265,55 @@ def read_pair(pair: PairFiles, working: str) -> PairImages:
     before = _read_small(pair.before, working)
     after = _read_small(pair.after, working)
     chroma = after.max(axis=-1) - after.min(axis=-1)
-    return PairImages(pair.name, before, after,
-                      bool(np.percentile(chroma, 99) < MONO_CHROMA))
+    monochrome = bool(np.percentile(chroma, 99) < MONO_CHROMA)
+    toned: bool | None = False
+    if not monochrome and _tint_spread(after) < TONED_SPREAD:
+        toned = True if _tint_spread(before) >= 2.0 * TONED_SPREAD else None
+    return PairImages(pair.name, before, after, monochrome, toned)
+
+
+def _tint_spread(image: np.ndarray) -> float:
+    """99th percentile over the flat pixels of how far a colour's chroma (the colour minus
+    its luma, largest channel) lies from the mean chroma of its lightness band: 0 for a
+    photo whose every colour is its luma plus a tint of that luma (toned, or black and
+    white). Flat: the luma of the 3x3 pixels about it spans under :data:`_TONE_FLAT` (a
+    JPEG's chroma is one per 2x2 block, its luma one per pixel: on an edge a pixel holds
+    another lightness's tint); all pixels when under a tenth are flat. (h, w, 3) image."""
+    import cv2
+
+    from wbcgrade.color.remap import TONE_LUMA
+
+    image = np.asarray(image, dtype=np.float32)
+    luma = image @ TONE_LUMA.astype(np.float32)
+    kernel = np.ones((3, 3), np.uint8)
+    flat = (cv2.dilate(luma, kernel) - cv2.erode(luma, kernel)) < _TONE_FLAT
+    if flat.mean() < 0.1:
+        flat[...] = True
+    colours = image[flat].astype(np.float64)
+    band, _, tints = _band_tints(colours, np.ones(len(colours)))
+    chroma = colours - (colours @ TONE_LUMA)[:, None]
+    return float(np.percentile(np.abs(chroma - tints[band]).max(axis=1), 99))
+
+
+def _band_tints(colours: np.ndarray, weights: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mean tint (colour minus its luma) of (N, 3) colours in each of
+    :data:`_TONE_BANDS` bands of luma, ``weights`` (N,) weighing them.
+
+    Returns (each colour's band (N,), each band's mean luma (B,), each band's mean tint
+    (B, 3)); a band with no weight has luma NaN and tint 0."""
+    from wbcgrade.color.remap import TONE_LUMA
+
+    luma = colours @ TONE_LUMA
+    band = np.clip((luma * _TONE_BANDS).astype(np.intp), 0, _TONE_BANDS - 1)
+    mass = np.bincount(band, weights, minlength=_TONE_BANDS)
+    held = mass > 0
+    safe = np.where(held, mass, 1.0)
+    centres = np.where(held, np.bincount(band, weights * luma, minlength=_TONE_BANDS) / safe,
+                       np.nan)
+    tints = np.stack([np.bincount(band, weights * (colours[:, c] - luma),
+                                  minlength=_TONE_BANDS) / safe for c in range(3)], axis=1)
+    return band, centres, tints
 
 
 # --------------------------------------------------------------------------- registration
@@ -399,22 +462,35 @@ def pair_colours(images: PairImages, registration: Registration,
 @dataclass(frozen=True)
 class LearnedLook:
     """The look the pairs share: a scene look (:class:`wbcgrade.color.look.SceneLook`),
-    made grey when every after was black and white.
+    made grey when every after was black and white, toned when every after was toned.
 
     Attributes
     ----------
     look : the fitted map (tone curves and colour mixing, then the lattice correction).
     monochrome : the output is grey (the mean of the fitted channels).
+    toning : (lumas (m,), tints (m, 3)) of a toned look: the output is the fitted
+        output's luma plus the afters' mean tint at that luma
+        (:func:`wbcgrade.color.remap.to_monochrome`); None otherwise.
     """
 
     look: object
     monochrome: bool = False
+    toning: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def toned(self) -> bool:
+        """Whether the output is toned (a tint per lightness, no other colour)."""
+        return self.toning is not None
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        from wbcgrade.color.remap import to_monochrome
+
         out = self.look(rgb)
         if self.monochrome:
             out = np.repeat(out.mean(axis=-1, keepdims=True), 3, axis=-1)
+        elif self.toning is not None:
+            out = to_monochrome(out, self.toning).astype(np.float64)
         return out
 
     def lattice(self, size: int = 33) -> np.ndarray:
@@ -425,9 +501,12 @@ class LearnedLook:
 
 
 def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome: bool,
-         robust: Sequence[np.ndarray] | None = None, rounds: int = 3
+         robust: Sequence[np.ndarray] | None = None, rounds: int = 3, toned: bool = False
          ) -> tuple[LearnedLook, list[np.ndarray], float]:
-    """Fit the parts' pairs, each part weighing the same.
+    """Fit the parts' pairs, each part weighing the same; ``monochrome``: the output
+    made grey, ``toned``: made its luma plus the afters' mean tint at that luma (the
+    afters' tints, robustly weighted, in bands of their luma: more faithful than the
+    grey axis of a map fitted to colourful originals).
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
     from wbcgrade.color.look.scene_fit import fit_pairs_look
@@ -438,7 +517,12 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
     start = None if robust is None else np.concatenate(list(robust))
     look, final = fit_pairs_look(sources, targets, weights, rounds=rounds, robust=start)
     split = np.cumsum([len(p[0]) for p in parts])[:-1]
-    return LearnedLook(look, monochrome), np.split(final, split), look.residual
+    toning = None
+    if toned and not monochrome:
+        _, lumas, tints = _band_tints(targets, final)
+        held = np.isfinite(lumas)
+        toning = (lumas[held], tints[held])
+    return LearnedLook(look, monochrome, toning), np.split(final, split), look.residual
 
 
 def _delta_e(colors: np.ndarray, truth: np.ndarray, encoding) -> np.ndarray:
@@ -467,6 +551,8 @@ class PairReport:
     problem : why the pair was not used (unreadable file, another scene), or None.
     coverage : share of the original the after covers.
     monochrome : the after is black and white.
+    toned : the after is toned (a tint per lightness, not black and white); None:
+        the original holds too little colour to tell.
     delta_e : mean CIEDE2000 of the after against the look applied to the
         original (the look fitted on all pairs).
     held_out : the same with the look fitted without this pair's fold, or None.
@@ -481,6 +567,7 @@ class PairReport:
     problem: str | None = None
     coverage: float | None = None
     monochrome: bool = False
+    toned: bool | None = False
     delta_e: float | None = None
     held_out: float | None = None
     edited_share: float | None = None
@@ -541,6 +628,7 @@ class LearnResult:
                 "working_space": self.working_space,
                 "pairs_used": len(self.used), "pairs_given": len(self.pairs),
                 "monochrome": bool(self.look is not None and self.look.monochrome),
+                "toned": bool(self.look is not None and self.look.toned),
                 "delta_e": None if self.delta_e is None else round(self.delta_e, 4),
                 "held_out_delta_e": None if self.held_out is None else round(self.held_out, 4),
                 "held_out_folds": self.folds,
@@ -600,6 +688,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                 report.registered = registration.how
                 report.coverage = registration.coverage
                 report.monochrome = images.monochrome
+                report.toned = images.toned
                 parts.append((report, pair_colours(images, registration)))
         if report.problem:
             warn(f"{pair.name}: {report.problem}; left out")
@@ -612,7 +701,9 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     used = [report for report, _ in parts]
     colours = [pair for _, pair in parts]
     monochrome = all(r.monochrome for r in used)
-    look, robust, _ = _fit(colours, monochrome)
+    toned = (not monochrome and any(r.toned for r in used)
+             and all(r.monochrome or r.toned is not False for r in used))
+    look, robust, _ = _fit(colours, monochrome, toned=toned)
     for report, (sources, targets, weights) in zip(used, colours):
         report.delta_e = float(np.mean(_delta_e(look(sources), targets, encoding)))
         report.edited_share = _edited_share(sources, targets, weights)
@@ -620,19 +711,33 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     for held in folds:
         rest = [i for i in range(len(colours)) if i not in set(held.tolist())]
         fold_look, _, _ = _fit([colours[i] for i in rest], monochrome,
-                               [robust[i] for i in rest], rounds=1)
+                               [robust[i] for i in rest], rounds=1, toned=toned)
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
     result.look, result.folds = look, len(folds)
     _flag_disagreements(used, warn)
-    if not monochrome and any(r.monochrome for r in used):
-        mono = [r.name for r in used if r.monochrome]
-        warn(f"{len(mono)} of the {len(used)} edited photos are black and white "
-             f"({', '.join(mono[:4])}{', ...' if len(mono) > 4 else ''}), the others in "
-             "colour: two looks? the look learned is a colour one")
+    _warn_mixed(used, monochrome, toned, warn)
     result.seconds = time.perf_counter() - start
     return result
+
+
+def _warn_mixed(used: list[PairReport], monochrome: bool, toned: bool,
+                warn: Callable[[str], None]) -> None:
+    """Warn when some afters are black and white or toned and the others are not."""
+    if monochrome:
+        return
+    if toned:
+        odd, what, rest, learned = ([r.name for r in used if r.monochrome], "black and white",
+                                    "toned", "the toning learned lies between theirs")
+    else:
+        odd = [r.name for r in used if r.monochrome or r.toned]
+        what, rest, learned = ("black and white or toned", "in colour",
+                               "the look learned is a colour one")
+    if odd:
+        warn(f"{len(odd)} of the {len(used)} edited photos are {what} "
+             f"({', '.join(odd[:4])}{', ...' if len(odd) > 4 else ''}), the others "
+             f"{rest}: two looks? {learned}")
 
 
 def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> float:
