@@ -25,11 +25,13 @@ colour after it. The steps:
    pair weighing the same, fitted as a scene look is
    (:func:`wbcgrade.color.look.scene_fit.fit_pairs_look`: tone curves and colour
    mixing, Cauchy-robust refits so that local edits such as a healed spot
-   or a masked sky weigh little, then a smooth lattice correction). When
-   every after is black and white the look's output is made grey; when every
-   after is toned (sepia, selenium: one tint per lightness) or black and
-   white, the output is its luma plus the tint the look gives grey of that
-   luma (:func:`wbcgrade.color.remap.to_monochrome`), so that no colour of a
+   or a masked sky weigh little), then a lattice correction finer and less
+   smoothed than a scene look's (:data:`CORRECTION_NODES`: a dozen photos
+   hold more than one scene's pairs). When every after is black and white
+   the look's output is made grey; when every after is toned (sepia,
+   selenium: one tint per lightness) or black and white, the output is its
+   luma plus the afters' mean tint at that luma
+   (:func:`wbcgrade.color.remap.to_monochrome`), so that no colour of a
    photo survives the look.
 5. **Report**: the mean CIEDE2000 between each after and the look applied
    to its original, fitted and held out (the pairs split into
@@ -47,7 +49,7 @@ import json
 import os
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -57,13 +59,28 @@ from wbcgrade.errors import InputError, first_line
 __all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
-           "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE"]
+           "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
+           "CORRECTION_NODES", "CORRECTION_SMOOTHNESS"]
 
 #: Long side (pixels) the photos are registered and sampled at (the scene match's size).
 LEARN_SIZE = 768
 #: Colour pairs drawn from each photo pair. Measured on ``benchmarks/learn.py`` (12 pairs,
 #: 16 film looks): 4 000 or 20 000 a pair recover the same (+0.81 either way, within 0.003).
 PAIRS_PER_PHOTO = 5000
+#: The lattice correction of the learned look (what tone curves and colour mixing cannot
+#: hold; :func:`wbcgrade.color.look.scene_fit.fit_correction`): nodes a side and smoothness. A scene
+#: look's (9 nodes, 1e-3: pairs of one scene) smooths a film look's fine structure away:
+#: a near-black photo's colours all lie in its first cell (0 to 0.125), one trilinear
+#: blend, and the Hubble deep field under Ektar 100 recovered +0.34 (weighting the
+#: pairs towards the dark end did not help: +0.33). Measured on ``benchmarks/learn.py``'s
+#: eight tuned looks (the fit alone on the 12 pairs' colours; mean recovered, worst
+#: photo): 9 nodes 1e-3 +0.825 / +0.545; 9 nodes 1e-4 +0.865 / +0.622; 17 nodes 1e-4,
+#: 3e-5, 1e-5, 3e-6, 1e-6: +0.876, +0.895, +0.907, +0.913, +0.916 (worst +0.638 to
+#: +0.689); 13 or 25 nodes at 1e-5 +0.904; a ridge of 1e-5 (pulling the correction to
+#: none where pairs are few) +0.882. From 4 pairs, on four of them, 3e-6 too is best
+#: (+0.84 against +0.71 with a scene look's).
+CORRECTION_NODES = 17
+CORRECTION_SMOOTHNESS = 3e-6
 #: Folds of the held-out check (leave-one-out below this many pairs).
 LEARN_FOLDS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
@@ -509,13 +526,19 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
     grey axis of a map fitted to colourful originals).
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
-    from wbcgrade.color.look.scene_fit import fit_pairs_look
+    from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look
+    from wbcgrade.core import fast_cpu
 
     sources = np.concatenate([p[0] for p in parts])
     targets = np.concatenate([p[1] for p in parts])
     weights = np.concatenate([p[2] / max(float(p[2].sum()), 1e-12) for p in parts])
     start = None if robust is None else np.concatenate(list(robust))
-    look, final = fit_pairs_look(sources, targets, weights, rounds=rounds, robust=start)
+    look, final = fit_pairs_look(sources, targets, weights, rounds=rounds, robust=start,
+                                 correct=False)
+    with fast_cpu():
+        correction = fit_correction(look.look(sources), targets, final, CORRECTION_NODES,
+                                    CORRECTION_SMOOTHNESS)
+    look = replace(look, correction=correction)
     split = np.cumsum([len(p[0]) for p in parts])[:-1]
     toning = None
     if toned and not monochrome:
