@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT",
            "PARENT_WATCH_S"]
@@ -141,8 +141,8 @@ def _dask_client(address: str):
     try:
         from dask.distributed import Client
     except ImportError:
-        raise InputError("--scheduler needs Dask: pip install 'wbcgrade[dask]' "
-                         "(dask[distributed])") from None
+        raise OptionError("scheduler needs Dask: pip install 'wbcgrade[dask]' "
+                          "(dask[distributed])", "scheduler") from None
     try:
         return Client(address, timeout=DASK_CONNECT_TIMEOUT)
     except (OSError, TimeoutError) as exc:

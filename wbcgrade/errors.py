@@ -25,12 +25,16 @@ class OptionError(InputError):
     message names it the same way; ``also`` names other settings the message
     mentions. The CLI writes each as the flag that sets it (``--bins``) and
     reports the error as a usage error (exit status 2), like click's own.
+    ``path``: the file or folder the message starts with (``"PATH: ..."``),
+    which the CLI never rewrites (a folder may be called ``codec``).
     """
 
-    def __init__(self, message: str, option: str, also: tuple[str, ...] = ()) -> None:
+    def __init__(self, message: str, option: str, also: tuple[str, ...] = (),
+                 path: object = None) -> None:
         super().__init__(message)
         self.option = option
         self.also = tuple(also)
+        self.path = None if path is None else str(path)
 
 
 class Terminated(KeyboardInterrupt):

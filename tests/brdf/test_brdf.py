@@ -81,7 +81,7 @@ def test_analytic_materials_are_finite_reciprocal_and_deterministic():
         [m.name for m in analytic.default_materials(14)]
     lambert = analytic.material_by_name("white-lambert")
     np.testing.assert_allclose(analytic.sample_material(lambert, d), 0.8 / np.pi, rtol=0.06)
-    with pytest.raises(InputError, match="unknown material 'unobtainium'; known: "):
+    with pytest.raises(InputError, match="material 'unobtainium' is unknown; known: "):
         analytic.material_by_name("unobtainium")
 
 

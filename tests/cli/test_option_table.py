@@ -87,3 +87,84 @@ def test_every_bad_option_exits_2_naming_its_flag(tmp_path, args):
                                        "warm", *args])
     assert result.exit_code == USAGE_ERROR == 2, result.output
     assert args[-2] in result.output
+
+
+def test_a_field_has_one_flag():
+    flags = {}
+    for row in OPTIONS:
+        if row.field is not None:
+            assert flags.setdefault(row.field, row.flag) == row.flag, row.field
+
+
+@pytest.mark.parametrize("command", [("look", "extract"), ("look", "learn"), ("preset", "build"),
+                                     ("preset", "list"), ("explore",), ("brdf", "synth")])
+def test_the_look_preset_and_explore_commands_options_are_table_rows(command):
+    group = main
+    for name in command:
+        group = group.commands[name]
+    params = {p.name: p for p in group.get_params(click.Context(group))
+              if isinstance(p, click.Option)}
+    rows = {row.name: row for row in OPTIONS}
+    own = {"list_only", "folder", "count", "directions"}  # brdf synth's own, not tabled yet
+    assert set(params) - set(rows) - own == {"help"}
+    for name, param in params.items():
+        if name in rows:
+            assert rows[name].flag in param.opts, (command, name)
+
+
+@pytest.mark.parametrize("error, shown", [
+    # the path the message starts with is never rewritten, even when it holds the field's name
+    (OptionError("codec/out.mp4: codec prores needs one of .mov, .mkv", "codec",
+                 path="codec/out.mp4"), "codec/out.mp4: --codec prores needs one of .mov, .mkv"),
+    (OptionError("codec: codec prores needs .mov", "codec", path="codec"),
+     "codec: --codec prores needs .mov"),
+    # without a path, a name inside a path is not a whole word
+    (OptionError("out/codec/x.mp4 and codec prores", "codec"),
+     "out/codec/x.mp4 and --codec prores"),
+])
+def test_a_path_in_a_message_keeps_its_names(error, shown):
+    assert str(flag_error(error)) == shown
+
+
+@pytest.mark.parametrize("args, shown", [
+    (["apply", "p.jpg", "--preset", "warm", "--lut", "out.txt"], "--lut file name"),
+    (["video", "clip.mp4", "--preset", "warm", "--codec", "prores", "-o", "codec/out.mp4"],
+     "codec/out.mp4: --codec prores"),
+    (["video", "clip.mp4", "--preset", "warm", "--lut", "out.txt"], "--lut file name"),
+    (["preset", "build", "styles", "-o", "x.npz", "--width", "-1"], "--width must be"),
+    (["preset", "build", "styles", "-o", "x.npz", "--bins", "3"], "--bins must be"),
+    (["preset", "build", "styles", "-o", "x.txt"], "--output file name must end in .npz"),
+    (["look", "extract", "--preset", "warm", "-o", "out.txt"], "--output file name"),
+    (["look", "extract", "-o", "out.cube"], "give either STYLE_DIR or --preset"),
+    (["look", "learn", "p.jpg", "p.jpg", "-o", "out.txt"], "--output must be written as"),
+    (["explore", "p.jpg"], "give exactly one of --style DIR or --preset"),
+    (["brdf", "synth", "-o", "db", "--material", "nosuch"], "--material 'nosuch' is unknown"),
+])
+def test_a_bad_option_of_any_command_exits_2_naming_its_flag(tmp_path, monkeypatch, args,
+                                                             shown):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "styles").mkdir()
+    (tmp_path / "codec").mkdir()
+    (tmp_path / "clip.mp4").write_bytes(b"x")
+    (tmp_path / "p.jpg").write_bytes(b"x")
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    assert shown in result.output.strip().splitlines()[-1]
+
+
+def test_a_missing_input_file_is_not_an_option_error(tmp_path):
+    for args in (["apply", str(tmp_path / "missing.jpg"), "--preset", "warm"],
+                 ["video", str(tmp_path / "missing.mp4"), "--preset", "warm"]):
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 1 and "no such file" in result.output, result.output
+
+
+def test_a_scheduler_without_dask_is_an_option_error(monkeypatch):
+    import sys
+
+    from wbcgrade._executor import _dask_client
+
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    with pytest.raises(OptionError, match="scheduler needs Dask") as caught:
+        _dask_client("tcp://127.0.0.1:1")
+    assert str(flag_error(caught.value)).startswith("--scheduler needs Dask")

@@ -100,11 +100,12 @@ def test_lut_format_follows_the_ending(tmp_path, warm_look):
     assert (tmp_path / "a.clf").read_text().lstrip().startswith("<?xml")
     result = run("apply", photo, "--look", warm_look, "-o", tmp_path / "b.jpg",
                  "--lut", tmp_path / "b.txt")
-    assert result.exit_code != 0 and ".cube or .clf" in result.output
+    assert result.exit_code == 2 and "b.txt: --lut file name must end in .cube or .clf" \
+        in result.output
     assert not (tmp_path / "b.jpg").exists()
     result = run("apply", photo, "--look", warm_look, "-o", tmp_path / "c.jpg",
                  "--lut", tmp_path / "c.cube", "--lut-format", "clf")
-    assert result.exit_code != 0 and "must end in .clf" in result.output
+    assert result.exit_code == 2 and "must end in .clf (--lut-format clf)" in result.output
 
 
 def cmyk_jpeg(path, profile: bytes | None = None):

@@ -26,16 +26,17 @@ def test_explore_is_a_command_with_its_options():
 
 
 def test_bad_inputs_are_one_line_errors(tmp_path, photo):
-    for args, message in (
-            ((tmp_path / "missing.jpg", "--preset", PRESET), "no such file"),
-            ((photo,), "give exactly one of --style DIR or --preset"),
-            ((photo, "--preset", PRESET, "--style", tmp_path), "give exactly one of"),
-            ((photo, "--preset", "nosuch"), "unknown preset 'nosuch'"),
-            ((photo, "--style", tmp_path / "nope"), "style folder does not exist"),
+    # a missing input (photo, styles, preset) exits 1; a bad option value 2 (a usage error)
+    for args, message, status in (
+            ((tmp_path / "missing.jpg", "--preset", PRESET), "no such file", 1),
+            ((photo,), "give exactly one of --style DIR or --preset", 2),
+            ((photo, "--preset", PRESET, "--style", tmp_path), "give exactly one of", 2),
+            ((photo, "--preset", "nosuch"), "unknown preset 'nosuch'", 1),
+            ((photo, "--style", tmp_path / "nope"), "style folder does not exist", 1),
             ((photo, "--preset", PRESET, "--save-dir", tmp_path / "nope"),
-             "the save folder does not exist")):
+             "the save folder does not exist (--save-dir)", 2)):
         result = run("explore", *args, "--no-browser")
-        assert result.exit_code == 1, (args, result.output)
+        assert result.exit_code == status, (args, result.output)
         assert result.stderr.strip().splitlines()[-1].startswith("Error: "), result.stderr
         assert message in result.stderr and "Traceback" not in result.stderr
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 
 _MIN_COS = 1e-4
 
@@ -221,7 +221,7 @@ def material_by_name(name: str) -> Material:
         if material.name == name:
             return material
     known = ", ".join(m.name for m in (*_CATALOGUE, *_HELD_OUT))
-    raise InputError(f"unknown material {name!r}; known: {known}")
+    raise OptionError(f"material {name!r} is unknown; known: {known}", "material")
 
 
 def all_material_names() -> list[str]:

@@ -21,6 +21,7 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_TOL,
     DEFAULT_WIDTH,
 )
+from wbcgrade.cli.grading_options import table_options
 from wbcgrade.errors import OptionError
 from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
 
@@ -40,8 +41,7 @@ def brdf() -> None:
               help="Folder to write the database into (created if needed).")
 @click.option("--count", default=6, show_default=True, type=click.IntRange(1, 64),
               help="Number of materials (the first of the built-in catalogue).")
-@click.option("--material", "materials", multiple=True, metavar="NAME",
-              help="Write these materials instead (repeatable; see --list).")
+@table_options("materials")
 @click.option("--list", "list_only", is_flag=True, help="List the material names and exit.")
 @click.option("--directions", default=DEFAULT_DIRECTIONS, show_default=True,
               type=click.IntRange(8, 2000),

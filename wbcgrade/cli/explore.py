@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from wbcgrade.cli.grading_options import table_options
+
 
 def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
@@ -11,20 +13,7 @@ def _warn(message: str) -> None:
 
 @click.command("explore")
 @click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
-@click.option("--style", "style_dir", type=click.Path(path_type=str), default=None,
-              help="Folder of style photos (non-images are skipped).")
-@click.option("--preset", "presets", multiple=True, metavar="NAME_OR_FILE",
-              help="Shipped preset name (see `wbcgrade preset list`) or a preset .npz file; "
-                   "repeat it to offer more in the page's preset picker (the page opens on "
-                   "the first; every shipped preset is offered too).")
-@click.option("--save-dir", type=click.Path(file_okay=False, path_type=str), default=None,
-              help="Folder the page's \"Save the graded photo\" writes into (new files "
-                   "<stem>_explore_<n>.<ext>, never replacing one) [default: the photo's "
-                   "folder].")
-@click.option("--port", type=click.IntRange(0, 65535), default=0, show_default=True,
-              help="Port on 127.0.0.1 (0: any free port).")
-@click.option("--no-browser", is_flag=True,
-              help="Do not open a browser; print the address only.")
+@table_options("style_dir", "presets", "save_dir", "port", "no_browser")
 def explore(photo, style_dir, presets, port, save_dir, no_browser):
     """Steer the grade of PHOTO by hand in a live page, then export it.
 

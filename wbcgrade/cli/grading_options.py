@@ -16,7 +16,15 @@ from __future__ import annotations
 
 import click
 
-from wbcgrade.cli.option_table import LOOK, PALETTE, click_options, flag_of, names_in, option
+from wbcgrade.cli.option_table import (
+    HISTOGRAMS,
+    LOOK,
+    PALETTE,
+    click_options,
+    flag_of,
+    names_in,
+    option,
+)
 
 #: The grading options' parameter names, in the order ``--help`` shows them (rows of
 #: :data:`wbcgrade.cli.option_table.OPTIONS`).
@@ -134,8 +142,9 @@ def flag_error(error):
     """An OptionError naming library settings -> the same error naming their flags.
 
     The first mention of ``error.option`` (and of each of ``error.also``), as a
-    whole word, becomes the flag that sets it (:data:`FLAGS`); names with no flag
-    are left as they are.
+    whole word (not part of a path: no ``/``, ``\\``, ``.``, ``-`` or ``_`` beside it),
+    becomes the flag that sets it (:data:`FLAGS`); names with no flag are left as
+    they are. The file the message starts with (``error.path``) is never rewritten.
     """
     import re
 
@@ -145,10 +154,14 @@ def flag_error(error):
     if flag is None:
         return error
     text = str(error)
+    path = getattr(error, "path", None)
+    head = f"{path}: " if path is not None and text.startswith(f"{path}: ") else ""
+    text = text[len(head):]
     for name in (error.option, *getattr(error, "also", ())):
         if name in FLAGS:
-            text = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w-])", FLAGS[name], text, count=1)
-    return OptionError(text, flag)
+            text = re.sub(rf"(?<![\w./\\-]){re.escape(name)}(?![\w/\\-])", FLAGS[name],
+                          text, count=1)
+    return OptionError(head + text, flag, path=path)
 
 
 class _Deferred:
@@ -169,12 +182,14 @@ class _Deferred:
 #: ``--help`` sections: (title, parameter names), in order; options not named go under
 #: "Other options".
 OPTION_GROUPS = (
-    ("Where the grade comes from", ("style_dir", "preset", "look_path", "mode", "strength")),
+    ("Where the grade comes from", ("style_dir", "preset", "look_path", "mode", "strength",
+                                    "look_strength")),
     ("Look grade (--mode look, the default)", tuple(LOOK_ONLY)),
     ("Colour map and finish (both modes)",
      ("map_size", "monotone", "preserve_luminance", "regrain", "regrain_radius",
       "regrain_eps")),
     ("Palette fit (--mode palette only)", tuple(PALETTE_ONLY)),
+    ("Histograms", names_in(HISTOGRAMS)),
     ("Colour spaces", _SPACE_KEYS),
     ("Outputs", ("output", "output_dir", "out_dir", "report_dir", "lut", "lut_size",
                  "lut_format", "save_grade", "quality", "bit_depth", "overwrite", "as_json")),
@@ -215,6 +230,13 @@ class LazyOptionsCommand(click.Command):
     @params.setter
     def params(self, value: list[click.Parameter]) -> None:
         self.__dict__["_params"] = value
+
+
+def table_rows(*names: str, **changes):
+    """Decorator: the table's rows named, built when the command's parameters are first
+    used (rows whose defaults live in heavy modules); the command must be a
+    :class:`LazyOptionsCommand`. ``changes`` as for :func:`table_options`."""
+    return lazy_options(lambda: click_options(*names, **changes))
 
 
 def lazy_options(factory):

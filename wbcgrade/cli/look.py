@@ -7,7 +7,15 @@ import json
 
 import click
 
-from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options, lut_format_option
+from wbcgrade.cli.grading_options import (
+    LazyOptionsCommand,
+    table_options,
+    table_rows,
+)
+from wbcgrade.cli.option_table import option
+
+#: ``--lut-size`` of the look commands (at most 129 nodes a side).
+_LUT_SIZE = click.IntRange(2, 129)
 
 
 @click.group("look")
@@ -18,28 +26,22 @@ def look() -> None:
 
 @look.command("extract", cls=LazyOptionsCommand)
 @click.argument("style_dir", required=False, type=click.Path(path_type=str))
-@click.option("--preset", default=None, metavar="NAME_OR_FILE",
-              help="A shipped preset name or preset file instead of STYLE_DIR.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
-              help="LUT file to write (.cube or .clf: the ending names the format).")
-@click.option("--lut-size", type=click.IntRange(2, 129), default=33, show_default=True,
-              help="Nodes per axis of the LUT.")
-@lazy_options(lut_format_option)
-@click.option("--strength", type=click.FloatRange(0.0, 2.0), default=None,
-              help="Scale of the extracted look [default: how far the two halves of "
-                   "the set agree on it; a preset's own look: all of it].")
-@click.option("--natural", type=click.Path(path_type=str), default=None,
-              metavar="PRESET|DIR", help="The content model: a preset (.npz) of ungraded "
-                                         "photos, or a folder of your own ungraded photos "
-                                         "[default: the shipped palettes].")
-@click.option("--working-space", default=None, metavar="NAME",
-              help="Colour space the look is extracted and the LUT applied in "
-                   "[default: sRGB-encoded Rec.709].")
-@click.option("--overwrite", is_flag=True, help="Replace an existing LUT file.")
-@click.option("--json", "as_json", is_flag=True, help="Print what was found as JSON.")
-@click.option("--no-cache", is_flag=True, help="Do not read or write cached style histograms.")
-def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, working_space,
-            overwrite, as_json, no_cache):
+@table_options("preset", help="A shipped preset name or preset file instead of STYLE_DIR.")
+@table_options("output", required=True,
+               help="LUT file to write (.cube or .clf: the ending names the format).")
+@table_rows("lut_size", type=_LUT_SIZE)
+@table_rows("lut_format", help=option("lut_format").help.replace("--lut file", "--output file"))
+@table_options("look_strength")
+@table_options("natural", help="The content model: a preset (.npz) of ungraded photos, or a "
+                               "folder of your own ungraded photos [default: the shipped "
+                               "palettes].")
+@table_options("working_space", help="Colour space the look is extracted and the LUT "
+                                     "applied in [default: sRGB-encoded Rec.709].")
+@table_options("overwrite", help="Replace an existing LUT file.")
+@table_options("as_json", help="Print what was found as JSON.")
+@table_options("no_cache")
+def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natural,
+            working_space, overwrite, as_json, no_cache):
     """Extract the look the photos in STYLE_DIR share and write it as a 3-D LUT.
 
     Each style photo is explained as a blend of ungraded palettes (its
@@ -55,7 +57,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
     from wbcgrade.errors import OptionError
 
     if (style_dir is None) == (preset is None):
-        raise OptionError("give either STYLE_DIR or --preset", "--preset")
+        raise OptionError("give either STYLE_DIR or preset", "preset")
     source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
     with style_progress() as on_style, \
             tqdm(desc="look", unit="style", disable=None, leave=False) as bar:
@@ -65,7 +67,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
             bar.refresh()
 
         found = extract_look_file(source, output, lut_size=lut_size, lut_format=lut_format,
-                                  strength=strength, natural=natural,
+                                  strength=look_strength, natural=natural,
                                   working_space=working_space, overwrite=overwrite,
                                   warn=lambda m: click.echo(f"Warning: {m}", err=True),
                                   on_style=on_style, on_look=on_look)
@@ -87,19 +89,18 @@ def extract(style_dir, preset, output, lut_size, lut_format, strength, natural, 
                        "the style photos' instead")
 
 
-@look.command("learn")
+@look.command("learn", cls=LazyOptionsCommand)
 @click.argument("before", type=click.Path(path_type=str))
 @click.argument("after", type=click.Path(path_type=str))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
-              help="The look to write: .cube or .clf (a LUT) or .json (a saved grade); "
-                   "the ending names the format.")
-@click.option("--lut-size", type=click.IntRange(2, 129), default=33, show_default=True,
-              help="Nodes per axis of the written look.")
-@click.option("--working-space", default=None, metavar="NAME",
-              help="Colour space the look is learned and applied in [default: ACEScct when "
-                   "an original is raw, else sRGB-encoded Rec.709].")
-@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
-@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@table_options("output", required=True,
+               help="The look to write: .cube or .clf (a LUT) or .json (a saved grade); the "
+                    "ending names the format.")
+@table_rows("lut_size", type=_LUT_SIZE, help="Nodes per axis of the written look.")
+@table_options("working_space", help="Colour space the look is learned and applied in "
+                                     "[default: ACEScct when an original is raw, else "
+                                     "sRGB-encoded Rec.709].")
+@table_options("overwrite", help="Replace an existing output file.")
+@table_options("as_json", help="Print the report as JSON.")
 def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     """Learn the look of a photographer's edits from BEFORE/AFTER pairs.
 

@@ -1,11 +1,15 @@
-"""The one table of the grading commands' options (``apply``, ``batch``, ``report``, ``video``).
+"""The one table of the command-line options (``apply``, ``batch``, ``report``, ``video``,
+``look``, ``preset``, ``explore``).
 
 Each row (:class:`Option`) holds what the command line, the JSON records and the
 error messages need of one option: the click parameter name, the flag, the
 library field it sets (whose errors name it: ``transfer.bins``), the key under
 which records write it (:meth:`wbcgrade.color.options.GradeOptions.flat`), the
 click type, the default (read from the library field unless given), the help
-and the ``--help`` section. The click options (:func:`click_options`), the
+and the ``--help`` section. A command may reword a row's help for itself
+(``click_options(name, help=...)``) where the meaning is the same; an option
+whose meaning differs has its own row (``look_strength``). The click options
+(:func:`click_options`), the
 flag of a field (:data:`flag_of`), the grading keys and the palette-only and
 look-only sets are derived from it; nothing else spells these names.
 
@@ -29,8 +33,8 @@ __all__ = ["Option", "OPTIONS", "FIELD_DEFAULT", "option", "click_options", "fla
 FIELD_DEFAULT = object()
 
 #: ``--help`` sections of the rows (OPTION_GROUPS in grading_options adds the titles).
-SOURCE, LOOK, MAP, PALETTE, SPACES, OUTPUTS, OTHER = (
-    "source", "look", "map", "palette", "spaces", "outputs", "other")
+SOURCE, LOOK, MAP, PALETTE, SPACES, OUTPUTS, HISTOGRAMS, OTHER = (
+    "source", "look", "map", "palette", "spaces", "outputs", "histograms", "other")
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,7 @@ class Option:
     metavar: str | None = None
     show_default: bool = False
     is_flag: bool = False
+    multiple: bool = False
     expose_value: bool = True
     required: bool = False
     hidden: bool = False
@@ -87,6 +92,8 @@ class Option:
             extra["metavar"] = self.metavar
         if self.is_flag:
             extra["is_flag"] = True
+        if self.multiple:
+            extra["multiple"] = True
         if self.callback is not None:
             extra["callback"] = _resolve(self.callback)
         if not self.expose_value:
@@ -302,6 +309,37 @@ OPTIONS: tuple[Option, ...] = (
     Option("crf", "--crf", "x264/x265 constant rate factor (lower: better, larger).",
            field="crf", type=int, default="wbcgrade.video.defaults:DEFAULT_CRF",
            lazy_default=True, show_default=True),
+    # look extract: a scale of the look found, at most 2, default its reliability (apply's
+    # --strength blends a grade made at its own strength, up to 4)
+    Option("look_strength", "--strength", "Scale of the extracted look [default: how far the "
+           "two halves of the set agree on it; a preset's own look: all of it].",
+           field="strength", type=click.FloatRange(0.0, 2.0), section=SOURCE),
+    # preset build: the preset's own histograms
+    Option("preset_bins", "--bins", "Bins per axis of the stored histograms (apply re-bins "
+           "them as needed).", field="bins", type=int, default=32, show_default=True,
+           section=HISTOGRAMS),
+    Option("preset_width", "--width", "Kernel width (bins) recorded with the preset.",
+           field="width", type=float, default="wbcgrade.color.presets:DEFAULT_PRESET_WIDTH",
+           lazy_default=True, show_default=True, section=HISTOGRAMS),
+    Option("description", "--description", "One line shown by `preset list`.",
+           field="description", default=""),
+    Option("compact", "--compact", "Store 16-bit bins (about half the file; for hundreds of "
+           "photos).", field="compact", is_flag=True, default=False),
+    # explore
+    Option("presets", "--preset", "Shipped preset name (see `wbcgrade preset list`) or a "
+           "preset .npz file; repeat it to offer more in the page's preset picker (the page "
+           "opens on the first; every shipped preset is offered too).", multiple=True,
+           metavar="NAME_OR_FILE", section=SOURCE),
+    Option("save_dir", "--save-dir", "Folder the page's \"Save the graded photo\" writes into "
+           "(new files <stem>_explore_<n>.<ext>, never replacing one) [default: the photo's "
+           "folder].", field="save_dir", type=_FOLDER, section=OUTPUTS),
+    Option("port", "--port", "Port on 127.0.0.1 (0: any free port).", field="port",
+           type=click.IntRange(0, 65535), default=0, show_default=True),
+    Option("no_browser", "--no-browser", "Do not open a browser; print the address only.",
+           is_flag=True, default=False),
+    # brdf synth
+    Option("materials", "--material", "Write these materials instead (repeatable; see --list).",
+           field="material", multiple=True, metavar="NAME"),
 )
 
 _BY_NAME = {row.name: row for row in OPTIONS}

@@ -7,16 +7,7 @@ import os
 
 import click
 
-from wbcgrade.cli.grading_options import LazyOptionsCommand, lazy_options
-from wbcgrade.errors import InputError
-
-
-def _width_option() -> list:
-    """``--width`` (default: the preset library's), for :func:`lazy_options`."""
-    from wbcgrade.color.presets import DEFAULT_PRESET_WIDTH
-
-    return [click.option("--width", type=float, default=DEFAULT_PRESET_WIDTH, show_default=True,
-                         help="Kernel width (bins) recorded with the preset.")]
+from wbcgrade.cli.grading_options import LazyOptionsCommand, table_options, table_rows
 
 
 @click.group("preset")
@@ -26,20 +17,18 @@ def preset() -> None:
 
 @preset.command("build", cls=LazyOptionsCommand)
 @click.argument("folder", type=click.Path(path_type=str))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=str),
-              help="Preset file to write (.npz).")
-@click.option("--bins", type=int, default=32, show_default=True,
-              help="Bins per axis of the stored histograms (apply re-bins them as needed).")
-@lazy_options(_width_option)
-@click.option("--description", default="", help="One line shown by `preset list`.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing preset file.")
-@click.option("--no-cache", is_flag=True, help="Do not use the style histogram cache.")
-@click.option("--working-space", default=None, metavar="NAME",
-              help="Colour space of the histograms (OpenColorIO name or alias, e.g. acescct), "
-                   "recorded in the preset [default: sRGB-encoded Rec.709].")
-@click.option("--compact", is_flag=True,
-              help="Store 16-bit bins (about half the file; for hundreds of photos).")
-def build(folder, output, bins, width, description, overwrite, no_cache, working_space, compact):
+@table_options("output", required=True, help="Preset file to write (.npz).")
+@table_options("preset_bins")
+@table_rows("preset_width")
+@table_options("description")
+@table_options("overwrite", help="Replace an existing preset file.")
+@table_options("no_cache", help="Do not use the style histogram cache.")
+@table_options("working_space", help="Colour space of the histograms (OpenColorIO name or "
+                                     "alias, e.g. acescct), recorded in the preset [default: "
+                                     "sRGB-encoded Rec.709].")
+@table_options("compact")
+def build(folder, output, preset_bins, preset_width, description, overwrite, no_cache,
+          working_space, compact):
     """Build a preset from the photos in FOLDER (non-images are skipped).
 
     Each photo is converted from its own colour space (ICC profile, EXR
@@ -48,12 +37,14 @@ def build(folder, output, bins, width, description, overwrite, no_cache, working
     from wbcgrade.cli._progress import style_progress
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.presets import check_preset_width, load_style_folder, save_preset
+    from wbcgrade.errors import InputError, OptionError
 
+    bins = preset_bins
     if not 4 <= bins <= 256:
-        raise InputError("--bins must be between 4 and 256")
-    width = check_preset_width(width)
+        raise OptionError("bins must be between 4 and 256", "bins")
+    width = check_preset_width(preset_width)
     if not output.lower().endswith(".npz"):
-        raise InputError(f"{output}: preset file name must end in .npz")
+        raise OptionError(f"{output}: output file name must end in .npz", "output", path=output)
     if os.path.exists(output) and not overwrite:
         raise InputError(f"{output}: file exists (use --overwrite to replace it)")
     if working_space:
@@ -72,7 +63,7 @@ def build(folder, output, bins, width, description, overwrite, no_cache, working
 
 
 @preset.command("list")
-@click.option("--json", "as_json", is_flag=True, help="Print as JSON.")
+@table_options("as_json", help="Print as JSON.")
 def list_(as_json):
     """List the presets shipped with wbcgrade."""
     from wbcgrade.color.presets import list_presets, load_preset

@@ -162,17 +162,20 @@ def read_cube(path: str | os.PathLike):
     return colour.read_LUT(str(path))
 
 
-def lut_format_of(path: str | os.PathLike, lut_format: str | None = None) -> str:
+def lut_format_of(path: str | os.PathLike, lut_format: str | None = None,
+                  option: str = "lut") -> str:
     """The LUT format of ``path``: ``lut_format`` when given, else the one its ending names
-    (``.cube`` or ``.clf``, :data:`LUT_FORMATS`); InputError for any other ending."""
+    (``.cube`` or ``.clf``, :data:`LUT_FORMATS`); OptionError naming the setting ``option``
+    (the one that gave ``path``) for any other ending."""
     if lut_format is not None:
         return lut_format
     suffix = Path(path).suffix.lower()
     for name, ending in LUT_FORMATS.items():
         if suffix == ending:
             return name
-    raise InputError(f"{path}: a LUT file name must end in "
-                     f"{' or '.join(LUT_FORMATS.values())} (the format follows the ending)")
+    raise OptionError(f"{path}: {option} file name must end in "
+                      f"{' or '.join(LUT_FORMATS.values())} (the format follows the ending)",
+                      option, path=path)
 
 
 def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Path:
@@ -186,7 +189,7 @@ def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Pa
     suffix = LUT_FORMATS[lut_format]
     if path.suffix.lower() != suffix:
         raise OptionError(f"{path}: LUT file name must end in {suffix} (lut_format "
-                          f"{lut_format})", "lut_format")
+                          f"{lut_format})", "lut_format", path=path)
     return path
 
 

@@ -236,16 +236,18 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
 
 
 def check_preset_width(width: float) -> float:
-    """``width`` as a float when it is a usable kernel width (finite, > 0 bins), else InputError.
+    """``width`` as a float when it is a usable kernel width (finite, > 0 bins), else an
+    OptionError naming the setting ``width``.
 
     Checked before a preset is built, since :func:`load_preset` refuses any other.
     """
     try:
         value = float(width)
     except (TypeError, ValueError):
-        raise InputError(f"--width must be a number of bins, got {width!r}") from None
+        raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
     if not (np.isfinite(value) and value > 0):
-        raise InputError(f"--width must be a positive, finite number of bins, got {width}")
+        raise OptionError(f"width must be a positive, finite number of bins, got {width}",
+                          "width")
     return value
 
 

@@ -223,10 +223,11 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
     output = Path(output) if output is not None else default_output(source, settings.codec)
     encoder, containers = CODECS[settings.codec]
     if output.suffix.lower() not in containers:
-        raise InputError(f"{output}: --codec {settings.codec} needs one of "
-                         f"{', '.join(containers)} as the output's extension")
+        raise OptionError(f"{output}: codec {settings.codec} needs one of "
+                          f"{', '.join(containers)} as the output's extension", "codec",
+                          path=output)
     if lut is not None and Path(lut).suffix.lower() != ".cube":
-        raise InputError(f"{lut}: LUT file name must end in .cube")
+        raise OptionError(f"{lut}: lut file name must end in .cube", "lut", path=lut)
     output, lut = plan_outputs([output, lut], [source, *reads], overwrite)
     return source, output, lut
 

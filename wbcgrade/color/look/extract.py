@@ -93,7 +93,7 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
     InputError
         The LUT may not be written (checked before any work), unreadable styles.
     """
-    lut_format = lut_format_of(output, lut_format)
+    lut_format = lut_format_of(output, lut_format, "output")
     check_lut_path(output, lut_format)
     output = plan_outputs([output], [], overwrite)[0]  # before any work
     encoding = ColorEncoding.of(None, working_space).within_working()

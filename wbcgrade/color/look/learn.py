@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.errors import InputError, first_line
+from wbcgrade.errors import InputError, OptionError, first_line
 
 __all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
@@ -820,8 +820,8 @@ def _output_kind(output: Path) -> str:
         return "json"
     if suffix in (".cube", ".clf"):
         return suffix[1:]
-    raise InputError(f"{output}: the look must be written as .cube, .clf or .json "
-                     "(the ending names the format)")
+    raise OptionError(f"{output}: output must be written as .cube, .clf or .json "
+                      "(the ending names the format)", "output", path=output)
 
 
 def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
