@@ -10,7 +10,18 @@ class WbcgradeError(Exception):
 
 
 class InputError(WbcgradeError, ValueError):
-    """An input file or array is unusable (unreadable, corrupt, wrong shape)."""
+    """An input file or array is unusable (unreadable, corrupt, wrong shape).
+
+    ``fields``: settings the message names as the library does (``"recursive"``,
+    ``"spaces.working"``), each once, in a hint; the CLI writes them as their flags.
+    ``path``: the file or folder the message starts with (``"PATH: ..."``), which the
+    CLI never rewrites.
+    """
+
+    def __init__(self, *args, fields: tuple[str, ...] = (), path: object = None) -> None:
+        super().__init__(*args)
+        self.fields = tuple(fields)
+        self.path = None if path is None else str(path)
 
 
 class NumericalError(WbcgradeError, FloatingPointError):
@@ -31,10 +42,9 @@ class OptionError(InputError):
 
     def __init__(self, message: str, option: str, also: tuple[str, ...] = (),
                  path: object = None) -> None:
-        super().__init__(message)
+        super().__init__(message, path=path)
         self.option = option
         self.also = tuple(also)
-        self.path = None if path is None else str(path)
 
 
 class Terminated(KeyboardInterrupt):

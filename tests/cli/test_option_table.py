@@ -168,3 +168,19 @@ def test_a_scheduler_without_dask_is_an_option_error(monkeypatch):
     with pytest.raises(OptionError, match="scheduler needs Dask") as caught:
         _dask_client("tcp://127.0.0.1:1")
     assert str(flag_error(caught.value)).startswith("--scheduler needs Dask")
+
+
+def test_an_input_errors_hint_names_the_flag_and_still_exits_1(tmp_path):
+    import pickle
+
+    from wbcgrade.errors import InputError
+
+    folder = tmp_path / "recursive"  # a folder named like the setting keeps its name
+    folder.mkdir()
+    result = CliRunner().invoke(main, ["batch", str(folder), "--preset", "warm", "-o",
+                                       str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    assert result.output.strip().splitlines()[-1] == (
+        f"Error: {folder}: no photos found (use --recursive for sub-folders)")
+    error = pickle.loads(pickle.dumps(InputError("a: b", fields=("recursive",), path="a")))
+    assert (error.fields, error.path) == (("recursive",), "a")

@@ -21,7 +21,7 @@ import warnings
 import click
 
 from wbcgrade import __version__
-from wbcgrade.errors import OptionError, Terminated, WbcgradeError, first_line
+from wbcgrade.errors import InputError, OptionError, Terminated, WbcgradeError, first_line
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -93,6 +93,10 @@ class _Group(click.Group):
                 from wbcgrade.cli.grading_options import flag_error
 
                 exc, status = flag_error(exc), USAGE_ERROR
+            elif getattr(exc, "fields", ()):  # an input error whose hint names a setting
+                from wbcgrade.cli.grading_options import flag_text
+
+                exc = InputError(flag_text(exc))
             click.echo(f"Error: {_message(exc)}", err=True)
             sys.exit(status)
 

@@ -146,22 +146,30 @@ def flag_error(error):
     becomes the flag that sets it (:data:`FLAGS`); names with no flag are left as
     they are. The file the message starts with (``error.path``) is never rewritten.
     """
-    import re
-
     from wbcgrade.errors import OptionError
 
     flag = FLAGS.get(getattr(error, "option", None))
     if flag is None:
         return error
+    return OptionError(flag_text(error), flag, path=getattr(error, "path", None))
+
+
+def flag_text(error) -> str:
+    """The message of a library error with the settings it names (``error.option``,
+    ``.also``, ``.fields``) written as their flags (see :func:`flag_error`)."""
+    import re
+
     text = str(error)
     path = getattr(error, "path", None)
     head = f"{path}: " if path is not None and text.startswith(f"{path}: ") else ""
     text = text[len(head):]
-    for name in (error.option, *getattr(error, "also", ())):
+    names = (getattr(error, "option", None), *getattr(error, "also", ()),
+             *getattr(error, "fields", ()))
+    for name in names:
         if name in FLAGS:
             text = re.sub(rf"(?<![\w./\\-]){re.escape(name)}(?![\w/\\-])", FLAGS[name],
                           text, count=1)
-    return OptionError(head + text, flag, path=path)
+    return head + text
 
 
 class _Deferred:

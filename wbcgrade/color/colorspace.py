@@ -243,7 +243,7 @@ def default_working_space() -> str:
     found = canonical("srgb")
     if found is None:
         raise InputError(f"OpenColorIO config {config_path()} has no sRGB-encoded Rec.709 "
-                         "space; name one with --working-space")
+                         "space; name one with spaces.working", fields=("spaces.working",))
     return found
 
 

@@ -178,7 +178,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                       exclude=[report_dir] if report_dir else [], reads=reads)
     if not plan.tasks and not plan.done and not plan.refused:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
-                                                         " (use --recursive for sub-folders)"))
+                                                         " (use recursive for sub-folders)"),
+                         fields=("recursive",), path=in_dir)
     if lut is not None:
         lut = plan_outputs([lut], [*(t.source for t in plan.all_photos), *reads], overwrite)[0]
     if consistent and options.spaces.working is None:  # one working space for the series
@@ -374,7 +375,8 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     plan = plan_batch(folder, None, recursive=recursive, exclude=[report_dir])
     if not plan.tasks:
         raise InputError(f"{folder}: no graded photos found"
-                         + ("" if recursive else " (use --recursive for sub-folders)"))
+                         + ("" if recursive else " (use recursive for sub-folders)"),
+                         fields=("recursive",), path=folder)
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks))
