@@ -53,3 +53,15 @@ def test_a_pipe_is_not_an_output(brdfs, tmp_path, no_fit):
     assert result.exit_code == 1
     assert "not a regular file" in result.output.strip().splitlines()[-1]
     assert fifo.is_fifo()
+
+
+def test_a_bad_output_is_an_option_error_naming_its_flag(brdfs, tmp_path, no_fit):
+    measured, database = brdfs
+    for extra, last in (
+            (["-o", str(tmp_path / "fit.txt")],
+             f"Error: {tmp_path / 'fit.txt'}: --output needs a .binary or .npz suffix"),
+            (["-o", str(tmp_path / "fit.npz"), "--png", str(measured)],
+             f"Error: {measured}: an input; choose another --png")):
+        result = _fit(measured, database, *extra)
+        assert result.exit_code == 2, result.output
+        assert result.output.strip().splitlines()[-1] == last

@@ -47,9 +47,9 @@ def test_outputs_are_checked_before_any_work(tmp_path, files):
     measured, database = files
     out, png = fit_outputs(measured, database, keeps=(0.25,))
     assert out.name == f"{measured.stem}-keep25-fit.binary" and png == out.with_suffix(".png")
-    with pytest.raises(OptionError, match="is an input") as info:
+    with pytest.raises(OptionError, match="an input; choose another png") as info:
         fit_outputs(measured, database, output=measured.with_suffix(".npz"), png=measured)
-    assert info.value.option == "-o/--png"
+    assert info.value.option == "png" and info.value.path == str(measured)
     with pytest.raises(OptionError, match="suffix"):
         fit_outputs(measured, database, output=tmp_path / "fit.txt")
     with pytest.raises(InputError, match="output folder does not exist"):

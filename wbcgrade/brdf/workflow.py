@@ -105,11 +105,11 @@ def fit_outputs(measured: str | os.PathLike, database: str | os.PathLike,
     out = Path(output) if output else default_fit_output(measured, keeps[0] if keeps else None)
     png_path = None if no_png else (Path(png) if png else out.with_suffix(".png"))
     inputs = {measured.resolve(), *(p.resolve() for p in io.database_files(database))}
-    for target in (out, png_path):
+    for target, name in ((out, "output"), (png_path, "png")):
         if target is not None and target.resolve() in inputs:
-            raise OptionError(f"{target} is an input; choose another output", "-o/--png")
+            raise OptionError(f"{target}: an input; choose another {name}", name, path=target)
     if out.suffix.lower() not in io.BRDF_SUFFIXES:
-        raise OptionError(f"{out}: use a .binary or .npz suffix", "-o")
+        raise OptionError(f"{out}: output needs a .binary or .npz suffix", "output", path=out)
     for target in (out, png_path):
         if target is not None:
             check_output_path(target, overwrite=True)

@@ -22,7 +22,6 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_WIDTH,
 )
 from wbcgrade.cli.grading_options import table_options
-from wbcgrade.errors import OptionError
 from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
 
 
@@ -86,10 +85,9 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
                    "acquisition); repeat for several fits side by side, e.g. --keep 0.25 "
                    "--keep 0.1 --keep 0.05 (the paper's Figure 6).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the decimation.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
-              help="Fitted BRDF (.binary MERL or .npz) [default: ./<MEASURED>[-keepK]-fit.binary].")
-@click.option("--png", type=click.Path(dir_okay=False), default=None,
-              help="Comparison picture [default: OUTPUT with .png].")
+@table_options("output", help="Fitted BRDF (.binary MERL or .npz) [default: "
+                              "./<MEASURED>[-keepK]-fit.binary].")
+@table_options("png")
 @click.option("--no-png", is_flag=True, help="Do not render the comparison picture.")
 @click.option("--compare/--no-compare", default=True, show_default=True,
               help="With --keep, also fit the full measurement for comparison.")
@@ -145,8 +143,6 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
             measured, database, keeps=keeps, seed=seed, output=output, png=png, no_png=no_png,
             compare=compare, loss=loss, directions=directions, fit_directions=fit_directions,
             width=width, n_iter=n_iter, max_iter=max_iter, tol=tol, progress=progress)
-    except OptionError as exc:
-        raise click.BadParameter(str(exc), param_hint=exc.option) from None
     finally:
         for bar in bars.values():
             bar.close()

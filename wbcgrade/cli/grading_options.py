@@ -161,7 +161,7 @@ def flag_text(error) -> str:
 
     text = str(error)
     path = getattr(error, "path", None)
-    head = f"{path}: " if path is not None and text.startswith(f"{path}: ") else ""
+    head = path if path is not None and text.startswith(path) else ""
     text = text[len(head):]
     names = (getattr(error, "option", None), *getattr(error, "also", ()),
              *getattr(error, "fields", ()))

@@ -337,7 +337,9 @@ OPTIONS: tuple[Option, ...] = (
            type=click.IntRange(0, 65535), default=0, show_default=True),
     Option("no_browser", "--no-browser", "Do not open a browser; print the address only.",
            is_flag=True, default=False),
-    # brdf synth
+    # brdf
+    Option("png", "--png", "Comparison picture [default: OUTPUT with .png].", field="png",
+           type=_FILE),
     Option("materials", "--material", "Write these materials instead (repeatable; see --list).",
            field="material", multiple=True, metavar="NAME"),
 )
