@@ -15,8 +15,8 @@ core's :func:`~wbcgrade.core.barycentric_coordinates` with
 where ``alpha`` is the fraction of the shape's volume missing from the input
 (the barycenter has mass 1, the observed part only ``1 - alpha`` of it). The
 shape drawn from the weights is the debiased barycenter
-(:mod:`wbcgrade.shape.debiased`), whose parts beyond the input are added to
-it; the written surface is the input mesh united with them, in the input's
+(:func:`wbcgrade.core.debiased_barycenter`), whose parts beyond the input are
+added to it; the written surface is the input mesh united with them, in the input's
 own coordinates (:func:`completion_surface`).
 
 Kernel width. The Gibbs kernel is a Gaussian of standard deviation
@@ -68,6 +68,7 @@ from wbcgrade.core import (
     GridGeometry,
     Loss,
     barycentric_coordinates,
+    debiased_barycenter,
     get_loss,
     mixture_coordinates,
     refine_grid,
@@ -75,7 +76,6 @@ from wbcgrade.core import (
 )
 from wbcgrade.core.barycenter import DEFAULT_CHECKPOINT_BYTES, gradient_memory
 from wbcgrade.errors import InputError
-from wbcgrade.shape.debiased import debiased_barycenter
 from wbcgrade.shape.defaults import (  # noqa: F401 - re-exported
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
@@ -621,7 +621,7 @@ class Completion:
         it by more than half a voxel and the weights were fitted again there.
     fitted : (n, n, n) the density the fitted shape is drawn from: the
         debiased barycenter of the fitted weights
-        (:func:`~wbcgrade.shape.debiased.debiased_barycenter`; the linear
+        (:func:`~wbcgrade.core.debiased_barycenter`; the linear
         mixture for the Euclidean method).
     extension : (n, n, n) the fitted shape's occupancy where it extends the
         input (:func:`extension_occupancy`); ``shape`` is its maximum with
