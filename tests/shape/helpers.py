@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from wbcgrade.shape.complete import VoxelShape
+from wbcgrade.shape.database import VoxelShape
 from wbcgrade.shape.mesh import normalize_mesh, voxelize
 
 

@@ -8,20 +8,11 @@ import pytest
 from tests.shape.helpers import ball, voxel_shapes
 from wbcgrade.core import GridGeometry, barycenter, barycenter_gradient
 from wbcgrade.errors import InputError
-from wbcgrade.shape.complete import (
-    KL_REVERSE,
-    VoxelShape,
-    check_memory,
-    complete_shape,
-    completion_surface,
-    default_width,
-    estimate_memory,
-    estimate_missing_fraction,
-    intersection_over_union,
-    iso_level,
-    make_target,
-    project,
-)
+from wbcgrade.shape.complete import complete_shape, estimate_missing_fraction, iso_level
+from wbcgrade.shape.database import VoxelShape, intersection_over_union
+from wbcgrade.shape.memory import check_memory, estimate_memory
+from wbcgrade.shape.projection import KL_REVERSE, default_width, make_target, project
+from wbcgrade.shape.surface import completion_surface
 from wbcgrade.shape.volume import density_from_volume
 
 
@@ -133,7 +124,7 @@ def test_projection_refuses_mismatched_or_single_database():
 def test_alignment_picks_the_axes_signs_that_match_the_reference(tmp_path):
     import trimesh
 
-    from wbcgrade.shape.complete import load_shape
+    from wbcgrade.shape.database import load_shape
 
     body = trimesh.creation.box(extents=(1.0, 0.4, 0.25))
     head = trimesh.creation.icosphere(subdivisions=2, radius=0.15)

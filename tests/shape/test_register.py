@@ -9,14 +9,9 @@ import pytest
 import trimesh
 
 from tests.shape.helpers import ball
-from wbcgrade.core import GridGeometry, barycenter
-from wbcgrade.shape.complete import (
-    extension_occupancy,
-    intersection_over_union,
-    iso_level,
-    load_shape,
-)
-from wbcgrade.shape.debiased import debiased_barycenter
+from wbcgrade.core import GridGeometry, barycenter, debiased_barycenter
+from wbcgrade.shape.complete import extension_occupancy, iso_level
+from wbcgrade.shape.database import intersection_over_union, load_shape
 from wbcgrade.shape.evaluate import cut_mesh
 from wbcgrade.shape.mesh import normalization_transform, read_mesh, voxelize
 from wbcgrade.shape.register import place_partial, soft_field

@@ -10,7 +10,8 @@ import trimesh
 
 from tests.conftest import run_cli
 from wbcgrade.errors import InputError
-from wbcgrade.shape.complete import complete_shape, intersection_over_union, load_shape
+from wbcgrade.shape.complete import complete_shape
+from wbcgrade.shape.database import intersection_over_union, load_shape
 from wbcgrade.shape.mesh import edge_counts, normalize_mesh, read_mesh, voxelize
 from wbcgrade.shape.winding import winding_numbers, winding_numbers_exact
 

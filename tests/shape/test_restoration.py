@@ -15,15 +15,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from wbcgrade.shape.complete import (
-    ADDED_COLOR,
-    complete_shape,
-    completion_sheet,
-    completion_surface,
-    load_shape,
-)
+from wbcgrade.shape.complete import complete_shape
+from wbcgrade.shape.database import load_shape
 from wbcgrade.shape.evaluate import cut_mesh, restoration
 from wbcgrade.shape.mesh import read_mesh, voxelize_together
+from wbcgrade.shape.sheets import ADDED_COLOR, completion_sheet
+from wbcgrade.shape.surface import completion_surface
 from wbcgrade.shape.workflow import complete_mesh_file
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples" / "shapes"

@@ -1,13 +1,14 @@
 """The mathematical core: arrays in, arrays and small result objects out.
 
 No files, no printing, no colours: geometry and grid resampling, barycenter
-(+ gradient), losses (masked ones too), Sinkhorn (single-grid and
+(+ gradient; debiased), losses (masked ones too), Sinkhorn (single-grid and
 multiscale) and barycentric coordinates; and the tools the domains' own
 kernels use: ``compiled`` (numba with a cache that never fails a run),
 ``in_bands`` (a kernel over bands of rows on every core), ``fast_cpu`` and
 ``n_workers`` (the core's threads; docs/architecture.md, threads).
 """
 
+from wbcgrade.core._barycenter_debiased import debiased_barycenter
 from wbcgrade.core._cpu import fast_cpu, n_workers
 from wbcgrade.core._jit import compiled, in_bands
 from wbcgrade.core.barycenter import (
@@ -45,6 +46,7 @@ __all__ = [
     "barycenter_gradient",
     "BarycenterSolver",
     "BarycenterResult",
+    "debiased_barycenter",
     "barycentric_coordinates",
     "mixture_coordinates",
     "CoordinatesResult",

@@ -1,6 +1,6 @@
 """Default settings of shape completion, in one light module (no numpy, no core).
 
-``wbcgrade.shape.complete`` uses these and re-exports them; the command line
+The shape modules (``projection``, ``complete``, ``workflow``) use these; the command line
 reads them here so that ``wbcgrade --help`` imports neither the core nor numba.
 """
 

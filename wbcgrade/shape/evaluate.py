@@ -18,7 +18,7 @@ import trimesh
 from trimesh.intersections import slice_faces_plane
 
 from wbcgrade.errors import InputError
-from wbcgrade.shape.complete import intersection_over_union
+from wbcgrade.shape.database import intersection_over_union
 from wbcgrade.shape.mesh import voxelize_together
 
 

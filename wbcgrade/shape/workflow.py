@@ -27,25 +27,20 @@ import numpy as np
 from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
 from wbcgrade.errors import InputError
-from wbcgrade.shape.complete import (
+from wbcgrade.shape.complete import complete_shape
+from wbcgrade.shape.database import VoxelShape, check_database_size, expand_paths, load_shape
+from wbcgrade.shape.defaults import (
     DEFAULT_LOSS,
     DEFAULT_MAX_ITER,
     DEFAULT_N_ITER,
     DEFAULT_RESOLUTION,
-    Projection,
-    VoxelShape,
-    check_database_size,
-    check_memory,
-    complete_shape,
-    completion_sheet,
-    completion_surface,
-    expand_paths,
-    load_shape,
-    project,
-    projection_sheet,
 )
+from wbcgrade.shape.memory import check_memory
 from wbcgrade.shape.mesh import MESH_SUFFIXES, write_mesh
+from wbcgrade.shape.projection import Projection, project
 from wbcgrade.shape.render import write_png
+from wbcgrade.shape.sheets import completion_sheet, projection_sheet
+from wbcgrade.shape.surface import completion_surface
 from wbcgrade.shape.volume import (
     density_from_volume,
     read_volume,
@@ -147,7 +142,7 @@ def complete_mesh_file(
     """Infer the missing geometry of the mesh ``partial`` from a database of meshes.
 
     See :func:`wbcgrade.shape.complete.complete_shape` (placing, fitting,
-    drawing) and :func:`~wbcgrade.shape.complete.completion_surface` (the
+    drawing) and :func:`~wbcgrade.shape.surface.completion_surface` (the
     written mesh: the input itself, united with what the database adds,
     in the input's coordinates).
 
@@ -169,7 +164,7 @@ def complete_mesh_file(
     missing : float, optional
         Fraction of the shape's volume missing from the input; estimated when None.
     loss, euclidean, width, n_iter, max_iter, coarse_to_fine :
-        See :func:`wbcgrade.shape.complete.project` (``width`` in voxels).
+        See :func:`wbcgrade.shape.projection.project` (``width`` in voxels).
     observed_only : bool
         Compare the input's voxels only (``--all-voxels`` turns it off).
     align : bool

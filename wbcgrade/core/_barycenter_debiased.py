@@ -1,9 +1,9 @@
-"""Debiased entropic barycenters: the fitted shape without the kernel's blur.
+"""Debiased entropic barycenters: a barycenter without the kernel's blur.
 
-The entropic barycenter the weights are fitted with is blurred by about one
-kernel width: the barycenter of a single shape is that shape convolved with
-the Gibbs kernel, and parts a few voxels thin (a cow's legs at 64^3) sink
-below any iso-level that keeps the body's size. The debiased barycenter
+The entropic barycenter (:func:`wbcgrade.core.barycenter`) is blurred by about one
+kernel width: the barycenter of a single histogram is that histogram
+convolved with the Gibbs kernel, so parts a few bins thin (a cow's legs at
+64^3 voxels) sink below any iso-level that keeps the body's size. The debiased barycenter
 (Janati, Cuturi, Gramfort, "Debiased Sinkhorn barycenters", ICML 2020) adds
 one scaling ``d`` to the iterations of the core's barycenter
 (docs/architecture.md, wbcgrade.core.barycenter):
@@ -13,10 +13,10 @@ one scaling ``d`` to the iterations of the core's barycenter
     b_s   = P / phi_s
     d     = sqrt( d * P / (K d) )
 
-and is a fixed point at ``P = p`` for a single shape ``p``. The weights are
-still those of the paper's barycenter; only the shape drawn from them is
-sharpened. Arrays in, arrays out: this is core-level mathematics kept here
-because only the shapes use it.
+and is a fixed point at ``P = p`` for a single histogram ``p``. It has no
+gradient here: weights are fitted with the ordinary barycenter
+(:func:`wbcgrade.core.barycentric_coordinates`) and the debiased one draws
+the result without the blur (the shapes' fitted shape, docs/shapes.md).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import logging
 
 import numpy as np
 
-from wbcgrade.core import Geometry
+from wbcgrade.core.geometry import Geometry
 
 log = logging.getLogger(__name__)
 
