@@ -40,8 +40,10 @@ def test_the_commands_options_are_the_tables_rows(command):
 def test_every_option_of_a_grading_command_is_a_table_row(command):
     names = {row.name for row in OPTIONS}
     params = _params(command)
-    options = {name for name, p in params.items() if isinstance(p, click.Option)}
-    assert options - names == {"help"}
+    # (the help option's own name differs between click versions: it is left out by its flag)
+    options = {name for name, p in params.items()
+               if isinstance(p, click.Option) and "--help" not in p.opts}
+    assert options - names == set()
 
 
 def test_a_required_row_stays_required(tmp_path):
@@ -103,10 +105,10 @@ def test_the_look_preset_and_explore_commands_options_are_table_rows(command):
     for name in command:
         group = group.commands[name]
     params = {p.name: p for p in group.get_params(click.Context(group))
-              if isinstance(p, click.Option)}
+              if isinstance(p, click.Option) and "--help" not in p.opts}
     rows = {row.name: row for row in OPTIONS}
     own = {"list_only", "folder", "count", "directions"}  # brdf synth's own, not tabled yet
-    assert set(params) - set(rows) - own == {"help"}
+    assert set(params) - set(rows) - own == set()
     for name, param in params.items():
         if name in rows:
             assert rows[name].flag in param.opts, (command, name)

@@ -36,7 +36,7 @@ def test_preset_build_refuses_a_bad_width_before_writing(tmp_path, style_dir, wi
 
 def test_save_preset_refuses_a_bad_width(tmp_path, style_dir):
     styles = load_style_folder(style_dir, 8)
-    with pytest.raises(InputError, match="--width"):
+    with pytest.raises(InputError, match="width must be a positive, finite number"):
         save_preset(tmp_path / "p.npz", styles, width=float("nan"))
     assert load_preset(save_preset(tmp_path / "p.npz", styles, width=2)).width == 2.0
 
