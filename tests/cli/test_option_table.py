@@ -99,16 +99,17 @@ def test_a_field_has_one_flag():
 
 
 @pytest.mark.parametrize("command", [("look", "extract"), ("look", "learn"), ("preset", "build"),
-                                     ("preset", "list"), ("explore",), ("brdf", "synth")])
-def test_the_look_preset_and_explore_commands_options_are_table_rows(command):
+                                     ("preset", "list"), ("explore",), ("brdf", "synth"),
+                                     ("brdf", "fit"), ("shape", "complete"),
+                                     ("shape", "project")])
+def test_the_other_commands_options_are_table_rows(command):
     group = main
     for name in command:
         group = group.commands[name]
     params = {p.name: p for p in group.get_params(click.Context(group))
               if isinstance(p, click.Option) and "--help" not in p.opts}
     rows = {row.name: row for row in OPTIONS}
-    own = {"list_only", "folder", "count", "directions"}  # brdf synth's own, not tabled yet
-    assert set(params) - set(rows) - own == set()
+    assert set(params) - set(rows) == set()
     for name, param in params.items():
         if name in rows:
             assert rows[name].flag in param.opts, (command, name)
@@ -141,6 +142,14 @@ def test_a_path_in_a_message_keeps_its_names(error, shown):
     (["look", "learn", "p.jpg", "p.jpg", "-o", "out.txt"], "--output must be written as"),
     (["explore", "p.jpg"], "give exactly one of --style DIR or --preset"),
     (["brdf", "synth", "-o", "db", "--material", "nosuch"], "--material 'nosuch' is unknown"),
+    (["brdf", "fit", "p.jpg", "--database", "styles", "--width", "0"], "'--width'"),
+    (["brdf", "fit", "p.jpg", "--database", "styles", "--keep", "0"], "'--keep'"),
+    (["brdf", "fit", "p.jpg", "--database", "styles", "--loss", "kl_reverse"], "'--loss'"),
+    (["shape", "complete", "p.ply", "-d", "styles", "--iterations", "0"], "'--iterations'"),
+    (["shape", "complete", "p.ply", "-d", "styles", "--width", "0.1"], "'--width'"),
+    (["shape", "project", "p.npy", "-d", "styles", "--loss", "sinkhorn-divergence"],
+     "'--loss'"),
+    (["shape", "project", "p.npy", "-d", "styles", "--missing", "1"], "'--missing'"),
 ])
 def test_a_bad_option_of_any_command_exits_2_naming_its_flag(tmp_path, monkeypatch, args,
                                                              shown):
@@ -155,10 +164,45 @@ def test_a_bad_option_of_any_command_exits_2_naming_its_flag(tmp_path, monkeypat
 
 
 def test_a_missing_input_file_is_not_an_option_error(tmp_path):
+    database = tmp_path / "db"
+    assert CliRunner().invoke(main, ["brdf", "synth", "-o", str(database), "--count", "1"]
+                              ).exit_code == 0
     for args in (["apply", str(tmp_path / "missing.jpg"), "--preset", "warm"],
-                 ["video", str(tmp_path / "missing.mp4"), "--preset", "warm"]):
+                 ["video", str(tmp_path / "missing.mp4"), "--preset", "warm"],
+                 ["brdf", "fit", str(tmp_path / "missing.binary"), "--database",
+                  str(database)],
+                 ["shape", "complete", str(tmp_path / "missing.ply"), "-d", str(tmp_path)],
+                 ["shape", "project", str(tmp_path / "missing.npy"), "-d", str(tmp_path)]):
         result = CliRunner().invoke(main, args)
-        assert result.exit_code == 1 and "no such file" in result.output, result.output
+        assert result.exit_code == 1 and "no such" in result.output.lower(), result.output
+
+
+def test_a_missing_brdf_database_is_an_input_error(tmp_path):
+    (tmp_path / "m.binary").write_bytes(b"x")
+    result = CliRunner().invoke(main, ["brdf", "fit", str(tmp_path / "m.binary"), "--database",
+                                       str(tmp_path / "nodb")])
+    assert result.exit_code == 1, result.output
+
+
+@pytest.mark.parametrize("command, name, default", [
+    (("brdf", "fit"), "brdf_width", "wbcgrade.brdf.defaults:DEFAULT_WIDTH"),
+    (("brdf", "fit"), "brdf_n_iter", "wbcgrade.brdf.defaults:DEFAULT_N_ITER"),
+    (("brdf", "fit"), "brdf_loss", "wbcgrade.brdf.defaults:DEFAULT_LOSS"),
+    (("brdf", "synth"), "directions", "wbcgrade.brdf.defaults:DEFAULT_DIRECTIONS"),
+    (("shape", "complete"), "shape_iterations", "wbcgrade.shape.defaults:DEFAULT_N_ITER"),
+    (("shape", "project"), "shape_max_iter", "wbcgrade.shape.defaults:DEFAULT_MAX_ITER"),
+    (("shape", "project"), "resolution", "wbcgrade.shape.defaults:DEFAULT_RESOLUTION"),
+    (("shape", "complete"), "shape_loss", "wbcgrade.shape.defaults:DEFAULT_LOSS"),
+])
+def test_brdf_and_shape_defaults_are_the_librarys(command, name, default):
+    from importlib import import_module
+
+    group = main
+    for part in command:
+        group = group.commands[part]
+    params = {p.name: p for p in group.get_params(click.Context(group))}
+    module, attr = default.split(":")
+    assert params[name].default == getattr(import_module(module), attr)
 
 
 def test_a_scheduler_without_dask_is_an_option_error(monkeypatch):

@@ -11,18 +11,7 @@ import json
 
 import click
 
-from wbcgrade.brdf.defaults import (
-    BRDF_LOSSES,
-    DEFAULT_DIRECTIONS,
-    DEFAULT_FIT_DIRECTIONS,
-    DEFAULT_LOSS,
-    DEFAULT_MAX_ITER,
-    DEFAULT_N_ITER,
-    DEFAULT_TOL,
-    DEFAULT_WIDTH,
-)
 from wbcgrade.cli.grading_options import table_options
-from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
 
 
 @click.group("brdf")
@@ -36,15 +25,9 @@ def brdf() -> None:
 
 
 @brdf.command("synth")
-@click.option("-o", "--output", "folder", type=click.Path(file_okay=False),
-              help="Folder to write the database into (created if needed).")
-@click.option("--count", default=6, show_default=True, type=click.IntRange(1, 64),
-              help="Number of materials (the first of the built-in catalogue).")
-@table_options("materials")
-@click.option("--list", "list_only", is_flag=True, help="List the material names and exit.")
-@click.option("--directions", default=DEFAULT_DIRECTIONS, show_default=True,
-              type=click.IntRange(8, 2000),
-              help="Hemisphere directions of the .npz files written for anisotropic materials.")
+@table_options("folder", "count", "materials", "list_only")
+@table_options("directions", help="Hemisphere directions of the .npz files written for "
+                                  "anisotropic materials.")
 def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only: bool,
           directions: int) -> None:
     """Write a database of analytic BRDFs (GGX metals and plastics, Ward, Lambert).
@@ -76,47 +59,16 @@ def synth(folder: str | None, count: int, materials: tuple[str, ...], list_only:
 
 
 @brdf.command("fit")
-@click.argument("measured", type=click.Path(exists=True, dir_okay=False))
-@click.option("--database", required=True, type=click.Path(exists=True, file_okay=False),
-              help="Folder of BRDF files (.binary MERL or .npz sampled).")
-@click.option("--keep", "keeps", type=click.FloatRange(0.0, 1.0, min_open=True),
-              multiple=True,
-              help="Keep only this random fraction of the measurements (simulated sparse "
-                   "acquisition); repeat for several fits side by side, e.g. --keep 0.25 "
-                   "--keep 0.1 --keep 0.05 (the paper's Figure 6).")
-@click.option("--seed", default=0, show_default=True, help="Seed of the decimation.")
+@click.argument("measured", type=click.Path(dir_okay=False))
+@table_options("brdf_database", "keeps", "seed")
 @table_options("output", help="Fitted BRDF (.binary MERL or .npz) [default: "
                               "./<MEASURED>[-keepK]-fit.binary].")
-@table_options("png")
-@click.option("--no-png", is_flag=True, help="Do not render the comparison picture.")
-@click.option("--compare/--no-compare", default=True, show_default=True,
-              help="With --keep, also fit the full measurement for comparison.")
-@click.option("--loss", type=click.Choice(BRDF_LOSSES), default=DEFAULT_LOSS,
-              show_default=True,
-              help="Fit loss: sinkhorn-divergence is the entropic Wasserstein loss without "
-                   "its entropic bias; wasserstein is the paper's (biased: it favours blurry "
-                   "BRDFs); quadratic is the fastest.")
-@click.option("--directions", default=DEFAULT_DIRECTIONS, show_default=True,
-              type=click.IntRange(8, 2000), help="Hemisphere sampling size N.")
-@click.option("--fit-directions", default=DEFAULT_FIT_DIRECTIONS, show_default=True,
-              type=click.IntRange(0, 2000),
-              help="Incoming directions (well spread) whose rows fit the weights; 0 = all N.")
-@click.option("--width", default=DEFAULT_WIDTH, show_default=True,
-              type=click.FloatRange(0.1, 20.0),
-              help="Kernel width in sample spacings (sets gamma).")
-@click.option("--iterations", "--n-iter", "n_iter", default=DEFAULT_N_ITER, show_default=True,
-              type=click.IntRange(1, MAX_BARYCENTER_ITERATIONS),
-              help="Barycenter iterations L (--n-iter: its former name).")
-@click.option("--max-iter", default=DEFAULT_MAX_ITER, show_default=True,
-              type=click.IntRange(1, 1000), help="L-BFGS iterations at most.")
-@click.option("--tol", default=DEFAULT_TOL, show_default=True, type=click.FloatRange(0, 1),
-              help="Stop when an L-BFGS iteration lowers the energy (1 at uniform weights) by "
-                   "less than this.")
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, output: str | None,
-        png: str | None, no_png: bool, compare: bool, loss: str, directions: int,
-        fit_directions: int, width: float, n_iter: int, max_iter: int, tol: float,
-        as_json: bool) -> None:
+@table_options("png", "no_png", "compare", "brdf_loss", "directions", "fit_directions",
+               "brdf_width", "brdf_n_iter", "brdf_max_iter", "tol", "as_json")
+def fit(measured: str, brdf_database: str, keeps: tuple[float, ...], seed: int,
+        output: str | None, png: str | None, no_png: bool, compare: bool, brdf_loss: str,
+        directions: int, fit_directions: int, brdf_width: float, brdf_n_iter: int,
+        brdf_max_iter: int, tol: float, as_json: bool) -> None:
     """Fit MEASURED (a BRDF file) with weights on the BRDFs of --database.
 
     Prints the weights and the PSNR of each fit against the full measurement,
@@ -140,9 +92,10 @@ def fit(measured: str, database: str, keeps: tuple[float, ...], seed: int, outpu
 
     try:
         result = fit_measurement(
-            measured, database, keeps=keeps, seed=seed, output=output, png=png, no_png=no_png,
-            compare=compare, loss=loss, directions=directions, fit_directions=fit_directions,
-            width=width, n_iter=n_iter, max_iter=max_iter, tol=tol, progress=progress)
+            measured, brdf_database, keeps=keeps, seed=seed, output=output, png=png,
+            no_png=no_png, compare=compare, loss=brdf_loss, directions=directions,
+            fit_directions=fit_directions, width=brdf_width, n_iter=brdf_n_iter,
+            max_iter=brdf_max_iter, tol=tol, progress=progress)
     finally:
         for bar in bars.values():
             bar.close()

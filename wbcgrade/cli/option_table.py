@@ -1,5 +1,5 @@
 """The one table of the command-line options (``apply``, ``batch``, ``report``, ``video``,
-``look``, ``preset``, ``explore``).
+``look``, ``preset``, ``explore``, ``brdf``, ``shape``).
 
 Each row (:class:`Option`) holds what the command line, the JSON records and the
 error messages need of one option: the click parameter name, the flag, the
@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cache
 from importlib import import_module
+from pathlib import Path
 
 import click
 
@@ -57,6 +58,9 @@ class Option:
         ``"module:attr"`` name).
     section : the ``--help`` section; PALETTE: options that steer the palette
         fit only, LOOK: the look grade's only.
+    case_sensitive : whether a choice (a ``"module:attr"`` list of names) is.
+    upper : a ``"module:attr"`` name of the upper bound of the ``click.IntRange`` type,
+        read when built.
     """
 
     name: str
@@ -78,12 +82,16 @@ class Option:
     hidden: bool = False
     callback: str | None = None
     section: str = OTHER
+    case_sensitive: bool = True
+    upper: str | None = None
 
     def build(self):
         """The click.option decorator of this row."""
         kind = _resolve(self.type) if isinstance(self.type, str) else self.type
         if isinstance(kind, (tuple, list, dict)):  # the names a library module lists
-            kind = click.Choice(tuple(kind))
+            kind = click.Choice(tuple(kind), case_sensitive=self.case_sensitive)
+        if self.upper is not None:
+            kind = click.IntRange(kind.min, _resolve(self.upper))
         default = self.default_value()
         extra = {}
         if kind is not None:
@@ -138,6 +146,10 @@ def _resolve(name: str):
 _PATH = click.Path(path_type=str)
 _FILE = click.Path(dir_okay=False, path_type=str)
 _FOLDER = click.Path(file_okay=False, path_type=str)
+_FILE_PATH = click.Path(dir_okay=False, path_type=Path)
+_BRDF = "wbcgrade.brdf.defaults:"
+_SHAPE = "wbcgrade.shape.defaults:"
+_MAX_L = "wbcgrade.limits:MAX_BARYCENTER_ITERATIONS"
 
 #: Every option of the grading commands, in the order ``--help`` shows them.
 OPTIONS: tuple[Option, ...] = (
@@ -342,6 +354,87 @@ OPTIONS: tuple[Option, ...] = (
            type=_FILE),
     Option("materials", "--material", "Write these materials instead (repeatable; see --list).",
            field="material", multiple=True, metavar="NAME"),
+    Option("folder", "--output", "Folder to write the database into (created if needed).",
+           decls=("-o", "--output"), type=click.Path(file_okay=False)),
+    Option("count", "--count", "Number of materials (the first of the built-in catalogue).",
+           type=click.IntRange(1, 64), default=6, show_default=True),
+    Option("list_only", "--list", "List the material names and exit.", is_flag=True,
+           default=False),
+    Option("directions", "--directions", "Hemisphere sampling size N.",
+           type=click.IntRange(8, 2000), default=_BRDF + "DEFAULT_DIRECTIONS",
+           lazy_default=True, show_default=True),
+    # brdf fit (its --loss, --width, --iterations and --max-iter are not the grading ones)
+    Option("brdf_database", "--database", "Folder of BRDF files (.binary MERL or .npz "
+           "sampled).", type=click.Path(file_okay=False), required=True),
+    Option("keeps", "--keep", "Keep only this random fraction of the measurements (simulated "
+           "sparse acquisition); repeat for several fits side by side, e.g. --keep 0.25 "
+           "--keep 0.1 --keep 0.05 (the paper's Figure 6).",
+           type=click.FloatRange(0.0, 1.0, min_open=True), multiple=True),
+    Option("seed", "--seed", "Seed of the decimation.", default=0, show_default=True),
+    Option("no_png", "--no-png", "Do not render the comparison picture.", is_flag=True,
+           default=False),
+    Option("compare", "--compare", "With --keep, also fit the full measurement for "
+           "comparison.", decls=("--compare/--no-compare",), default=True, show_default=True),
+    Option("brdf_loss", "--loss", "Fit loss: sinkhorn-divergence is the entropic Wasserstein "
+           "loss without its entropic bias; wasserstein is the paper's (biased: it favours "
+           "blurry BRDFs); quadratic is the fastest.", type=_BRDF + "BRDF_LOSSES",
+           default=_BRDF + "DEFAULT_LOSS", lazy_default=True, show_default=True),
+    Option("fit_directions", "--fit-directions", "Incoming directions (well spread) whose rows "
+           "fit the weights; 0 = all N.", type=click.IntRange(0, 2000),
+           default=_BRDF + "DEFAULT_FIT_DIRECTIONS", lazy_default=True, show_default=True),
+    Option("brdf_width", "--width", "Kernel width in sample spacings (sets gamma).",
+           type=click.FloatRange(0.1, 20.0), default=_BRDF + "DEFAULT_WIDTH",
+           lazy_default=True, show_default=True),
+    Option("brdf_n_iter", "--iterations", "Barycenter iterations L (--n-iter: its former "
+           "name).", decls=("--iterations", "--n-iter"), type=click.IntRange(1), upper=_MAX_L,
+           default=_BRDF + "DEFAULT_N_ITER", lazy_default=True, show_default=True),
+    Option("brdf_max_iter", "--max-iter", "L-BFGS iterations at most.",
+           type=click.IntRange(1, 1000), default=_BRDF + "DEFAULT_MAX_ITER", lazy_default=True,
+           show_default=True),
+    Option("tol", "--tol", "Stop when an L-BFGS iteration lowers the energy (1 at uniform "
+           "weights) by less than this.", type=click.FloatRange(0, 1),
+           default=_BRDF + "DEFAULT_TOL", lazy_default=True, show_default=True),
+    # shape complete and project (--width, --iterations, --max-iter, --loss, --jobs their own)
+    Option("shape_database", "--database", "Database files or folders (repeat the option for "
+           "several).", decls=("--database", "-d"), multiple=True, required=True),
+    Option("resolution", "--resolution", "Voxels along the largest axis.",
+           decls=("--resolution", "-n"), type=click.IntRange(min=8),
+           default=_SHAPE + "DEFAULT_RESOLUTION", lazy_default=True, show_default=True),
+    Option("missing", "--missing", "Fraction of the input's volume that is missing (complete: "
+           "estimated where the input is placed when not given; project: 0).",
+           type=click.FloatRange(0.0, 0.95)),
+    Option("euclidean", "--euclidean", "Fit a linear mixture of the database instead (for "
+           "comparison).", is_flag=True, default=False),
+    Option("shape_width", "--width", "Kernel standard deviation in voxels (default 1 at 64^3, "
+           "scaled).", type=click.FloatRange(min=0.5)),
+    Option("shape_iterations", "--iterations", "Barycenter iterations L.",
+           type=click.IntRange(1), upper=_MAX_L, default=_SHAPE + "DEFAULT_N_ITER",
+           lazy_default=True, show_default=True),
+    Option("shape_max_iter", "--max-iter", "Optimiser iterations at most.",
+           type=click.IntRange(min=1), default=_SHAPE + "DEFAULT_MAX_ITER", lazy_default=True,
+           show_default=True),
+    Option("coarse", "--coarse", "Fit on a half-size grid first (grids of 32 voxels or more).",
+           decls=("--coarse/--no-coarse",), default=True, show_default=True),
+    Option("top", "--top", "Database shapes shown in the picture.", type=click.IntRange(min=0),
+           default=3, show_default=True),
+    Option("quiet", "--quiet", "No progress bar.", decls=("--quiet", "-q"), is_flag=True,
+           default=False),
+    Option("shape_loss", "--loss", "kl_reverse = KL(input|barycenter); kl = the paper's "
+           "KL(barycenter|input).", type=_SHAPE + "LOSS_NAMES", case_sensitive=False,
+           default=_SHAPE + "DEFAULT_LOSS", lazy_default=True, show_default=True),
+    Option("observed_only", "--observed-only", "Compare the input's voxels only, leaving the "
+           "barycenter free where the input is missing (kl_reverse, kl, quadratic, l1), or "
+           "every voxel.", decls=("--observed-only/--all-voxels",), default=True,
+           show_default=True),
+    Option("align", "--align", "Align every mesh on its principal axes first, picking the "
+           "axes' signs that overlap the input most, and fit a rotation when placing the input "
+           "(for databases of unaligned meshes).", is_flag=True, default=False),
+    Option("volume_path", "--volume", "Fitted density (.npy; default beside -o).",
+           type=_FILE_PATH),
+    Option("smooth", "--smooth", "Taubin smoothing passes on the surface.",
+           type=click.IntRange(min=0), default=10, show_default=True),
+    Option("shape_jobs", "--jobs", "Worker processes voxelising the database meshes.",
+           decls=("--jobs", "-j"), type=click.IntRange(min=1), default=1, show_default=True),
 )
 
 _BY_NAME = {row.name: row for row in OPTIONS}

@@ -12,10 +12,7 @@ from pathlib import Path
 
 import click
 
-from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS
-from wbcgrade.shape.defaults import DEFAULT_LOSS, LOSS_NAMES
-
-_LOSS_CHOICE = click.Choice(LOSS_NAMES, case_sensitive=False)
+from wbcgrade.cli.grading_options import table_options
 
 
 class _FitProgress:
@@ -69,38 +66,16 @@ def _print_result(result, as_json: bool) -> None:
             click.echo(f"wrote {value}")
 
 
-_common_options = [
-    click.option("--database", "-d", "database", multiple=True, required=True,
-                 help="Database files or folders (repeat the option for several)."),
-    click.option("--resolution", "-n", type=click.IntRange(min=8), default=64, show_default=True,
-                 help="Voxels along the largest axis."),
-    click.option("--missing", type=click.FloatRange(0.0, 0.95), default=None,
-                 help="Fraction of the input's volume that is missing "
-                 "(complete: estimated where the input is placed when not given; project: 0)."),
-    click.option("--euclidean", is_flag=True,
-                 help="Fit a linear mixture of the database instead (for comparison)."),
-    click.option("--width", type=click.FloatRange(min=0.5), default=None,
-                 help="Kernel standard deviation in voxels (default 1 at 64^3, scaled)."),
-    click.option("--iterations", type=click.IntRange(1, MAX_BARYCENTER_ITERATIONS), default=60,
-                 show_default=True,
-                 help="Barycenter iterations L."),
-    click.option("--max-iter", type=click.IntRange(min=1), default=15, show_default=True,
-                 help="Optimiser iterations at most."),
-    click.option("--coarse/--no-coarse", default=True, show_default=True,
-                 help="Fit on a half-size grid first (grids of 32 voxels or more)."),
-    click.option("--png", "png_path", type=click.Path(dir_okay=False, path_type=Path),
-                 default=None, help="Picture of the views (default: beside -o, .png)."),
-    click.option("--top", type=click.IntRange(min=0), default=3, show_default=True,
-                 help="Database shapes shown in the picture."),
-    click.option("--json", "as_json", is_flag=True, help="Print the result as JSON."),
-    click.option("--quiet", "-q", is_flag=True, help="No progress bar."),
-]
+_FILE_PATH = click.Path(dir_okay=False, path_type=Path)
 
 
 def _with_common(function):
-    for option in reversed(_common_options):
-        function = option(function)
-    return function
+    """The options of ``shape complete`` and ``shape project`` both (the option table's)."""
+    function = table_options("top", "as_json", "quiet")(function)
+    function = table_options("png", type=_FILE_PATH,
+                             help="Picture of the views (default: beside -o, .png).")(function)
+    return table_options("shape_database", "resolution", "missing", "euclidean", "shape_width",
+                         "shape_iterations", "shape_max_iter", "coarse")(function)
 
 
 #: What ``wbcgrade shape`` needs beyond the base install (the ``shape`` extra).
@@ -130,26 +105,13 @@ def shape() -> None:
 @shape.command()
 @click.argument("partial", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_LOSS, show_default=True,
-              help="kl_reverse = KL(input|barycenter); kl = the paper's KL(barycenter|input).")
-@click.option("--observed-only/--all-voxels", default=True, show_default=True,
-              help="Compare the input's voxels only, leaving the barycenter free where the "
-                   "input is missing (kl_reverse, kl, quadratic, l1), or every voxel.")
-@click.option("--align", is_flag=True,
-              help="Align every mesh on its principal axes first, picking the axes' signs "
-                   "that overlap the input most, and fit a rotation when placing the input "
-                   "(for databases of unaligned meshes).")
-@click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Completed mesh (.obj, .ply, .stl, .off); default PARTIAL_completed.obj.")
-@click.option("--volume", "volume_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Fitted density (.npy; default beside -o).")
-@click.option("--smooth", type=click.IntRange(min=0), default=10, show_default=True,
-              help="Taubin smoothing passes on the surface.")
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes voxelising the database meshes.")
-def complete(partial, database, resolution, missing, euclidean, width, iterations, max_iter,
-             coarse, png_path, top, as_json, quiet, loss, observed_only, align, output,
-             volume_path, smooth, jobs) -> None:
+@table_options("shape_loss", "observed_only", "align")
+@table_options("output", type=_FILE_PATH, decls=("--output", "-o"),
+               help="Completed mesh (.obj, .ply, .stl, .off); default PARTIAL_completed.obj.")
+@table_options("volume_path", "smooth", "shape_jobs")
+def complete(partial, shape_database, resolution, missing, euclidean, shape_width,
+             shape_iterations, shape_max_iter, coarse, png, top, as_json, quiet, shape_loss,
+             observed_only, align, output, volume_path, smooth, shape_jobs) -> None:
     """Infer the missing geometry of the mesh PARTIAL from a database of meshes.
 
     PARTIAL is placed where it overlaps a database shape best (scale and
@@ -176,15 +138,14 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
         if done == total:
             bars[0].close()
 
-    callback = _FitProgress(not quiet, max_iter, "fitting")
+    callback = _FitProgress(not quiet, shape_max_iter, "fitting")
     try:
         result = complete_mesh_file(
-            partial, database, output=output, volume_path=volume_path, png_path=png_path,
-            resolution=resolution, missing=missing, loss=loss, euclidean=euclidean,
-            width=width, n_iter=iterations, max_iter=max_iter, coarse_to_fine=coarse,
-            align=align, observed_only=observed_only, smooth=smooth, top=top, warn=warn,
-            on_mesh=on_mesh,
-            callback=callback, jobs=jobs)
+            partial, shape_database, output=output, volume_path=volume_path, png_path=png,
+            resolution=resolution, missing=missing, loss=shape_loss, euclidean=euclidean,
+            width=shape_width, n_iter=shape_iterations, max_iter=shape_max_iter,
+            coarse_to_fine=coarse, align=align, observed_only=observed_only, smooth=smooth,
+            top=top, warn=warn, on_mesh=on_mesh, callback=callback, jobs=shape_jobs)
     finally:
         for bar in bars:
             bar.close()
@@ -195,12 +156,13 @@ def complete(partial, database, resolution, missing, euclidean, width, iteration
 @shape.command()
 @click.argument("volume", type=click.Path(dir_okay=False, path_type=Path))
 @_with_common
-@click.option("--loss", type=_LOSS_CHOICE, default=DEFAULT_LOSS, show_default=True,
-              help="Loss between the barycenter and the input (the paper's MRIs: quadratic).")
-@click.option("--output", "-o", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Fitted volume (.npy, .nii, .nii.gz); default VOLUME_projected.npy.")
-def project(volume, database, resolution, missing, euclidean, width, iterations, max_iter,
-            coarse, png_path, top, as_json, quiet, loss, output) -> None:
+@table_options("shape_loss", help="Loss between the barycenter and the input (the paper's "
+                                  "MRIs: quadratic).")
+@table_options("output", type=_FILE_PATH, decls=("--output", "-o"),
+               help="Fitted volume (.npy, .nii, .nii.gz); default VOLUME_projected.npy.")
+def project(volume, shape_database, resolution, missing, euclidean, shape_width,
+            shape_iterations, shape_max_iter, coarse, png, top, as_json, quiet, shape_loss,
+            output) -> None:
     """Project the volume VOLUME (.npy or NIfTI) onto a database of volumes.
 
     The fitted volume is written scaled to the input's total intensity, at the
@@ -208,12 +170,13 @@ def project(volume, database, resolution, missing, euclidean, width, iterations,
     """
     from wbcgrade.shape.workflow import project_volume_file
 
-    callback = _FitProgress(not quiet, max_iter, "fitting")
+    callback = _FitProgress(not quiet, shape_max_iter, "fitting")
     try:
         result = project_volume_file(
-            volume, database, output=output, png_path=png_path, resolution=resolution,
-            missing=missing, loss=loss, euclidean=euclidean, width=width, n_iter=iterations,
-            max_iter=max_iter, coarse_to_fine=coarse, top=top, callback=callback)
+            volume, shape_database, output=output, png_path=png, resolution=resolution,
+            missing=missing, loss=shape_loss, euclidean=euclidean, width=shape_width,
+            n_iter=shape_iterations, max_iter=shape_max_iter, coarse_to_fine=coarse, top=top,
+            callback=callback)
     finally:
         callback.close()
     _print_result(result, as_json)
