@@ -33,7 +33,7 @@ def _loss_choices(*command: str) -> list[str]:
     for name in command:
         group = group.commands[name] if hasattr(group, "commands") else group
     ctx = click.Context(group)
-    option = next(p for p in group.get_params(ctx) if p.name == "loss")
+    option = next(p for p in group.get_params(ctx) if "--loss" in getattr(p, "opts", ()))
     return list(option.type.choices)
 
 

@@ -150,6 +150,10 @@ def test_a_path_in_a_message_keeps_its_names(error, shown):
     (["shape", "project", "p.npy", "-d", "styles", "--loss", "sinkhorn-divergence"],
      "'--loss'"),
     (["shape", "project", "p.npy", "-d", "styles", "--missing", "1"], "'--missing'"),
+    (["shape", "complete", "p.ply", "-d", "styles", "-o", "x.txt"],
+     "x.txt: the --output mesh must end in"),
+    (["shape", "project", "p.npy", "-d", "styles", "-o", "x.txt"],
+     "x.txt: the --output volume must end in"),
 ])
 def test_a_bad_option_of_any_command_exits_2_naming_its_flag(tmp_path, monkeypatch, args,
                                                              shown):
@@ -157,7 +161,8 @@ def test_a_bad_option_of_any_command_exits_2_naming_its_flag(tmp_path, monkeypat
     (tmp_path / "styles").mkdir()
     (tmp_path / "codec").mkdir()
     (tmp_path / "clip.mp4").write_bytes(b"x")
-    (tmp_path / "p.jpg").write_bytes(b"x")
+    for name in ("p.jpg", "p.ply", "p.npy"):
+        (tmp_path / name).write_bytes(b"x")
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 2, result.output
     assert shown in result.output.strip().splitlines()[-1]

@@ -26,7 +26,7 @@ import numpy as np
 
 from wbcgrade._executor import Executor
 from wbcgrade._publish import remove_stale_beside
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, OptionError
 from wbcgrade.shape.complete import complete_shape
 from wbcgrade.shape.database import VoxelShape, check_database_size, expand_paths, load_shape
 from wbcgrade.shape.defaults import (
@@ -204,7 +204,8 @@ def complete_mesh_file(
         raise InputError(f"{partial}: no such mesh file")
     output = Path(output) if output else Path(f"{partial.stem}_completed.obj")
     if output.suffix.lower() not in MESH_SUFFIXES:
-        raise InputError(f"{output}: the output mesh must end in {', '.join(MESH_SUFFIXES)}")
+        raise OptionError(f"{output}: the output mesh must end in {', '.join(MESH_SUFFIXES)}",
+                          "output", path=str(output))
     volume_path = Path(volume_path) if volume_path else output.with_suffix(".npy")
     png_path = Path(png_path) if png_path else output.with_suffix(".png")
     paths = [p for p in expand_paths(database, "mesh") if p.resolve() != partial.resolve()]
@@ -301,7 +302,8 @@ def project_volume_file(
     output = (Path(output) if output
               else Path(volume.name[: -len(volume_suffix(volume))] + "_projected.npy"))
     if not volume_suffix(output):
-        raise InputError(f"{output}: the output volume must end in .npy, .nii or .nii.gz")
+        raise OptionError(f"{output}: the output volume must end in .npy, .nii or .nii.gz",
+                          "output", path=str(output))
     png_path = (Path(png_path) if png_path
                 else Path(str(output)[: -len(volume_suffix(output))] + ".png"))
     paths = [p for p in expand_paths(database, "volume") if p.resolve() != volume.resolve()]
