@@ -99,25 +99,30 @@ def summary(values_s: list[float]) -> str:
     return f"{statistics.median(ms):7.0f} {p90:7.0f} {ms[-1]:7.0f}"
 
 
-def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
-    """Move-to-pixels latencies (s) measured by the page in headless Chromium:
-    (first pixels of each move, pixels of the server's preview)."""
+def headless_chromium(width: int, height: int):
+    """A Selenium driver of Debian's headless Chromium (its own throwaway profile)."""
     import shutil
-    import tempfile
 
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
-    from selenium.webdriver.common.action_chains import ActionChains
 
     options = webdriver.ChromeOptions()
     options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--window-size=1280,900",
+                 "--disable-sync", f"--window-size={width},{height}",
                  f"--user-data-dir={tempfile.mkdtemp(prefix='wbcgrade-bench-')}"):
         options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")
-                                              or "/usr/bin/chromedriver"), options=options)
+    return webdriver.Chrome(service=Service(shutil.which("chromedriver")
+                                            or "/usr/bin/chromedriver"), options=options)
+
+
+def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
+    """Move-to-pixels latencies (s) measured by the page in headless Chromium:
+    (first pixels of each move, pixels of the server's preview)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    driver = headless_chromium(1280, 900)
     try:
         driver.get(url)
         deadline = time.monotonic() + 600
@@ -220,22 +225,9 @@ def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
 def browser_look_latencies(url: str, sources: int) -> list[float]:
     """Pick-a-preset-to-pixels latencies (s) measured by the page in headless Chromium,
     each preset picked in turn (after the first round: all loaded)."""
-    import shutil
-    import tempfile
-
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.support.select import Select
 
-    options = webdriver.ChromeOptions()
-    options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
-    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--window-size=1400,900",
-                 f"--user-data-dir={tempfile.mkdtemp(prefix='wbcgrade-bench-')}"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")
-                                              or "/usr/bin/chromedriver"), options=options)
+    driver = headless_chromium(1400, 900)
     try:
         driver.get(url)
         shown = ("const p = window.wbcgradeExplore, s = p && p.shown();"

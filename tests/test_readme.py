@@ -31,16 +31,13 @@ SEPARATORS = {"&&", "||", ";", "|"}
 PLACEHOLDER = re.compile(r"^[A-Z][A-Z0-9_]+(\.[a-z0-9]+)?/?$")
 
 
-def bash_blocks(text: str) -> list[tuple[int, str]]:
-    """(line number, code) of every ```bash block."""
+def code_blocks(text: str, languages: tuple[str, ...]) -> list[tuple[int, str]]:
+    """(line number, code) of every fenced block in one of ``languages``."""
     blocks, current, start = [], None, 0
     for number, line in enumerate(text.splitlines(), start=1):
         fence = line.strip()
         if current is None and fence.startswith("```"):
-            if fence[3:].strip() in ("bash", "sh", "shell"):
-                current, start = [], number + 1
-            elif fence[3:].strip():
-                current, start = False, number  # another language: skip its body
+            current, start = ([] if fence[3:].strip() in languages else False), number + 1
         elif current is not None and fence.startswith("```"):
             if current is not False:
                 blocks.append((start, "\n".join(current)))
@@ -48,6 +45,11 @@ def bash_blocks(text: str) -> list[tuple[int, str]]:
         elif current not in (None, False):
             current.append(line)
     return blocks
+
+
+def bash_blocks(text: str) -> list[tuple[int, str]]:
+    """(line number, code) of every ```bash (or sh, shell) block."""
+    return code_blocks(text, ("bash", "sh", "shell"))
 
 
 def commands(code: str) -> list[list[str]]:
@@ -142,22 +144,6 @@ def test_the_checks_catch_what_they_should(tmp_path):
     assert inside_clone("graded/", home) and not inside_clone("$HOME/graded", home)
     assert PLACEHOLDER.match("PHOTO") and PLACEHOLDER.match("IN.mov")
     assert not PLACEHOLDER.match("samples/chelsea.jpg")
-
-
-def code_blocks(text: str, languages: tuple[str, ...]) -> list[tuple[int, str]]:
-    """(line number, code) of every fenced block in one of ``languages``."""
-    blocks, current, start = [], None, 0
-    for number, line in enumerate(text.splitlines(), start=1):
-        fence = line.strip()
-        if current is None and fence.startswith("```"):
-            current, start = ([] if fence[3:].strip() in languages else False), number + 1
-        elif current is not None and fence.startswith("```"):
-            if current is not False:
-                blocks.append((start, "\n".join(current)))
-            current = None
-        elif current not in (None, False):
-            current.append(line)
-    return blocks
 
 
 PYTHON = [(f"{_name(page)}:{line}", code) for page in PAGES

@@ -31,7 +31,6 @@ __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_s
            "find_scene_look", "fit_correction", "fit_pairs_look"]
 
 
-
 @dataclass(frozen=True)
 class PairFit:
     """The look that moves one photo's palette onto one style's.
