@@ -210,3 +210,25 @@ def test_black_and_white_histograms_rebinned_from_a_finer_grid_hold_no_colour():
         assert palette_statistics(styles.at_bins(32), source_bins=bins).spread[0] < 0.006
     assert palette_statistics(StyleSet(["a"], image_histogram(grey, 64)[None]).at_bins(32)
                               ).spread[0] > 0.01  # what it was without
+
+
+def test_a_look_far_beyond_what_content_varies_by_is_shrunk_less():
+    """The share of the natural spread taken for a collection's own difference eases for a
+    set whose statistics stand far from the natural ones (a strong look), not for an
+    ungraded set, whose look stays near the identity."""
+    contents = [natural_photo(s) for s in range(24)]
+    test = np.concatenate([natural_photo(s) for s in range(200, 206)])
+
+    def strong(rgb):  # a cold, dark, desaturated look (a day for night)
+        luma = (rgb @ LUMA)[..., None]
+        return np.clip(0.55 * (luma + 0.3 * (rgb - luma)) + np.array([-0.03, 0.0, 0.06]), 0, 1)
+
+    styles = hists([strong(c) for c in contents])
+    eased = statistics_look(tinted_statistics(styles, NATURALS), NATURALS)
+    held = statistics_look(tinted_statistics(styles, NATURALS), NATURALS, content_bias=1.0)
+    assert eased.info["evidence"] > 2.0 and eased.info["content_bias"] < 0.7
+    error = [np.mean(np.abs(look(test) - strong(test))) for look in (eased, held)]
+    assert error[0] < 0.8 * error[1]
+    plain = statistics_look(tinted_statistics(hists(contents), NATURALS), NATURALS)
+    assert plain.info["evidence"] < 1.0 and plain.info["content_bias"] == 1.0
+    assert np.mean(np.abs(plain(test) - test)) < 0.25 * np.mean(np.abs(strong(test) - test))

@@ -319,7 +319,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 8
+LOOK_VERSION = 9
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -334,7 +334,9 @@ def statistics_settings() -> tuple:
     from wbcgrade.color.look import statistics as stats
 
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
-            stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS)
+            stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
+            stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
+            stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS)
 
 
 _DIGESTS: dict[int, tuple[object, str]] = {}
