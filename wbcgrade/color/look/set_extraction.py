@@ -336,7 +336,7 @@ def statistics_settings() -> tuple:
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
             stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
-            stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS)
+            stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS, stats.NULL_DRAWS, stats.NULL_MARGIN)
 
 
 _DIGESTS: dict[int, tuple[object, str]] = {}
