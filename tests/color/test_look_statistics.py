@@ -232,3 +232,23 @@ def test_a_look_far_beyond_what_content_varies_by_is_shrunk_less():
     plain = statistics_look(tinted_statistics(hists(contents), NATURALS), NATURALS)
     assert plain.info["evidence"] < 1.0 and plain.info["content_bias"] == 1.0
     assert np.mean(np.abs(plain(test) - test)) < 0.25 * np.mean(np.abs(strong(test) - test))
+
+
+def test_a_look_that_moves_one_kind_of_statistic_far_counts_as_strong():
+    """A mild bleach bypass moves saturation alone, too little for the mean over every
+    statistic to stand out (0.8 of where ungraded sets stop, here): that kind's own
+    evidence, against where random sets of as many natural photos stop, eases it."""
+    contents = [natural_photo(s) for s in range(24)]
+
+    def bleach(rgb):
+        luma = (rgb @ LUMA)[..., None]
+        return np.clip(luma + 0.75 * (rgb - luma), 0, 1)
+
+    styles = hists([bleach(c) for c in contents])
+    found = statistics_look(tinted_statistics(styles, NATURALS), NATURALS)
+    held = statistics_look(tinted_statistics(styles, NATURALS), NATURALS, content_bias=1.0)
+    assert found.info["evidence"] > 1.5 and found.info["content_bias"] < 0.6
+    test = np.concatenate([natural_photo(s) for s in range(200, 206)])
+    error = [np.mean(np.abs(look(test) - bleach(test))) for look in (found, held)]
+    assert error[0] < 0.75 * error[1]
+    assert error[0] < 0.75 * np.mean(np.abs(test - bleach(test)))
