@@ -154,10 +154,13 @@ def test_the_grade_applies_the_statistics_look_of_a_style_set_as_far_as_its_halv
                                                    naturals)
     # applied as far as the set's halves agree on it (here: a look every style shows)
     assert extracted.info["method"] == "statistics" and strength > 0.6
+    # a look far beyond where ungraded sets stop is applied in full, halves or not
+    assert extracted.info["evidence"] >= look.TRUSTED_EVIDENCE and strength == 1.0
     before = np.mean(np.abs(faded_teal(test) - test))
     assert np.mean(np.abs(base(test) - faded_teal(test))) < 0.75 * before
-    plain = look.set_look_base(style_set(contents), naturals)[0]
+    plain, plain_look, plain_strength = look.set_look_base(style_set(contents), naturals)
     assert np.mean(np.abs(plain(test) - test)) < 0.3 * before
+    assert plain_look.info["evidence"] < 1.0 and plain_strength < 1.0
     mono, extracted, _ = look.set_look_base(
         style_set([black_and_white(c) for c in contents]), naturals)
     assert extracted.info["monochrome"]

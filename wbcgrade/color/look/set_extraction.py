@@ -522,6 +522,18 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
 #: +0.180 (-0.22): a little of the mean for no photo clearly worse than doing nothing.
 MIN_HALF_STYLES = 2
 
+#: A statistics look whose evidence (``info["evidence"]``, 1 where ungraded sets stop;
+#: :func:`wbcgrade.color.look.statistics._look_evidence`) reaches this is applied in full,
+#: without its halves' check: at this evidence it is already shrunk by the least share
+#: (:data:`wbcgrade.color.look.statistics.MIN_CONTENT_BIAS`), and six styles a half
+#: estimate it noisily enough to halve a real look. Measured (``benchmarks/look.py``,
+#: cross-content, 384 px): film looks +0.25 -> +0.26 (bleach bypass 2 +0.44 -> +0.60),
+#: older looks +0.22 -> +0.25 (CDL warm +0.37 -> +0.49, cross process +0.12 -> +0.32),
+#: worst photo unchanged; ungraded sets of 6 / 8 / 12 of the benchmark's photos (40 each):
+#: the largest applied look 17.6 -> 21.2 / 4.6 / 4.2 (per 255, rms; one six-photo set of
+#: warm scenes reached 2.4), the 90th percentile unchanged.
+TRUSTED_EVIDENCE = 2.0
+
 #: Size (rms displacement on a photo's colours) of the look :func:`extract_look` finds
 #: in sets of UNGRADED photos: what content alone makes of a look, the part of any
 #: extracted look that both halves of a set can share without its being a look.
@@ -560,7 +572,9 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     extracted = set_look(styles, naturals, progress)
     statistics = extracted.info.get("method") == "statistics"
     if strength is None and statistics and (extracted.info.get("monochrome")
-                                            or len(styles.names) < MIN_HALF_STYLES * 2):
+                                            or len(styles.names) < MIN_HALF_STYLES * 2
+                                            or extracted.info.get("evidence", 0.0)
+                                            >= TRUSTED_EVIDENCE):
         strength = 1.0  # every style black and white / too few styles to halve
     if strength is None:
         halves = set_look_halves(styles, naturals)
