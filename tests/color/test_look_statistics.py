@@ -255,3 +255,18 @@ def test_a_look_that_moves_one_kind_of_statistic_far_counts_as_strong():
     error = [np.mean(np.abs(look(test) - bleach(test))) for look in (found, held)]
     assert error[0] < 0.75 * error[1]
     assert error[0] < 0.75 * np.mean(np.abs(test - bleach(test)))
+
+
+def test_a_tint_is_shrunk_as_a_whole_and_keeps_its_hue():
+    """Each band's tint is shrunk by its size against what natural photos vary by, all its
+    channels alike: a blue tint whose green part natural photos vary little in stays blue
+    (shrunk channel by channel, it turned teal)."""
+    from wbcgrade.color.look.statistics import _shrink_vectors
+
+    tint = np.array([[-0.03, 0.004, 0.05]] * 3)
+    sigma = np.array([[0.03, 0.004, 0.04]] * 3)
+    kept = _shrink_vectors(tint, sigma)
+    cosine = np.sum(kept * tint, axis=1) / np.linalg.norm(kept, axis=1) / np.linalg.norm(tint,
+                                                                                        axis=1)
+    assert np.all(cosine > 0.9999) and np.all(np.linalg.norm(kept, axis=1) > 0.3 * 0.058)
+    assert not _shrink_vectors(0.5 * sigma * np.array([1.0, -1.0, 0.0]), sigma).any()

@@ -319,7 +319,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 9
+LOOK_VERSION = 10
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"

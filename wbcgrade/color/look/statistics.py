@@ -211,6 +211,18 @@ def _shrink(difference: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return d * factor
 
 
+def _shrink_vectors(difference: np.ndarray, sigma: np.ndarray, dof: float = 2.0) -> np.ndarray:
+    """(B, 3) chroma differences shrunk band by band as vectors: ``d * max(0, 1 - dof / q)``,
+    ``q`` the squared norm of ``d / sigma`` (positive-part James-Stein on the chroma plane's
+    two degrees of freedom), so a tint keeps its hue (shrunk channel by channel, a blue
+    shadow tint whose green part varies least between natural photos turned teal: crisp
+    winter on a dusk sky, -0.07 -> -0.02 on the photos no setting saw); NaN counts as 0."""
+    d = np.nan_to_num(difference)
+    q = np.sum((d / np.maximum(np.broadcast_to(sigma, d.shape), 1e-12)) ** 2, axis=-1)
+    factor = np.where(q > 0, np.maximum(0.0, 1.0 - dof / np.maximum(q, 1e-300)), 0.0)
+    return d * factor[..., None]
+
+
 def _fill(values: np.ndarray, axis_values: np.ndarray) -> np.ndarray:
     """Interpolate NaN entries of a 1-D profile from its valid neighbours (edges held)."""
     values = np.asarray(values, dtype=np.float64)
@@ -414,8 +426,8 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
         sty_neutral = np.stack([_nanmedian(at_mapped(styles.band_neutral[..., c]), axis=0)
                                 for c in range(3)], axis=-1)
         nat_neutral = _nanmedian(centre_of.band_neutral, axis=0)
-        tint = _shrink(sty_neutral - nat_neutral,
-                       sigma(naturals.band_neutral, valid_styles[:, None]))
+        tint = _shrink_vectors(sty_neutral - nat_neutral,
+                               sigma(naturals.band_neutral, valid_styles[:, None]))
     else:
         tint = _shrink(sty_mean - saturation[:, None] * nat_mean,
                        sigma(naturals.band_mean, valid_styles[:, None]))
