@@ -211,12 +211,12 @@ def _shrink(difference: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return d * factor
 
 
-def _shrink_vectors(difference: np.ndarray, sigma: np.ndarray, dof: float = 2.0) -> np.ndarray:
+def _shrink_vectors(difference: np.ndarray, sigma: np.ndarray, dof: float = 3.0) -> np.ndarray:
     """(B, 3) chroma differences shrunk band by band as vectors: ``d * max(0, 1 - dof / q)``,
-    ``q`` the squared norm of ``d / sigma`` (positive-part James-Stein on the chroma plane's
-    two degrees of freedom), so a tint keeps its hue (shrunk channel by channel, a blue
-    shadow tint whose green part varies least between natural photos turned teal: crisp
-    winter on a dusk sky, -0.07 -> -0.02 on the photos no setting saw); NaN counts as 0."""
+    ``q`` the squared norm of ``d / sigma`` (``dof``: its mean where there is no tint, one a
+    channel, as a channel by channel shrink drops ``z^2 < 1``), so a tint keeps its hue
+    (shrunk channel by channel, a blue shadow tint whose green part varies least between
+    natural photos turned teal: crisp winter on a dusk sky). NaN counts as 0."""
     d = np.nan_to_num(difference)
     q = np.sum((d / np.maximum(np.broadcast_to(sigma, d.shape), 1e-12)) ** 2, axis=-1)
     factor = np.where(q > 0, np.maximum(0.0, 1.0 - dof / np.maximum(q, 1e-300)), 0.0)
