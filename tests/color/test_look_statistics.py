@@ -270,3 +270,11 @@ def test_a_tint_is_shrunk_as_a_whole_and_keeps_its_hue():
     cosine = np.sum(kept * tint, axis=1) / np.linalg.norm(kept, axis=1) / size
     assert np.all(cosine > 0.9999) and np.all(np.linalg.norm(kept, axis=1) > 0.4 * size)
     assert not _shrink_vectors(0.5 * sigma * np.array([1.0, -1.0, 0.0]), sigma).any()
+
+
+def test_a_set_under_six_styles_keeps_the_full_share_and_is_not_weighed():
+    """Medians of a few photos stand far from the natural ones without a look: such a set
+    is neither eased nor trusted past its halves' check (no evidence is weighed)."""
+    few = statistics_look(tinted_statistics(hists([faded_teal(natural_photo(s))
+                                                   for s in range(4)]), NATURALS), NATURALS)
+    assert few.info["evidence"] is None and few.info["content_bias"] == 1.0

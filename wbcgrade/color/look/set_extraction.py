@@ -523,7 +523,9 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
 MIN_HALF_STYLES = 2
 
 #: A statistics look whose evidence (``info["evidence"]``, 1 where ungraded sets stop;
-#: :func:`wbcgrade.color.look.statistics._look_evidence`) reaches this is applied in full,
+#: :func:`wbcgrade.color.look.statistics._look_evidence`; weighed for sets of
+#: :data:`~wbcgrade.color.look.statistics.MIN_EASED_STYLES` styles or more against the
+#: shipped palettes, not against the user's own photos) reaches this is applied in full,
 #: without its halves' check: at this evidence it is already shrunk by the least share
 #: (:data:`wbcgrade.color.look.statistics.MIN_CONTENT_BIAS`), and six styles a half
 #: estimate it noisily enough to halve a real look. Measured (``benchmarks/look.py``,
@@ -573,7 +575,7 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     statistics = extracted.info.get("method") == "statistics"
     if strength is None and statistics and (extracted.info.get("monochrome")
                                             or len(styles.names) < MIN_HALF_STYLES * 2
-                                            or extracted.info.get("evidence", 0.0)
+                                            or (extracted.info.get("evidence") or 0.0)
                                             >= TRUSTED_EVIDENCE):
         strength = 1.0  # every style black and white / too few styles to halve
     if strength is None:

@@ -371,10 +371,11 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
         n_reference = len(reference.quantiles)
     centre_of = reference if reference is not None else naturals
     monochrome = bool(np.all(styles.spread < MONOCHROME_SPREAD * space_scale))
-    # a set without colour says nothing of its tone curve's size by lacking colour
-    evidence = _look_evidence(styles, naturals, centre_of, n_styles,
-                              kinds=1 if monochrome else 3)
+    evidence = None  # weighed only where it may ease the share (and so trust the look)
     if reference is None and content_bias is None and n_styles >= MIN_EASED_STYLES:
+        # a set without colour says nothing of its tone curve's size by lacking colour
+        evidence = _look_evidence(styles, naturals, centre_of, n_styles,
+                                  kinds=1 if monochrome else 3)
         eased = 1.0 - (evidence - EVIDENCE_FLOOR) * (1.0 - MIN_CONTENT_BIAS) / EVIDENCE_SPAN
         bias = float(np.clip(eased, MIN_CONTENT_BIAS, bias))
         tone_bias = float(np.clip(eased, MIN_CONTENT_BIAS, tone_bias))
@@ -441,6 +442,7 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
             "tone_raw": [round(float(v), 4) for v in sty_q - nat_q],
             "saturation": [round(float(v), 3) for v in saturation],
             "tint": [[round(float(v), 4) for v in row] for row in tint],
-            "evidence": round(evidence, 3), "content_bias": round(bias, 3),
+            "evidence": None if evidence is None else round(evidence, 3),
+            "content_bias": round(bias, 3),
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference}
     return StatisticsLook(tone_in, tone_out, saturation, tint, monochrome, info)
