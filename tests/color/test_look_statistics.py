@@ -200,6 +200,66 @@ def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tm
     assert len(naturals.meta["own"].names) == 3 and len(naturals.names) > 3
 
 
+def test_the_users_own_photos_count_as_far_as_their_number_says():
+    """The centre leans from the natural medians towards the own photos' by their number
+    (none below six: a median of a few photos moves as far as a faint look); a warm
+    collection's own cast is taken for content more, the more of its photos are given."""
+    from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS, content_centre, own_photos_blend
+
+    shares = [own_photos_blend(n) for n in (0, MIN_OWN_PHOTOS - 1, MIN_OWN_PHOTOS, 8, 50)]
+    assert shares[:2] == [1.0, 1.0] and 1.0 > shares[2] > shares[3] > shares[4] > 0.0
+    warm = np.array([0.06, 0.0, -0.06])
+
+    def collection(seeds):
+        return [np.clip(natural_photo(s) + warm, 0, 1) for s in seeds]
+
+    styles = tinted_statistics(hists(collection(range(12))), NATURALS)
+    test = np.concatenate(collection(range(200, 204)))
+    alone = statistics_look(styles, NATURALS)
+    few = statistics_look(styles, NATURALS,
+                          reference=palette_statistics(hists(collection(range(300, 304)))))
+    assert np.array_equal(few(test), alone(test)) and few.info["own_photos_unused"] == 4
+    eight = palette_statistics(hists(collection(range(300, 308))))
+    centre = content_centre(NATURALS, eight)
+    natural_q, own_q = np.median(NATURALS.quantiles, 0), np.median(eight.quantiles, 0)
+    share = own_photos_blend(8)
+    assert np.allclose(centre.quantiles[0], share * natural_q + (1 - share) * own_q)
+    # the styles' own photos, ungraded, as the user's: what is left is the natural share's
+    own = palette_statistics(hists(collection(range(12))))
+    moved = [np.sqrt(np.mean((look(test) - test) ** 2)) for look in (
+        statistics_look(styles, NATURALS, content_bias=0.0),
+        statistics_look(tinted_statistics(hists(collection(range(12))), NATURALS, own),
+                        NATURALS, content_bias=0.0, reference=own))]
+    assert moved[0] > 0.02 and moved[1] < 0.5 * moved[0]
+
+
+def test_the_halves_check_sees_the_own_photos_sampling_error_too():
+    """Each half of a style set is measured against its half of the user's own photos, so
+    the halves disagree by what those few photos happen to show, not only by the styles':
+    two identical halves of styles agree exactly without own photos, not with them."""
+    from wbcgrade.color import look
+    from wbcgrade.color.histogram import grid_points
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images, meta=None):
+        return StyleSet([f"s{i}" for i in range(len(images))], hists(images),
+                        meta={"cache_dir": None, **(meta or {})})
+
+    contents = [natural_photo(s) for s in range(6)]
+    styles = style_set([c for c in contents for _ in range(2)])  # halves: the same photos
+    own = style_set([natural_photo(s) for s in range(300, 308)])
+    plain = style_set([natural_photo(s) for s in range(100, 140)])
+    naturals = style_set([natural_photo(s) for s in range(100, 140)], {"own": own})
+    colors = grid_points(9)
+    crossed = look.set_look_halves(styles, naturals)
+    a, b = (half(colors) - colors for half in crossed)
+    # the styles' halves are the same photos: only the own photos' halves differ
+    assert np.sqrt(np.mean((a - b) ** 2)) > 0.002
+    assert look.look_reliability(*crossed, colors) < 0.999
+    a, b = (half(colors) - colors for half in look.set_look_halves(styles, plain))
+    assert np.allclose(a, b)  # without own photos the two halves agree exactly
+
+
 @pytest.mark.slow
 def test_black_and_white_histograms_rebinned_from_a_finer_grid_hold_no_colour():
     """Style histograms come at the transfer grid (64^3, 128^3) and are re-binned to 32^3:

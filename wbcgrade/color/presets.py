@@ -560,7 +560,8 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
 def source_files(source: StyleSource | None = None, natural: str | os.PathLike | None = None,
                  look=None) -> list[Path]:
     """Every file a grade reads besides the photo: the style folder's files (or the preset),
-    the natural palettes (``natural``, else the shipped ones) and a saved ``look``'s file.
+    the natural palettes (``natural``: a preset file or a folder of photos; else, or
+    ``"shipped"``, the shipped ones) and a saved ``look``'s file.
 
     They are inputs: an output naming one of them is refused, ``--overwrite`` or not
     (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
@@ -576,7 +577,9 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
             files.append(resolve_preset(source.preset))
         except InputError:
             pass
-    if natural is not None:
+    if natural is not None and Path(natural).is_dir():  # the user's own ungraded photos
+        files += [p for p in Path(natural).iterdir() if p.is_file()]
+    elif natural is not None and str(natural) != "shipped":
         files.append(Path(natural))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")

@@ -224,15 +224,23 @@ FIT_BINS = 16
 MAP_BINS = 32
 
 
+#: ``--natural`` naming the shipped palettes alone (a batch otherwise also reads its own
+#: photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
+SHIPPED_NATURALS = "shipped"
+
+
 def load_naturals(natural: str | None, working_space: str):
     """The content model a command names: ``natural`` a preset file (.npz) of natural
     palettes, a folder of the user's own ungraded photos (their statistics say what
     content looks like in their collection; the shipped palettes how much it varies:
-    ``meta["own"]``), or None (the shipped palettes); in ``working_space``."""
+    ``meta["own"]``), or None or :data:`SHIPPED_NATURALS` (the shipped palettes); in
+    ``working_space``."""
     from pathlib import Path
 
     from wbcgrade.color.presets import load_preset, load_style_folder, styles_in_space
 
+    if natural == SHIPPED_NATURALS:
+        natural = None
     if natural is not None and Path(natural).is_dir():
         from wbcgrade.color.histogram import HistogramCache
 
@@ -294,6 +302,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     digest.update(np.ascontiguousarray(styles.at_bins(FIT_BINS), dtype=np.float64).tobytes())
     for palettes in (naturals, *([own] if own is not None else [])):
         digest.update(_palettes_digest(palettes).encode())
+    digest.update(repr(naturals.meta.get("own_count")).encode())
     # the settings too: a look cached under other settings (an experiment's) is not reused
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS, SET_RELAXATION, SET_RIDGE,
                         DEFAULT_CONTENT_SHRINK, DEFAULT_WIDTH, DEFAULT_SMOOTHNESS,
@@ -319,7 +328,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 10
+LOOK_VERSION = 12
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -336,7 +345,8 @@ def statistics_settings() -> tuple:
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
             stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
-            stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS, stats.NULL_DRAWS, stats.NULL_MARGIN)
+            stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS, stats.NULL_DRAWS, stats.NULL_MARGIN,
+            stats.OWN_PHOTO_NOISE)
 
 
 _DIGESTS: dict[int, tuple[object, str]] = {}
@@ -410,14 +420,15 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
 
     natural_stats = _natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
+    own_count = naturals.meta.get("own_count")  # a half's: the whole own set's number
     reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
     # re-binned from a finer grid, the styles' colours were binned twice (a trace of chroma
     # in a black-and-white set's histograms): both are taken off the chroma spread
     style_hists = styles.at_bins(MAP_BINS)
     model = statistics_look(tinted_statistics(style_hists, natural_stats, reference,
-                                              source_bins=styles.bins),
+                                              source_bins=styles.bins, own_count=own_count),
                             natural_stats, _space_scale(styles.working_space),
-                            reference=reference)
+                            reference=reference, own_count=own_count)
     size = 17
     points = grid_points(size)
     density = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), size).ravel()
@@ -441,13 +452,24 @@ def _styles_subset(styles, indices):
 
 def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
     """The looks of the two halves of a style set (styles 0, 2, 4, ... and 1, 3, 5, ...),
-    each extracted as :func:`set_look` does (and cached the same way); None under 2 styles."""
+    each extracted as :func:`set_look` does (and cached the same way); None under 2 styles.
+    With the user's own photos (``naturals.meta["own"]``), each half is measured against
+    its half of them too (weighed as the whole), so the halves disagree by the own
+    photos' sampling error as well as by the styles'."""
     n = len(styles.names)
     if n < 2:
         return None
-    first, second = (set_look(_styles_subset(styles, range(h, n, 2)), naturals).look
-                     for h in (0, 1))
-    return first, second
+    own = None if naturals is None else naturals.meta.get("own")
+    halves = []
+    for h in (0, 1):
+        against = naturals
+        if own is not None and len(own.names) >= 2:
+            against = type(naturals)(naturals.names, naturals.histograms, naturals.source,
+                                     naturals.width, naturals.description,
+                                     {**naturals.meta, "own_count": len(own.names),
+                                      "own": _styles_subset(own, range(h, len(own.names), 2))})
+        halves.append(set_look(_styles_subset(styles, range(h, n, 2)), against).look)
+    return halves[0], halves[1]
 
 
 def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
