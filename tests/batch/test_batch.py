@@ -413,3 +413,40 @@ def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
     report = json.loads((tmp_path / "report" / "report.json").read_text())
     assert [p["photo"] for p in report["photos"]] == ["chelsea.jpg"]
     assert (tmp_path / "report" / "index.html").is_file()
+
+
+def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
+    """Six or more photos directly in the batch's folder are the look's content model
+    beside the shipped palettes: said on the summary, recorded in the settings, and the
+    grade differs from the shipped palettes' alone (``--natural shipped``); a broken photo
+    among them is skipped there as in the grade; five photos are too few."""
+    _, styles = folders
+    photos = tmp_path / "mine"
+    names = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
+    for name in names:
+        small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 40)
+    (photos / "broken.jpg").write_bytes((photos / "chelsea.jpg").read_bytes()[:300])
+    warm = tmp_path / "warm"
+    for name in ("sunset", "coffee", "flower", "seeding", "aitzgorri", "bridge"):
+        img = _pixels(small_copy(SAMPLES / f"{name}.jpg", warm / f"{name}.png", 40))
+        _write_png(warm / f"{name}.png", np.clip(img[..., :3] * [1.1, 0.95, 0.7], 0, 1))
+    own = run_cli("batch", str(photos), "-o", str(tmp_path / "own"), "--style", str(warm),
+                  "--no-cache")
+    assert own.exit_code == 1, own.output  # the broken photo fails; the others are graded
+    assert "graded 7, skipped 0, failed 1" in own.output
+    assert "measured against the photos being graded (8 in the folder)" in own.output
+    settings = json.loads((tmp_path / "own" / ".wbcgrade-batch.json").read_text())
+    assert settings["options"]["natural"] == str(photos)
+    shipped = run_cli("batch", str(photos), "-o", str(tmp_path / "shipped"), "--style",
+                      str(warm), "--natural", "shipped", "--no-cache")
+    assert "graded 7" in shipped.output and "content:" not in shipped.output
+    differ = [np.abs(_pixels(tmp_path / "own" / f"{n}.jpg")
+                     - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max() for n in names]
+    assert max(differ) > 2 / 255
+    few = tmp_path / "few"
+    few.mkdir()
+    for name in names[:5]:
+        shutil.copy(photos / f"{name}.jpg", few / f"{name}.jpg")
+    result = run_cli("batch", str(few), "-o", str(tmp_path / "few_out"), "--style", str(warm),
+                     "--no-cache")
+    assert result.exit_code == 0 and "content:" not in result.output

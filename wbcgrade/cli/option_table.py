@@ -164,8 +164,10 @@ OPTIONS: tuple[Option, ...] = (
            type="wbcgrade.color.options:MODES", default=FIELD_DEFAULT, show_default=True,
            section=SOURCE),
     Option("natural", "--natural", "The look's content model: a preset (.npz) of ungraded "
-           "photos, or a folder of your own ungraded photos [default: the shipped palettes of "
-           "300+ photos].", field="map.natural", json="natural", type=_PATH,
+           "photos, a folder of six or more of your own ungraded photos (beside the shipped "
+           "palettes), or 'shipped' [default: the shipped palettes of 300+ photos; in batch, "
+           "with the photos being graded when six or more lie directly in IN_DIR].",
+           field="map.natural", json="natural", type=_PATH,
            metavar="PRESET|DIR", section=LOOK),
     # the palette fit and transport
     Option("weights_text", "--weights", "Use these style weights and skip the fit (order: "

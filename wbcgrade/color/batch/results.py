@@ -122,7 +122,8 @@ class FileResult:
 class BatchResult:
     """Outcome of a batch: one FileResult per photo (graded, skipped, failed), the time,
     for a series its weights (``series``) and grade (``series_grade``, colour map), and
-    what else was written (``report``: report.json, ``lut``: the series LUT)."""
+    what else was written (``report``: report.json, ``lut``: the series LUT), and how many
+    of the batch's own photos the look was told content looks like (``own_photos``)."""
 
     results: list[FileResult]
     ignored: list[str]
@@ -132,6 +133,7 @@ class BatchResult:
     series_grade: Grade | None = None
     report: Path | None = None
     lut: Path | None = None
+    own_photos: int = 0
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.results)
