@@ -229,6 +229,9 @@ MAP_BINS = 32
 SHIPPED_NATURALS = "shipped"
 
 
+_OWN_NATURALS: dict[tuple, object] = {}
+
+
 def load_naturals(natural: str | None, working_space: str):
     """The content model a command names: ``natural`` a preset file (.npz) of natural
     palettes, a folder of the user's own ungraded photos (their statistics say what
@@ -244,12 +247,23 @@ def load_naturals(natural: str | None, working_space: str):
     if natural is not None and Path(natural).is_dir():
         from wbcgrade.color.histogram import HistogramCache
 
-        own = load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
-                                working_space=working_space)
-        naturals = styles_in_space(natural_palettes(), working_space)
-        return type(naturals)(naturals.names, naturals.histograms, naturals.source,
-                              naturals.width, naturals.description,
-                              {**naturals.meta, "own": own})
+        # once per process and state of the folder (a batch grades each photo against it)
+        try:
+            listing = tuple(sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns)
+                                   for p in Path(natural).iterdir() if p.is_file()))
+        except OSError:  # the folder changing under us: read it, keep nothing
+            listing = None
+        key = (str(Path(natural).resolve()), working_space, listing)
+        if listing is None or key not in _OWN_NATURALS:
+            own = load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
+                                    working_space=working_space)
+            naturals = styles_in_space(natural_palettes(), working_space)
+            _OWN_NATURALS.clear()
+            _OWN_NATURALS[key] = type(naturals)(naturals.names, naturals.histograms,
+                                                naturals.source, naturals.width,
+                                                naturals.description,
+                                                {**naturals.meta, "own": own})
+        return _OWN_NATURALS[key]
     naturals = load_preset(natural) if natural else natural_palettes()
     return styles_in_space(naturals, working_space)
 
