@@ -450,3 +450,7 @@ def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
     result = run_cli("batch", str(few), "-o", str(tmp_path / "few_out"), "--style", str(warm),
                      "--no-cache")
     assert result.exit_code == 0 and "content:" not in result.output
+    # a folder graded towards its own look: its photos are the styles, not its content
+    itself = run_cli("batch", str(warm), "-o", str(tmp_path / "itself"), "--style", str(warm),
+                     "--no-cache")
+    assert itself.exit_code == 0 and "content:" not in itself.output

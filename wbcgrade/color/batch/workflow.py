@@ -137,14 +137,16 @@ def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> N
 
 
 def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: BatchPlan,
-                       look=None) -> tuple[GradeOptions, int]:
+                       look=None, source: StyleSource | None = None
+                       ) -> tuple[GradeOptions, int]:
     """The batch's own photos beside the shipped palettes as the look's content model
     (``map.natural`` = ``in_dir``): the photos being graded show, together, what ungraded
     content looks like in this collection
     (:func:`wbcgrade.color.look.statistics.own_photos_blend`). Only in the look mode,
     with no content model or saved grade named, and with at least
     :data:`~wbcgrade.color.look.statistics.MIN_OWN_PHOTOS` photos directly in ``in_dir``
-    (the ones read). Returns the options and that number of photos (0: not used)."""
+    (the ones read), not when they are the style photos themselves. Returns the options
+    and that number of photos (0: not used)."""
     from dataclasses import replace
 
     from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
@@ -152,6 +154,9 @@ def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: B
     if look is not None or options.map.natural is not None or options.map.builder != "look":
         return options, 0
     folder = Path(in_dir).resolve()
+    style_dir = None if source is None else source.style_dir
+    if style_dir is not None and Path(style_dir).resolve() == folder:
+        return options, 0
     count = sum(Path(task.source).resolve().parent == folder for task in plan.all_photos)
     if count < MIN_OWN_PHOTOS:
         return options, 0
@@ -211,7 +216,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    options, own_photos = own_photos_content(options, in_dir, plan, look)
+    options, own_photos = own_photos_content(options, in_dir, plan, look, source)
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))
