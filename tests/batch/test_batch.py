@@ -16,7 +16,7 @@ from tests.conftest import run_cli
 from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
 from wbcgrade.color.fit import fit_weights
 from wbcgrade.color.options import FitOptions, GradeOptions
-from wbcgrade.color.presets import load_style_folder
+from wbcgrade.color.presets import load_preset, load_style_folder
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 FAST = ["--mode", "palette", "--bins", "8", "--fit-bins", "6", "--max-iter", "3",
@@ -418,14 +418,16 @@ def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
 def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
     """Six or more photos directly in the batch's folder are the look's content model
     beside the shipped palettes: said on the summary, recorded in the settings, and the
-    grade differs from the shipped palettes' alone (``--natural shipped``); a broken photo
-    among them is skipped there as in the grade; five photos are too few."""
+    grade differs from the shipped palettes' alone (``--natural shipped``); their palettes
+    are read once and kept in the output folder; a broken photo among them is skipped there
+    as in the grade, two photos of one stem are both read; five photos are too few."""
     _, styles = folders
     photos = tmp_path / "mine"
     names = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
     for name in names:
         small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 40)
     (photos / "broken.jpg").write_bytes((photos / "chelsea.jpg").read_bytes()[:300])
+    _write_png(photos / "coffee.png", _pixels(photos / "coffee.jpg"))  # a stem twice
     warm = tmp_path / "warm"
     for name in ("sunset", "coffee", "flower", "seeding", "aitzgorri", "bridge"):
         img = _pixels(small_copy(SAMPLES / f"{name}.jpg", warm / f"{name}.png", 40))
@@ -433,13 +435,15 @@ def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
     own = run_cli("batch", str(photos), "-o", str(tmp_path / "own"), "--style", str(warm),
                   "--no-cache")
     assert own.exit_code == 1, own.output  # the broken photo fails; the others are graded
-    assert "graded 7, skipped 0, failed 1" in own.output
-    assert "measured against the photos being graded (8 in the folder)" in own.output
+    assert "graded 8, skipped 0, failed 1" in own.output
+    assert "measured against 8 of the photos being graded" in own.output
     settings = json.loads((tmp_path / "own" / ".wbcgrade-batch.json").read_text())
-    assert settings["options"]["natural"] == str(photos)
+    kept = tmp_path / "own" / ".wbcgrade-own-photos.npz"  # their palettes, read once
+    assert settings["options"]["natural"] == str(kept.resolve())
+    assert len(load_preset(kept).names) == 8
     shipped = run_cli("batch", str(photos), "-o", str(tmp_path / "shipped"), "--style",
                       str(warm), "--natural", "shipped", "--no-cache")
-    assert "graded 7" in shipped.output and "content:" not in shipped.output
+    assert "graded 8" in shipped.output and "content:" not in shipped.output
     differ = [np.abs(_pixels(tmp_path / "own" / f"{n}.jpg")
                      - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max() for n in names]
     assert max(differ) > 2 / 255
@@ -450,6 +454,10 @@ def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
     result = run_cli("batch", str(few), "-o", str(tmp_path / "few_out"), "--style", str(warm),
                      "--no-cache")
     assert result.exit_code == 0 and "content:" not in result.output
+    # a preset's look is baked in: no content model is read
+    preset = run_cli("batch", str(photos), "-o", str(tmp_path / "preset"), "--preset", "warm",
+                     "--no-cache")
+    assert "graded 8" in preset.output and "content:" not in preset.output
     # a folder graded towards its own look: its photos are the styles, not its content
     itself = run_cli("batch", str(warm), "-o", str(tmp_path / "itself"), "--style", str(warm),
                      "--no-cache")

@@ -186,7 +186,7 @@ def test_the_users_own_photos_say_what_content_looks_like_in_their_collection(tm
     assert warmer_others > 0.015
     assert abs(np.mean((against_own(test) - test) @ red_blue)) < 0.5 * warmer_others
 
-    # a folder of them as --natural: the shipped palettes' spread, the folder's centre
+    # a folder of them as --natural: beside the shipped palettes (three: too few to be used)
     import OpenImageIO as oiio
 
     from wbcgrade.color.look import load_naturals
@@ -231,6 +231,25 @@ def test_the_users_own_photos_count_as_far_as_their_number_says():
         statistics_look(tinted_statistics(hists(collection(range(12))), NATURALS, own),
                         NATURALS, content_bias=0.0, reference=own))]
     assert moved[0] > 0.02 and moved[1] < 0.5 * moved[0]
+
+
+def test_own_photos_missing_a_band_leave_it_to_the_natural_photos_and_evidence_is_stable():
+    """A lightness band none of the own photos holds (dim photos: no highlights) keeps the
+    natural median there, not NaN (which would drop the look's tint in that band); and a
+    look's evidence does not depend on which centres were weighed before in the process."""
+    from wbcgrade.color.look import statistics as stats
+
+    dim = palette_statistics(hists([natural_photo(s) * 0.35 for s in range(300, 308)]))
+    assert np.isnan(dim.band_neutral[:, -1]).all()
+    centre = stats.content_centre(NATURALS, dim)
+    top = np.nanmedian(NATURALS.band_neutral[:, -1], axis=0)
+    assert np.allclose(centre.band_neutral[0, -1], top)
+    styles = tinted_statistics(hists([faded_teal(natural_photo(s)) for s in range(12)]), NATURALS)
+    stats._NULLS.clear()
+    first = stats._look_evidence(styles, NATURALS, centre, 12)
+    stats._NULLS.clear()
+    stats._look_evidence(styles, NATURALS, NATURALS, 12)
+    assert stats._look_evidence(styles, NATURALS, centre, 12) == first
 
 
 def test_the_halves_check_sees_the_own_photos_sampling_error_too():

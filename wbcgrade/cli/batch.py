@@ -116,10 +116,10 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
     if result.ignored:
         line += f" ({len(result.ignored)} non-image file{'s' * (len(result.ignored) > 1)} ignored)"
     click.echo(line)
-    if result.own_photos:
-        click.echo(f"content: the look was measured against the photos being graded "
-                   f"({result.own_photos} in the folder) beside the shipped palettes "
-                   "(--natural shipped: the shipped palettes alone)")
+    if result.own_photos and result.count("graded"):
+        click.echo(f"content: the look was measured against {result.own_photos} of the photos "
+                   "being graded beside the shipped palettes (--natural shipped: the shipped "
+                   "palettes alone)")
     for item in result.results:
         if item.status == "failed":
             click.echo(f"  failed   {item.relative}: {item.error}")

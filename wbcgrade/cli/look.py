@@ -33,8 +33,8 @@ def look() -> None:
 @table_rows("lut_format", help=option("lut_format").help.replace("--lut file", "--output file"))
 @table_options("look_strength")
 @table_options("natural", help="The content model: a preset (.npz) of ungraded photos, or a "
-                               "folder of your own ungraded photos [default: the shipped "
-                               "palettes].")
+                               "folder of six or more of your own ungraded photos (beside the "
+                               "shipped palettes) [default: the shipped palettes].")
 @table_options("working_space", help="Colour space the look is extracted and the LUT "
                                      "applied in [default: sRGB-encoded Rec.709].")
 @table_options("overwrite", help="Replace an existing LUT file.")

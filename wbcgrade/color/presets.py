@@ -180,6 +180,55 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
         raise InputError(f"{path}: {exc}") from None
 
 
+def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pixels: int,
+                     working: str, warn: Callable[[str], None],
+                     progress: Callable[[int, int, str], None] | None
+                     ) -> tuple[list[np.ndarray], list[str]]:
+    """Histograms of the readable ``files`` (from ``cache`` when it holds them; the others
+    skipped with a ``warn``ing) and their paths."""
+    space = f"{config_path()}|{working}"
+    hists, used = [], []
+    for number, path in enumerate(files):
+        if progress:
+            progress(number, len(files), path.name)
+        hist = cache.get(path, bins, max_pixels, space)
+        if hist is None:
+            try:
+                hist = _photo_histogram(path, bins, max_pixels, working)
+            except InputError as exc:
+                if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
+                    warn(f"skipping {exc}")
+                else:
+                    warn(f"skipping {path.name}: not an image")
+                continue
+            hist = cache.put(path, bins, hist, max_pixels, space)  # as later runs read it
+        hists.append(hist)
+        used.append(str(path))
+    if progress:
+        progress(len(files), len(files), "")
+    return hists, used
+
+
+def photo_palettes(files: list[str | os.PathLike], bins: int,
+                   *, cache: HistogramCache | None = None,
+                   max_pixels: int = DEFAULT_MAX_PIXELS,
+                   warn: Callable[[str], None] | None = None,
+                   progress: Callable[[int, int, str], None] | None = None,
+                   working_space: str | None = None) -> StyleSet | None:
+    """Histograms of the readable photos among ``files`` (as :func:`load_style_folder`
+    reads a folder's), named by file name (a raw and its JPEG may share a stem); None
+    when none is readable."""
+    cache = cache or HistogramCache(enabled=False)
+    working = resolve_space(working_space) if working_space else default_working_space()
+    hists, used = _read_histograms([Path(f) for f in files], bins, cache, max_pixels, working,
+                                   warn or log.warning, progress)
+    if not hists:
+        return None
+    return StyleSet(names=[Path(path).name for path in used], histograms=np.stack(hists),
+                    source="", meta={"working_space": working, "ocio_config": config_path(),
+                                     "files": used})
+
+
 def load_style_folder(folder: str | os.PathLike, bins: int,
                       *, cache: HistogramCache | None = None,
                       max_pixels: int = DEFAULT_MAX_PIXELS,
@@ -202,28 +251,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     warn = warn or log.warning
     cache = cache or HistogramCache(enabled=False)
     working = resolve_space(working_space) if working_space else default_working_space()
-    space = f"{config_path()}|{working}"
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    names, hists, used = [], [], []
-    for number, path in enumerate(files):
-        if progress:
-            progress(number, len(files), path.name)
-        hist = cache.get(path, bins, max_pixels, space)
-        if hist is None:
-            try:
-                hist = _photo_histogram(path, bins, max_pixels, working)
-            except InputError as exc:
-                if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
-                    warn(f"skipping {exc}")
-                else:
-                    warn(f"skipping {path.name}: not an image")
-                continue
-            hist = cache.put(path, bins, hist, max_pixels, space)  # as later runs read it
-        names.append(path.stem)
-        hists.append(hist)
-        used.append(str(path))
-    if progress:
-        progress(len(files), len(files), "")
+    hists, used = _read_histograms(files, bins, cache, max_pixels, working, warn, progress)
+    names = [Path(path).stem for path in used]
     if not hists:
         raise InputError(f"{folder}: no readable photos in the style folder")
     if len(set(names)) != len(names):
@@ -577,9 +607,11 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
             files.append(resolve_preset(source.preset))
         except InputError:
             pass
+    if natural is not None and str(natural) == "shipped":
+        natural = None
     if natural is not None and Path(natural).is_dir():  # the user's own ungraded photos
         files += [p for p in Path(natural).iterdir() if p.is_file()]
-    elif natural is not None and str(natural) != "shipped":
+    elif natural is not None:
         files.append(Path(natural))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")

@@ -136,31 +136,57 @@ def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> N
                     [task.source for task in plan.all_photos], overwrite)
 
 
+#: Where a batch keeps its own photos' palettes (its content model), in the output folder.
+OWN_PHOTOS_FILE = ".wbcgrade-own-photos.npz"
+
+
 def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: BatchPlan,
-                       look=None, source: StyleSource | None = None
+                       out_dir: str | os.PathLike, source: StyleSource | None = None,
+                       look=None, progress: BatchProgress | None = None
                        ) -> tuple[GradeOptions, int]:
-    """The batch's own photos beside the shipped palettes as the look's content model
-    (``map.natural`` = ``in_dir``): the photos being graded show, together, what ungraded
-    content looks like in this collection
-    (:func:`wbcgrade.color.look.statistics.own_photos_blend`). Only in the look mode,
-    with no content model or saved grade named, and with at least
-    :data:`~wbcgrade.color.look.statistics.MIN_OWN_PHOTOS` photos directly in ``in_dir``
-    (the ones read), not when they are the style photos themselves. Returns the options
-    and that number of photos (0: not used)."""
+    """The batch's own photos beside the shipped palettes as the look's content model:
+    the photos being graded show, together, what ungraded content looks like in this
+    collection (:func:`wbcgrade.color.look.statistics.own_photos_blend`). Only for a style
+    folder's look (the look mode; not a preset, a saved grade, ``map.natural`` named, or
+    the batch's own folder as the styles), with at least
+    :data:`~wbcgrade.color.look.statistics.MIN_OWN_PHOTOS` readable photos directly in
+    ``in_dir``. Their palettes are read once, here, and kept in ``out_dir`` as a preset
+    marked as own photos (:data:`OWN_PHOTOS_FILE`), which ``map.natural`` then names (an
+    absolute path: every worker reads that file, not the photos). Returns the options and
+    how many photos that is (0: not used)."""
     from dataclasses import replace
 
+    from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE
     from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
+    from wbcgrade.color.presets import photo_palettes, save_preset
 
-    if look is not None or options.map.natural is not None or options.map.builder != "look":
+    if (look is not None or options.map.natural is not None or options.map.builder != "look"
+            or source is None or source.style_dir is None):
         return options, 0
     folder = Path(in_dir).resolve()
-    style_dir = None if source is None else source.style_dir
-    if style_dir is not None and Path(style_dir).resolve() == folder:
+    if Path(source.style_dir).resolve() == folder:
         return options, 0
-    count = sum(Path(task.source).resolve().parent == folder for task in plan.all_photos)
-    if count < MIN_OWN_PHOTOS:
+    files = [task.source for task in plan.all_photos
+             if Path(task.source).resolve().parent == folder]
+    if len(files) < MIN_OWN_PHOTOS:
         return options, 0
-    return replace(options, map=replace(options.map, natural=str(in_dir))), count
+    read = None if progress is None or progress.read is None else (
+        lambda done, total, _name: progress.read(done, total))
+    own = photo_palettes(files, MAP_BINS, cache=source.cache, warn=lambda _message: None,
+                         progress=read)
+    if own is None or len(own.names) < MIN_OWN_PHOTOS:
+        return options, 0
+    target = Path(out_dir).resolve() / OWN_PHOTOS_FILE
+    try:
+        save_preset(target, own, overwrite=True, threshold=0.0,
+                    provenance={OWN_PHOTOS_PROVENANCE: str(folder)},
+                    description="the photos a batch grades: its content model")
+    except (OSError, InputError) as exc:
+        if progress is not None and progress.warn:
+            progress.warn(f"cannot keep the photos' palettes in {target} ({exc}); the look is "
+                          "measured against the shipped palettes alone")
+        return options, 0
+    return replace(options, map=replace(options.map, natural=str(target))), len(own.names)
 
 
 def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: StyleSource,
@@ -216,7 +242,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    options, own_photos = own_photos_content(options, in_dir, plan, look, source)
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))
@@ -229,6 +254,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         plan = recheck_plan(plan, overwrite, out_dir=out_dir)
         remove_stale_records(out_dir)  # what a killed run left half-written
         start = time.perf_counter()
+        options, own_photos = own_photos_content(options, in_dir, plan, out_dir, source, look,
+                                                 progress)
         if look is None:
             styles = _load(source, options, progress)
         else:

@@ -227,17 +227,36 @@ MAP_BINS = 32
 #: ``--natural`` naming the shipped palettes alone (a batch otherwise also reads its own
 #: photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
 SHIPPED_NATURALS = "shipped"
+#: A preset whose provenance holds this key is of the user's own ungraded photos (used
+#: beside the shipped palettes, as a folder of them is): a batch's own photos.
+OWN_PHOTOS_PROVENANCE = "own_photos_of"
 
 
 _OWN_NATURALS: dict[tuple, object] = {}
+
+
+def _remember_own(key: tuple, naturals) -> None:
+    """Keep a few content models with own photos (one a working space a batch grades in)."""
+    if len(_OWN_NATURALS) >= 4:
+        _OWN_NATURALS.pop(next(iter(_OWN_NATURALS)))
+    _OWN_NATURALS[key] = naturals
+
+
+def _beside_shipped(own, working_space: str):
+    """The shipped palettes in ``working_space`` with ``own`` photos' palettes beside them."""
+    from wbcgrade.color.presets import styles_in_space
+
+    naturals = styles_in_space(natural_palettes(), working_space)
+    return type(naturals)(naturals.names, naturals.histograms, naturals.source, naturals.width,
+                          naturals.description, {**naturals.meta, "own": own})
 
 
 def load_naturals(natural: str | None, working_space: str):
     """The content model a command names: ``natural`` a preset file (.npz) of natural
     palettes, a folder of the user's own ungraded photos (their statistics say what
     content looks like in their collection; the shipped palettes how much it varies:
-    ``meta["own"]``), or None or :data:`SHIPPED_NATURALS` (the shipped palettes); in
-    ``working_space``."""
+    ``meta["own"]``; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
+    or None or :data:`SHIPPED_NATURALS` (the shipped palettes); in ``working_space``."""
     from pathlib import Path
 
     from wbcgrade.color.presets import load_preset, load_style_folder, styles_in_space
@@ -254,18 +273,30 @@ def load_naturals(natural: str | None, working_space: str):
         except OSError:  # the folder changing under us: read it, keep nothing
             listing = None
         key = (str(Path(natural).resolve()), working_space, listing)
-        if listing is None or key not in _OWN_NATURALS:
-            own = load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
-                                    working_space=working_space)
-            naturals = styles_in_space(natural_palettes(), working_space)
-            _OWN_NATURALS.clear()
-            _OWN_NATURALS[key] = type(naturals)(naturals.names, naturals.histograms,
-                                                naturals.source, naturals.width,
-                                                naturals.description,
-                                                {**naturals.meta, "own": own})
-        return _OWN_NATURALS[key]
-    naturals = load_preset(natural) if natural else natural_palettes()
-    return styles_in_space(naturals, working_space)
+        if listing is not None and key in _OWN_NATURALS:
+            return _OWN_NATURALS[key]
+        naturals = _beside_shipped(load_style_folder(natural, MAP_BINS, cache=HistogramCache(),
+                                                     working_space=working_space),
+                                   working_space)
+        if listing is not None:
+            _remember_own(key, naturals)
+        return naturals
+    if natural:
+        try:
+            stat = Path(natural).stat()
+            key = (str(Path(natural).resolve()), working_space, stat.st_size, stat.st_mtime_ns)
+        except OSError:
+            key = None
+        if key is not None and key in _OWN_NATURALS:
+            return _OWN_NATURALS[key]
+        preset = load_preset(natural)
+        if OWN_PHOTOS_PROVENANCE in (preset.meta.get("provenance") or {}):
+            own = _beside_shipped(styles_in_space(preset, working_space), working_space)
+            if key is not None:
+                _remember_own(key, own)
+            return own
+        return styles_in_space(preset, working_space)
+    return styles_in_space(natural_palettes(), working_space)
 
 
 def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
@@ -342,7 +373,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 12
+LOOK_VERSION = 13
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -360,7 +391,7 @@ def statistics_settings() -> tuple:
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
             stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
             stats.MIN_EASED_STYLES, stats.MIN_CONTENT_BIAS, stats.NULL_DRAWS, stats.NULL_MARGIN,
-            stats.OWN_PHOTO_NOISE)
+            stats.OWN_PHOTO_NOISE, stats.MIN_OWN_PHOTOS)
 
 
 _DIGESTS: dict[int, tuple[object, str]] = {}
@@ -478,12 +509,33 @@ def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
     for h in (0, 1):
         against = naturals
         if own is not None and len(own.names) >= 2:
-            against = type(naturals)(naturals.names, naturals.histograms, naturals.source,
-                                     naturals.width, naturals.description,
-                                     {**naturals.meta, "own_count": len(own.names),
-                                      "own": _styles_subset(own, range(h, len(own.names), 2))})
+            against = _own_half(naturals, own, h)
         halves.append(set_look(_styles_subset(styles, range(h, n, 2)), against).look)
     return halves[0], halves[1]
+
+
+_OWN_HALVES: dict[tuple, object] = {}
+
+
+def _own_half(naturals, own, half: int):
+    """``naturals`` with half ``half`` (0, 1) of its own photos, weighed as the whole set
+    (``meta["own_count"]``); made once per own set (its digest names the half's)."""
+    from wbcgrade.color.presets import StyleSet
+
+    digest = _palettes_digest(own)
+    key = (id(naturals), digest, half)
+    if key not in _OWN_HALVES or _OWN_HALVES[key][0] is not naturals:
+        if len(_OWN_HALVES) >= 8:
+            _OWN_HALVES.pop(next(iter(_OWN_HALVES)))
+        picked = list(range(half, len(own.names), 2))
+        part = StyleSet([own.names[i] for i in picked], own.histograms[picked], own.source,
+                        own.width, own.description,
+                        {"working_space": own.meta.get("working_space"),
+                         "file_digest": f"{digest}|half {half}"})
+        _OWN_HALVES[key] = (naturals, type(naturals)(
+            naturals.names, naturals.histograms, naturals.source, naturals.width,
+            naturals.description, {**naturals.meta, "own_count": len(own.names), "own": part}))
+    return _OWN_HALVES[key][1]
 
 
 def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,

@@ -299,6 +299,7 @@ def _look_evidence(styles: PaletteStatistics, naturals: PaletteStatistics,
     sds = [_robust_sd(v) for v in nat]
     centres = [_nanmedian(v, axis=0) for v in _groups(centre_of)[:kinds]]
     found = [_z2(v, c, sd, n_styles) for v, c, sd in zip(_groups(styles), centres, sds)]
+    centres = [_nanmedian(v, axis=0) for v in nat]  # random natural sets about their own
     overall = _mean(np.concatenate(found))
     digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes()).hexdigest()
     key = (digest, naturals.quantiles.shape, n_styles, kinds)
@@ -348,9 +349,10 @@ def content_centre(naturals: PaletteStatistics, reference: PaletteStatistics | N
         return naturals
     blend = own_photos_blend(count)
 
-    def mixed(name: str) -> np.ndarray:
-        return (blend * _nanmedian(getattr(naturals, name), axis=0)
-                + (1.0 - blend) * _nanmedian(getattr(reference, name), axis=0))[None]
+    def mixed(name: str) -> np.ndarray:  # (a band none of the own photos holds: natural)
+        natural = _nanmedian(getattr(naturals, name), axis=0)
+        own = _nanmedian(getattr(reference, name), axis=0)
+        return np.where(np.isfinite(own), blend * natural + (1.0 - blend) * own, natural)[None]
 
     return PaletteStatistics(*(mixed(name) for name in (
         "quantiles", "band_mass", "band_mean", "band_spread", "spread", "band_neutral")))
