@@ -309,7 +309,12 @@ def unchanged_advice(source: GradeSource, blend: float) -> str | None:
     """What the user can do about a grade that leaves the photo unchanged."""
     if blend < UNCHANGED_STRENGTH:
         return "raise --strength (1 applies the grade in full)"
-    if source in (GradeSource.SET_LOOK, GradeSource.OWN_SCENE):
+    if source is GradeSource.SET_LOOK:
+        return ("--natural DIR with six or more of your own ungraded photos (what `batch` "
+                "does with the photos it grades) tells a faint look from content better; "
+                "--mode palette moves the photo's colours towards those of the style "
+                "photos; --strength above 1 forces what look there is")
+    if source is GradeSource.OWN_SCENE:
         return ("--mode palette moves the photo's colours towards those of the style "
                 "photos; --strength above 1 forces what look there is")
     if source is GradeSource.PRESET_LOOK:
