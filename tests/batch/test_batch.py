@@ -436,7 +436,7 @@ def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
                   "--no-cache")
     assert own.exit_code == 1, own.output  # the broken photo fails; the others are graded
     assert "graded 8, skipped 0, failed 1" in own.output
-    assert "measured against 8 of the photos being graded" in own.output
+    assert "measured against 8 photos of the folder" in own.output
     settings = json.loads((tmp_path / "own" / ".wbcgrade-batch.json").read_text())
     kept = tmp_path / "own" / ".wbcgrade-own-photos.npz"  # their palettes, read once
     assert settings["options"]["natural"] == str(kept.resolve())

@@ -117,9 +117,9 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
         line += f" ({len(result.ignored)} non-image file{'s' * (len(result.ignored) > 1)} ignored)"
     click.echo(line)
     if result.own_photos and result.count("graded"):
-        click.echo(f"content: the look was measured against {result.own_photos} of the photos "
-                   "being graded beside the shipped palettes (--natural shipped: the shipped "
-                   "palettes alone)")
+        click.echo(f"content: the look was measured against {result.own_photos} photos of the "
+                   "folder beside the shipped palettes (--natural shipped: the shipped palettes "
+                   "alone)")
     for item in result.results:
         if item.status == "failed":
             click.echo(f"  failed   {item.relative}: {item.error}")

@@ -178,6 +178,7 @@ def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: B
         return options, 0
     target = Path(out_dir).resolve() / OWN_PHOTOS_FILE
     try:
+        target.parent.mkdir(parents=True, exist_ok=True)
         save_preset(target, own, overwrite=True, threshold=0.0,
                     provenance={OWN_PHOTOS_PROVENANCE: str(folder)},
                     description="the photos a batch grades: its content model")
@@ -332,10 +333,15 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
     if progress.planned:
         progress.planned(len(plan.tasks))
     start = time.perf_counter()
+    own_photos = 0
+    if target.is_dir():  # the look measured as `batch` measures it
+        options, own_photos = own_photos_content(options, target, plan, out, source, None,
+                                                 progress)
     styles = _load(source, options, progress)
     result = _run(plan, styles, options, consistent, jobs, scheduler, out, False, overwrite,
                   progress)
     result.time_s = time.perf_counter() - start
+    result.own_photos = own_photos
     from wbcgrade.color.report import write_report
 
     result.report = write_report(out, result, styles, options,
