@@ -252,6 +252,38 @@ def test_own_photos_missing_a_band_leave_it_to_the_natural_photos_and_evidence_i
     assert stats._look_evidence(styles, NATURALS, centre, 12) == first
 
 
+def test_black_and_white_own_photos_say_nothing_of_how_colourful_content_is():
+    """A colour look against own photos in black and white: they are not its content (taken
+    for it, a warm look saturated colour photos 2-9 times); mixed, only the colour ones
+    count."""
+    from wbcgrade.color import look
+
+    def warm(rgb):
+        return np.clip(rgb * [1.08, 1.0, 0.9], 0, 1)
+
+    images = [warm(natural_photo(s)) for s in range(12)]
+    alone = statistics_look(tinted_statistics(hists(images), NATURALS), NATURALS)
+    grey = palette_statistics(hists([black_and_white(natural_photo(s)) for s in range(300, 308)]))
+    against = statistics_look(tinted_statistics(hists(images), NATURALS, grey), NATURALS,
+                              reference=grey)
+    assert np.allclose(against.saturation, alone.saturation)
+    assert against.info["own_photos"] == 0 and against.info["own_photos_unused"] == 8
+    mixed = [black_and_white(natural_photo(s)) for s in range(300, 306)]
+    mixed += [natural_photo(s) for s in range(306, 314)]
+    mixed = palette_statistics(hists(mixed))
+    assert statistics_look(tinted_statistics(hists(images), NATURALS, mixed), NATURALS,
+                           reference=mixed).info["own_photos"] == 8
+    assert np.max(statistics_look(tinted_statistics(hists(images), NATURALS, mixed),
+                                  NATURALS, reference=mixed).saturation) < 1.5
+    from wbcgrade.color.presets import StyleSet
+
+    folder = StyleSet([f"p{i}" for i in range(14)],
+                      hists([black_and_white(natural_photo(s)) for s in range(300, 306)]
+                            + [natural_photo(s) for s in range(306, 314)]),
+                      meta={"cache_dir": None})
+    assert len(look.colour_photos(folder).names) == 8
+
+
 def test_the_halves_check_sees_the_own_photos_sampling_error_too():
     """Each half of a style set is measured against its half of the user's own photos, so
     the halves disagree by what those few photos happen to show, not only by the styles':

@@ -149,14 +149,14 @@ def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: B
     collection (:func:`wbcgrade.color.look.statistics.own_photos_blend`). Only for a style
     folder's look (the look mode; not a preset, a saved grade, ``map.natural`` named, or
     the batch's own folder as the styles), with at least
-    :data:`~wbcgrade.color.look.statistics.MIN_OWN_PHOTOS` readable photos directly in
-    ``in_dir``. Their palettes are read once, here, and kept in ``out_dir`` as a preset
+    :data:`~wbcgrade.color.look.statistics.MIN_OWN_PHOTOS` readable colour photos directly
+    in ``in_dir``. Their palettes are read once, here, and kept in ``out_dir`` as a preset
     marked as own photos (:data:`OWN_PHOTOS_FILE`), which ``map.natural`` then names (an
     absolute path: every worker reads that file, not the photos). Returns the options and
     how many photos that is (0: not used)."""
     from dataclasses import replace
 
-    from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE
+    from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE, colour_photos
     from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
     from wbcgrade.color.presets import photo_palettes, save_preset
 
@@ -174,6 +174,7 @@ def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: B
         lambda done, total, _name: progress.read(done, total))
     own = photo_palettes(files, MAP_BINS, cache=source.cache, warn=lambda _message: None,
                          progress=read)
+    own = None if own is None else colour_photos(own)  # (black and white: not content)
     if own is None or len(own.names) < MIN_OWN_PHOTOS:
         return options, 0
     target = Path(out_dir).resolve() / OWN_PHOTOS_FILE

@@ -55,6 +55,7 @@ from wbcgrade.color.look.scene_fit import (
 )
 from wbcgrade.color.look.set_extraction import (
     LookResult,
+    colour_photos,
     extract_look,
     load_naturals,
     look_reliability,
@@ -70,4 +71,4 @@ __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences
            "PhotoLook", "photo_look", "SceneLook", "fit_scene_look", "find_scene_look",
            "fit_correction", "fit_pairs_look",
            "set_look_base", "set_look_halves", "look_reliability",
-           "set_look", "set_look_map", "natural_palettes", "load_naturals"]
+           "set_look", "set_look_map", "natural_palettes", "load_naturals", "colour_photos"]

@@ -242,11 +242,30 @@ def _remember_own(key: tuple, naturals) -> None:
     _OWN_NATURALS[key] = naturals
 
 
+def colour_photos(styles, working_space: str | None = None):
+    """The photos of ``styles`` that hold colour (a black-and-white or toned photo says
+    nothing of how colourful ungraded content is: a batch of them taken for content made
+    a colour look saturate colour photos 2-9 times), or None when none does."""
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look.statistics import MONOCHROME_SPREAD, palette_statistics
+
+    space = working_space or styles.meta.get("working_space") or default_working_space()
+    spread = palette_statistics(styles.at_bins(MAP_BINS), source_bins=styles.bins).spread
+    keep = np.flatnonzero(spread >= MONOCHROME_SPREAD * _space_scale(space))
+    if len(keep) == len(styles.names):
+        return styles
+    return _styles_subset(styles, keep) if len(keep) else None
+
+
 def _beside_shipped(own, working_space: str):
-    """The shipped palettes in ``working_space`` with ``own`` photos' palettes beside them."""
+    """The shipped palettes in ``working_space`` with ``own`` photos' palettes (those in
+    colour: :func:`colour_photos`) beside them."""
     from wbcgrade.color.presets import styles_in_space
 
+    own = colour_photos(own, working_space)
     naturals = styles_in_space(natural_palettes(), working_space)
+    if own is None:
+        return naturals
     return type(naturals)(naturals.names, naturals.histograms, naturals.source, naturals.width,
                           naturals.description, {**naturals.meta, "own": own})
 

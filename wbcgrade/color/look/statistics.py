@@ -339,11 +339,28 @@ def own_photos_blend(count: int) -> float:
     return noise / (noise + CONTENT_BIAS ** 2)
 
 
+def _in_colour(reference: PaletteStatistics | None,
+               space_scale: float = 1.0) -> PaletteStatistics | None:
+    """The palettes of ``reference`` that hold colour (a black-and-white or toned photo
+    says nothing of how colourful ungraded content is), or None when none does."""
+    if reference is None:
+        return None
+    keep = np.asarray(reference.spread) >= MONOCHROME_SPREAD * space_scale
+    if keep.all():
+        return reference
+    if not keep.any():
+        return None
+    return PaletteStatistics(*(getattr(reference, name)[keep] for name in (
+        "quantiles", "band_mass", "band_mean", "band_spread", "spread", "band_neutral")))
+
+
 def content_centre(naturals: PaletteStatistics, reference: PaletteStatistics | None,
                    own_count: int | None = None) -> PaletteStatistics:
     """What the styles' statistics are compared with: the natural photos' medians, leaned
     towards the user's own photos' (``reference``) by :func:`own_photos_blend` of their
-    number (``own_count``: of the whole own set ``reference`` is a part of; one row)."""
+    number (``own_count``: of the whole own set ``reference`` is a part of; one row; only
+    those in colour count)."""
+    reference = _in_colour(reference)
     count = own_count or (0 if reference is None else len(reference.quantiles))
     if reference is None or count < MIN_OWN_PHOTOS:
         return naturals
@@ -417,6 +434,10 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
     """
     n_styles = len(styles.quantiles)
     unused = 0
+    given = 0 if reference is None else len(reference.quantiles)
+    reference = _in_colour(reference, space_scale)
+    if reference is None:
+        unused = given
     if reference is not None and (own_count or len(reference.quantiles)) < MIN_OWN_PHOTOS:
         unused, reference = len(reference.quantiles), None
     bias = CONTENT_BIAS if content_bias is None else content_bias
