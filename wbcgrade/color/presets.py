@@ -65,6 +65,7 @@ __all__ = [
     "StyleSource",
     "look_in_space",
     "source_files",
+    "SHIPPED_NATURALS",
     "load_styles",
     "load_style_folder",
     "save_preset",
@@ -587,11 +588,16 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
                              progress=progress, working_space=working_space)
 
 
+#: ``--natural`` naming the shipped natural palettes alone (a batch otherwise also reads
+#: its own photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
+SHIPPED_NATURALS = "shipped"
+
+
 def source_files(source: StyleSource | None = None, natural: str | os.PathLike | None = None,
                  look=None) -> list[Path]:
     """Every file a grade reads besides the photo: the style folder's files (or the preset),
     the natural palettes (``natural``: a preset file or a folder of photos; else, or
-    ``"shipped"``, the shipped ones) and a saved ``look``'s file.
+    :data:`SHIPPED_NATURALS`, the shipped ones) and a saved ``look``'s file.
 
     They are inputs: an output naming one of them is refused, ``--overwrite`` or not
     (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
@@ -607,7 +613,7 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
             files.append(resolve_preset(source.preset))
         except InputError:
             pass
-    if natural is not None and str(natural) == "shipped":
+    if natural is not None and str(natural) == SHIPPED_NATURALS:
         natural = None
     if natural is not None and Path(natural).is_dir():  # the user's own ungraded photos
         files += [p for p in Path(natural).iterdir() if p.is_file()]

@@ -224,9 +224,6 @@ FIT_BINS = 16
 MAP_BINS = 32
 
 
-#: ``--natural`` naming the shipped palettes alone (a batch otherwise also reads its own
-#: photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
-SHIPPED_NATURALS = "shipped"
 #: A preset whose provenance holds this key is of the user's own ungraded photos (used
 #: beside the shipped palettes, as a folder of them is): a batch's own photos.
 OWN_PHOTOS_PROVENANCE = "own_photos_of"
@@ -264,10 +261,13 @@ def _beside_shipped(own, working_space: str):
 
     own = colour_photos(own, working_space)
     naturals = styles_in_space(natural_palettes(), working_space)
-    if own is None:
-        return naturals
-    return type(naturals)(naturals.names, naturals.histograms, naturals.source, naturals.width,
-                          naturals.description, {**naturals.meta, "own": own})
+    return naturals if own is None else _with_meta(naturals, own=own)
+
+
+def _with_meta(palettes, **meta):
+    """``palettes`` (a StyleSet) with ``meta`` added (the own photos beside the natural ones)."""
+    return type(palettes)(palettes.names, palettes.histograms, palettes.source, palettes.width,
+                          palettes.description, {**palettes.meta, **meta})
 
 
 def load_naturals(natural: str | None, working_space: str):
@@ -275,10 +275,16 @@ def load_naturals(natural: str | None, working_space: str):
     palettes, a folder of the user's own ungraded photos (their statistics say what
     content looks like in their collection; the shipped palettes how much it varies:
     ``meta["own"]``; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
-    or None or :data:`SHIPPED_NATURALS` (the shipped palettes); in ``working_space``."""
+    or None or :data:`~wbcgrade.color.presets.SHIPPED_NATURALS` (the shipped palettes); in
+    ``working_space``."""
     from pathlib import Path
 
-    from wbcgrade.color.presets import load_preset, load_style_folder, styles_in_space
+    from wbcgrade.color.presets import (
+        SHIPPED_NATURALS,
+        load_preset,
+        load_style_folder,
+        styles_in_space,
+    )
 
     if natural == SHIPPED_NATURALS:
         natural = None
@@ -310,7 +316,9 @@ def load_naturals(natural: str | None, working_space: str):
             return _OWN_NATURALS[key]
         preset = load_preset(natural)
         if OWN_PHOTOS_PROVENANCE in (preset.meta.get("provenance") or {}):
-            own = _beside_shipped(styles_in_space(preset, working_space), working_space)
+            # (a batch kept only its photos in colour)
+            own = _with_meta(styles_in_space(natural_palettes(), working_space),
+                             own=styles_in_space(preset, working_space))
             if key is not None:
                 _remember_own(key, own)
             return own
@@ -489,10 +497,11 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     # re-binned from a finer grid, the styles' colours were binned twice (a trace of chroma
     # in a black-and-white set's histograms): both are taken off the chroma spread
     style_hists = styles.at_bins(MAP_BINS)
+    scale = _space_scale(styles.working_space)
     model = statistics_look(tinted_statistics(style_hists, natural_stats, reference,
-                                              source_bins=styles.bins, own_count=own_count),
-                            natural_stats, _space_scale(styles.working_space),
-                            reference=reference, own_count=own_count)
+                                              source_bins=styles.bins, own_count=own_count,
+                                              space_scale=scale),
+                            natural_stats, scale, reference=reference, own_count=own_count)
     size = 17
     points = grid_points(size)
     density = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), size).ravel()
@@ -551,9 +560,7 @@ def _own_half(naturals, own, half: int):
                         own.width, own.description,
                         {"working_space": own.meta.get("working_space"),
                          "file_digest": f"{digest}|half {half}"})
-        _OWN_HALVES[key] = (naturals, type(naturals)(
-            naturals.names, naturals.histograms, naturals.source, naturals.width,
-            naturals.description, {**naturals.meta, "own_count": len(own.names), "own": part}))
+        _OWN_HALVES[key] = (naturals, _with_meta(naturals, own_count=len(own.names), own=part))
     return _OWN_HALVES[key][1]
 
 

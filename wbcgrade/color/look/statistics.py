@@ -177,13 +177,14 @@ def palette_statistics(hists: np.ndarray, centre: np.ndarray | None = None,
 def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
                       reference: PaletteStatistics | None = None,
                       source_bins: int | None = None,
-                      own_count: int | None = None) -> PaletteStatistics:
+                      own_count: int | None = None,
+                      space_scale: float = 1.0) -> PaletteStatistics:
     """:func:`palette_statistics` of a style set, its neutral tints measured from the set's
     rough tint (the median band means' departure from the natural ones): a tint every
     style shows moves what was grey, and the least colourful colours of a strongly
     tinted photo are not what was grey."""
     first = palette_statistics(hists, source_bins=source_bins)
-    centre = content_centre(naturals, reference, own_count)
+    centre = content_centre(naturals, _in_colour(reference, space_scale), own_count)
     rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(centre.band_mean, axis=0)
     sd = _robust_sd(naturals.band_mean)
     sigma = np.sqrt((MEDIAN_SE * sd) ** 2 / len(first.quantiles) + (CONTENT_BIAS * sd) ** 2)
@@ -358,9 +359,8 @@ def content_centre(naturals: PaletteStatistics, reference: PaletteStatistics | N
                    own_count: int | None = None) -> PaletteStatistics:
     """What the styles' statistics are compared with: the natural photos' medians, leaned
     towards the user's own photos' (``reference``) by :func:`own_photos_blend` of their
-    number (``own_count``: of the whole own set ``reference`` is a part of; one row; only
-    those in colour count)."""
-    reference = _in_colour(reference)
+    number (``own_count``: of the whole own set ``reference`` is a part of; one row;
+    ``reference`` in colour: :func:`_in_colour`)."""
     count = own_count or (0 if reference is None else len(reference.quantiles))
     if reference is None or count < MIN_OWN_PHOTOS:
         return naturals
@@ -445,19 +445,18 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
     n_reference = 0 if reference is None else len(reference.quantiles)
     blend = own_photos_blend((own_count or n_reference) if n_reference else 0)
     monochrome = bool(np.all(styles.spread < MONOCHROME_SPREAD * space_scale))
-    evidence = None  # weighed only where it may ease the share (and so trust the look)
-    if content_bias is None and n_styles >= MIN_EASED_STYLES:
-        # a set without colour says nothing of its tone curve's size by lacking colour
-        # measured from the centre the look is (the user's own photos lean it)
-        evidence = _look_evidence(styles, naturals,
-                                  content_centre(naturals, reference, own_count),
-                                  n_styles, kinds=1 if monochrome else 3)
-        eased = 1.0 - (evidence - EVIDENCE_FLOOR) * (1.0 - MIN_CONTENT_BIAS) / EVIDENCE_SPAN
-        bias = float(np.clip(eased, MIN_CONTENT_BIAS, bias))
-        tone_bias = float(np.clip(eased, MIN_CONTENT_BIAS, tone_bias))
     # the user's own photos: the centre leans on them as far as their number says (the
     # natural photos' share keeps its collection bias, the own photos' their sampling error)
     centre_of = content_centre(naturals, reference, own_count)
+    evidence = None  # weighed only where it may ease the share (and so trust the look)
+    if content_bias is None and n_styles >= MIN_EASED_STYLES:
+        # a set without colour says nothing of its tone curve's size by lacking colour;
+        # measured from the centre the look is
+        evidence = _look_evidence(styles, naturals, centre_of, n_styles,
+                                  kinds=1 if monochrome else 3)
+        eased = 1.0 - (evidence - EVIDENCE_FLOOR) * (1.0 - MIN_CONTENT_BIAS) / EVIDENCE_SPAN
+        bias = float(np.clip(eased, MIN_CONTENT_BIAS, bias))
+        tone_bias = float(np.clip(eased, MIN_CONTENT_BIAS, tone_bias))
     bias, tone_bias = blend * bias, blend * tone_bias
 
     def sigma(natural_values: np.ndarray, count: np.ndarray | int,
