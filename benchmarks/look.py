@@ -569,6 +569,25 @@ def feature_crop(img: np.ndarray, size: int) -> tuple[str, int, int] | None:
     return None
 
 
+#: JPEG quality the style photos are written with before anything reads them
+#: (``--style-jpeg``; 0: as arrays, the benchmark's default).
+STYLE_JPEG = 0
+
+
+def jpeg_round_trip(img: np.ndarray, quality: int) -> np.ndarray:
+    """(H, W, 3) float in [0, 1] -> the same after a JPEG file at ``quality`` (PIL's
+    default 4:2:0 chroma subsampling, as most cameras and exports write)."""
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(
+        buffer, "JPEG", quality=quality)
+    buffer.seek(0)
+    return np.asarray(Image.open(buffer).convert("RGB"), dtype=np.float64) / 255.0
+
+
 def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> dict:
     """Grade the case's photos with every method; numbers, sheet rows and crop rows."""
     memo: dict = {}
@@ -579,6 +598,8 @@ def run_case(case: Case, method_names: list[str], photos: Photos, tile: int) -> 
         styles = [framings(photos.looked(case.look, s))[0] for s in case.style_sources]
     else:
         styles = [photos.looked(case.look, s) for s in case.style_sources]
+    if STYLE_JPEG:  # style photos as users have them: JPEG files
+        styles = [jpeg_round_trip(s, STYLE_JPEG) for s in styles]
     rows, sheet, crops = {}, [], []
     for name in case.graded:
         if case.protocol == "shot":
@@ -817,6 +838,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--framing", choices=["plain", "dark", "flipped"], default="plain",
                         help="shot matching: the scenes as they are, 2.5 stops darker (both "
                         "framings), or the graded framing flipped left to right")
+    parser.add_argument("--style-jpeg", type=int, default=0, metavar="Q",
+                        help="write the style photos as JPEG at quality Q (1-95) before "
+                        "any method reads them, as a user's style folder holds them "
+                        "(default: as arrays)")
     parser.add_argument("--graded", type=int,
                         help="grade only the first K photos of each case (--quick: 3)")
     parser.add_argument("--size", type=int, help="long side in px (default 768; --quick: 384)")
@@ -852,7 +877,10 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit("--photos must be in 1..10 and --graded at least 1")
     film = any(lk in FILM_LOOKS for lk in looks)
     n_styles = args.styles or (12 if film and args.photos <= 8 else args.photos)
-    global NATURAL_FILE, GRADED_FRAMING
+    global NATURAL_FILE, GRADED_FRAMING, STYLE_JPEG
+    if not 0 <= args.style_jpeg <= 95:
+        raise SystemExit("--style-jpeg must be in 1..95 (0: no JPEG)")
+    STYLE_JPEG = args.style_jpeg
     if args.natural is not None:
         NATURAL_FILE = str(args.natural.resolve())
     GRADED_FRAMING = args.framing
@@ -885,6 +913,7 @@ def main(argv: list[str] | None = None) -> None:
     results = {"settings": {"size": size, "photos_per_set": args.photos, "graded": graded,
                             "styles_per_set": n_styles, "natural": NATURAL_FILE,
                             "framing": FRAMING, "graded_framing": GRADED_FRAMING,
+                            "style_jpeg": STYLE_JPEG,
                             "shuffle_seed": SHUFFLE_SEED,
                             "rotation": ROTATION, "photo_dir": str(args.photo_dir),
                             "methods": methods, "looks": looks, "jobs": args.jobs,

@@ -45,6 +45,23 @@ def test_a_set_look_at_strength_zero_says_the_photo_is_unchanged_and_why():
     assert "essentially unchanged" in text and "--mode palette" in text
 
 
+def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
+    """No own photos: --natural DIR is the lever; own photos used: it is not offered again;
+    too few given: says they were not used. Before/after pairs (look learn) every time."""
+    def advice(**look):
+        grade = _look_grade(identity_map(9), 0.0)
+        grade.info["look"].update(look)
+        return grade_outcome(grade, _fit(), None).advice
+
+    plain, used, few = advice(), advice(own_photos=9), advice(own_photos_unused=4)
+    assert "--natural DIR with 6 or more" in plain
+    assert "--natural" not in used and "your 9 own photos" in used
+    assert "your 4 own photos were not used (6 or more" in few
+    assert all("look learn BEFORE AFTER" in text and "--mode palette" in text
+               for text in (plain, used, few))
+    assert "was not used" in advice(own_photos_unused=1)
+
+
 def test_mean_change_is_the_photos_own_change_in_255ths():
     """A map that adds 0.1 to red moves a photo's colours by 0.1 / 3 per channel where red
     has room, and the outcome says the same size."""

@@ -69,6 +69,7 @@ from wbcgrade.color.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
+    OWN_PHOTO_KEYS,
     UNCHANGED_STRENGTH,
     FitStart,
     GradeOutcome,
@@ -362,7 +363,8 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
         return GradeOutcome.judge(source, n_styles, strength, blend,
                                   look_size, mean_change, why, match=look.get("match"),
                                   confidence=confidence,
-                                  extra={"set_strength": set_strength})
+                                  extra={"set_strength": set_strength,
+                                         **{k: int(look.get(k) or 0) for k in OWN_PHOTO_KEYS}})
     order = np.argsort(-np.asarray(fit.weights), kind="stable")
     best = fit.best_vertex if len(fit.vertex_losses) else None
     palette = PaletteFit(tuple(grade.names[i] for i in order),

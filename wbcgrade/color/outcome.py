@@ -27,7 +27,8 @@ import numpy as np
 
 __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
-           "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice"]
+           "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
+           "OWN_PHOTO_KEYS"]
 
 #: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
 #: photo is "essentially unchanged".
@@ -279,7 +280,7 @@ class GradeOutcome:
             reason = f"this photo's colours move by {mean_change:.1f}/255 on average"
             if strength < FAINT_STRENGTH and why_weak is not None:
                 reason += f"; the look is applied at strength {strength:.2f}: {why_weak}"
-            advice = unchanged_advice(source, blend)
+            advice = unchanged_advice(source, blend, more.get("extra"))
         if unchanged:
             if blend < UNCHANGED_STRENGTH:
                 reason = f"--strength {blend:g} applies almost none of the grade"
@@ -290,7 +291,7 @@ class GradeOutcome:
             else:
                 reason = (f"the grade moves this photo's colours by only {mean_change:.1f}/255 "
                           "on average (it changes other colours more)")
-            advice = unchanged_advice(source, blend)
+            advice = unchanged_advice(source, blend, more.get("extra"))
         more["faint"] = faint
         if why_weak is not None:
             more["extra"] = {**more.get("extra", {}), "why_weak": why_weak}
@@ -305,15 +306,37 @@ class GradeOutcome:
                                   palette=self.palette, file=self.file, extra=self.extra)
 
 
-def unchanged_advice(source: GradeSource, blend: float) -> str | None:
-    """What the user can do about a grade that leaves the photo unchanged."""
+#: The set look's counts of the user's own photos (``grade.info["look"]``) that the advice
+#: for a faint grade reads from ``GradeOutcome.extra``.
+OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
+
+
+def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None) -> str | None:
+    """What the user can do about a grade that leaves the photo unchanged.
+
+    ``look``: the set look's own photos (``own_photos``: the user's photos it was
+    measured against; ``own_photos_unused``: photos given for that but too few)."""
     if blend < UNCHANGED_STRENGTH:
         return "raise --strength (1 applies the grade in full)"
     if source is GradeSource.SET_LOOK:
-        return ("--natural DIR with six or more of your own ungraded photos (what `batch` "
-                "does with the photos it grades) tells a faint look from content better; "
-                "--mode palette moves the photo's colours towards those of the style "
-                "photos; --strength above 1 forces what look there is")
+        from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
+
+        look = look or {}
+        own, unused = int(look.get("own_photos") or 0), int(look.get("own_photos_unused") or 0)
+        if own:
+            content = f"the look is faint beside what your {own} own photos vary by; "
+        elif unused:
+            content = (f"your {unused} own photo{'s were' if unused != 1 else ' was'} not "
+                       f"used ({MIN_OWN_PHOTOS} or more in colour are needed to tell a faint "
+                       "look from content); ")
+        else:
+            content = (f"--natural DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
+                       "photos (what `batch` does with the photos it grades) tells a faint "
+                       "look from content better; ")
+        return (content + "`wbcgrade look learn BEFORE AFTER` learns the whole look from "
+                "the style photos' originals, if you have them; --mode palette moves the "
+                "photo's colours towards those of the style photos; --strength above 1 "
+                "forces what look there is")
     if source is GradeSource.OWN_SCENE:
         return ("--mode palette moves the photo's colours towards those of the style "
                 "photos; --strength above 1 forces what look there is")

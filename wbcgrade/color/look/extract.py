@@ -23,6 +23,7 @@ from wbcgrade.color.look.set_extraction import load_naturals, set_look_map
 from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
+    OWN_PHOTO_KEYS,
     UNCHANGED_STRENGTH,
     GradeOutcome,
     GradeSource,
@@ -116,5 +117,6 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
         why = (f"these {n_styles} style photos share {how} look that can be told apart "
                "from their content")
     outcome = GradeOutcome.judge(GradeSource.PRESET_LOOK if preset else GradeSource.SET_LOOK,
-                                 n_styles, float(strength), 1.0, size, size, why)
+                                 n_styles, float(strength), 1.0, size, size, why,
+                                 extra={k: int(info.get(k) or 0) for k in OWN_PHOTO_KEYS})
     return ExtractedLook(path, list(styles.names), float(strength), dict(info), outcome)
