@@ -1,13 +1,16 @@
 """How long a new style folder's look takes: twelve style photos, nothing cached.
 
-Run ``python benchmarks/set_look.py`` (``--help``). Copies twelve photos
+Run ``python benchmarks/set_look.py`` (``--help``). Writes twelve photos
 (the benchmark photos beside a clone, else ``samples/``, repeated) into a
-fresh folder and times, in a fresh cache folder, each stage of the first
+fresh folder as camera-sized JPEGs (``--megapixels``, default 16; 0: as they
+are) and times, in a fresh cache folder, each stage of the first
 ``apply --style`` on it (median of ``--runs`` runs, each cold): reading the
-style photos into histograms, the natural palettes' statistics (once per
-cache folder; the ``warm`` row has them cached, as every run after the
-first on a machine does) and the set's look itself. Target: a new set's
-look in 5 s or less on the project's 2-core machine.
+style photos into histograms (and preparing them for scene matching from
+the same decode, as ``apply`` does), the natural palettes' statistics (once
+per cache folder; the second column has them cached, as every run after the
+first on a machine does), the set's look itself, and the style photos'
+scene images (read back, not decoded again). Target: a new set's look in
+5 s or less on the project's 2-core machine.
 """
 
 from __future__ import annotations
@@ -33,24 +36,42 @@ def style_photos(count: int) -> list[Path]:
     return [found[i % len(found)] for i in range(count)]
 
 
-def one_run(files: list[Path], warm_cache: Path | None) -> dict[str, float]:
+def write_styles(files: list[Path], folder: Path, megapixels: float) -> None:
+    """The style photos as a user's folder holds them: JPEGs of ``megapixels`` (0: copies)."""
+    from PIL import Image
+
+    folder.mkdir()
+    for i, path in enumerate(files):
+        target = folder / f"{i:02d}_{path.name}"
+        if megapixels <= 0:
+            shutil.copy(path, target)
+            continue
+        with Image.open(path) as image:
+            scale = (megapixels * 1e6 / (image.width * image.height)) ** 0.5
+            size = (round(image.width * scale), round(image.height * scale))
+            image.convert("RGB").resize(size, Image.BICUBIC).save(target, quality=92)
+
+
+def one_run(styles_dir: Path, warm_cache: Path | None) -> dict[str, float]:
     from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.look import scene
     from wbcgrade.color.look import set_extraction as look
-    from wbcgrade.color.presets import load_style_folder
+    from wbcgrade.color.options import GradeOptions
+    from wbcgrade.color.presets import StyleSource, load_styles
 
     look._SET_LOOKS.clear()
     look._NATURAL_STATISTICS.clear()
+    scene._IN_MEMORY.clear()
     with tempfile.TemporaryDirectory() as tmp:
-        styles_dir = Path(tmp) / "styles"
-        styles_dir.mkdir()
-        for i, path in enumerate(files):
-            shutil.copy(path, styles_dir / f"{i:02d}_{path.name}")
         cache = warm_cache or Path(tmp) / "cache"
+        fresh = Path(tmp) / "styles"  # a folder the cache has never seen
+        shutil.copytree(styles_dir, fresh)
         times = {}
         start = time.perf_counter()
-        styles = load_style_folder(styles_dir, 64, cache=HistogramCache(cache / "hist"))
-        styles.meta["cache_dir"] = str(cache)
-        times["style histograms"] = time.perf_counter() - start
+        source = StyleSource(str(fresh), None, HistogramCache(cache))
+        styles = load_styles(source, 64, None, None, None,
+                             scene.matching_hook(source, GradeOptions()))
+        times["style histograms (and scene images)"] = time.perf_counter() - start
         start = time.perf_counter()
         naturals = look.natural_palettes()
         look._natural_statistics(naturals, styles)
@@ -58,6 +79,9 @@ def one_run(files: list[Path], warm_cache: Path | None) -> dict[str, float]:
         start = time.perf_counter()
         look.set_look_base(styles, naturals)
         times["set look"] = time.perf_counter() - start
+        start = time.perf_counter()
+        scene.style_scene_images(styles)
+        times["style scene images, read back"] = time.perf_counter() - start
         times["total"] = sum(times.values())
         return times
 
@@ -66,14 +90,19 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--styles", type=int, default=12)
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--megapixels", type=float, default=16.0,
+                        help="size the style photos are written at (0: as they are)")
     args = parser.parse_args(argv)
     sys.path.insert(0, str(ROOT))
-    files = style_photos(args.styles)
-    cold = [one_run(files, None) for _ in range(args.runs)]
-    with tempfile.TemporaryDirectory() as tmp:
-        one_run(files, Path(tmp))  # fills the natural statistics' cache
-        warm = [one_run(files, Path(tmp)) for _ in range(args.runs)]
-    print(f"\n{args.styles} style photos, median of {args.runs} runs (seconds)")
+    with tempfile.TemporaryDirectory() as folder:
+        styles_dir = Path(folder) / "styles"
+        write_styles(style_photos(args.styles), styles_dir, args.megapixels)
+        cold = [one_run(styles_dir, None) for _ in range(args.runs)]
+        with tempfile.TemporaryDirectory() as tmp:
+            one_run(styles_dir, Path(tmp))  # fills the natural statistics' cache
+            warm = [one_run(styles_dir, Path(tmp)) for _ in range(args.runs)]
+    size = f"{args.megapixels:g}-megapixel JPEGs" if args.megapixels > 0 else "as they are"
+    print(f"\n{args.styles} style photos ({size}), median of {args.runs} runs (seconds)")
     print("| stage | cold (nothing cached) | natural statistics cached |")
     print("|---|---|---|")
     for stage in cold[0]:

@@ -170,41 +170,70 @@ class StyleSet:
         return self._resampled[bins]
 
 
+#: ``on_image(path, colours)``: told of each photo a folder's histograms are read from, with
+#: its (H, W, 3) working-space colours (e.g. to prepare it for scene matching from the
+#: same decode: :func:`wbcgrade.color.look.scene.keep_for_matching`).
+ImageHook = Callable[[Path, np.ndarray], None]
+
+
 def _photo_histogram(path: Path, bins: int, max_pixels: int,
-                     working_space: str | None = None) -> np.ndarray:
+                     working_space: str | None = None,
+                     on_image: ImageHook | None = None) -> np.ndarray:
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working_space)  # each in its own space
     encoded, _ = encoding.encode(image.rgb(), image.is_float)
+    if on_image is not None:
+        on_image(path, encoded)
     try:
         return image_histogram(encoded, bins, image.alpha(), max_pixels)
     except InputError as exc:  # e.g. fully transparent: say which photo
         raise InputError(f"{path}: {exc}") from None
 
 
+#: Photos a folder's histograms are read from at once, at most (threads: decoding, colour
+#: conversion and binning release the GIL). Twelve 16-megapixel JPEGs on a 2-core machine:
+#: 4.6 s one at a time, 3.0 s two at once; each holds its decoded photo (16 MP: ~0.4 GB).
+READ_THREADS = 4
+
+
 def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pixels: int,
                      working: str, warn: Callable[[str], None],
-                     progress: Callable[[int, int, str], None] | None
+                     progress: Callable[[int, int, str], None] | None,
+                     on_image: ImageHook | None = None
                      ) -> tuple[list[np.ndarray], list[str]]:
     """Histograms of the readable ``files`` (from ``cache`` when it holds them; the others
-    skipped with a ``warn``ing) and their paths."""
+    skipped with a ``warn``ing) and their paths, in the order of ``files``."""
+    from concurrent.futures import ThreadPoolExecutor
+
     space = f"{config_path()}|{working}"
-    hists, used = [], []
-    for number, path in enumerate(files):
-        if progress:
-            progress(number, len(files), path.name)
+
+    def read(path: Path) -> tuple[np.ndarray | None, InputError | None]:
         hist = cache.get(path, bins, max_pixels, space)
-        if hist is None:
-            try:
-                hist = _photo_histogram(path, bins, max_pixels, working)
-            except InputError as exc:
+        if hist is not None:
+            return hist, None
+        try:
+            hist = _photo_histogram(path, bins, max_pixels, working, on_image)
+        except InputError as exc:
+            return None, exc
+        return cache.put(path, bins, hist, max_pixels, space), None  # as later runs read it
+
+    hists, used = [], []
+    threads = max(1, min(READ_THREADS, os.cpu_count() or 1, len(files)))
+    pool = ThreadPoolExecutor(threads)
+    try:
+        for number, (path, (hist, exc)) in enumerate(zip(files, pool.map(read, files))):
+            if progress:
+                progress(number, len(files), path.name)
+            if exc is not None:
                 if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
                     warn(f"skipping {exc}")
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue
-            hist = cache.put(path, bins, hist, max_pixels, space)  # as later runs read it
-        hists.append(hist)
-        used.append(str(path))
+            hists.append(hist)
+            used.append(str(path))
+    finally:  # interrupted: the photos not started are not read
+        pool.shutdown(wait=True, cancel_futures=True)
     if progress:
         progress(len(files), len(files), "")
     return hists, used
@@ -235,7 +264,8 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
                       max_pixels: int = DEFAULT_MAX_PIXELS,
                       warn: Callable[[str], None] | None = None,
                       progress: Callable[[int, int, str], None] | None = None,
-                      working_space: str | None = None) -> StyleSet:
+                      working_space: str | None = None,
+                      on_image: ImageHook | None = None) -> StyleSet:
     """Histograms of every photo in a folder (not recursive), sorted by name.
 
     Files that are not readable images are skipped with a warning (passed to
@@ -244,7 +274,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     metadata; :func:`wbcgrade.color.colorspace.detect_input_space`) into
     ``working_space`` (None: sRGB-encoded Rec.709) before its histogram.
 
-    Raises InputError when the folder is missing or holds no usable photo.
+    ``on_image``: told of each photo decoded (:data:`ImageHook`; not of those whose
+    histogram was cached). Raises InputError when the folder is missing or holds no
+    usable photo.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -253,7 +285,8 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     cache = cache or HistogramCache(enabled=False)
     working = resolve_space(working_space) if working_space else default_working_space()
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    hists, used = _read_histograms(files, bins, cache, max_pixels, working, warn, progress)
+    hists, used = _read_histograms(files, bins, cache, max_pixels, working, warn, progress,
+                                   on_image)
     names = [Path(path).stem for path in used]
     if not hists:
         raise InputError(f"{folder}: no readable photos in the style folder")
@@ -568,7 +601,8 @@ class StyleSource:
 
 def load_styles(source: StyleSource, bins: int, working_space: str | None = None,
                 warn: Callable[[str], None] | None = None,
-                progress: Callable[[int, int, str], None] | None = None) -> StyleSet:
+                progress: Callable[[int, int, str], None] | None = None,
+                on_image: ImageHook | None = None) -> StyleSet:
     """The styles a command names: a folder's histograms at ``bins`` (cached) or a preset.
 
     The histograms are those of ``working_space`` (None: sRGB-encoded
@@ -585,7 +619,8 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
             return styles  # sRGB-encoded Rec.709 on both sides
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
-                             progress=progress, working_space=working_space)
+                             progress=progress, working_space=working_space,
+                             on_image=on_image)
 
 
 #: ``--natural`` naming the shipped natural palettes alone (a batch otherwise also reads

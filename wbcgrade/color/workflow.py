@@ -41,6 +41,7 @@ from wbcgrade.color.imageio import (
     read_image,
     stage_image,
 )
+from wbcgrade.color.look.scene import matching_hook
 from wbcgrade.color.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -342,7 +343,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         return report
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
+                         progress.styles, matching_hook(source, options))
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
                         keep_input=report_dir is not None)

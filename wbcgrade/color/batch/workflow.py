@@ -39,6 +39,7 @@ from wbcgrade.color.batch.settings import (
 )
 from wbcgrade.color.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.look.scene import matching_hook
 from wbcgrade.color.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -73,7 +74,7 @@ class BatchProgress(Progress):
 
 def _load(source: StyleSource, options: GradeOptions, progress: Progress) -> StyleSet:
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles)
+                         progress.styles, matching_hook(source, options))
     options.check_styles(len(styles.names))
     return styles
 
