@@ -62,6 +62,22 @@ def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
     assert "was not used" in advice(own_photos_unused=1)
 
 
+def test_the_terminal_says_whether_the_users_own_photos_were_used():
+    def lines(set_strength, **look):
+        nodes = identity_map(9)
+        moved = nodes.copy()
+        moved[..., 2] = np.minimum(nodes[..., 2] + 0.2, 1.0)  # a clear look: not faint
+        grade = _look_grade(moved if set_strength else nodes, set_strength)
+        grade.info["look"].update(look)
+        return "\n".join(grade_outcome(grade, _fit(), None).lines())
+
+    assert "measured against 9 of your own photos" in lines(1.0, own_photos=9)
+    assert "your 4 own photos were not used (6 or more" in lines(1.0, own_photos_unused=4)
+    assert "own photos" not in lines(1.0)
+    # an unchanged grade says it once, in its advice
+    assert lines(0.0, own_photos_unused=4).count("were not used") == 1
+
+
 def test_mean_change_is_the_photos_own_change_in_255ths():
     """A map that adds 0.1 to red moves a photo's colours by 0.1 / 3 per channel where red
     has room, and the outcome says the same size."""

@@ -223,6 +223,15 @@ class GradeOutcome:
             lines.append(f"a faint grade: {self.reason}")
         if (self.unchanged or self.faint) and self.advice:
             lines.append(self.advice)
+        own, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
+        if own:
+            lines.append(f"content: the look was measured against {own} of your own photos "
+                         "beside the shipped palettes")
+        elif unused and not (self.advice and (self.unchanged or self.faint)):
+            from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
+
+            lines.append(f"your {unused} own photo{'s were' if unused != 1 else ' was'} not "
+                         f"used ({MIN_OWN_PHOTOS} or more in colour are needed)")
         return lines
 
     def as_dict(self) -> dict:
