@@ -282,6 +282,18 @@ def test_black_and_white_own_photos_say_nothing_of_how_colourful_content_is():
                             + [natural_photo(s) for s in range(306, 314)]),
                       meta={"cache_dir": None})
     assert len(look.colour_photos(folder).names) == 8
+    # a folder of own photos (--natural DIR): its black-and-white ones are counted as unused
+    styles = StyleSet([f"s{i}" for i in range(12)], hists(images), meta={"cache_dir": None})
+    for own, used, unused in ((folder, 8, 6), (_subset(folder, range(6)), 0, 6)):
+        with_own = look.set_extraction._beside_shipped(own, styles.working_space)
+        info = look.set_look(styles, with_own, cache=False).info
+        assert (info["own_photos"], info["own_photos_unused"]) == (used, unused)
+
+
+def _subset(styles, indices):
+    from wbcgrade.color.look.set_extraction import _styles_subset
+
+    return _styles_subset(styles, list(indices))
 
 
 def test_the_halves_check_sees_the_own_photos_sampling_error_too():

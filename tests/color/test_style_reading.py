@@ -5,6 +5,10 @@ the folder's order."""
 
 from __future__ import annotations
 
+import threading
+import time
+from pathlib import Path
+
 import numpy as np
 import OpenImageIO as oiio
 import pytest
@@ -82,24 +86,91 @@ def test_a_folder_read_for_a_look_is_decoded_once_and_its_scene_images_are_the_s
     images = scene.style_scene_images(styles)
     assert len(reads) == read_for_histograms  # no photo decoded a second time
     for path, image in zip(styles.files, images):
-        fresh = scene._read_style(path, styles.working_space)
+        fresh = scene._as_stored(scene._read_style(path, styles.working_space))
         assert np.array_equal(image.colors, fresh.colors)
         assert np.array_equal(image.points, fresh.points)
         assert np.array_equal(image.descriptors, fresh.descriptors)
-    # and from the disk cache in another process (the in-memory ones forgotten)
+    # and from the disk cache in another process (the in-memory ones forgotten): the same
+    # values, so a first run and a later one grade alike
     monkeypatch.setattr(scene, "_IN_MEMORY", {})
     read_fresh = len(reads)
     again = scene.style_scene_images(styles)
     assert len(reads) == read_fresh
-    assert all(np.allclose(a.colors, b.colors, atol=1e-3) for a, b in zip(images, again))
+    for first, later in zip(images, again):
+        assert np.array_equal(first.colors, later.colors)
+        assert np.array_equal(first.descriptors, later.descriptors)
 
 
-def test_a_palette_grade_prepares_no_scene_images(folder):
+def test_apply_decodes_each_style_photo_once(tmp_path, monkeypatch, cli):
+    """Through the command line, with style photos larger than the matching size (their
+    scene images shrunk from the decode the histograms are read from)."""
+    styles = tmp_path / "big"
+    styles.mkdir()
+    for name in STYLE_PHOTOS:
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", width=scene.MATCH_SIZE + 200)
+    photo = small_copy(SAMPLES / "sunset.jpg", tmp_path / "sunset.jpg", width=160)
+    reads: list[str] = []
+    real = imageio.read_image
+
+    def counting(path):
+        reads.append(Path(path).name)
+        return real(path)
+
+    monkeypatch.setattr(imageio, "read_image", counting)
+    monkeypatch.setattr(presets, "read_image", counting)
+    monkeypatch.setattr(scene, "_IN_MEMORY", {})
+    result = cli("apply", photo, "--style", styles, "-o", tmp_path / "out.jpg",
+                 env={"WBCGRADE_CACHE_DIR": str(tmp_path / "cache")})
+    assert result.exit_code == 0, result.output
+    assert sorted(r for r in reads if r != "sunset.jpg") == sorted(f"{n}.jpg" for n in STYLE_PHOTOS)
+
+
+def test_scene_images_are_prepared_only_where_photos_match_scenes(folder, tmp_path, monkeypatch):
     source = StyleSource(str(folder), None, None)
+    photo = tmp_path / "photo.jpg"
+    assert scene.matching_hook(source, GradeOptions(), [photo]) is not None
     assert scene.matching_hook(source, GradeOptions(mode="palette")) is None
     assert scene.matching_hook(source, GradeOptions(weights=(0.5, 0.5))) is None
     assert scene.matching_hook(StyleSource(None, "warm", None), GradeOptions()) is None
-    assert scene.matching_hook(source, GradeOptions()) is not None
+    # raw photos alone, graded in ACEScct, look the styles up in that space, not this one
+    raws = [tmp_path / "a.CR2", tmp_path / "b.dng"]
+    assert scene.matching_hook(source, GradeOptions(), raws) is None
+    assert scene.matching_hook(source, GradeOptions(), [*raws, photo]) is not None
+    assert scene.matching_hook(source, GradeOptions(working_space="acescct"), raws) is not None
+    # more photos than are kept in memory: not prepared ahead (they would be dropped)
+    monkeypatch.setattr(scene, "_IN_MEMORY_MAX", 3)
+    assert scene.matching_hook(source, GradeOptions(), [photo]) is None
+
+
+def test_big_photos_are_not_decoded_together(folder, monkeypatch):
+    """At most READ_MEGAPIXELS in flight; a photo bigger than that alone."""
+    monkeypatch.setattr(presets, "READ_THREADS", 4)
+    monkeypatch.setattr(presets, "_megapixels", lambda path: 30.0)
+    import wbcgrade._executor as executor
+    monkeypatch.setattr(executor, "cpu_count", lambda: 4)
+    in_flight, most = [0], [0]
+    lock = threading.Lock()
+    real = presets._photo_histogram
+
+    def reading(path, *args):
+        with lock:
+            in_flight[0] += 1
+            most[0] = max(most[0], in_flight[0])
+        try:
+            time.sleep(0.05)
+            return real(path, *args)
+        finally:
+            with lock:
+                in_flight[0] -= 1
+
+    monkeypatch.setattr(presets, "_photo_histogram", reading)
+    monkeypatch.setattr(presets, "READ_MEGAPIXELS", 48.0)
+    presets.load_style_folder(folder, 16, warn=lambda _: None)
+    assert most[0] == 1  # two 30 MP photos would be 60
+    monkeypatch.setattr(presets, "READ_MEGAPIXELS", 120.0)
+    most[0] = 0
+    presets.load_style_folder(folder, 16, warn=lambda _: None)
+    assert most[0] > 1
 
 
 def test_photos_read_in_threads_keep_the_folders_order_and_skip_a_broken_one(

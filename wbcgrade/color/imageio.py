@@ -42,6 +42,7 @@ from wbcgrade.errors import InputError, first_line
 __all__ = [
     "Image",
     "read_image",
+    "header_pixels",
     "write_image",
     "stage_image",
     "check_image_output",
@@ -197,6 +198,21 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
             f"{path}: {width}x{height} is {count / 1e6:.1f} megapixels, over the "
             f"limit of {limit / 1e6:g} megapixels (a decompression bomb?); raise it with "
             f"--max-image-pixels {count} if the file is trusted")
+
+
+def header_pixels(path: str | os.PathLike) -> int:
+    """Pixels of the image at ``path`` from its header, nothing decoded (0 when OpenImageIO
+    reads no header there: :func:`read_image` says what is wrong with the file)."""
+    with readable_name(Path(path)) as name:
+        inp = oiio.ImageInput.open(name)
+    if inp is None:
+        oiio.geterror()  # (cleared: not this function's error to report)
+        return 0
+    try:
+        spec = inp.spec()
+        return max(spec.width, 0) * max(spec.height, 0) * max(spec.depth, 1)
+    finally:
+        inp.close()
 
 
 #: Integer pixel formats read as they are stored and scaled to [0, 1] with numpy: the float32

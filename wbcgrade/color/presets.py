@@ -34,6 +34,7 @@ import hashlib
 import json
 import logging
 import os
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,7 +57,7 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.imageio import header_pixels, read_image
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_histogram_cells, read_npz
 
@@ -192,8 +193,39 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
 
 #: Photos a folder's histograms are read from at once, at most (threads: decoding, colour
 #: conversion and binning release the GIL). Twelve 16-megapixel JPEGs on a 2-core machine:
-#: 4.6 s one at a time, 3.0 s two at once; each holds its decoded photo (16 MP: ~0.4 GB).
+#: 4.6 s one at a time, 3.0 s two at once.
 READ_THREADS = 4
+#: Megapixels of photos decoded at once, at most (a bigger photo is read alone): each holds
+#: its pixels and their working-space copy while it is read (16 MP: ~0.5 GB, in ACEScct
+#: ~1 GB), so four 50 MP photos at once would need four times one's memory.
+READ_MEGAPIXELS = 48.0
+
+
+class _Budget:
+    """Megapixels in flight across threads: ``take`` waits until ``amount`` fits (or
+    nothing else is in flight), ``give`` returns it."""
+
+    def __init__(self, total: float) -> None:
+        self.total, self.used = total, 0.0
+        self.changed = threading.Condition()
+
+    def take(self, amount: float) -> None:
+        with self.changed:
+            self.changed.wait_for(lambda: self.used <= 0 or self.used + amount <= self.total)
+            self.used += amount
+
+    def give(self, amount: float) -> None:
+        with self.changed:
+            self.used -= amount
+            self.changed.notify_all()
+
+
+def _megapixels(path: Path) -> float:
+    """A photo's size from its header; a raw file (demosaiced in full) counts as the whole
+    :data:`READ_MEGAPIXELS`."""
+    from wbcgrade.color.raw import is_raw
+
+    return READ_MEGAPIXELS if is_raw(path) else header_pixels(path) / 1e6
 
 
 def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pixels: int,
@@ -202,28 +234,38 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
                      on_image: ImageHook | None = None
                      ) -> tuple[list[np.ndarray], list[str]]:
     """Histograms of the readable ``files`` (from ``cache`` when it holds them; the others
-    skipped with a ``warn``ing) and their paths, in the order of ``files``."""
+    skipped with a ``warn``ing) and their paths, in the order of ``files``; read in up to
+    :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time."""
     from concurrent.futures import ThreadPoolExecutor
 
+    from wbcgrade._executor import cpu_count
+
     space = f"{config_path()}|{working}"
+    budget = _Budget(READ_MEGAPIXELS)
 
     def read(path: Path) -> tuple[np.ndarray | None, InputError | None]:
         hist = cache.get(path, bins, max_pixels, space)
         if hist is not None:
             return hist, None
+        size = _megapixels(path)
+        budget.take(size)
         try:
             hist = _photo_histogram(path, bins, max_pixels, working, on_image)
         except InputError as exc:
             return None, exc
+        finally:
+            budget.give(size)
         return cache.put(path, bins, hist, max_pixels, space), None  # as later runs read it
 
     hists, used = [], []
-    threads = max(1, min(READ_THREADS, os.cpu_count() or 1, len(files)))
+    threads = max(1, min(READ_THREADS, cpu_count(), len(files)))
     pool = ThreadPoolExecutor(threads)
     try:
+        if progress and files:
+            progress(0, len(files), files[0].name)
         for number, (path, (hist, exc)) in enumerate(zip(files, pool.map(read, files))):
-            if progress:
-                progress(number, len(files), path.name)
+            if progress and number + 1 < len(files):
+                progress(number + 1, len(files), files[number + 1].name)
             if exc is not None:
                 if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
                     warn(f"skipping {exc}")

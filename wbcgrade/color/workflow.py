@@ -343,7 +343,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         return report
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles, matching_hook(source, options))
+                         progress.styles, matching_hook(source, options, [plan.photo]))
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
                         keep_input=report_dir is not None)

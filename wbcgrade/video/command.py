@@ -11,7 +11,6 @@ import os
 import time
 from dataclasses import replace
 
-from wbcgrade.color.look.scene import matching_hook
 from wbcgrade.color.options import GradeOptions, RegrainOptions
 from wbcgrade.color.presets import StyleSource, load_styles, source_files
 from wbcgrade.video.report import plan_video_report, write_video_report
@@ -53,7 +52,7 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     start = time.perf_counter()
     if look is None:
         loaded = load_styles(styles, options.transfer.bins, options.spaces.working,
-                             progress.warn, progress.styles, matching_hook(styles, options))
+                             progress.warn, progress.styles)
     else:
         from wbcgrade.color.saved_grade import look_batch_options, look_styles
 

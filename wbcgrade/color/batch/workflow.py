@@ -72,9 +72,14 @@ class BatchProgress(Progress):
     photo: Callable[[str], None] | None = None
 
 
-def _load(source: StyleSource, options: GradeOptions, progress: Progress) -> StyleSet:
+def _load(source: StyleSource, options: GradeOptions, progress: Progress, plan: BatchPlan,
+          consistent: bool) -> StyleSet:
+    """The styles, each photo prepared for scene matching from the decode its histogram is
+    read from where the photos are graded one by one (not ``consistent``: pooled)."""
+    hook = None if consistent else matching_hook(source, options,
+                                                 [task.source for task in plan.all_photos])
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles, matching_hook(source, options))
+                         progress.styles, hook)
     options.check_styles(len(styles.names))
     return styles
 
@@ -260,7 +265,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         options, own_photos = own_photos_content(options, in_dir, plan, out_dir, source, look,
                                                  progress)
         if look is None:
-            styles = _load(source, options, progress)
+            styles = _load(source, options, progress, plan, consistent)
         else:
             from wbcgrade.color.saved_grade import look_styles
 
@@ -339,7 +344,7 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
     if target.is_dir():  # the look measured as `batch` measures it
         options, own_photos = own_photos_content(options, target, plan, out, source, None,
                                                  progress)
-    styles = _load(source, options, progress)
+    styles = _load(source, options, progress, plan, consistent)
     result = _run(plan, styles, options, consistent, jobs, scheduler, out, False, overwrite,
                   progress)
     result.time_s = time.perf_counter() - start

@@ -29,6 +29,7 @@ Feature detection and matching use OpenCV.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -301,15 +302,49 @@ def _read_style(path: Path, working_space: str) -> SceneImage:
 
 #: Style images already prepared in this process, by :func:`_scene_key`: a batch grades
 #: many photos towards them, and a folder's photos read for their histograms are prepared
-#: from that one decode (:func:`keep_for_matching`).
+#: from that one decode (:func:`keep_for_matching`). Threads read a folder: one lock.
 _IN_MEMORY: dict[str, SceneImage] = {}
 _IN_MEMORY_MAX = 64
+_IN_MEMORY_LOCK = threading.Lock()
+
+
+def _remembered(key: str | None) -> SceneImage | None:
+    if key is None:
+        return None
+    with _IN_MEMORY_LOCK:
+        return _IN_MEMORY.get(key)
 
 
 def _remember(key: str, image: SceneImage) -> None:
-    if key not in _IN_MEMORY and len(_IN_MEMORY) >= _IN_MEMORY_MAX:
-        _IN_MEMORY.pop(next(iter(_IN_MEMORY)))
-    _IN_MEMORY[key] = image
+    with _IN_MEMORY_LOCK:
+        if key not in _IN_MEMORY and len(_IN_MEMORY) >= _IN_MEMORY_MAX:
+            _IN_MEMORY.pop(next(iter(_IN_MEMORY)), None)
+        _IN_MEMORY[key] = image
+
+
+def _as_stored(image: SceneImage) -> SceneImage:
+    """``image`` as its cache entry keeps it (colours and descriptors in float16), so a
+    style prepared now and one read back from the cache later give the same grade."""
+    return SceneImage(image.colors.astype(np.float16).astype(np.float32), image.points,
+                      image.descriptors.astype(np.float16).astype(np.float32))
+
+
+def _prepared(path: Path, working_space: str, key: str, where: Path | None,
+              colors: np.ndarray | None = None) -> SceneImage | None:
+    """The style photo at ``path`` prepared for matching in ``working_space`` (``key``:
+    :func:`_scene_key`): from this process, the cache entry ``where``, else from ``colors``
+    (its working-space colours) or its file (then written to ``where``); None when its file
+    cannot be read any more."""
+    found = _remembered(key) or _read_cached(where)
+    if found is None:
+        try:
+            found = _as_stored(scene_image(colors) if colors is not None
+                               else _read_style(path, working_space))
+        except (InputError, OSError, ValueError):  # gone or changed since: no scene
+            return None
+        _write_cached(where, found)
+    _remember(key, found)
+    return found
 
 
 def keep_for_matching(working_space: str, cache_dir: str | os.PathLike | None
@@ -322,28 +357,35 @@ def keep_for_matching(working_space: str, cache_dir: str | os.PathLike | None
 
     def keep(path: Path, colors: np.ndarray) -> None:
         key = _scene_key(Path(path), working_space)
-        if key is None or key in _IN_MEMORY:
-            return
-        where = entry_path(folder, "scenes", key)
-        found = _read_cached(where)
-        if found is None:
-            found = scene_image(colors)
-            _write_cached(where, found)
-        _remember(key, found)
+        if key is not None and _remembered(key) is None:
+            _prepared(Path(path), working_space, key, entry_path(folder, "scenes", key),
+                      colors)
 
     return keep
 
 
-def matching_hook(source, options) -> Callable[[Path, np.ndarray], None] | None:
-    """:func:`keep_for_matching` for a command loading ``source`` (a StyleSource) whose
-    grade (``options``, GradeOptions) matches scenes: look mode with a style folder and
-    no fixed weights; else None (nothing to prepare)."""
+def matching_hook(source, options, photos: Sequence[str | os.PathLike] = ()
+                  ) -> Callable[[Path, np.ndarray], None] | None:
+    """:func:`keep_for_matching` for a command loading ``source`` (a StyleSource) to grade
+    ``photos`` one by one, each towards the style photo showing its scene (``options``,
+    GradeOptions: look mode, no fixed weights); else None (nothing to prepare): a preset,
+    a palette grade, no folder of at most ``_IN_MEMORY_MAX`` photos, or photos all graded
+    in another working space than the styles are read in (raw files, without
+    ``--working-space``: ACEScct)."""
     from wbcgrade.color.colorspace import default_working_space, resolve_space
+    from wbcgrade.color.raw import is_raw
 
     if (source.style_dir is None or options.map.builder != "look"
             or options.fit.weights is not None):
         return None
+    try:
+        if sum(1 for p in Path(source.style_dir).iterdir() if p.is_file()) > _IN_MEMORY_MAX:
+            return None  # (kept in memory first-in first-out, a bigger folder would miss)
+    except OSError:
+        return None
     working = options.spaces.working
+    if working is None and photos and all(is_raw(photo) for photo in photos):
+        return None
     working = resolve_space(working) if working else default_working_space()
     cache = source.cache
     return keep_for_matching(working, cache.folder if cache is not None and cache.enabled
@@ -378,19 +420,9 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
         elif i < len(files) and files[i]:
             path = Path(files[i])
             key = _scene_key(path, styles.working_space)
-            where = None if key is None else entry_path(
-                cache_folder(styles) if cache else None, "scenes", key)
-            found = _IN_MEMORY.get(key) if key is not None else None
-            found = found or _read_cached(where)
-            if found is None:
-                try:
-                    found = _read_style(path, styles.working_space)
-                except (InputError, OSError, ValueError):  # gone or changed since: no scene
-                    found = None
-                else:
-                    _write_cached(where, found)
-            if found is not None and key is not None:  # a batch reads each style once
-                _remember(key, found)
+            if key is not None:
+                found = _prepared(path, styles.working_space, key, entry_path(
+                    cache_folder(styles) if cache else None, "scenes", key))
         out.append(found)
         if progress is not None:
             progress(i + 1, n)

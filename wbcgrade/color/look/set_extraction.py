@@ -259,9 +259,12 @@ def _beside_shipped(own, working_space: str):
     colour: :func:`colour_photos`) beside them."""
     from wbcgrade.color.presets import styles_in_space
 
+    given = len(own.names)  # (black-and-white ones too: the advice counts them as unused)
     own = colour_photos(own, working_space)
     naturals = styles_in_space(natural_palettes(), working_space)
-    return naturals if own is None else _with_meta(naturals, own=own)
+    if own is None:
+        return _with_meta(naturals, own_given=given)
+    return _with_meta(naturals, own=own, own_given=given)
 
 
 def _with_meta(palettes, **meta):
@@ -396,7 +399,12 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
             if cache:
                 _write_cached_look(key[0], found, styles)
         _SET_LOOKS[key] = found
-    return _SET_LOOKS[key]
+    found = _SET_LOOKS[key]
+    given = naturals.meta.get("own_given")  # a folder of own photos, black-and-white ones too
+    if given is not None and "own_photos" in found.info:
+        found = LookResult(found.look, found.weights, found.losses,
+                           {**found.info, "own_photos_unused": given - found.info["own_photos"]})
+    return found
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
