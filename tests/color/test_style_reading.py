@@ -209,3 +209,23 @@ def test_an_interrupted_folder_read_stops_reading(folder, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         presets.load_style_folder(folder, 16, progress=progress)
     assert 2 <= len(started) <= 3 < len(STYLE_PHOTOS) + 1
+
+
+def test_a_thumbnail_of_a_big_picture_is_the_filtered_resize_of_it():
+    """Block-averaged first (a big photo's filtered resize took seconds), the thumbnail
+    still matches OpenImageIO's filtered resize of the whole picture: a smooth gradient
+    within 1/255, a fine stripe pattern averaged to its mean grey, not aliased."""
+    from wbcgrade.color.sheet import PRESHRINK, thumbnail
+
+    height, width = 1203, 1807  # not multiples of the blocks
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    smooth = np.stack([x / width, y / height, 0.5 + 0.4 * np.sin(x / 150)], axis=-1)
+    direct = np.asarray(oiio.ImageBufAlgo.resize(
+        oiio.ImageBuf(smooth), roi=oiio.ROI(0, 120, 0, 80, 0, 1, 0, 3)).get_pixels(oiio.FLOAT))
+    small = thumbnail(smooth, 80, 120)
+    assert small.shape == direct.shape == (80, 120, 3)
+    assert height // (PRESHRINK * 80) >= 2  # the block path was taken
+    assert np.abs(small - direct).max() < 1 / 255
+    stripes = np.repeat(((x % 2) * np.float32(1.0))[..., None], 3, axis=-1)
+    tiny = thumbnail(stripes, 80, 120)
+    assert np.abs(tiny[:, 1:-1] - 0.5).max() < 0.01  # (the edge columns: a partial block)

@@ -58,3 +58,33 @@ def test_command_line_quotes_paths_and_names_every_setting(tmp_path):
     plain = settings_from_json({"weights": [1, 0, 0]}, 3)
     assert shlex.split(session.command_line(plain))[-3:] == ["--weights", "1,0,0",
                                                              "--no-regrain"]
+
+
+def test_a_session_on_a_style_folder_decodes_each_style_photo_for_its_look_once(
+        tmp_path, monkeypatch):
+    """The explorer opens on apply's look grade: its scene matching reads the style photos
+    prepared from the decode their histograms came from (as ``apply`` does), not again."""
+    import wbcgrade.color.imageio as imageio
+    import wbcgrade.color.look.scene as scene
+    import wbcgrade.color.presets as presets
+
+    styles = tmp_path / "styles"
+    styles.mkdir()
+    for name in ("aitzgorri", "coffee", "flower", "seeding"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", width=120)
+    photo = small_copy(SAMPLES / "sunset.jpg", tmp_path / "sunset.jpg", width=96)
+    reads: list[str] = []
+    real = imageio.read_image
+
+    def counting(path):
+        reads.append(str(path))
+        return real(path)
+
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(imageio, "read_image", counting)
+    monkeypatch.setattr(presets, "read_image", counting)
+    monkeypatch.setattr(scene, "_IN_MEMORY", {})
+    session = load_session(str(photo), style_dir=str(styles))
+    before = [r for r in reads if "styles" in r]
+    session.look_grade()
+    assert [r for r in reads if "styles" in r] == before  # no style decoded for the scene

@@ -98,8 +98,8 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
         if name in files:
             try:
                 image = read_image(files[name])
-                shown = ColorEncoding.for_image(image).to_display(image.rgb())  # as it looks
-                picture = thumbnail(shown, size, size * 4 // 3)
+                small = thumbnail(image.rgb(), size, size * 4 // 3)
+                picture = ColorEncoding.for_image(image).to_display(small)  # as it looks
             except (ValueError, OSError):
                 picture = None
         if picture is None:

@@ -96,11 +96,33 @@ def _fit_size(height: int, width: int, max_h: int, max_w: int) -> tuple[int, int
     return max(1, round(height * scale)), max(1, round(width * scale))
 
 
+#: A picture this many times larger than its thumbnail (in both directions) is first
+#: averaged down by whole blocks to about that size: OpenImageIO's filtered resize widens
+#: its filter with the ratio (a 16-megapixel photo to a 96 x 128 tile: 1.8 s; blocks first:
+#: 0.1 s), and the blocks' average is the area filter the last step still smooths.
+PRESHRINK = 4
+
+
+def _block_mean(pixels: np.ndarray, factor: int) -> np.ndarray:
+    """(H, W, C) -> (H // factor, W // factor, C): the mean of each whole factor x factor
+    block (the last partial rows and columns dropped)."""
+    height, width = (pixels.shape[0] // factor) * factor, (pixels.shape[1] // factor) * factor
+    channels = pixels.shape[2]
+    rows = pixels[:height, :width].reshape(height // factor, factor, width, channels)
+    rows = rows.sum(axis=1, dtype=np.float32)  # (one axis at a time: 6x faster than both)
+    blocks = rows.reshape(height // factor, width // factor, factor, channels).sum(axis=2)
+    return blocks / np.float32(factor * factor)
+
+
 def thumbnail(rgb: np.ndarray, max_h: int, max_w: int) -> np.ndarray:
     """(H, W, 3) float display pixels -> resized copy fitting in max_h x max_w (filtered)."""
     height, width = rgb.shape[:2]
     out_h, out_w = _fit_size(height, width, max_h, max_w)
-    buf = oiio.ImageBuf(np.ascontiguousarray(rgb[:, :, :3], dtype=np.float32))
+    pixels = rgb[:, :, :3]
+    factor = min(height // (PRESHRINK * out_h), width // (PRESHRINK * out_w))
+    if factor >= 2:
+        pixels = _block_mean(np.asarray(pixels, dtype=np.float32), factor)
+    buf = oiio.ImageBuf(np.ascontiguousarray(pixels, dtype=np.float32))
     small = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, out_w, 0, out_h, 0, 1, 0, 3))
     return np.asarray(small.get_pixels(oiio.FLOAT)).reshape(out_h, out_w, 3)
 

@@ -555,6 +555,7 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     photo or style source (one line).
     """
     from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.look.scene import matching_hook
     from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
     from wbcgrade.color.report import style_pictures
 
@@ -562,7 +563,8 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
         loaded = load_photo(photo, preview_side)
     base = _base_options()
     source = StyleSource(style_dir, preset, HistogramCache())
-    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress)
+    styles = load_styles(source, base.transfer.bins, base.spaces.working, warn, progress,
+                         matching_hook(source, _look_options(), [photo]))  # (what it opens on)
     styles = styles_in_space(styles, loaded.encoding.working)
     pictures = style_pictures(styles, THUMBNAIL_SIDE)
     return Session(photo=str(photo), style_dir=None if style_dir is None else str(style_dir),
