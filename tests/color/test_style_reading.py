@@ -229,3 +229,12 @@ def test_a_thumbnail_of_a_big_picture_is_the_filtered_resize_of_it():
     stripes = np.repeat(((x % 2) * np.float32(1.0))[..., None], 3, axis=-1)
     tiny = thumbnail(stripes, 80, 120)
     assert np.abs(tiny[:, 1:-1] - 0.5).max() < 0.01  # (the edge columns: a partial block)
+
+
+def test_header_pixels_reads_the_size_and_says_nothing_of_what_it_cannot_read(tmp_path):
+    photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "c.jpg", width=90)
+    image = imageio.read_image(photo)
+    assert imageio.header_pixels(photo) == image.pixels.shape[0] * image.pixels.shape[1]
+    (tmp_path / "broken.jpg").write_bytes(b"\xff\xd8 not a jpeg")
+    for path in (tmp_path / "gone.jpg", tmp_path, tmp_path / "broken.jpg"):
+        assert imageio.header_pixels(path) == 0  # read_image says what is wrong

@@ -203,8 +203,11 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
 def header_pixels(path: str | os.PathLike) -> int:
     """Pixels of the image at ``path`` from its header, nothing decoded (0 when OpenImageIO
     reads no header there: :func:`read_image` says what is wrong with the file)."""
-    with readable_name(Path(path)) as name:
-        inp = oiio.ImageInput.open(name)
+    try:
+        with readable_name(Path(path)) as name:
+            inp = oiio.ImageInput.open(name)
+    except (OSError, RuntimeError, ValueError):  # gone, a folder, an unusable name
+        inp = None
     if inp is None:
         oiio.geterror()  # (cleared: not this function's error to report)
         return 0
