@@ -228,10 +228,7 @@ class GradeOutcome:
             lines.append(f"content: the look was measured against {own} of your own photos "
                          "beside the shipped palettes")
         elif unused and not (self.advice and (self.unchanged or self.faint)):
-            from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-
-            lines.append(f"your {unused} own photo{'s were' if unused != 1 else ' was'} not "
-                         f"used ({MIN_OWN_PHOTOS} or more in colour are needed)")
+            lines.append(_unused_own_photos(unused) + ")")
         return lines
 
     def as_dict(self) -> dict:
@@ -320,6 +317,15 @@ class GradeOutcome:
 OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
 
 
+def _unused_own_photos(count: int) -> str:
+    """The start of the words for own photos given but not used (the caller closes the
+    parenthesis)."""
+    from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
+
+    return (f"your {count} own photo{'s were' if count != 1 else ' was'} not used "
+            f"({MIN_OWN_PHOTOS} or more in colour are needed")
+
+
 def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None) -> str | None:
     """What the user can do about a grade that leaves the photo unchanged.
 
@@ -335,9 +341,7 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
         if own:
             content = f"the look is faint beside what your {own} own photos vary by; "
         elif unused:
-            content = (f"your {unused} own photo{'s were' if unused != 1 else ' was'} not "
-                       f"used ({MIN_OWN_PHOTOS} or more in colour are needed to tell a faint "
-                       "look from content); ")
+            content = _unused_own_photos(unused) + " to tell a faint look from content); "
         else:
             content = (f"--natural DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
                        "photos (what `batch` does with the photos it grades) tells a faint "

@@ -266,13 +266,6 @@ def _scene_key(path: Path, working_space: str) -> str | None:
         return None
 
 
-def _scene_cache_path(path: Path, working_space: str, folder: Path | None) -> Path | None:
-    """The entry of a style photo prepared for matching: ``scenes/`` in ``folder`` (None:
-    not cached), keyed by :func:`_scene_key`."""
-    key = _scene_key(path, working_space)
-    return None if key is None else entry_path(folder, "scenes", key)
-
-
 def _read_cached(path: Path | None) -> SceneImage | None:
     data = read_entry(path)
     try:
@@ -357,7 +350,7 @@ def keep_for_matching(working_space: str, cache_dir: str | os.PathLike | None
 
     def keep(path: Path, colors: np.ndarray) -> None:
         key = _scene_key(Path(path), working_space)
-        if key is not None and _remembered(key) is None:
+        if key is not None:  # (one prepared already, in memory or on disk, is kept as it is)
             _prepared(Path(path), working_space, key, entry_path(folder, "scenes", key),
                       colors)
 

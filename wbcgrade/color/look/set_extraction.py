@@ -244,11 +244,11 @@ def colour_photos(styles, working_space: str | None = None):
     nothing of how colourful ungraded content is: a batch of them taken for content made
     a colour look saturate colour photos 2-9 times), or None when none does."""
     from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.look.statistics import MONOCHROME_SPREAD, palette_statistics
+    from wbcgrade.color.look.statistics import holds_colour, palette_statistics
 
     space = working_space or styles.meta.get("working_space") or default_working_space()
     spread = palette_statistics(styles.at_bins(MAP_BINS), source_bins=styles.bins).spread
-    keep = np.flatnonzero(spread >= MONOCHROME_SPREAD * _space_scale(space))
+    keep = np.flatnonzero(holds_colour(spread, _space_scale(space)))
     if len(keep) == len(styles.names):
         return styles
     return _styles_subset(styles, keep) if len(keep) else None

@@ -42,7 +42,7 @@ from wbcgrade.color.colorspace import REC709_LUMA
 from wbcgrade.color.histogram import grid_points
 
 __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
-           "statistics_look", "own_photos_blend", "content_centre",
+           "statistics_look", "own_photos_blend", "content_centre", "holds_colour",
            "QUANTILES", "BANDS", "MIN_OWN_PHOTOS"]
 
 #: Rec.709 luma weights on encoded values (the look family's lightness; toning is a
@@ -340,13 +340,19 @@ def own_photos_blend(count: int) -> float:
     return noise / (noise + CONTENT_BIAS ** 2)
 
 
+def holds_colour(spread: np.ndarray, space_scale: float = 1.0) -> np.ndarray:
+    """(K,) whole-palette chroma spreads -> (K,) whether each palette holds colour (not
+    black and white or toned: :data:`MONOCHROME_SPREAD`, scaled to the working space)."""
+    return np.asarray(spread) >= MONOCHROME_SPREAD * space_scale
+
+
 def _in_colour(reference: PaletteStatistics | None,
                space_scale: float = 1.0) -> PaletteStatistics | None:
     """The palettes of ``reference`` that hold colour (a black-and-white or toned photo
     says nothing of how colourful ungraded content is), or None when none does."""
     if reference is None:
         return None
-    keep = np.asarray(reference.spread) >= MONOCHROME_SPREAD * space_scale
+    keep = holds_colour(reference.spread, space_scale)
     if keep.all():
         return reference
     if not keep.any():
