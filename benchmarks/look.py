@@ -395,7 +395,8 @@ def batch_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -
         from PIL import Image
 
         photos = context._photos
-        digest = hashlib.sha1(",".join([context.protocol, *context.batch]).encode())
+        digest = hashlib.sha1(",".join([context.protocol, str(photos.size),
+                                        *context.batch]).encode())
         folder = Path(context.cache_dir) / f"batch-{digest.hexdigest()[:16]}"
         if not folder.is_dir():
             staging = Path(f"{folder}.{os.getpid()}")
@@ -405,6 +406,33 @@ def batch_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -
                 img = framings(img)[1] if context.protocol == "shot" else img
                 Image.fromarray(np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(
                     staging / f"{name}.png")
+            os.replace(staging, folder)
+        context.memo[key] = str(folder)
+    out, weights = wbcgrade_grade(photo, styles, context.style_names, context.memo,
+                                  natural=context.memo[key])
+    context.info["weights"] = weights
+    return out
+
+
+def known_content(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
+    """A bound, not a method: the default grade given the style photos' own UNGRADED
+    originals as the user's own photos (``--natural FOLDER``), which no user has: the best
+    any content model can tell it (the same photos before the look: no collection bias,
+    no sampling difference). What it still misses, a better content model cannot add."""
+    key = ("known-content-folder",)
+    if key not in context.memo:
+        from PIL import Image
+
+        digest = hashlib.sha1(",".join([context.protocol, str(context._photos.size),
+                                        *context.style_names]).encode())
+        folder = Path(context.cache_dir) / f"originals-{digest.hexdigest()[:16]}"
+        if not folder.is_dir():
+            staging = Path(f"{folder}.{os.getpid()}")
+            staging.mkdir(parents=True, exist_ok=True)
+            for i, name in enumerate(context.style_names):
+                img = context.before(i)
+                Image.fromarray(np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(
+                    staging / f"{i:02d}-{name}.png")
             os.replace(staging, folder)
         context.memo[key] = str(folder)
     out, weights = wbcgrade_grade(photo, styles, context.style_names, context.memo,
@@ -505,6 +533,7 @@ METHODS: dict[str, Method] = {
     "wbcgrade-extract": extract_route,
     "wbcgrade-batch": batch_route,
     "ceiling": paired_ceiling,
+    "known-content": known_content,
     "wbcgrade-palette": wbcgrade_method(mode="palette"),
     "wbcgrade-relax0.1": wbcgrade_method(mode="palette", relaxation=0.1),
     "wbcgrade-kl-relax0.01": wbcgrade_method(mode="palette", loss="kl", relaxation=0.01),

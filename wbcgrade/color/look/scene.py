@@ -10,9 +10,10 @@ tell content from look.
 
 The steps, on images of at most :data:`MATCH_SIZE` pixels a side:
 
-1. SIFT keypoints on the lightness of both images, each stretched between
-   its 1st and 99th percentiles (a dark or a flat frame keeps its keypoints;
-   gradient orientations survive a change of tone and colour);
+1. SIFT keypoints on the lightness of both images, each smoothed a little,
+   stretched between its 1st and 99th percentiles and equalised tile by tile
+   (a dark, a flat or a lifted-black frame keeps its keypoints; gradient
+   orientations survive a change of tone and colour);
 2. descriptor matches kept by the ratio test, then a homography fitted with
    RANSAC; a match counts when enough keypoints agree (:data:`MIN_INLIERS`;
    photos of other scenes give a handful by chance) and the homography is a
@@ -64,9 +65,18 @@ CONTRAST = 0.02
 #: 0.3 s against twelve style photos at 768 px, a quarter of what all of them would take).
 MIRROR_FEATURES = 1000
 #: Bumped when what is cached (size, features) changes.
-SCENE_VERSION = 2
+SCENE_VERSION = 3
 #: Share of the pixels left at each end when the lightness is stretched for keypoints.
 STRETCH = 0.01
+#: Gaussian smoothing (pixels at the matching size) of the lightness before it is
+#: stretched, and the clip limit and tiles (per side) of its local equalisation
+#: (:func:`_stretched_lightness8`). Measured on the look benchmark's photos at 384 px
+#: (12 scenes x 2 looks, framings 2.5 stops under through the look, against an under-
+#: exposed other framing): own scene found 21 -> 24 of 24, agreeing keypoints 1958 -> 4122
+#: in all; at normal exposure 23 -> 24 of 24, 3817 -> 6477; other scenes never matched.
+SMOOTH = 0.8
+LOCAL_CONTRAST = 2.0
+LOCAL_TILES = 8
 
 
 def _cv2():
@@ -124,12 +134,22 @@ def _lightness8(colors: np.ndarray) -> np.ndarray:
 
 
 def _stretched_lightness8(colors: np.ndarray) -> np.ndarray:
-    """(h, w) uint8: the lightness stretched from its :data:`STRETCH` quantiles to the
-    full range, so a dark or a flat image has the contrast a keypoint needs."""
+    """(h, w) uint8: the lightness keypoints are found on. Smoothed by :data:`SMOOTH` pixels
+    (an 8-bit dark frame holds a few dozen grey levels: their steps make keypoints that
+    match nothing), stretched from its :data:`STRETCH` quantiles to 16 bits, then
+    equalised tile by tile (OpenCV's CLAHE, :data:`LOCAL_CONTRAST`), so a dark, a flat or
+    a lifted-black frame has the local contrast a keypoint needs."""
+    cv2 = _cv2()
     luma = np.asarray(colors, dtype=np.float32) @ np.float32(SYCC_LUMA)
+    if SMOOTH > 0:
+        luma = cv2.GaussianBlur(luma, (0, 0), SMOOTH)
     low, high = np.quantile(luma[::2, ::2], [STRETCH, 1.0 - STRETCH])
-    scale = 255.0 / max(float(high - low), 1.0 / 255.0)
-    return np.clip(np.rint((luma - low) * scale), 0, 255).astype(np.uint8)
+    scale = 65535.0 / max(float(high - low), 1.0 / 255.0)
+    wide = np.clip(np.rint((luma - low) * scale), 0, 65535).astype(np.uint16)
+    if LOCAL_CONTRAST > 0:
+        wide = cv2.createCLAHE(clipLimit=LOCAL_CONTRAST,
+                               tileGridSize=(LOCAL_TILES, LOCAL_TILES)).apply(wide)
+    return (wide >> 8).astype(np.uint8)
 
 
 def shrink_colors(colors: np.ndarray, size: int) -> np.ndarray:
