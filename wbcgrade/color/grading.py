@@ -125,6 +125,9 @@ class Grade:
     own_style : the style the photo itself is (graded towards itself), or None.
     transport : how the transfer's Sinkhorn solve ended
         (:class:`~wbcgrade.color.outcome.TransportCheck`), None when there was none.
+    regrain_follows : the regrain lets the input's grain follow the map where it lowers
+        contrast or saturation (:func:`wbcgrade.color.regrain.regrain_map`'s ``follow``):
+        the look grades; the palette mode keeps the input's grain as it is.
     """
 
     names: tuple[str, ...]
@@ -141,6 +144,7 @@ class Grade:
     saved: SavedFrom | None = field(default=None, compare=False)
     own_style: str | None = field(default=None, compare=False)
     transport: TransportCheck | None = field(default=None, compare=False)
+    regrain_follows: bool = False
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -151,7 +155,8 @@ class Grade:
         into, which may be ``encoded`` itself (graded in place); returned.
         """
         if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
-            graded = regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out)
+            graded = regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out,
+                                 follow=self.regrain_follows)
             if self.strength == 1.0:  # a black-and-white map stays so: no colour regrained
                 toning = monochrome_toning(self.color_map)
                 if toning is not None:
@@ -291,7 +296,8 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
                   strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
-                  own_style=found, transport=transport)
+                  own_style=found, transport=transport,
+                  regrain_follows=name != "palette")
     outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
 

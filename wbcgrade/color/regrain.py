@@ -31,7 +31,8 @@ from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
 from wbcgrade.core import compiled, in_bands
 
-__all__ = ["regrain", "regrain_map", "DEFAULT_REGRAIN_RADIUS", "DEFAULT_REGRAIN_EPS"]
+__all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
+           "DEFAULT_REGRAIN_EPS"]
 
 #: Coefficients are solved on at most this many pixels and interpolated back.
 _MAX_SOLVE_PIXELS = 1_500_000
@@ -149,10 +150,11 @@ _N_MOMENTS = 21
 
 @compiled(cache=True)
 def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndarray,
-                  out: np.ndarray) -> None:  # pragma: no cover - compiled
+                  out: np.ndarray, prior: np.ndarray) -> None:  # pragma: no cover - compiled
     """One window's A (row-major, [a, c] at 3 a + c) and b into ``out`` (12,) from the
-    window means ``m`` (21,) of the moments: ``A = (Cov(I) + eps Id)^-1 Cov(I, d)``,
-    ``b = mean(d) - A^T mean(I)``; ``inverse``, ``cross``: (3, 3) scratch."""
+    window means ``m`` (21,) of the moments: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
+    eps A0)``, ``b = mean(d) - A^T mean(I)``; ``A0`` the (9,) ``prior`` (empty: 0);
+    ``inverse``, ``cross``: (3, 3) scratch."""
     # symmetric covariance of the guide (+ eps), inverted in closed form
     s00 = m[6] - m[0] * m[0] + eps
     s01 = m[7] - m[0] * m[1]
@@ -170,9 +172,12 @@ def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndar
     inverse[2, 0] = inverse[0, 2]
     inverse[2, 1] = inverse[1, 2]
     det = s00 * inverse[0, 0] + s01 * inverse[0, 1] + s02 * inverse[0, 2]
+    pulled = prior.shape[0] == 9
     for a in range(3):
         for c in range(3):
             cross[a, c] = m[12 + 3 * a + c] - m[a] * m[3 + c]
+            if pulled:
+                cross[a, c] += eps * prior[3 * a + c]
     for c in range(3):
         offset = m[3 + c]
         for a in range(3):
@@ -206,13 +211,15 @@ def _moment_rows(guide: np.ndarray, change: np.ndarray, radius: int, rows: np.nd
 
 
 @compiled(nogil=True, cache=True)
-def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray, lo: int,
-                   hi: int) -> None:  # pragma: no cover - compiled
+def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray,
+                   prior: np.ndarray, lo: int, hi: int) -> None:  # pragma: no cover - compiled
     """Column blocks lo:hi of :func:`_window_models`: the moments' window means (vertical
-    pass), solved as they come."""
+    pass), solved as they come (``prior``: (H, W, 9) each window's ``A0``, or (0, 0, 9))."""
     h, w = rows.shape[:2]
     inverse = np.empty((3, 3))
     cross = np.empty((3, 3))
+    pulled = prior.shape[0] == h and prior.shape[1] == w
+    none = np.empty(0, np.float32)
     for block in range(lo, hi):
         start = block * _COLUMN_BLOCK
         stop = min(start + _COLUMN_BLOCK, w)
@@ -221,11 +228,12 @@ def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray, l
         for y in range(h):
             _column_means(rows, radius, y, start, acc, means)
             for x in range(start, stop):
-                _solve_window(means[x - start], eps, inverse, cross, out[y, x])
+                _solve_window(means[x - start], eps, inverse, cross, out[y, x],
+                              prior[y, x] if pulled else none)
 
 
 def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
-                   eps: float) -> np.ndarray:
+                   eps: float, prior: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
     window means (rows, then blocks of columns, as :func:`_box`), solved as they come;
     in bands on every core (serial compiled kernels: a first run compiles them fast)."""
@@ -237,7 +245,9 @@ def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
     if h == 0 or w == 0:
         return out
     in_bands(_moment_rows, h, guide, change, int(radius), rows, min_band=1)
-    in_bands(_solve_columns, _column_blocks(w), rows, int(radius), float(eps), out,
+    prior = (np.zeros((0, 0, 9), np.float32) if prior is None
+             else np.ascontiguousarray(prior, dtype=np.float32))
+    in_bands(_solve_columns, _column_blocks(w), rows, int(radius), float(eps), out, prior,
              min_band=1)
     return out
 
@@ -250,15 +260,24 @@ def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
 _NUMPY_SOLVE_PIXELS = 400_000
 
 
-def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float) -> np.ndarray:
+def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float,
+                  prior: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 12) float32 box-averaged coefficients of the local model
-    ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``."""
+    ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``. ``prior``: (n, n,
+    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0)."""
     guide = np.ascontiguousarray(guide, dtype=np.float32)
     change = np.ascontiguousarray(change, dtype=np.float32)
-    if guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS:
-        return _box_numpy(_window_models_numpy(guide, change, int(radius), float(eps)),
+    numpy = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
+    box = _box_numpy if numpy else _box
+    pull = None
+    if prior is not None:  # each window's A0 at its mean colour (the moments' first three)
+        centre = box(guide, int(radius))
+        pull = np.concatenate([apply_color_map(centre, np.ascontiguousarray(
+            prior[..., 3 * a:3 * a + 3], dtype=np.float32)) for a in range(3)], axis=-1)
+    if numpy:
+        return _box_numpy(_window_models_numpy(guide, change, int(radius), float(eps), pull),
                           int(radius))
-    return _box(_window_models(guide, change, int(radius), float(eps)), int(radius))
+    return _box(_window_models(guide, change, int(radius), float(eps), pull), int(radius))
 
 
 def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
@@ -283,7 +302,7 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
 
 
 def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
-                         eps: float) -> np.ndarray:
+                         eps: float, prior: np.ndarray | None = None) -> np.ndarray:
     """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
     moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
     of rows. Nothing to compile."""
@@ -308,7 +327,8 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
 
     _threaded(window_mean, _N_MOMENTS)
     for start in range(0, h, 64):
-        _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64])
+        _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64],
+                    None if prior is None else prior[start:start + 64])
     return out
 
 
@@ -329,9 +349,10 @@ def _threaded(task, n: int) -> None:
             done.result()
 
 
-def _solve_band(m: np.ndarray, eps: float, band: np.ndarray) -> None:
+def _solve_band(m: np.ndarray, eps: float, band: np.ndarray,
+                prior: np.ndarray | None = None) -> None:
     """:func:`_solve_window` on a band of (21, rows, W) float64 window means, into the
-    (rows, W, 12) ``band`` of the output."""
+    (rows, W, 12) ``band`` of the output (``prior``: the band's (rows, W, 9) ``A0``)."""
     mg, md = m[0:3], m[3:6]
     s00 = m[6] - mg[0] * mg[0] + eps
     s01 = m[7] - mg[0] * mg[1]
@@ -349,6 +370,8 @@ def _solve_band(m: np.ndarray, eps: float, band: np.ndarray) -> None:
     inverse = ((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))
     for c in range(3):
         cross = [m[12 + 3 * b + c] - mg[b] * md[c] for b in range(3)]
+        if prior is not None:
+            cross = [cross[b] + eps * prior[..., 3 * b + c] for b in range(3)]
         offset = md[c].copy()
         for a in range(3):
             row = inverse[a]
@@ -473,7 +496,7 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
 
 def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0,
                 radius: float = DEFAULT_REGRAIN_RADIUS, eps: float = DEFAULT_REGRAIN_EPS,
-                out: np.ndarray | None = None) -> np.ndarray:
+                out: np.ndarray | None = None, follow: bool = False) -> np.ndarray:
     """``regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)``.
 
     The same numbers; on large images (solved on a subsampled copy) the
@@ -481,6 +504,12 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     block means (of the input too) are one pass
     (:func:`wbcgrade.color.remap.block_means_mapped`) and the full-size graded
     image is never made (two passes and ~12 bytes a pixel saved).
+
+    ``follow``: where the input varies only by grain, its detail follows the map's
+    local gain where the map lowers contrast or saturation (a flat, faded or
+    lifted-black look flattens the texture too) and keeps the input's amplitude
+    where the map raises them (:func:`map_gain_prior`); off, it always keeps the
+    input's amplitude.
     """
     if source.ndim != 3 or source.shape[2] != 3:
         raise ValueError("source must be an (H, W, 3) image")
@@ -488,12 +517,40 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
         raise ValueError("radius and eps must be positive")
     h, w = source.shape[:2]
     step = _step(h, w)
-    if step == 1:
+    if step == 1 and not follow:
         return regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)
     out = _output(source, out)
     source = np.ascontiguousarray(source, dtype=np.float32)
-    mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
-    return _regrain_upsampled(source, small, mapped - small, step, radius, eps, out)
+    if step == 1:
+        small, change = source, apply_color_map(source, color_map, strength) - source
+    else:
+        mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
+        change = mapped - small
+    if not follow:
+        return _regrain_upsampled(source, small, change, step, radius, eps, out)
+    pixels = _window(radius, max(h, w) / step)
+    coefficients = _coefficients(small, change, pixels, eps, map_gain_prior(color_map, strength))
+    _apply_upsampled(source, coefficients, float(step), out)
+    return out
+
+
+def map_gain_prior(color_map: np.ndarray, strength: float = 1.0) -> np.ndarray:
+    """(n, n, n, 9) float32: at every node of an (n, n, n, 3) colour map (blended with the
+    identity at ``strength``), the local model a window of pure noise falls back to, laid
+    out as the regrain's ``A`` (``A[a, c]`` at ``3 a + c``): the map's Jacobian with every
+    gain above 1 cut to 1 (its singular values; the directions kept), minus the identity.
+    Where the map lowers contrast or saturation, detail follows it; where it raises them,
+    detail keeps the input's amplitude (no grain or block step amplified)."""
+    table = np.asarray(color_map, dtype=np.float64)
+    n = table.shape[0]
+    axis = np.linspace(0.0, 1.0, n)
+    identity = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1)
+    mapped = (1.0 - strength) * identity + strength * table
+    jacobian = np.stack(np.gradient(mapped, axis, axis, axis, axis=(0, 1, 2)), axis=-1)
+    u, s, vt = np.linalg.svd(jacobian)  # jacobian[..., out, in]
+    capped = np.einsum("...ij,...j,...jk->...ik", u, np.minimum(s, 1.0), vt)
+    prior = np.swapaxes(capped, -1, -2) - np.eye(3)  # [in a, out c]
+    return np.ascontiguousarray(prior.reshape(n, n, n, 9), dtype=np.float32)
 
 
 def _window(radius: float, side: float) -> int:

@@ -147,6 +147,7 @@ def look_dict(grade: Grade) -> dict:
     return {"format": LOOK_FORMAT, "version": _VERSION, "working_space": grade.working,
             "strength": float(grade.strength),
             "regrain": None if grade.regrain is None else [float(v) for v in grade.regrain],
+            "regrain_follows": bool(grade.regrain_follows),
             "names": list(grade.names), "weights": [float(w) for w in grade.weights],
             "loss": None if grade.loss is None else float(grade.loss),
             "map": _encode_array(grade.color_map)}
@@ -204,6 +205,9 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
         loss = None if loss is None else _number(loss)
     except ValueError:
         raise InputError(f"{where}: the saved loss must be a number or null") from None
+    follows = entry.get("regrain_follows", False)  # (grades saved before it: False)
+    if not isinstance(follows, bool):
+        raise InputError(f"{where}: the saved \"regrain_follows\" must be true or false")
     working = entry.get("working_space")
     if working is not None and not isinstance(working, str):
         raise InputError(f"{where}: the saved working space must be a colour space name")
@@ -211,7 +215,7 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
     return Grade(names=tuple(names), weights=weights, color_map=color_map,
                  working=working or "", strength=strength, regrain=regrain, loss=loss,
                  info={"saved_look": {"file": where, "kind": "json"}},
-                 saved=SavedFrom(where, "json"))
+                 saved=SavedFrom(where, "json"), regrain_follows=follows)
 
 
 def _header_space(lines: list[str]) -> str | None:
@@ -425,7 +429,8 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
         space = grade.working or default_working_space()
         return Grade(grade.names, grade.weights, grade.color_map,
                      _resolve(space, path, "working space"), grade.strength, grade.regrain,
-                     grade.loss, info=grade.info, saved=grade.saved)
+                     grade.loss, info=grade.info, saved=grade.saved,
+                     regrain_follows=grade.regrain_follows)
     if suffix not in LOOK_SUFFIXES:
         raise InputError(f"{path}: a saved grade must end in .json or one of "
                          f"{', '.join(LOOK_SUFFIXES)}")
