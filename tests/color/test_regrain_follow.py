@@ -113,7 +113,7 @@ def test_look_grades_follow_the_palette_mode_does_not_and_saved_grades_keep_it(t
 
 
 @pytest.mark.slow
-def test_grade_array_follows_in_look_mode_only():
+def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
     from pathlib import Path
 
     from wbcgrade.color.grading import grade_array
@@ -126,3 +126,26 @@ def test_grade_array_follows_in_look_mode_only():
     _, look = grade_array(photo, styles, GradeOptions())
     _, palette = grade_array(photo, styles, GradeOptions(mode="palette"))
     assert look.regrain_follows is True and palette.regrain_follows is False
+    # a set's look read from statistics (no photo of this scene among the styles): its
+    # slopes are a guess, the grain is kept as it is
+    from tests.color.test_look import sample
+    from wbcgrade.color.histogram import image_histogram
+    from wbcgrade.color.presets import StyleSet
+
+    images = [sample(name, 64) for name in ("coffee", "flower", "seeding", "sunset")]
+    folder = StyleSet([f"s{i}" for i in range(4)],
+                      np.stack([image_histogram(im.astype(np.float32), 16) for im in images]),
+                      meta={"images": [im.astype(np.float32) for im in images]})
+    _, set_look = grade_array(sample("aitzgorri", 64).astype(np.float32), folder,
+                              GradeOptions())
+    assert set_look.regrain_follows is False
+    # the photo's own scene among the styles: the look read off it is followed
+    from tests.color.test_look import halves, warm_look
+
+    scene = sample("aitzgorri", 480)
+    left, right = halves(scene)
+    matched = StyleSet(["left"], image_histogram(warm_look(left).astype(np.float32), 16)[None],
+                       meta={"images": [warm_look(left).astype(np.float32)]})
+    _, from_scene = grade_array(right.astype(np.float32), matched, GradeOptions())
+    assert from_scene.info["look"].get("confidence", 0) > 0
+    assert from_scene.regrain_follows is True

@@ -127,7 +127,7 @@ class Grade:
         (:class:`~wbcgrade.color.outcome.TransportCheck`), None when there was none.
     regrain_follows : the regrain lets the input's grain follow the map where it lowers
         contrast or saturation (:func:`wbcgrade.color.regrain.regrain_map`'s ``follow``):
-        the look grades; the palette mode keeps the input's grain as it is.
+        grades of a known look (:data:`FOLLOWED_MAPS`); the others keep it as it is.
     """
 
     names: tuple[str, ...]
@@ -297,9 +297,18 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                   strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
                   own_style=found, transport=transport,
-                  regrain_follows=name != "palette")
+                  regrain_follows=name != "palette" and built.fit.start in FOLLOWED_MAPS)
     outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
+
+
+#: The look grades whose regrain lets the grain follow the map where it lowers contrast
+#: (:attr:`Grade.regrain_follows`): maps known to be the look itself, a preset's own and
+#: the one read off the style photo of the photo's scene. A set's look read from
+#: statistics is a guess at the look's slopes (day for night's highlights, estimated flatter
+#: than the look has them, softened a dandelion field's seed heads: gradient correlation
+#: 0.92 -> 0.78), so its grain keeps the input's amplitude, as the palette mode's does.
+FOLLOWED_MAPS = (FitStart.PRESET, FitStart.SCENE)
 
 
 def strengthened(color_map: np.ndarray, strength: float) -> tuple[np.ndarray, float]:
