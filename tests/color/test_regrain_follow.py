@@ -149,3 +149,17 @@ def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
     _, from_scene = grade_array(right.astype(np.float32), matched, GradeOptions())
     assert from_scene.info["look"].get("confidence", 0) > 0
     assert from_scene.regrain_follows is True
+
+
+@pytest.mark.parametrize("max_pixels", [10 ** 6, 3000])
+def test_following_writes_in_place_and_into_out_as_a_new_array(rng, monkeypatch, max_pixels):
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    image = _grain(rng, (40, 56), sd=0.05)
+    flat = _linear_map(0.6)
+    expected = regrain_map(image, flat, 0.9, 0.05, EPS, follow=True)
+    out = np.empty_like(image)
+    assert regrain_map(image, flat, 0.9, 0.05, EPS, out=out, follow=True) is out
+    np.testing.assert_array_equal(out, expected)
+    in_place = image.copy()
+    assert regrain_map(in_place, flat, 0.9, 0.05, EPS, out=in_place, follow=True) is in_place
+    np.testing.assert_array_equal(in_place, expected)
