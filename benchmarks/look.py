@@ -390,20 +390,28 @@ def batch_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -
     of a case are of one suite here, and random ungraded style sets against random own
     sets got looks of up to 24-46/255 (the halves of a set share the own set, so its
     sampling error passes their check)."""
-    key = ("batch-folder",)
+    photos = context._photos
+    images = {name: (framings(photos.photo(name))[1] if context.protocol == "shot"
+                     else photos.photo(name)) for name in context.batch}
+    return _graded_with_own_photos(photo, styles, context, "batch", images)
+
+
+def _graded_with_own_photos(photo: np.ndarray, styles: list[np.ndarray], context: Context,
+                            kind: str, images: dict[str, np.ndarray]) -> np.ndarray:
+    """The default grade with ``images`` ({file stem: image}) as the user's own ungraded
+    photos (``--natural FOLDER``): written once as PNG files into a folder of the cache,
+    named by ``kind``, the protocol, the photo size and the stems."""
+    key = (f"{kind}-folder",)
     if key not in context.memo:
         from PIL import Image
 
-        photos = context._photos
-        digest = hashlib.sha1(",".join([context.protocol, str(photos.size),
-                                        *context.batch]).encode())
-        folder = Path(context.cache_dir) / f"batch-{digest.hexdigest()[:16]}"
+        digest = hashlib.sha1(",".join([context.protocol, str(context._photos.size),
+                                        *images]).encode())
+        folder = Path(context.cache_dir) / f"{kind}-{digest.hexdigest()[:16]}"
         if not folder.is_dir():
             staging = Path(f"{folder}.{os.getpid()}")
             staging.mkdir(parents=True, exist_ok=True)
-            for name in context.batch:
-                img = photos.photo(name)
-                img = framings(img)[1] if context.protocol == "shot" else img
+            for name, img in images.items():
                 Image.fromarray(np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(
                     staging / f"{name}.png")
             os.replace(staging, folder)
@@ -419,26 +427,9 @@ def known_content(photo: np.ndarray, styles: list[np.ndarray], context: Context)
     originals as the user's own photos (``--natural FOLDER``), which no user has: the best
     any content model can tell it (the same photos before the look: no collection bias,
     no sampling difference). What it still misses, a better content model cannot add."""
-    key = ("known-content-folder",)
-    if key not in context.memo:
-        from PIL import Image
-
-        digest = hashlib.sha1(",".join([context.protocol, str(context._photos.size),
-                                        *context.style_names]).encode())
-        folder = Path(context.cache_dir) / f"originals-{digest.hexdigest()[:16]}"
-        if not folder.is_dir():
-            staging = Path(f"{folder}.{os.getpid()}")
-            staging.mkdir(parents=True, exist_ok=True)
-            for i, name in enumerate(context.style_names):
-                img = context.before(i)
-                Image.fromarray(np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(
-                    staging / f"{i:02d}-{name}.png")
-            os.replace(staging, folder)
-        context.memo[key] = str(folder)
-    out, weights = wbcgrade_grade(photo, styles, context.style_names, context.memo,
-                                  natural=context.memo[key])
-    context.info["weights"] = weights
-    return out
+    images = {f"{i:02d}-{name}": context.before(i)
+              for i, name in enumerate(context.style_names)}
+    return _graded_with_own_photos(photo, styles, context, "originals", images)
 
 
 def extract_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
