@@ -66,6 +66,9 @@ def test_grain_follows_a_flattening_map_and_is_never_amplified(rng, monkeypatch,
     followed = _detail_sd(regrain_map(image, flat, 1.0, 0.05, EPS, follow=True))
     assert kept == pytest.approx(before, rel=0.1)
     assert followed == pytest.approx(0.5 * before, rel=0.12)
+    # half way: the grain between the two (a scene matched with confidence 0.5)
+    halfway = _detail_sd(regrain_map(image, flat, 1.0, 0.05, EPS, follow=0.5))
+    assert halfway == pytest.approx(0.75 * before, rel=0.12)
     # a map that doubles contrast does not double the grain, followed or not
     steep = _linear_map(2.0)
     for follow in (False, True):
@@ -101,15 +104,16 @@ def test_look_grades_follow_the_palette_mode_does_not_and_saved_grades_keep_it(t
     from wbcgrade.color.saved_grade import look_dict, look_from_dict
 
     grade = Grade(("warm",), np.ones(1), _linear_map(0.5, 5), working="w",
-                  regrain=(0.01, EPS), regrain_follows=True)
+                  regrain=(0.01, EPS), regrain_follow=0.75)
     entry = json.loads(json.dumps(look_dict(grade)))
-    assert look_from_dict(entry).regrain_follows is True
-    del entry["regrain_follows"]  # a grade saved before the flag: grain kept as it was
-    assert look_from_dict(entry).regrain_follows is False
-    entry["regrain_follows"] = "yes"
+    assert look_from_dict(entry).regrain_follow == 0.75
+    del entry["regrain_follow"]  # a grade saved before it: grain kept as it was
+    assert look_from_dict(entry).regrain_follow == 0.0
     from wbcgrade.errors import InputError
-    with pytest.raises(InputError, match="regrain_follows"):
-        look_from_dict(entry)
+    for wrong in ("yes", True, 1.5, -0.1, None):
+        entry["regrain_follow"] = wrong
+        with pytest.raises(InputError, match="regrain_follow"):
+            look_from_dict(entry)
 
 
 @pytest.mark.slow
@@ -125,7 +129,7 @@ def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
     photo = _grain(np.random.default_rng(0), (48, 64))
     _, look = grade_array(photo, styles, GradeOptions())
     _, palette = grade_array(photo, styles, GradeOptions(mode="palette"))
-    assert look.regrain_follows is True and palette.regrain_follows is False
+    assert look.regrain_follow == 1.0 and palette.regrain_follow == 0.0
     # a set's look read from statistics (no photo of this scene among the styles): its
     # slopes are a guess, the grain is kept as it is
     from tests.color.test_look import sample
@@ -138,7 +142,7 @@ def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
                       meta={"images": [im.astype(np.float32) for im in images]})
     _, set_look = grade_array(sample("aitzgorri", 64).astype(np.float32), folder,
                               GradeOptions())
-    assert set_look.regrain_follows is False
+    assert set_look.regrain_follow == 0.0
     # the photo's own scene among the styles: the look read off it is followed
     from tests.color.test_look import halves, warm_look
 
@@ -147,8 +151,8 @@ def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
     matched = StyleSet(["left"], image_histogram(warm_look(left).astype(np.float32), 16)[None],
                        meta={"images": [warm_look(left).astype(np.float32)]})
     _, from_scene = grade_array(right.astype(np.float32), matched, GradeOptions())
-    assert from_scene.info["look"].get("confidence", 0) > 0
-    assert from_scene.regrain_follows is True
+    confidence = from_scene.info["look"]["confidence"]
+    assert 0 < confidence <= 1 and from_scene.regrain_follow == pytest.approx(confidence)
 
 
 @pytest.mark.parametrize("max_pixels", [10 ** 6, 3000])
@@ -163,3 +167,12 @@ def test_following_writes_in_place_and_into_out_as_a_new_array(rng, monkeypatch,
     in_place = image.copy()
     assert regrain_map(in_place, flat, 0.9, 0.05, EPS, out=in_place, follow=True) is in_place
     np.testing.assert_array_equal(in_place, expected)
+
+
+def test_a_map_with_nan_is_refused_plainly():
+    broken = _linear_map(0.5, 5)
+    broken[2, 2, 2, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        map_gain_prior(broken)
+    with pytest.raises(ValueError, match="follow"):
+        regrain_map(_grain(np.random.default_rng(1), (8, 8)), _linear_map(0.5, 5), follow=2.0)

@@ -125,9 +125,10 @@ class Grade:
     own_style : the style the photo itself is (graded towards itself), or None.
     transport : how the transfer's Sinkhorn solve ended
         (:class:`~wbcgrade.color.outcome.TransportCheck`), None when there was none.
-    regrain_follows : the regrain lets the input's grain follow the map where it lowers
-        contrast or saturation (:func:`wbcgrade.color.regrain.regrain_map`'s ``follow``):
-        grades of a known look (:data:`FOLLOWED_MAPS`); the others keep it as it is.
+    regrain_follow : in [0, 1], how far the regrain lets the input's grain follow the map
+        where it lowers contrast or saturation (:func:`wbcgrade.color.regrain.regrain_map`'s
+        ``follow``): 1 for a preset's own look, a scene's look by the match's confidence
+        (:func:`regrain_follow`); 0, the grain as it is, for the others.
     """
 
     names: tuple[str, ...]
@@ -144,7 +145,7 @@ class Grade:
     saved: SavedFrom | None = field(default=None, compare=False)
     own_style: str | None = field(default=None, compare=False)
     transport: TransportCheck | None = field(default=None, compare=False)
-    regrain_follows: bool = False
+    regrain_follow: float = 0.0
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -156,7 +157,7 @@ class Grade:
         """
         if self.regrain is not None and encoded.ndim == 3 and min(encoded.shape[:2]) > 1:
             graded = regrain_map(encoded, self.color_map, self.strength, *self.regrain, out=out,
-                                 follow=self.regrain_follows)
+                                 follow=self.regrain_follow)
             if self.strength == 1.0:  # a black-and-white map stays so: no colour regrained
                 toning = monochrome_toning(self.color_map)
                 if toning is not None:
@@ -297,18 +298,24 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                   strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
                   own_style=found, transport=transport,
-                  regrain_follows=name != "palette" and built.fit.start in FOLLOWED_MAPS)
+                  regrain_follow=0.0 if name == "palette" else regrain_follow(built.fit))
     outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
 
 
-#: The look grades whose regrain lets the grain follow the map where it lowers contrast
-#: (:attr:`Grade.regrain_follows`): maps known to be the look itself, a preset's own and
-#: the one read off the style photo of the photo's scene. A set's look read from
-#: statistics is a guess at the look's slopes (day for night's highlights, estimated flatter
-#: than the look has them, softened a dandelion field's seed heads: gradient correlation
-#: 0.92 -> 0.78), so its grain keeps the input's amplitude, as the palette mode's does.
-FOLLOWED_MAPS = (FitStart.PRESET, FitStart.SCENE)
+def regrain_follow(fit: FitSummary) -> float:
+    """How far a look grade's regrain lets the grain follow its map
+    (:attr:`Grade.regrain_follow`): fully for a preset's own look, for the look read off
+    the style photo of the photo's scene as far as the match is sure (the map is that much
+    the scene's; the rest is the set's look); not at all for a set's look read from
+    statistics, a guess at the look's slopes (day for night's highlights, estimated flatter
+    than the look has them, softened a dandelion field's seed heads: gradient correlation
+    0.92 -> 0.78)."""
+    if fit.start == FitStart.PRESET:
+        return 1.0
+    if fit.start == FitStart.SCENE:
+        return float(np.clip(fit.info.get("confidence", 0.0), 0.0, 1.0))
+    return 0.0
 
 
 def strengthened(color_map: np.ndarray, strength: float) -> tuple[np.ndarray, float]:

@@ -25,6 +25,8 @@ He and Sun 2015), so 16 megapixels cost about one pass over the pixels.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
@@ -496,20 +498,19 @@ def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGR
 
 def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0,
                 radius: float = DEFAULT_REGRAIN_RADIUS, eps: float = DEFAULT_REGRAIN_EPS,
-                out: np.ndarray | None = None, follow: bool = False) -> np.ndarray:
+                out: np.ndarray | None = None, follow: float = 0.0) -> np.ndarray:
     """``regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)``.
 
-    The same numbers; on large images (solved on a subsampled copy) the
+    The same numbers (``follow`` 0); on large images (solved on a subsampled copy) the
     graded image is only needed block-averaged, so the colour map and the
     block means (of the input too) are one pass
     (:func:`wbcgrade.color.remap.block_means_mapped`) and the full-size graded
     image is never made (two passes and ~12 bytes a pixel saved).
 
-    ``follow``: where the input varies only by grain, its detail follows the map's
-    local gain where the map lowers contrast or saturation (a flat, faded or
-    lifted-black look flattens the texture too) and keeps the input's amplitude
-    where the map raises them (:func:`map_gain_prior`); off, it always keeps the
-    input's amplitude.
+    ``follow``: in [0, 1], how far the input's grain (variations under sqrt(eps)) follows
+    the map's local gain where the map lowers contrast or saturation (a flat, faded or
+    lifted-black look flattens the texture too; :func:`map_gain_prior` scaled by it);
+    where the map raises them it keeps the input's amplitude. 0: always the input's.
     """
     if source.ndim != 3 or source.shape[2] != 3:
         raise ValueError("source must be an (H, W, 3) image")
@@ -517,6 +518,8 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
         raise ValueError("radius and eps must be positive")
     h, w = source.shape[:2]
     step = _step(h, w)
+    if not 0.0 <= follow <= 1.0:
+        raise ValueError("follow must be in [0, 1]")
     if step == 1 and not follow:
         return regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)
     out = _output(source, out)
@@ -529,9 +532,14 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     if not follow:
         return _regrain_upsampled(source, small, change, step, radius, eps, out)
     pixels = _window(radius, max(h, w) / step)
-    coefficients = _coefficients(small, change, pixels, eps, map_gain_prior(color_map, strength))
+    coefficients = _coefficients(small, change, pixels, eps,
+                                 float(follow) * map_gain_prior(color_map, strength))
     _apply_upsampled(source, coefficients, float(step), out)
     return out
+
+
+#: The last few maps' priors (:func:`map_gain_prior`), by a digest of the map and strength.
+_PRIORS: dict[tuple, np.ndarray] = {}
 
 
 def map_gain_prior(color_map: np.ndarray, strength: float = 1.0) -> np.ndarray:
@@ -542,6 +550,12 @@ def map_gain_prior(color_map: np.ndarray, strength: float = 1.0) -> np.ndarray:
     Where the map lowers contrast or saturation, detail follows it; where it raises them,
     detail keeps the input's amplitude (no grain or block step amplified)."""
     table = np.asarray(color_map, dtype=np.float64)
+    if not np.isfinite(table).all():
+        raise ValueError("the colour map holds NaN or infinite values")
+    key = (hashlib.sha1(np.ascontiguousarray(table).tobytes()).hexdigest(), table.shape,
+           float(strength))
+    if key in _PRIORS:
+        return _PRIORS[key]
     n = table.shape[0]
     axis = np.linspace(0.0, 1.0, n)
     identity = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1)
@@ -550,7 +564,12 @@ def map_gain_prior(color_map: np.ndarray, strength: float = 1.0) -> np.ndarray:
     u, s, vt = np.linalg.svd(jacobian)  # jacobian[..., out, in]
     capped = np.einsum("...ij,...j,...jk->...ik", u, np.minimum(s, 1.0), vt)
     prior = np.swapaxes(capped, -1, -2) - np.eye(3)  # [in a, out c]
-    return np.ascontiguousarray(prior.reshape(n, n, n, 9), dtype=np.float32)
+    prior = np.ascontiguousarray(prior.reshape(n, n, n, 9), dtype=np.float32)
+    prior.setflags(write=False)
+    if len(_PRIORS) >= 8:  # (a batch grades many photos with one preset's map)
+        _PRIORS.pop(next(iter(_PRIORS)))
+    _PRIORS[key] = prior
+    return prior
 
 
 def _window(radius: float, side: float) -> int:

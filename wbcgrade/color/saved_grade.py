@@ -147,7 +147,7 @@ def look_dict(grade: Grade) -> dict:
     return {"format": LOOK_FORMAT, "version": _VERSION, "working_space": grade.working,
             "strength": float(grade.strength),
             "regrain": None if grade.regrain is None else [float(v) for v in grade.regrain],
-            "regrain_follows": bool(grade.regrain_follows),
+            "regrain_follow": float(grade.regrain_follow),
             "names": list(grade.names), "weights": [float(w) for w in grade.weights],
             "loss": None if grade.loss is None else float(grade.loss),
             "map": _encode_array(grade.color_map)}
@@ -205,9 +205,14 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
         loss = None if loss is None else _number(loss)
     except ValueError:
         raise InputError(f"{where}: the saved loss must be a number or null") from None
-    follows = entry.get("regrain_follows", False)  # (grades saved before it: False)
-    if not isinstance(follows, bool):
-        raise InputError(f"{where}: the saved \"regrain_follows\" must be true or false")
+    follows = entry.get("regrain_follow", 0.0)  # (grades saved before it: 0)
+    try:
+        follows = _number(follows)
+        if not 0 <= follows <= 1:
+            raise ValueError
+    except ValueError:
+        raise InputError(f"{where}: the saved \"regrain_follow\" must be a number in "
+                         "[0, 1]") from None
     working = entry.get("working_space")
     if working is not None and not isinstance(working, str):
         raise InputError(f"{where}: the saved working space must be a colour space name")
@@ -215,7 +220,7 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
     return Grade(names=tuple(names), weights=weights, color_map=color_map,
                  working=working or "", strength=strength, regrain=regrain, loss=loss,
                  info={"saved_look": {"file": where, "kind": "json"}},
-                 saved=SavedFrom(where, "json"), regrain_follows=follows)
+                 saved=SavedFrom(where, "json"), regrain_follow=follows)
 
 
 def _header_space(lines: list[str]) -> str | None:
@@ -430,7 +435,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
         return Grade(grade.names, grade.weights, grade.color_map,
                      _resolve(space, path, "working space"), grade.strength, grade.regrain,
                      grade.loss, info=grade.info, saved=grade.saved,
-                     regrain_follows=grade.regrain_follows)
+                     regrain_follow=grade.regrain_follow)
     if suffix not in LOOK_SUFFIXES:
         raise InputError(f"{path}: a saved grade must end in .json or one of "
                          f"{', '.join(LOOK_SUFFIXES)}")
