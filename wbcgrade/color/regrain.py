@@ -529,13 +529,8 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     else:
         mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
         change = mapped - small
-    if not follow:
-        return _regrain_upsampled(source, small, change, step, radius, eps, out)
-    pixels = _window(radius, max(h, w) / step)
-    coefficients = _coefficients(small, change, pixels, eps,
-                                 float(follow) * map_gain_prior(color_map, strength))
-    _apply_upsampled(source, coefficients, float(step), out)
-    return out
+    prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
+    return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
 
 
 #: The last few maps' priors (:func:`map_gain_prior`), by a digest of the map and strength.
@@ -596,8 +591,9 @@ def _output(source: np.ndarray, out: np.ndarray | None) -> np.ndarray:
 
 
 def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray, step: int,
-                       radius: float, eps: float, out: np.ndarray) -> np.ndarray:
+                       radius: float, eps: float, out: np.ndarray,
+                       prior: np.ndarray | None = None) -> np.ndarray:
     h, w = source.shape[:2]
     pixels = _window(radius, max(h, w) / step)
-    _apply_upsampled(source, _coefficients(small, change, pixels, eps), float(step), out)
+    _apply_upsampled(source, _coefficients(small, change, pixels, eps, prior), float(step), out)
     return out
