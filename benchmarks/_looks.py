@@ -200,6 +200,58 @@ def pastel(rgb: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- shipped LMTs
 
 
+# Photographers' looks of the kinds sold as presets (``--looks photographer``): defined
+# here with their own formulas, not with the library's generator of edits
+# (wbcgrade/color/look/edits.py), from which the grade's prior over looks is learned.
+PHOTOGRAPHER = {
+    "muted-cool": {"saturation": 0.45, "contrast": 1.25, "shadow": (-0.05, 0.01, 0.06)},
+    "faded-warm": {"black": 0.09, "white": 0.93, "warm": (1.06, 1.0, 0.9), "saturation": 0.8},
+    "punchy": {"contrast": 1.35, "saturation": 1.4},
+    "split-tone": {"shadow": (-0.07, 0.02, 0.07), "highlight": (0.07, 0.01, -0.07),
+                   "contrast": 1.1},
+}
+
+
+def _linear_contrast(rgb: np.ndarray, amount: float) -> np.ndarray:
+    """Contrast about mid grey on luma, chroma kept."""
+    luma = rec709_luma(rgb)[..., None]
+    return np.clip(rgb + (amount - 1.0) * (luma - 0.5), 0.0, 1.0)
+
+
+def _split(rgb: np.ndarray, shadow, highlight) -> np.ndarray:
+    luma = rec709_luma(rgb)[..., None]
+    dark = smoothstep(np.clip(1.0 - 2.0 * luma, 0.0, 1.0))
+    bright = smoothstep(np.clip(2.0 * luma - 1.0, 0.0, 1.0))
+    return np.clip(rgb + dark * np.asarray(shadow) + bright * np.asarray(highlight), 0.0, 1.0)
+
+
+def muted_cool(rgb: np.ndarray) -> np.ndarray:
+    """Muted and cool: colour at 0.45, contrast x1.25, teal shadows."""
+    p = PHOTOGRAPHER["muted-cool"]
+    out = saturate(_linear_contrast(rgb, p["contrast"]), p["saturation"])
+    return _split(out, p["shadow"], (0.0, 0.0, 0.0))
+
+
+def faded_warm(rgb: np.ndarray) -> np.ndarray:
+    """Faded and warm: lifted blacks, lowered whites, warm balance, less colour."""
+    p = PHOTOGRAPHER["faded-warm"]
+    out = np.clip(np.asarray(rgb, np.float64) * np.asarray(p["warm"]), 0.0, 1.0)
+    out = saturate(out, p["saturation"])
+    return np.clip(p["black"] + (p["white"] - p["black"]) * out, 0.0, 1.0)
+
+
+def punchy(rgb: np.ndarray) -> np.ndarray:
+    """Punchy: more contrast and more colour."""
+    p = PHOTOGRAPHER["punchy"]
+    return saturate(_linear_contrast(rgb, p["contrast"]), p["saturation"])
+
+
+def split_tone(rgb: np.ndarray) -> np.ndarray:
+    """Split toning: teal shadows, orange highlights, a little contrast."""
+    p = PHOTOGRAPHER["split-tone"]
+    return _split(_linear_contrast(rgb, p["contrast"]), p["shadow"], p["highlight"])
+
+
 def _package_file(package: str, relative: str) -> tuple[Path, str]:
     """(absolute path, version) of a data file inside an installed package."""
     import importlib
@@ -358,6 +410,13 @@ LOOKS: dict[str, Look] = {
                       DAY_FOR_NIGHT),
         _defined_here("pastel", pastel, "pastel high key: lifted, low contrast, soft colour",
                       PASTEL),
+        # photographers' looks
+        _defined_here("muted-cool", muted_cool, "muted, cool, teal shadows",
+                      PHOTOGRAPHER["muted-cool"]),
+        _defined_here("faded-warm", faded_warm, "faded and warm", PHOTOGRAPHER["faded-warm"]),
+        _defined_here("punchy", punchy, "more contrast and colour", PHOTOGRAPHER["punchy"]),
+        _defined_here("split-tone", split_tone, "teal shadows, orange highlights",
+                      PHOTOGRAPHER["split-tone"]),
         # real film looks (Hald CLUTs)
         *[_film(name) for name in _FILM_FILES],
     ]
@@ -374,7 +433,10 @@ FILM_HELD_OUT_LOOKS = ["portra-160nc", "fuji-400h", "polachrome", "redscale", "s
                        "delta-100"]
 #: Film looks settings may be chosen on (``--looks film-tuned``).
 FILM_TUNED_LOOKS = [name for name in FILM_LOOKS if name not in FILM_HELD_OUT_LOOKS]
+#: Photographers' looks (``--looks photographer``): no setting was chosen on them.
+PHOTOGRAPHER_LOOKS = list(PHOTOGRAPHER)
 #: Looks whose output is black and white.
 MONOCHROME_LOOKS = ["tri-x", "delta-100"]
 #: Looks no default was chosen on (``--looks held-out``; the film looks apart).
-HELD_OUT_LOOKS = [name for name in LOOKS if name not in TUNED_LOOKS and name not in FILM_LOOKS]
+HELD_OUT_LOOKS = [name for name in LOOKS if name not in TUNED_LOOKS and name not in FILM_LOOKS
+                  and name not in PHOTOGRAPHER_LOOKS]

@@ -76,6 +76,7 @@ from _looks import (  # noqa: E402
     HELD_OUT_LOOKS,
     LOOKS,
     MONOCHROME_LOOKS,
+    PHOTOGRAPHER_LOOKS,
     TUNED_LOOKS,
 )
 from quality import (  # noqa: E402
@@ -881,7 +882,7 @@ def main(argv: list[str] | None = None) -> None:
     graded = args.graded or (3 if args.quick else None)
     groups = {"held-out": HELD_OUT_LOOKS, "all": list(LOOKS), "tuned": TUNED_LOOKS,
               "film": FILM_LOOKS, "film-tuned": FILM_TUNED_LOOKS,
-              "film-held-out": FILM_HELD_OUT_LOOKS}
+              "film-held-out": FILM_HELD_OUT_LOOKS, "photographer": PHOTOGRAPHER_LOOKS}
     if args.looks:
         looks = [lk for part in args.looks.split(",") if part
                  for lk in groups.get(part, [part])]

@@ -139,7 +139,7 @@ def test_few_natural_palettes_still_give_a_finite_look(n_naturals):
     assert np.all(np.isfinite(out)) and out.min() >= 0 and out.max() <= 1
 
 
-def test_the_grade_applies_the_statistics_look_of_a_style_set_as_far_as_its_halves_agree():
+def test_the_grade_applies_the_look_a_style_set_supports_as_strongly_as_it_supports_it():
     from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
@@ -152,15 +152,19 @@ def test_the_grade_applies_the_statistics_look_of_a_style_set_as_far_as_its_halv
     test = np.concatenate([natural_photo(s) for s in range(200, 204)])
     base, extracted, strength = look.set_look_base(style_set([faded_teal(c) for c in contents]),
                                                    naturals)
-    # applied as far as the set's halves agree on it (here: a look every style shows)
-    assert extracted.info["method"] == "statistics" and strength > 0.6
-    # a look far beyond where ungraded sets stop is applied in full, halves or not
-    assert extracted.info["evidence"] >= look.TRUSTED_EVIDENCE and strength == 1.0
+    # judged jointly against content: a look every style shows is sure and mostly applied
+    assert extracted.info["method"] == "statistics" and extracted.info["rule"] == "posterior"
+    assert extracted.info["probability"] > 0.99 and strength > 0.6
     before = np.mean(np.abs(faded_teal(test) - test))
     assert np.mean(np.abs(base(test) - faded_teal(test))) < 0.75 * before
     plain, plain_look, plain_strength = look.set_look_base(style_set(contents), naturals)
     assert np.mean(np.abs(plain(test) - test)) < 0.3 * before
-    assert plain_look.info["evidence"] < 1.0 and plain_strength < 1.0
+    assert plain_strength < 0.5 * strength
+    # --strength scales the look the set supports, and says so
+    double, _, doubled = look.set_look_base(style_set([faded_teal(c) for c in contents]),
+                                            naturals, 2.0)
+    assert np.allclose(double.coefficients, 2.0 * base.coefficients)
+    assert doubled == pytest.approx(2.0 * strength)
     mono, extracted, _ = look.set_look_base(
         style_set([black_and_white(c) for c in contents]), naturals)
     assert extracted.info["monochrome"]

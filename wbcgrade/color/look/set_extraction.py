@@ -381,7 +381,8 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     # the settings too: a look cached under other settings (an experiment's) is not reused
     digest.update(repr((LOOK_VERSION, FIT_BINS, MAP_BINS, SET_RELAXATION, SET_RIDGE,
                         DEFAULT_CONTENT_SHRINK, DEFAULT_WIDTH, DEFAULT_SMOOTHNESS,
-                        DEFAULT_KNOTS, SET_LOOK_METHOD, statistics_settings())).encode())
+                        DEFAULT_KNOTS, SET_LOOK_METHOD, SET_LOOK_RULE, statistics_settings(),
+                        _prior_settings())).encode())
     key = (digest.hexdigest(),)
     if key not in _SET_LOOKS:
         found = _read_cached_look(key[0], styles) if cache else None
@@ -408,14 +409,27 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 13
+LOOK_VERSION = 14
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
 #: (:func:`extract_look`: relaxed plans from the natural barycenter, pooled).
 SET_LOOK_METHOD = "statistics"
+#: How the statistics are shrunk: "posterior" (jointly, against content's noise, with a
+#: prior over looks learned from a generator of edits:
+#: :func:`wbcgrade.color.look.prior.posterior_statistics_look`) or "shrink" (statistic by
+#: statistic, then the halves' agreement: :func:`wbcgrade.color.look.statistics.statistics_look`).
+SET_LOOK_RULE = "posterior"
 
 _NATURAL_STATISTICS: dict[str, object] = {}
+
+
+def _prior_settings() -> tuple:
+    """The settings of :mod:`wbcgrade.color.look.prior` a set's look depends on."""
+    from wbcgrade.color.look import prior
+
+    return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.DIAGONAL_SHRINK,
+            prior.NOISE_DRAWS, float(np.sum(prior.load_prior())))
 
 
 def statistics_settings() -> tuple:
@@ -492,7 +506,9 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     styles, naturals : StyleSets in one working space.
     """
     from wbcgrade.color.histogram import resample_histogram
+    from wbcgrade.color.look.prior import posterior_statistics_look
     from wbcgrade.color.look.statistics import (
+        MONOCHROME_SPREAD,
         palette_statistics,
         statistics_look,
         tinted_statistics,
@@ -506,10 +522,16 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     # in a black-and-white set's histograms): both are taken off the chroma spread
     style_hists = styles.at_bins(MAP_BINS)
     scale = _space_scale(styles.working_space)
-    model = statistics_look(tinted_statistics(style_hists, natural_stats, reference,
-                                              source_bins=styles.bins, own_count=own_count,
-                                              space_scale=scale),
-                            natural_stats, scale, reference=reference, own_count=own_count)
+    style_stats = tinted_statistics(style_hists, natural_stats, reference,
+                                    source_bins=styles.bins, own_count=own_count,
+                                    space_scale=scale)
+    if SET_LOOK_RULE == "posterior" and not np.all(style_stats.spread
+                                                   < MONOCHROME_SPREAD * scale):
+        model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
+                                          own_count)
+    else:
+        model = statistics_look(style_stats, natural_stats, scale, reference=reference,
+                                own_count=own_count)
     size = 17
     points = grid_points(size)
     density = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), size).ravel()
@@ -695,6 +717,11 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
     """
     extracted = set_look(styles, naturals, progress)
     statistics = extracted.info.get("method") == "statistics"
+    if extracted.info.get("rule") == "posterior":
+        # the look is already the posterior's: as strong as the styles support it
+        scale = 1.0 if strength is None else float(strength)
+        look = LookMap(scale * extracted.look.coefficients, extracted.look.knots)
+        return look, extracted, scale * float(extracted.info["share"])
     if strength is None and statistics and (extracted.info.get("monochrome")
                                             or len(styles.names) < MIN_HALF_STYLES * 2
                                             or (extracted.info.get("evidence") or 0.0)

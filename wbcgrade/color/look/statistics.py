@@ -532,3 +532,95 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
             "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
     return StatisticsLook(tone_in, tone_out, saturation, tint, monochrome, info)
+
+
+# --------------------------------------------------------------------------- the calibrated look
+
+#: Luma quantiles, log chroma spreads per band and the neutral tint's R and B chroma per
+#: band: the statistics a set's look is judged on jointly (:class:`LookDifferences`).
+TINT_CHANNELS = (0, 2)
+
+
+@dataclass(frozen=True)
+class LookDifferences:
+    """How a set's median statistics differ from content's (no shrinking).
+
+    Attributes
+    ----------
+    centre_quantiles : (Q,) the content's median luma quantiles (the tone curve's input).
+    tone : (Q,) the styles' median quantiles minus those.
+    saturation : (B,) log of the styles' median chroma spread over content's, per band
+        (read at the lightness the tone curve sends each band to).
+    tint : (B, 3) the styles' median neutral tint minus content's, per band (chroma).
+    """
+
+    centre_quantiles: np.ndarray
+    tone: np.ndarray
+    saturation: np.ndarray
+    tint: np.ndarray
+
+    def vector(self) -> np.ndarray:
+        """(Q + 3 B,) the differences as one vector (tint: R and B chroma; G follows)."""
+        return np.concatenate([self.tone, self.saturation,
+                               self.tint[:, TINT_CHANNELS].ravel()])
+
+    def with_vector(self, vector: np.ndarray) -> LookDifferences:
+        """The same centre with differences read from :meth:`vector`'s layout."""
+        q, b = len(self.tone), len(self.saturation)
+        tint = np.zeros((b, 3))
+        tint[:, TINT_CHANNELS] = np.asarray(vector[q + b:]).reshape(b, len(TINT_CHANNELS))
+        others = [c for c in range(3) if c not in TINT_CHANNELS][0]
+        tint[:, others] = -(tint[:, TINT_CHANNELS] @ LUMA[list(TINT_CHANNELS)]) / LUMA[others]
+        return LookDifferences(self.centre_quantiles, np.asarray(vector[:q]),
+                               np.asarray(vector[q:q + b]), tint)
+
+
+def _tone_curve(centre_q: np.ndarray, shift: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Knots (in, out) of the monotone tone curve moving ``centre_q`` by ``shift``."""
+    tone_out = np.maximum.accumulate(np.clip(centre_q + shift, 0.0, 1.0))
+    tone_in = np.concatenate([[0.0], centre_q, [1.0]])
+    tone_out = np.concatenate([[np.clip(shift[0], 0.0, 1.0)], tone_out,
+                               [np.clip(1.0 + shift[-1], 0.0, 1.0)]])
+    tone_in, keep = np.unique(tone_in, return_index=True)
+    return tone_in, np.maximum.accumulate(tone_out[keep])
+
+
+def look_differences(styles: PaletteStatistics, centre_of: PaletteStatistics,
+                     monochrome: bool = False) -> LookDifferences:
+    """The raw differences of the styles' median statistics from ``centre_of``'s
+    medians (bands no two styles hold are filled from their neighbours)."""
+    nat_q = _nanmedian(centre_of.quantiles, axis=0)
+    tone = _nanmedian(styles.quantiles, axis=0) - nat_q
+    tone_in, tone_out = _tone_curve(nat_q, tone)
+    centres = np.linspace(0.0, 1.0, BANDS)
+    mapped = np.interp(centres, tone_in, tone_out)
+    valid = np.sum(np.isfinite(styles.band_spread), axis=0)
+
+    def at_mapped(values: np.ndarray) -> np.ndarray:  # (S, B) -> (S, B)
+        return np.stack([np.interp(mapped, centres, _fill(row, centres))
+                         if np.isfinite(row).any() else np.full(BANDS, np.nan)
+                         for row in values])
+
+    sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
+    nat_spread = _nanmedian(centre_of.band_spread, axis=0)
+    ratio = np.log(np.maximum(sty_spread, 1e-4)) - np.log(np.maximum(nat_spread, 1e-4))
+    ratio = _fill(np.where(valid >= 2, ratio, np.nan), centres)
+    if monochrome:
+        tint = np.zeros((BANDS, 3))
+    else:
+        sty = np.stack([_nanmedian(at_mapped(styles.band_neutral[..., c]), axis=0)
+                        for c in range(3)], axis=-1)
+        tint = sty - _nanmedian(centre_of.band_neutral, axis=0)
+        tint = np.stack([_fill(np.where((valid >= 2) & np.isfinite(tint[:, c]), tint[:, c],
+                                        np.nan), centres) for c in range(3)], axis=-1)
+        tint -= (tint @ LUMA)[:, None]
+    return LookDifferences(nat_q, tone, ratio, tint)
+
+
+def look_from_differences(differences: LookDifferences, monochrome: bool = False,
+                          info: dict | None = None) -> StatisticsLook:
+    """The :class:`StatisticsLook` the (shrunk) differences describe."""
+    tone_in, tone_out = _tone_curve(differences.centre_quantiles, differences.tone)
+    saturation = np.zeros(BANDS) if monochrome else np.exp(differences.saturation)
+    return StatisticsLook(tone_in, tone_out, saturation, differences.tint, monochrome,
+                          dict(info or {}))

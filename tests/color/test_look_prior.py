@@ -1,0 +1,105 @@
+"""The prior over looks and the joint posterior of a set's statistics
+(wbcgrade.color.look.edits, wbcgrade.color.look.prior)."""
+
+import numpy as np
+import pytest
+
+from wbcgrade.color.histogram import grid_points, image_histogram
+from wbcgrade.color.look.edits import Edit, random_edit
+from wbcgrade.color.look.prior import (
+    build_prior,
+    content_noise,
+    load_prior,
+    posterior_look,
+    push_edit,
+)
+from wbcgrade.color.look.statistics import LookDifferences, look_differences, palette_statistics
+
+
+def test_the_empty_edit_changes_nothing_and_random_edits_stay_in_the_cube():
+    points = grid_points(9)
+    assert np.allclose(Edit()(points), points)
+    rng = np.random.default_rng(1)
+    moved = [random_edit(rng) for _ in range(50)]
+    assert all(np.all((e(points) >= 0) & (e(points) <= 1)) for e in moved)
+    sizes = [np.mean(np.abs(e(points) - points)) for e in moved]
+    assert min(sizes) < 0.01 and max(sizes) > 0.05  # from traces to heavy looks
+
+
+def test_an_edit_pushes_a_histogram_as_it_moves_its_pixels():
+    rng = np.random.default_rng(2)
+    image = rng.random((24, 24, 3))
+    edit = Edit(saturation=0.5, contrast=0.4, black=0.05)
+    pushed = push_edit(image_histogram(image, 16), edit)
+    direct = image_histogram(edit(image), 16)
+    colours = grid_points(16)
+    means = [h.reshape(-1) @ colours for h in (pushed, direct)]
+    assert np.allclose(*means, atol=0.01)
+
+
+def _palettes(seeds, edit=None):
+    out = []
+    for s in seeds:
+        rng = np.random.default_rng(s)
+        image = np.clip(rng.random((1, 3)) * 0.8 + rng.normal(0, 0.15, (30, 30, 3)), 0, 1)
+        out.append(image_histogram(image if edit is None else edit(image), 16))
+    return np.stack(out)
+
+
+def test_the_prior_is_a_second_moment_of_what_edits_do_to_the_statistics():
+    naturals = _palettes(range(20))
+    moment = build_prior(naturals, edits=12, sample=8)
+    assert moment.shape == (42, 42) and np.allclose(moment, moment.T)
+    assert np.min(np.linalg.eigvalsh(moment)) > -1e-12 and np.trace(moment) > 0
+    shipped = load_prior()
+    assert shipped.shape == (42, 42) and np.all(np.isfinite(shipped))
+    assert np.min(np.linalg.eigvalsh(shipped)) > -1e-9
+
+
+def test_the_posterior_keeps_a_clear_look_drops_noise_and_says_how_sure_it_is():
+    naturals = palette_statistics(_palettes(range(100, 160)))
+    sets, singles = content_noise(naturals, 6)
+    noise = sets + 0.25 * singles
+    prior = load_prior()
+    centre = look_differences(naturals, naturals)
+    sd = np.sqrt(np.diag(noise))
+    # a difference of 12 noise sd along a direction looks take: kept, and sure
+    direction = prior @ np.ones(len(sd))
+    direction *= 12.0 * np.linalg.norm(sd) / np.linalg.norm(direction)
+    strong = posterior_look(centre.with_vector(direction), noise, prior)
+    assert strong.probability > 0.99 and strong.share > 0.8
+    # what content alone makes of a set: mostly dropped, and not sure
+    rng = np.random.default_rng(3)
+    draws = [posterior_look(centre.with_vector(rng.multivariate_normal(np.zeros(len(sd)),
+                                                                       noise)), noise, prior)
+             for _ in range(20)]
+    assert np.median([d.share for d in draws]) < 0.3
+    assert np.median([d.probability for d in draws]) < 0.7
+    # the differences' vector layout round-trips, chroma with no luma
+    back = centre.with_vector(centre.vector())
+    assert np.allclose(back.vector(), centre.vector())
+    assert isinstance(back, LookDifferences)
+    assert np.allclose(back.tint @ np.array([0.2126, 0.7152, 0.0722]), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("size", [3, 12])
+def test_a_strong_look_lands_and_a_set_with_none_stays_put_from_3_to_12_photos(size):
+    from tests.color.test_look_statistics import faded_teal, natural_photo
+    from wbcgrade.color.look import set_extraction as look
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))],
+                        np.stack([image_histogram(i, 32) for i in images]),
+                        meta={"cache_dir": None})
+
+    naturals = style_set([natural_photo(s) for s in range(100, 140)])
+    contents = [natural_photo(s) for s in range(size)]
+    test = np.concatenate([natural_photo(s) for s in range(200, 204)])
+    before = np.mean(np.abs(faded_teal(test) - test))
+    base, _, strength = look.set_look_base(style_set([faded_teal(c) for c in contents]),
+                                           naturals)
+    assert np.mean(np.abs(base(test) - faded_teal(test))) < 0.75 * before
+    plain, _, plain_strength = look.set_look_base(style_set(contents), naturals)
+    assert np.mean(np.abs(plain(test) - test)) < 0.25 * before
+    assert plain_strength < strength

@@ -1,0 +1,268 @@
+"""What a set's statistics say of its look, judged jointly against what content does.
+
+A style set's median statistics differ from content's by the look plus noise:
+the sampling error of a median of S photos and a collection's own character
+(a share of what single photos vary by). Both are Gaussian here, with the
+full covariance of the statistics (their correlations count: saturation down
+in all six photos *and* teal shadows in all six is far less likely from
+content than either alone). The look itself has a prior learned from a
+generator of photographers' edits (:mod:`wbcgrade.color.look.edits`): a
+"no look" spike and a mixture of Gaussians of several sizes.
+
+:func:`posterior_look` gives the posterior mean of the differences (what the
+grade applies) and the probability that the set has a look at all; the
+strength reported is how much of what the set shows is applied.
+
+``python -m wbcgrade.color.look.prior`` rebuilds the shipped prior
+(``wbcgrade/color/data/look_prior.npz``) from the generator and the shipped
+natural palettes.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbcgrade.color.look.statistics import (
+    LookDifferences,
+    PaletteStatistics,
+    look_differences,
+)
+
+__all__ = ["LookPosterior", "posterior_look", "content_noise", "load_prior", "build_prior",
+           "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE"]
+
+#: Prior probability that a style set has no look at all (the spike at zero).
+NO_LOOK = 0.3
+#: Sizes of the looks' Gaussians, as shares of the generator's covariance (equal weights):
+#: traces to heavy looks.
+PRIOR_SCALES = (1.0 / 64.0, 1.0 / 16.0, 1.0 / 4.0, 1.0, 4.0)
+#: A collection's own character, as a share of what single natural photos vary by
+#: (its variance: COLLECTION_SHARE ** 2 times theirs), added to every set's noise.
+COLLECTION_SHARE = 0.8
+#: Pull of the covariances towards their diagonals (316 palettes estimate 42 x 42).
+DIAGONAL_SHRINK = 0.2
+#: Random sets drawn to measure the noise of a set's median statistics.
+NOISE_DRAWS = 400
+
+
+@dataclass(frozen=True)
+class LookPosterior:
+    """The look a set's statistics support.
+
+    Attributes
+    ----------
+    differences : the posterior mean of the differences (what is applied).
+    probability : posterior probability that the set has a look.
+    share : how much of the raw differences is applied (projection, whitened), in [0, 1].
+    evidence : whitened size of the raw differences (rms z against the noise).
+    """
+
+    differences: LookDifferences
+    probability: float
+    share: float
+    evidence: float
+
+
+def _shrunk_to_diagonal(cov: np.ndarray) -> np.ndarray:
+    return (1.0 - DIAGONAL_SHRINK) * cov + DIAGONAL_SHRINK * np.diag(np.diag(cov))
+
+
+def _subset(stats: PaletteStatistics, index: np.ndarray) -> PaletteStatistics:
+    return PaletteStatistics(*(getattr(stats, f)[index] for f in (
+        "quantiles", "band_mass", "band_mean", "band_spread", "spread", "band_neutral")))
+
+
+_NOISE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def content_noise(naturals: PaletteStatistics, n_styles: int) -> tuple[np.ndarray, np.ndarray]:
+    """Covariances of the differences content alone makes: (of a median of ``n_styles``
+    natural photos, of a single photo), each (P, P), from random draws (seeded)."""
+    digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes()).hexdigest()
+    key = (digest, n_styles)
+    if key not in _NOISE:
+        rng = np.random.default_rng(0)
+        k = len(naturals.quantiles)
+        size = min(n_styles, max(k - 1, 1))
+
+        def spread(draws) -> np.ndarray:
+            vectors = np.stack([look_differences(_subset(naturals, idx), naturals).vector()
+                                for idx in draws])
+            return _shrunk_to_diagonal(np.cov(vectors, rowvar=False))
+
+        sets = spread(rng.choice(k, size, replace=False) for _ in range(NOISE_DRAWS))
+        singles = spread(np.array([i]) for i in range(k))
+        if len(_NOISE) > 16:
+            _NOISE.pop(next(iter(_NOISE)))
+        _NOISE[key] = (sets, singles)
+    return _NOISE[key]
+
+
+def _log_gaussian(vector: np.ndarray, cov: np.ndarray) -> tuple[float, np.ndarray]:
+    """log N(vector; 0, cov) and cov^-1 vector."""
+    chol = np.linalg.cholesky(cov)
+    solved = np.linalg.solve(chol, vector)
+    logdet = 2.0 * np.sum(np.log(np.diag(chol)))
+    inverse = np.linalg.solve(chol.T, solved)
+    return float(-0.5 * (solved @ solved + logdet + len(vector) * np.log(2 * np.pi))), inverse
+
+
+def posterior_look(raw: LookDifferences, noise: np.ndarray, prior: np.ndarray,
+                   no_look: float = NO_LOOK,
+                   scales: tuple[float, ...] = PRIOR_SCALES) -> LookPosterior:
+    """The posterior mean of a set's look differences under a spike-and-slab prior.
+
+    Parameters
+    ----------
+    raw : the set's differences (:func:`~wbcgrade.color.look.statistics.look_differences`).
+    noise : (P, P) covariance content makes of them (sampling and collection).
+    prior : (P, P) second moment of the generator's looks' differences.
+    no_look : prior probability of no look.
+    scales : the slab's Gaussians, as shares of ``prior``.
+    """
+    v = raw.vector()
+    ridge = 1e-10 * np.eye(len(v))
+    logs, means = [], []
+    spike, _ = _log_gaussian(v, noise + ridge)
+    logs.append(np.log(no_look) + spike)
+    means.append(np.zeros_like(v))
+    for scale in scales:
+        cov = scale * prior
+        log, inverse = _log_gaussian(v, cov + noise + ridge)
+        logs.append(np.log((1.0 - no_look) / len(scales)) + log)
+        means.append(cov @ inverse)
+    logs = np.array(logs)
+    weights = np.exp(logs - logs.max())
+    weights /= weights.sum()
+    mean = np.sum(weights[:, None] * np.array(means), axis=0)
+    chol = np.linalg.cholesky(noise + ridge)
+    white_raw, white_mean = np.linalg.solve(chol, v), np.linalg.solve(chol, mean)
+    power = float(white_raw @ white_raw)
+    share = float(np.clip(white_mean @ white_raw / power, 0.0, 1.0)) if power > 0 else 0.0
+    return LookPosterior(raw.with_vector(mean), float(1.0 - weights[0]), share,
+                         float(np.sqrt(power / len(v))))
+
+
+# --------------------------------------------------------------------------- the shipped prior
+
+def _prior_path() -> Path:
+    return Path(__file__).parents[1] / "data" / "look_prior.npz"
+
+
+@functools.cache
+def load_prior() -> np.ndarray:
+    """(P, P) the shipped prior's second moment of look differences."""
+    with np.load(_prior_path()) as data:
+        return np.asarray(data["second_moment"], dtype=np.float64)
+
+
+def push_edit(hist: np.ndarray, edit) -> np.ndarray:
+    """The (n, n, n) histogram of ``hist``'s colours moved through ``edit`` (soft binning)."""
+    from wbcgrade.color.histogram import grid_points, soft_histogram
+
+    n = hist.shape[0]
+    flat = hist.ravel()
+    keep = np.flatnonzero(flat > 0)
+    return soft_histogram(edit(grid_points(n)[keep]), n, flat[keep])
+
+
+def build_prior(naturals: np.ndarray, edits: int = 400, sample: int = 64,
+                seed: int = 0, progress=None) -> np.ndarray:
+    """(P, P) second moment of the differences random edits
+    (:func:`~wbcgrade.color.look.edits.random_edit`) make of ``sample`` natural palettes'
+    median statistics (naturals: (K, n, n, n) histograms)."""
+    from wbcgrade.color.look.edits import random_edit
+    from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
+
+    rng = np.random.default_rng(seed)
+    base = palette_statistics(naturals)
+    vectors = []
+    for i in range(edits):
+        edit = random_edit(rng)
+        picked = rng.choice(len(naturals), min(sample, len(naturals)), replace=False)
+        pushed = np.stack([push_edit(naturals[j], edit) for j in picked])
+        styles = tinted_statistics(pushed, base)
+        monochrome = False
+        vectors.append(look_differences(styles, _subset(base, picked), monochrome).vector())
+        if progress is not None:
+            progress(i + 1, edits)
+    vectors = np.array(vectors)
+    return vectors.T @ vectors / len(vectors)
+
+
+def main() -> None:  # pragma: no cover - a build script
+    from tqdm import tqdm
+
+    from wbcgrade.color.look.set_extraction import MAP_BINS, natural_palettes
+
+    naturals = natural_palettes().at_bins(MAP_BINS)
+    bar = tqdm(total=400, desc="edits")
+    moment = build_prior(naturals, progress=lambda done, total: bar.update(1))
+    bar.close()
+    np.savez_compressed(_prior_path(), second_moment=moment)
+    print(f"wrote {_prior_path()}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
+
+
+def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
+                              space_scale: float = 1.0,
+                              reference: PaletteStatistics | None = None,
+                              own_count: int | None = None):
+    """The look a style set's statistics support (:func:`posterior_look`), as a
+    :class:`~wbcgrade.color.look.statistics.StatisticsLook` whose ``info`` holds the
+    probability of a look, the share applied and the evidence.
+
+    Parameters
+    ----------
+    styles : statistics of the S style palettes (neutral tints measured from their rough
+        tint: :func:`~wbcgrade.color.look.statistics.tinted_statistics`).
+    naturals : statistics of the natural palettes (K >= 2), same working space.
+    reference, own_count : the user's own ungraded photos, as for
+        :func:`~wbcgrade.color.look.statistics.statistics_look`: the centre leans on them
+        as far as their number says, and their sampling error counts as noise.
+    """
+    from wbcgrade.color.look.statistics import (
+        MEDIAN_SE,
+        MIN_OWN_PHOTOS,
+        _in_colour,
+        content_centre,
+        look_from_differences,
+        own_photos_blend,
+    )
+
+    n_styles = len(styles.quantiles)
+    given = 0 if reference is None else len(reference.quantiles)
+    reference = _in_colour(reference, space_scale)
+    unused = given if reference is None else 0
+    if reference is not None and (own_count or len(reference.quantiles)) < MIN_OWN_PHOTOS:
+        unused, reference = len(reference.quantiles), None
+    n_reference = 0 if reference is None else len(reference.quantiles)
+    blend = own_photos_blend((own_count or n_reference) if n_reference else 0)
+    centre_of = content_centre(naturals, reference, own_count)
+    raw = look_differences(styles, centre_of)
+    sets, singles = content_noise(naturals, n_styles)
+    noise = sets + (blend * COLLECTION_SHARE) ** 2 * singles
+    if n_reference:
+        noise = noise + (1.0 - blend) ** 2 * MEDIAN_SE ** 2 / n_reference * singles
+    # the prior and the noise were measured in sRGB-encoded units; chroma and tint scale
+    # with the working space (the log spreads do not)
+    prior = load_prior()
+    found = posterior_look(raw, noise, prior)
+    info = {"method": "statistics", "rule": "posterior", "monochrome": False,
+            "probability": round(found.probability, 3), "share": round(found.share, 3),
+            "evidence": round(found.evidence, 3),
+            "tone_shift": [round(float(v), 4) for v in found.differences.tone],
+            "tone_raw": [round(float(v), 4) for v in raw.tone],
+            "saturation": [round(float(np.exp(v)), 3) for v in found.differences.saturation],
+            "tint": [[round(float(v), 4) for v in row] for row in found.differences.tint],
+            "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
+            "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
+    return look_from_differences(found.differences, False, info)
