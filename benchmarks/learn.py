@@ -113,16 +113,21 @@ def resized_cropped(rgb: np.ndarray) -> np.ndarray:
     return cv2.resize(np.ascontiguousarray(crop, np.float32), size, interpolation=cv2.INTER_AREA)
 
 
-def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, variant: str):
-    """Write the pairs, learn the look; (the Grade read back, (wall, CPU) seconds, the report)."""
+def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, variant: str,
+          originals: int | None = None):
+    """Write the pairs, learn the look; (the Grade read back, (wall, CPU) seconds, the report).
+
+    ``originals``: only the first so many edited photos have their original in BEFORE
+    (the others are graded photos without one)."""
     from wbcgrade.color.look.learn import learn_look_file
     from wbcgrade.color.saved_grade import load_look
 
     before, after = folder / f"{variant}-before", folder / f"{variant}-after"
     before.mkdir()
     after.mkdir()
-    for name in names:
-        write_8bit(before / f"{name}.png", photos[name])
+    for number, name in enumerate(names):
+        if originals is None or number < originals:
+            write_8bit(before / f"{name}.png", photos[name])
         looked = to_8bit(apply_hald(table, photos[name]))
         write_8bit(after / f"{name}.png", resized_cropped(looked) if variant == "cropped"
                    else looked)
@@ -156,6 +161,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--size", type=int, default=768, help="long side of the photos")
     parser.add_argument("--no-variant", action="store_true",
                         help="skip the resized + cropped afters")
+    parser.add_argument("--originals", type=int, default=None, metavar="K",
+                        help="only the first K of the --pairs edited photos have their "
+                             "original (the others are edited photos without one)")
     parser.add_argument("--json", type=Path, default=None, help="write every number here")
     args = parser.parse_args(argv)
 
@@ -169,8 +177,9 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     header = (f"{'look':26s} {'group':8s} {'mean':>6s} {'worst':>6s} {'cropped':>7s} "
               f"{'diff':>5s} {'learn s':>11s} {'crop s':>11s} {'held dE':>7s} {'chroma':>6s}")
-    print(f"{args.pairs} pairs learned, {len(names) - args.pairs} other photos graded "
-          f"(long side {args.size})")
+    print(f"{args.pairs} edited photos "
+          + ("" if args.originals is None else f"({args.originals} with their original) ")
+          + f"learned, {len(names) - args.pairs} other photos graded (long side {args.size})")
     print(header)
     for look in looks:
         table = hald_table(args.looks / f"{look}.png")
@@ -178,7 +187,8 @@ def main(argv: list[str] | None = None) -> None:
         ring = order[turn:] + order[:turn]
         style, graded = ring[:args.pairs], ring[args.pairs:]
         with tempfile.TemporaryDirectory(prefix="wbcgrade-learn-") as tmp:
-            grade, seconds, report = learn(Path(tmp), photos, style, table, "plain")
+            grade, seconds, report = learn(Path(tmp), photos, style, table, "plain",
+                                           args.originals)
             recovered, chroma = score(grade, photos, graded, table)
             row = {"look": look, "group": "tuned" if look in TUNED else "held-out",
                    "mean": float(np.mean(recovered)), "worst": float(np.min(recovered)),
@@ -188,7 +198,8 @@ def main(argv: list[str] | None = None) -> None:
                    "monochrome_learned": report.look.monochrome, "max_chroma": chroma,
                    "pairs_used": len(report.used)}
             if not args.no_variant:
-                grade, seconds, report = learn(Path(tmp), photos, style, table, "cropped")
+                grade, seconds, report = learn(Path(tmp), photos, style, table, "cropped",
+                                               args.originals)
                 cropped, _ = score(grade, photos, graded, table)
                 row.update({"cropped_mean": float(np.mean(cropped)),
                             "cropped_worst": float(np.min(cropped)), "cropped_s": seconds[0],
@@ -196,13 +207,15 @@ def main(argv: list[str] | None = None) -> None:
                             "cropped_pairs_used": len(report.used)})
         rows.append(row)
         crop = row.get("cropped_mean")
+        held = ("-" if row["held_out_delta_e"] is None
+                else format(row["held_out_delta_e"], "7.2f"))
         print(f"{look:26s} {row['group']:8s} {row['mean']:+6.3f} {row['worst']:+6.3f} "
               f"{'-' if crop is None else format(crop, '+7.3f'):>7} "
               f"{'' if crop is None else format(abs(crop - row['mean']), '5.3f'):>5} "
               f"{row['learn_s']:5.1f} ({row['learn_cpu_s']:4.1f}) "
               f"{row.get('cropped_s', float('nan')):5.1f} "
               f"({row.get('cropped_cpu_s', float('nan')):4.1f}) "
-              f"{row['held_out_delta_e']:7.2f} "
+              f"{held:>7} "
               f"{row['max_chroma'] if look in MONOCHROME else '':>6}", flush=True)
     print()
     for group in ("tuned", "held-out"):

@@ -63,8 +63,9 @@ def lut_format_option() -> list:
 
 
 def look_option() -> list:
-    """``--look FILE``: apply a saved grade, no fit (for :func:`lazy_options`)."""
-    return click_options("look_path")
+    """``--look FILE``: apply a saved grade, no fit; ``--originals DIR``: learn the look of
+    the style photos from the originals of some of them (for :func:`lazy_options`)."""
+    return click_options("look_path", "originals_dir")
 
 
 def write_options() -> list:
@@ -86,23 +87,41 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
 
     Called after :func:`take_grading_options` (``options`` its result); ``kwargs`` are the
     command's remaining parameters. ``--style``/``--preset`` with ``--look`` is an OptionError.
+    ``--originals DIR`` (popped from ``kwargs``) learns the look of the ``--style`` photos
+    from the originals of some of them (:func:`wbcgrade.color.look.learn.learned_grade`),
+    applied as a LUT from ``look learn`` would be.
     """
-    if look_path is None:
+    originals = kwargs.pop("originals_dir", None)
+    if look_path is None and originals is None:
         return None
     from dataclasses import replace
 
     from click.core import ParameterSource
 
-    from wbcgrade.color.saved_grade import load_look
     from wbcgrade.errors import OptionError
 
     def given(name: str) -> bool:
         return ctx.get_parameter_source(name) == ParameterSource.COMMANDLINE
 
-    for name, flag in (("style_dir", "--style"), ("preset", "--preset")):
-        if given(name):
-            raise OptionError(f"--look replaces {flag}: give one of them", "--look")
-    look = load_look(look_path, options.spaces.working)
+    if originals is not None:
+        if look_path is not None:
+            raise OptionError("--originals learns the look; --look applies a saved one: "
+                              "give one of them", "--originals")
+        style_dir = ctx.params.get("style_dir")
+        if style_dir is None or given("preset"):
+            raise OptionError("--originals pairs with the style photos: give --style DIR "
+                              "(the edited photos) beside it", "--originals")
+        if ctx.params.get("mode") == "palette":
+            raise OptionError("--originals learns the look; --mode palette fits palettes",
+                              "--originals")
+        look = _learned_look(style_dir, originals, options)
+    else:
+        from wbcgrade.color.saved_grade import load_look
+
+        for name, flag in (("style_dir", "--style"), ("preset", "--preset")):
+            if given(name):
+                raise OptionError(f"--look replaces {flag}: give one of them", "--look")
+        look = load_look(look_path, options.spaces.working)
     is_json = look.saved is not None and look.saved.is_json
     regrain_given = any(given(n) for n in ("regrain", "regrain_radius", "regrain_eps"))
     changes = {}
@@ -114,6 +133,28 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
         changes["color_map"], changes["strength"] = strengthened(look.color_map,
                                                                  options.map.strength)
     return replace(look, **changes) if changes else look
+
+
+def _learned_look(style_dir: str, originals: str, options):
+    """The look ``look learn ORIGINALS STYLE_DIR`` learns, as a grade (progress on the
+    terminal, a warning per file left out)."""
+    from tqdm import tqdm
+
+    from wbcgrade.color.look.learn import learned_grade
+
+    with tqdm(desc="learning the look", unit="photo", disable=None, leave=False) as bar:
+        def on_photo(done: int, total: int, name: str) -> None:
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name, refresh=True)
+
+        def warn(message: str) -> None:
+            bar.clear()
+            click.echo(f"Warning: {message}", err=True)
+
+        grade, _ = learned_grade(originals, style_dir, working_space=options.spaces.working,
+                                 warn=warn, progress=on_photo)
+    return grade
 
 
 def set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
@@ -190,7 +231,8 @@ class _Deferred:
 #: ``--help`` sections: (title, parameter names), in order; options not named go under
 #: "Other options".
 OPTION_GROUPS = (
-    ("Where the grade comes from", ("style_dir", "preset", "look_path", "mode", "strength",
+    ("Where the grade comes from", ("style_dir", "preset", "look_path", "originals_dir",
+                                    "mode", "strength",
                                     "look_strength")),
     ("Look grade (--mode look, the default)", tuple(LOOK_ONLY)),
     ("Colour map and finish (both modes)",
@@ -343,7 +385,8 @@ def take_grading_options(kwargs: dict) -> tuple:
 
     values = {key: kwargs.pop(key) for key in GRADING_KEYS}
     ctx = click.get_current_context(silent=True)
-    saved_look = ctx is not None and ctx.params.get("look_path") is not None
+    saved_look = ctx is not None and (ctx.params.get("look_path") is not None
+                                      or ctx.params.get("originals_dir") is not None)
     check_mode_options(values["mode"], given_flags(), saved_look)
     spaces = {key: kwargs.pop(key, None) for key in _SPACE_KEYS}
     if any(spaces.values()):

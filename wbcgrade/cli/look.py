@@ -110,14 +110,16 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     degrees or of another format. The look (tone curves, colour mixing and a
     smooth correction; black and white or toned when every edit is) is fitted to the
     pixels of all pairs and written for `apply --look`, `batch --look` and
-    `video --look`. Each pair that cannot be used is named with the reason;
-    the others are used.
+    `video --look`. Edited photos in AFTER without an original are used too:
+    they correct the look where the pairs' colours say little (one edited
+    photo with its original and a folder of others is enough). Each pair that
+    cannot be used is named with the reason; the others are used.
     """
     from tqdm import tqdm
 
     from wbcgrade.color.look.learn import learn_look_file
 
-    with tqdm(desc="pairs", unit="pair", disable=None, leave=False) as bar:
+    with tqdm(desc="photos", unit="photo", disable=None, leave=False) as bar:
         def on_pair(done: int, total: int, name: str) -> None:
             bar.total = total
             bar.n = done
@@ -136,11 +138,11 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     for pair in found.used:
         held = "" if pair.held_out is None else f", {pair.held_out:.1f} held out"
         click.echo(f"  {pair.name}: {pair.registered}; CIEDE2000 {pair.delta_e:.1f}{held}")
-    n = len(found.used)
     kind = ("black-and-white look" if found.look.monochrome else
             "toned black-and-white look" if found.look.toned else "look")
     held = ("" if found.held_out is None else
             f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
-    click.echo(f"wrote {found.output}: the {kind} of {n} before/after pair{'s' * (n != 1)} "
+    learned = found.describe().replace("the look", f"the {kind}", 1)
+    click.echo(f"wrote {found.output}: {learned} "
                f"(mean CIEDE2000 after vs look(before) {found.delta_e:.1f}{held}; "
                f"{found.seconds:.1f} s)")

@@ -267,6 +267,13 @@ OPTIONS: tuple[Option, ...] = (
            "--lut, .clf, ...; regrained unless --no-regrain). Replaces --style/--preset; the "
            "fit options are not used.", field="look", type=_FILE, metavar="FILE",
            section=SOURCE),
+    Option("originals_dir", "--originals", "Folder of the originals of some of the --style "
+           "photos (paired by file name as `look learn` pairs them; raw originals and "
+           "resized or cropped exports included): the look is learned from those pairs, "
+           "and the style photos without an original correct it where the pairs show "
+           "little. One hand-edited photo with its original is worth more than a folder "
+           "of edits alone.", field="originals", type=_FOLDER, metavar="DIR",
+           section=SOURCE),
     Option("quality", "--quality", "JPEG/WebP quality 1-100 [default: the encoder's, 98 for "
            "JPEG; 90 gives about the size of a typical camera JPEG].", field="quality",
            type=click.IntRange(1, 100), metavar="N", section=OUTPUTS),

@@ -361,7 +361,9 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
     if start == FitStart.SAVED:
         return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend, look_size,
                                   mean_change,
-                                  file=None if grade.saved is None else grade.saved.file)
+                                  file=None if grade.saved is None else grade.saved.file,
+                                  extra={"learned": grade.saved is not None
+                                         and grade.saved.kind == "learned"})
     if start == FitStart.PRESET:
         return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
                                   blend, look_size, mean_change)

@@ -204,7 +204,8 @@ class GradeOutcome:
         """One line: the source, the strength, the look's size and the photo's change."""
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
-            what = f"the saved grade {self.file} (applied as saved, no fit)"
+            what = (self.file if self.extra.get("learned")  # a look learned for this run
+                    else f"the saved grade {self.file} (applied as saved, no fit)")
         if self.source is GradeSource.OWN_SCENE and self.match:
             what = f"the look of the style photo of this scene ({self.match}, " \
                    f"confidence {self.confidence:.2f})"

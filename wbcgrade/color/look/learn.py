@@ -49,14 +49,16 @@ import json
 import os
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from wbcgrade.errors import InputError, OptionError, first_line
 
-__all__ = ["PairFiles", "PairImages", "Registration", "LearnedLook", "PairReport",
+__all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
+           "learned_grade",
+           "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
            "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
@@ -166,7 +168,33 @@ def _preference(path: Path) -> tuple[int, str]:
 
 def pair_files(before: str | os.PathLike, after: str | os.PathLike
                ) -> tuple[list[PairFiles], list[tuple[str, str]]]:
-    """The before/after pairs two photos or two folders give, and what could not be paired.
+    """The before/after pairs two photos or two folders give, and what could not be paired
+    (:func:`match_files`, an edited photo without its original counted as a problem)."""
+    matched = match_files(before, after)
+    alone = [(path.stem, f"no original in {before} (nothing named {path.stem}.*)")
+             for path in matched.edits_alone]
+    return matched.pairs, sorted(matched.problems + alone)
+
+
+@dataclass(frozen=True)
+class FileMatch:
+    """What two photos or two folders of originals and edits give.
+
+    Attributes
+    ----------
+    pairs : the before/after pairs, in the order of their names.
+    edits_alone : edited photos whose original is not there (evidence of the look too).
+    problems : (name, reason) of originals without an edit and of stems several files share.
+    """
+
+    pairs: list[PairFiles]
+    edits_alone: list[Path]
+    problems: list[tuple[str, str]]
+
+
+def match_files(before: str | os.PathLike, after: str | os.PathLike) -> FileMatch:
+    """The before/after pairs two photos or two folders give, the edited photos without
+    an original, and what could not be used.
 
     Parameters
     ----------
@@ -176,9 +204,9 @@ def pair_files(before: str | os.PathLike, after: str | os.PathLike
 
     Returns
     -------
-    pairs : the pairs, in the order of their names.
-    problems : (name, reason) of each stem found on one side only, and of
-        stems several files share (the raw, else the lossless file is used).
+    A :class:`FileMatch`: the pairs; the edits with no original; (name, reason) of
+    each original with no edit, and of stems several files share (the raw, else the
+    lossless file is used).
 
     Raises
     ------
@@ -190,7 +218,7 @@ def pair_files(before: str | os.PathLike, after: str | os.PathLike
         if not path.exists():
             raise InputError(f"{path}: no such file or folder ({side})")
     if before.is_file() and after.is_file():
-        return [PairFiles(before.stem, before, after)], []
+        return FileMatch([PairFiles(before.stem, before, after)], [], [])
     if not (before.is_dir() and after.is_dir()):
         raise InputError("BEFORE and AFTER must be two photos or two folders "
                          f"({before} is a {'folder' if before.is_dir() else 'file'}, "
@@ -218,10 +246,8 @@ def pair_files(before: str | os.PathLike, after: str | os.PathLike
     for key in sorted(set(originals) - set(edits)):
         problems.append((originals[key].stem, f"no edited version in {after} "
                          f"(nothing named {originals[key].stem}.*)"))
-    for key in sorted(set(edits) - set(originals)):
-        problems.append((edits[key].stem, f"no original in {before} "
-                         f"(nothing named {edits[key].stem}.*)"))
-    return pairs, problems
+    alone = [edits[key] for key in sorted(set(edits) - set(originals))]
+    return FileMatch(pairs, alone, problems)
 
 
 # --------------------------------------------------------------------------- reading
@@ -636,10 +662,18 @@ class LearnResult:
     folds: int = 0
     seconds: float = 0.0
     output: Path | None = None
+    edits_alone: list[str] = field(default_factory=list)
 
     @property
     def used(self) -> list[PairReport]:
         return [p for p in self.pairs if p.problem is None]
+
+    def describe(self) -> str:
+        """In words: what the look was learned from."""
+        n, alone = len(self.used), len(self.edits_alone)
+        return (f"the look learned from {n} before/after pair{'s' * (n != 1)}"
+                + (f" and {alone} edited photo{'s' * (alone != 1)} without an original"
+                   if alone else ""))
 
     def _mean(self, key: str) -> float | None:
         values = [getattr(p, key) for p in self.used if getattr(p, key) is not None]
@@ -668,6 +702,7 @@ class LearnResult:
                 "seconds": round(self.seconds, 3),
                 "pairs": [p.as_dict() for p in self.pairs],
                 "unpaired": [{"name": n, "problem": why} for n, why in self.problems],
+                "edits_without_original": list(self.edits_alone),
                 "warnings": [f"{p.name}: {p.warning}" for p in self.pairs if p.warning]}
 
 
@@ -679,7 +714,8 @@ def _folds(n: int) -> list[np.ndarray]:
 def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                problems: Sequence[tuple[str, str]] = (),
                warn: Callable[[str], None] | None = None,
-               progress: Callable[[int, int, str], None] | None = None) -> LearnResult:
+               progress: Callable[[int, int, str], None] | None = None,
+               edits_alone: Sequence[Path] = ()) -> LearnResult:
     """Learn the look before/after pairs share.
 
     Parameters
@@ -689,6 +725,8 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     problems : what pairing could not pair (carried into the result).
     warn : called with one line for each pair that cannot be used or disagrees.
     progress : ``progress(done, total, name)`` as pairs are read.
+    edits_alone : edited photos without their original: evidence of how the look moves
+        the colours the pairs do not show (:func:`unpaired_correction`).
 
     Returns
     -------
@@ -702,10 +740,11 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     warn = warn or (lambda message: None)
     working = learn_space(pairs, working_space)
     encoding = ColorEncoding.of(working, working)
-    reports, parts = [], []
+    reports, parts, read = [], [], []
+    total = len(pairs) + len(edits_alone)
     for number, pair in enumerate(pairs):
         if progress:
-            progress(number, len(pairs), pair.name)
+            progress(number, total, pair.name)
         report = PairReport(pair.name, str(pair.before), str(pair.after))
         reports.append(report)
         try:
@@ -723,20 +762,39 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                 report.monochrome = images.monochrome
                 report.toned = images.toned
                 parts.append((report, pair_colours(images, registration)))
+                read.append(images)
         if report.problem:
             warn(f"{pair.name}: {report.problem}; left out")
+    alone: list[tuple[str, np.ndarray]] = []
+    for number, path in enumerate(edits_alone):
+        if progress:
+            progress(len(pairs) + number, total, path.stem)
+        try:
+            alone.append((path.stem, _read_small(Path(path), working)))
+        except (InputError, OSError) as exc:
+            warn(f"{path.stem}: unreadable: {first_line(exc)}; left out")
     if progress:
-        progress(len(pairs), len(pairs), "")
-    result = LearnResult(None, reports, list(problems), working)
+        progress(total, total, "")
+    result = LearnResult(None, reports, list(problems), working,
+                         edits_alone=[name for name, _ in alone])
     if not parts:
         result.seconds = time.perf_counter() - start
         return result
     used = [report for report, _ in parts]
     colours = [pair for _, pair in parts]
-    monochrome = all(r.monochrome for r in used)
+    alone_mono = [bool(np.percentile(image.max(axis=-1) - image.min(axis=-1), 99)
+                       < MONO_CHROMA) for _, image in alone]
+    monochrome = all(r.monochrome for r in used) and all(alone_mono)
     toned = (not monochrome and any(r.toned for r in used)
              and all(r.monochrome or r.toned is not False for r in used))
     look, robust, _ = _fit(colours, monochrome, toned=toned)
+    if alone and not monochrome and not toned:
+        sources = np.concatenate([c[0] for c in colours])
+        weights = np.concatenate([c[2] / max(float(c[2].sum()), 1e-12) for c in colours])
+        corrected = unpaired_correction(look.look, [i.after for i in read]
+                                        + [image for _, image in alone],
+                                        [i.before for i in read], sources, weights, working)
+        look = replace(look, look=corrected)
     for report, (sources, targets, weights) in zip(used, colours):
         report.delta_e = float(np.mean(_delta_e(look(sources), targets, encoding)))
         report.edited_share = _edited_share(sources, targets, weights)
@@ -824,6 +882,57 @@ def _output_kind(output: Path) -> str:
                       "(the ending names the format)", "output", path=output)
 
 
+def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
+                  lut_size: int = 33, working_space: str | None = None,
+                  warn: Callable[[str], None] | None = None,
+                  progress: Callable[[int, int, str], None] | None = None):
+    """The look of before/after pairs (and of edits without originals) as a grade.
+
+    What ``look learn`` writes and ``apply --look`` reads back, and what ``apply
+    --style DIR --originals ODIR`` applies: the learned look sampled as a
+    ``lut_size``^3 lattice, in the look's working space, no regrain settings.
+
+    Parameters
+    ----------
+    before, after : two photos, or two folders (:func:`match_files`): the originals,
+        and the edited photos (those without an original count too).
+
+    Returns (:class:`~wbcgrade.color.grading.Grade`, :class:`LearnResult`).
+
+    Raises
+    ------
+    InputError
+        The paths do not pair, or no pair is usable (each pair's reason went to
+        ``warn`` first).
+    """
+    from wbcgrade.color.colorspace import ColorEncoding
+    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.lut import check_lut_size
+    from wbcgrade.color.outcome import SavedFrom
+
+    check_lut_size(lut_size)
+    matched = match_files(before, after)
+    pairs, problems = matched.pairs, matched.problems
+    warn = warn or (lambda message: None)
+    for name, why in problems:
+        warn(f"{name}: {why}")
+    if not pairs:
+        raise InputError(f"no before/after pairs: no photo in {after} has the name of one "
+                         f"in {before}")
+    result = learn_look(pairs, working_space, problems, warn, progress,
+                        edits_alone=matched.edits_alone)
+    if result.look is None:
+        raise InputError(f"no usable before/after pair (all {len(pairs)} left out: see "
+                         "the lines above)")
+    encoding = ColorEncoding.of(result.working_space, result.working_space)
+    described = result.describe()
+    grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
+                  working=encoding.working,  # no regrain: the look as the pairs show it
+                  info={"saved_look": {"file": described, "kind": "learned"}},
+                  saved=SavedFrom(described, "learned"))
+    return grade, result
+
+
 def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
                     output: str | os.PathLike, *, lut_size: int = 33,
                     working_space: str | None = None, overwrite: bool = False,
@@ -833,7 +942,8 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
 
     Parameters
     ----------
-    before, after : two photos or two folders (:func:`pair_files`).
+    before, after : two photos or two folders (:func:`match_files`; edited photos
+        without an original are evidence too: :func:`unpaired_correction`).
     output : ``.cube`` or ``.clf`` (a LUT whose header names its working
         space) or ``.json`` (a saved grade: ``{"saved_grade": ..., "learned":
         the report}``); checked before any work, never an input.
@@ -848,38 +958,34 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
         The output may not be written, the paths do not pair, or no pair is
         usable (each pair's reason went to ``warn`` first).
     """
+    from dataclasses import replace as replaced
+
     from wbcgrade._publish import plan_outputs, publish_bytes
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grading import Grade
     from wbcgrade.color.lut import check_lut_size, write_grade_lut
     from wbcgrade.color.saved_grade import look_dict
 
     output = Path(output)
     kind = _output_kind(output)
     check_lut_size(lut_size)
-    pairs, problems = pair_files(before, after)
-    inputs = [p.before for p in pairs] + [p.after for p in pairs]
+    matched = match_files(before, after)
+    inputs = ([p.before for p in matched.pairs] + [p.after for p in matched.pairs]
+              + matched.edits_alone)
     output = plan_outputs([output], inputs, overwrite)[0]  # before any work
-    warn = warn or (lambda message: None)
-    for name, why in problems:
-        warn(f"{name}: {why}")
-    if not pairs:
-        raise InputError(f"no before/after pairs: no photo in {after} has the name of one "
-                         f"in {before}")
-    result = learn_look(pairs, working_space, problems, warn, progress)
-    if result.look is None:
-        raise InputError(f"no usable before/after pair (all {len(pairs)} left out: see "
-                         "the lines above)")
+    grade, result = learned_grade(before, after, lut_size=lut_size,
+                                  working_space=working_space, warn=warn, progress=progress)
+    grade = replaced(grade, info={}, saved=None)
     encoding = ColorEncoding.of(result.working_space, result.working_space)
-    grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
-                  working=encoding.working)  # no regrain: the look as the pairs show it
     n = len(result.used)
     if kind == "json":
         result.output = output
         data = {"saved_grade": look_dict(grade), "learned": result.as_dict()}
         publish_bytes(output, (json.dumps(data, indent=1) + "\n").encode(), overwrite)
     else:
-        comments = [f"look learned from {n} before/after pair{'s' if n != 1 else ''}"]
+        comments = [f"look learned from {n} before/after pair{'s' if n != 1 else ''}"
+                    + (f" and {len(result.edits_alone)} edited photo"
+                       f"{'s' if len(result.edits_alone) != 1 else ''} without an original"
+                       if result.edits_alone else "")]
         if result.held_out is not None:
             comments.append(f"mean CIEDE2000 on the pairs {result.delta_e:.2f}, "
                             f"held out {result.held_out:.2f}")
@@ -887,3 +993,107 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
                                         title="wbcgrade learned look", comments=comments,
                                         overwrite=overwrite)
     return result
+
+
+# ------------------------------------------------------------------- edits without originals
+
+#: Colours whose density in the pairs' edited colours (a 17^3 soft histogram, blurred by a
+#: node) reaches this multiple of the uniform density are pinned by the pairs: the edited
+#: photos without originals correct the look only where the pairs show little
+#: (:func:`unpaired_correction`).
+PAIR_SUPPORT = 0.5
+#: Grid of the inverse map and of the support.
+_INVERSE_SIZE = 33
+_SUPPORT_SIZE = 17
+
+
+@dataclass(frozen=True)
+class CorrectedLook:
+    """A look fitted on pairs, after a correction of the content colours the pairs do not
+    show (read from edited photos without originals).
+
+    ``y + (1 - support(y)) * (residual(y) - y)`` with ``y = look(x)``: ``residual`` a
+    smooth map, ``support`` in [0, 1] how well the pairs' edited colours cover ``y``.
+    """
+
+    look: object
+    residual: object
+    support: np.ndarray
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        from wbcgrade.color.look.scene_fit import interpolate_lattice
+
+        rgb = np.asarray(rgb, dtype=np.float64)
+        mapped = np.asarray(self.look(rgb.reshape(-1, 3)), dtype=np.float64)
+        free = 1.0 - interpolate_lattice(self.support[..., None], mapped)[:, 0]
+        out = np.clip(mapped + free[:, None] * (self.residual(mapped) - mapped), 0.0, 1.0)
+        return out.reshape(rgb.shape)
+
+
+def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(m, m, m) how well colours ``sources`` (N, 3) with ``weights`` cover each node, in
+    [0, 1]."""
+    from scipy.ndimage import gaussian_filter
+
+    from wbcgrade.color.histogram import soft_histogram
+
+    density = soft_histogram(sources, _SUPPORT_SIZE, weights)
+    density = gaussian_filter(density, 1.0, mode="constant") * density.size
+    return np.clip(density / PAIR_SUPPORT, 0.0, 1.0)
+
+
+def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[np.ndarray],
+                        sources: np.ndarray, weights: np.ndarray, working: str):
+    """The look corrected by what the edited photos say of the colours the pairs lack.
+
+    Every edited photo (with an original or not) is ``look(content)`` for content of
+    natural photos. The natural palettes pushed through the pairs' look are what the
+    edited photos would be if the pairs had shown the whole look; what the edited
+    photos show beyond that is the set look of the edits against the pushed palettes
+    (:func:`~wbcgrade.color.look.prior.posterior_statistics_look`: judged jointly against
+    what content does), applied after the pairs' look only where the pairs' edited
+    colours show little (:func:`_support`).
+
+    Parameters
+    ----------
+    look : the pairs' look (a callable on (N, 3) colours).
+    edits : every edited photo, (h, w, 3) working-space colours.
+    originals : the pairs' originals (unused beyond ``sources``).
+    sources, weights : the pairs' original colours (N, 3) and their weights.
+    working : the working space.
+
+    Returns a :class:`CorrectedLook`, or ``look`` itself when nothing is left to correct.
+    """
+    from wbcgrade.color.cache import default_cache_dir
+    from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
+    from wbcgrade.color.look.family import fit_look_map
+    from wbcgrade.color.look.prior import posterior_statistics_look
+    from wbcgrade.color.look.set_extraction import (
+        MAP_BINS,
+        _natural_statistics,
+        _space_scale,
+        natural_palettes,
+    )
+    from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
+    from wbcgrade.color.presets import styles_in_space
+
+    bins = MAP_BINS
+    naturals = styles_in_space(natural_palettes(), working)
+    points = grid_points(bins)
+    pushed = []
+    for hist in naturals.at_bins(bins):
+        flat = hist.ravel()
+        keep = np.flatnonzero(flat > 0)
+        pushed.append(soft_histogram(look(points[keep]), bins, flat[keep]))
+    pushed_stats = palette_statistics(np.stack(pushed))
+    hists = np.stack([image_histogram(np.asarray(e, np.float64), bins) for e in edits])
+    scale = _space_scale(working)
+    model = posterior_statistics_look(tinted_statistics(hists, pushed_stats, space_scale=scale),
+                                      pushed_stats, scale,
+                                      noise_from=_natural_statistics(naturals),
+                                      cache=default_cache_dir())
+    if model.info.get("share", 0.0) <= 0.0:
+        return look
+    nodes = grid_points(_SUPPORT_SIZE)
+    residual = fit_look_map(nodes, model(nodes), np.ones(len(nodes)), None, 1e-4, 1e-6)
+    return CorrectedLook(look, residual, _support(look(sources), weights))

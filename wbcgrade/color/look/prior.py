@@ -43,11 +43,16 @@ NO_LOOK = 0.3
 PRIOR_SCALES = (1.0 / 64.0, 1.0 / 16.0, 1.0 / 4.0, 1.0, 4.0)
 #: A collection's own character, as a share of what single natural photos vary by
 #: (its variance: COLLECTION_SHARE ** 2 times theirs), added to every set's noise.
-COLLECTION_SHARE = 0.8
+COLLECTION_SHARE = 0.3
+#: Content of an unusual kind (a set of sunsets, of snow scenes): the collection's share
+#: of the single photos' spread scaled by each factor, with its prior weight.
+UNUSUAL_CONTENT = ((1.0, 0.6), (2.0, 0.3), (4.0, 0.1))
 #: Pull of the covariances towards their diagonals (316 palettes estimate 42 x 42).
 DIAGONAL_SHRINK = 0.2
 #: Random sets drawn to measure the noise of a set's median statistics.
 NOISE_DRAWS = 400
+#: Bumped when the statistics or their noise change (cached noise of an older one unused).
+NOISE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -80,26 +85,48 @@ def _subset(stats: PaletteStatistics, index: np.ndarray) -> PaletteStatistics:
 _NOISE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
 
-def content_noise(naturals: PaletteStatistics, n_styles: int) -> tuple[np.ndarray, np.ndarray]:
+def content_noise(naturals: PaletteStatistics, n_styles: int,
+                  cache: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Covariances of the differences content alone makes: (of a median of ``n_styles``
-    natural photos, of a single photo), each (P, P), from random draws (seeded)."""
-    digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes()).hexdigest()
-    key = (digest, n_styles)
+    natural photos, of a single photo), each (P, P), from random draws (seeded).
+
+    Kept for the process and, with a ``cache`` folder, on disk (``looks/`` in it; an
+    entry of the wrong shape or not finite is computed again)."""
+    from wbcgrade.color.cache import entry_path, read_entry, write_entry
+
+    digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes())
+    digest.update(np.ascontiguousarray(naturals.band_neutral).tobytes())
+    digest.update(repr((n_styles, NOISE_DRAWS, DIAGONAL_SHRINK, NOISE_VERSION)).encode())
+    key = (digest.hexdigest(), n_styles)
+    path = entry_path(cache, "looks", "noise-" + key[0])
+    if key not in _NOISE:
+        data = read_entry(path)
+        try:
+            found = (np.asarray(data["sets"], np.float64), np.asarray(data["singles"], np.float64))
+            size = len(look_differences(_subset(naturals, np.array([0])), naturals).vector())
+            if any(m.shape != (size, size) or not np.isfinite(m).all() for m in found):
+                found = None
+        except Exception:  # noqa: BLE001 - a cache never fails a run: any damage is a miss
+            found = None
+        if found is not None:
+            _NOISE[key] = found
     if key not in _NOISE:
         rng = np.random.default_rng(0)
         k = len(naturals.quantiles)
         size = min(n_styles, max(k - 1, 1))
 
-        def spread(draws) -> np.ndarray:
-            vectors = np.stack([look_differences(_subset(naturals, idx), naturals).vector()
+        def spread(draws, least: int = 2) -> np.ndarray:
+            vectors = np.stack([look_differences(_subset(naturals, idx), naturals,
+                                                 min_styles=least).vector()
                                 for idx in draws])
             return _shrunk_to_diagonal(np.cov(vectors, rowvar=False))
 
         sets = spread(rng.choice(k, size, replace=False) for _ in range(NOISE_DRAWS))
-        singles = spread(np.array([i]) for i in range(k))
+        singles = spread((np.array([i]) for i in range(k)), least=1)
         if len(_NOISE) > 16:
             _NOISE.pop(next(iter(_NOISE)))
         _NOISE[key] = (sets, singles)
+        write_entry(path, sets=sets, singles=singles)
     return _NOISE[key]
 
 
@@ -112,40 +139,47 @@ def _log_gaussian(vector: np.ndarray, cov: np.ndarray) -> tuple[float, np.ndarra
     return float(-0.5 * (solved @ solved + logdet + len(vector) * np.log(2 * np.pi))), inverse
 
 
-def posterior_look(raw: LookDifferences, noise: np.ndarray, prior: np.ndarray,
-                   no_look: float = NO_LOOK,
+def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarray, float]],
+                   prior: np.ndarray, no_look: float = NO_LOOK,
                    scales: tuple[float, ...] = PRIOR_SCALES) -> LookPosterior:
     """The posterior mean of a set's look differences under a spike-and-slab prior.
 
     Parameters
     ----------
     raw : the set's differences (:func:`~wbcgrade.color.look.statistics.look_differences`).
-    noise : (P, P) covariance content makes of them (sampling and collection).
+    noise : (P, P) covariance content makes of them (sampling and collection), or a
+        mixture [(covariance, weight), ...] (content of an unusual kind: a set of sunsets).
     prior : (P, P) second moment of the generator's looks' differences.
     no_look : prior probability of no look.
     scales : the slab's Gaussians, as shares of ``prior``.
     """
     v = raw.vector()
     ridge = 1e-10 * np.eye(len(v))
-    logs, means = [], []
-    spike, _ = _log_gaussian(v, noise + ridge)
-    logs.append(np.log(no_look) + spike)
-    means.append(np.zeros_like(v))
-    for scale in scales:
-        cov = scale * prior
-        log, inverse = _log_gaussian(v, cov + noise + ridge)
-        logs.append(np.log((1.0 - no_look) / len(scales)) + log)
-        means.append(cov @ inverse)
+    mixture = [(noise, 1.0)] if isinstance(noise, np.ndarray) else list(noise)
+    total = sum(w for _, w in mixture)
+    logs, means, spikes = [], [], []
+    for cov_noise, weight in mixture:
+        share = weight / total
+        log, _ = _log_gaussian(v, cov_noise + ridge)
+        logs.append(np.log(no_look * share) + log)
+        means.append(np.zeros_like(v))
+        spikes.append(True)
+        for scale in scales:
+            cov = scale * prior
+            log, inverse = _log_gaussian(v, cov + cov_noise + ridge)
+            logs.append(np.log((1.0 - no_look) * share / len(scales)) + log)
+            means.append(cov @ inverse)
+            spikes.append(False)
     logs = np.array(logs)
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
     mean = np.sum(weights[:, None] * np.array(means), axis=0)
-    chol = np.linalg.cholesky(noise + ridge)
+    chol = np.linalg.cholesky(mixture[0][0] + ridge)
     white_raw, white_mean = np.linalg.solve(chol, v), np.linalg.solve(chol, mean)
     power = float(white_raw @ white_raw)
     share = float(np.clip(white_mean @ white_raw / power, 0.0, 1.0)) if power > 0 else 0.0
-    return LookPosterior(raw.with_vector(mean), float(1.0 - weights[0]), share,
-                         float(np.sqrt(power / len(v))))
+    return LookPosterior(raw.with_vector(mean), float(1.0 - weights[np.array(spikes)].sum()),
+                         share, float(np.sqrt(power / len(v))))
 
 
 # --------------------------------------------------------------------------- the shipped prior
@@ -215,7 +249,9 @@ if __name__ == "__main__":  # pragma: no cover
 def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
                               space_scale: float = 1.0,
                               reference: PaletteStatistics | None = None,
-                              own_count: int | None = None):
+                              own_count: int | None = None,
+                              noise_from: PaletteStatistics | None = None,
+                              cache: Path | None = None):
     """The look a style set's statistics support (:func:`posterior_look`), as a
     :class:`~wbcgrade.color.look.statistics.StatisticsLook` whose ``info`` holds the
     probability of a look, the share applied and the evidence.
@@ -228,6 +264,9 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     reference, own_count : the user's own ungraded photos, as for
         :func:`~wbcgrade.color.look.statistics.statistics_look`: the centre leans on them
         as far as their number says, and their sampling error counts as noise.
+    noise_from : the palettes whose statistics' spread is content's noise (default
+        ``naturals``; the same palettes before a known look, whose noise is cached).
+    cache : the cache folder that keeps the noise on disk (None: kept in memory only).
     """
     from wbcgrade.color.look.statistics import (
         MEDIAN_SE,
@@ -248,10 +287,11 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     blend = own_photos_blend((own_count or n_reference) if n_reference else 0)
     centre_of = content_centre(naturals, reference, own_count)
     raw = look_differences(styles, centre_of)
-    sets, singles = content_noise(naturals, n_styles)
-    noise = sets + (blend * COLLECTION_SHARE) ** 2 * singles
-    if n_reference:
-        noise = noise + (1.0 - blend) ** 2 * MEDIAN_SE ** 2 / n_reference * singles
+    sets, singles = content_noise(naturals if noise_from is None else noise_from, n_styles,
+                                  cache)
+    own = (1.0 - blend) ** 2 * MEDIAN_SE ** 2 / n_reference * singles if n_reference else 0.0
+    noise = [(sets + (blend * COLLECTION_SHARE * spread) ** 2 * singles + own, weight)
+             for spread, weight in UNUSUAL_CONTENT]
     # the prior and the noise were measured in sRGB-encoded units; chroma and tint scale
     # with the working space (the log spreads do not)
     prior = load_prior()

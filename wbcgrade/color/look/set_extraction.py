@@ -428,7 +428,8 @@ def _prior_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.prior` a set's look depends on."""
     from wbcgrade.color.look import prior
 
-    return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.DIAGONAL_SHRINK,
+    return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.UNUSUAL_CONTENT,
+            prior.DIAGONAL_SHRINK,
             prior.NOISE_DRAWS, float(np.sum(prior.load_prior())))
 
 
@@ -527,8 +528,10 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
                                     space_scale=scale)
     if SET_LOOK_RULE == "posterior" and not np.all(style_stats.spread
                                                    < MONOCHROME_SPREAD * scale):
+        from wbcgrade.color.cache import cache_folder
+
         model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
-                                          own_count)
+                                          own_count, cache=cache_folder(styles))
     else:
         model = statistics_look(style_stats, natural_stats, scale, reference=reference,
                                 own_count=own_count)

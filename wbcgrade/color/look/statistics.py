@@ -586,9 +586,10 @@ def _tone_curve(centre_q: np.ndarray, shift: np.ndarray) -> tuple[np.ndarray, np
 
 
 def look_differences(styles: PaletteStatistics, centre_of: PaletteStatistics,
-                     monochrome: bool = False) -> LookDifferences:
+                     monochrome: bool = False, min_styles: int = 2) -> LookDifferences:
     """The raw differences of the styles' median statistics from ``centre_of``'s
-    medians (bands no two styles hold are filled from their neighbours)."""
+    medians (bands fewer than ``min_styles`` styles hold are filled from their
+    neighbours)."""
     nat_q = _nanmedian(centre_of.quantiles, axis=0)
     tone = _nanmedian(styles.quantiles, axis=0) - nat_q
     tone_in, tone_out = _tone_curve(nat_q, tone)
@@ -604,14 +605,15 @@ def look_differences(styles: PaletteStatistics, centre_of: PaletteStatistics,
     sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
     nat_spread = _nanmedian(centre_of.band_spread, axis=0)
     ratio = np.log(np.maximum(sty_spread, 1e-4)) - np.log(np.maximum(nat_spread, 1e-4))
-    ratio = _fill(np.where(valid >= 2, ratio, np.nan), centres)
+    ratio = _fill(np.where(valid >= min_styles, ratio, np.nan), centres)
     if monochrome:
         tint = np.zeros((BANDS, 3))
     else:
         sty = np.stack([_nanmedian(at_mapped(styles.band_neutral[..., c]), axis=0)
                         for c in range(3)], axis=-1)
         tint = sty - _nanmedian(centre_of.band_neutral, axis=0)
-        tint = np.stack([_fill(np.where((valid >= 2) & np.isfinite(tint[:, c]), tint[:, c],
+        tint = np.stack([_fill(np.where((valid >= min_styles) & np.isfinite(tint[:, c]),
+                                        tint[:, c],
                                         np.nan), centres) for c in range(3)], axis=-1)
         tint -= (tint @ LUMA)[:, None]
     return LookDifferences(nat_q, tone, ratio, tint)

@@ -1,0 +1,160 @@
+"""Edited photos without their original (``look learn``, ``apply --originals``):
+evidence of the look beside the before/after pairs (wbcgrade.color.look.learn)."""
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from tests.color.test_look import LUMA, sample
+from tests.color.test_look_learn import write
+from wbcgrade.color.look.learn import learned_grade, match_files, pair_files
+
+NAMES = ("aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding",
+         "sunset")
+HELD = ("astronaut", "aitzgorri")
+
+
+@pytest.fixture(scope="module")
+def photos():
+    return {name: sample(name, 200) for name in NAMES}
+
+
+def bleach(rgb):
+    """A strong look: most of the colour gone, more contrast."""
+    luma = (rgb @ LUMA)[..., None]
+    return np.clip(0.5 + 1.3 * (luma + 0.35 * (rgb - luma) - 0.5), 0.0, 1.0)
+
+
+def shoot(root, photos, look, pair="bridge", alone=True, original_look=None):
+    """ORIGINALS with one photo, EDITS with its edit and (``alone``) both halves of every
+    other photo but the held-out ones, edited by ``look``."""
+    before, after = root / "originals", root / "edits"
+    before.mkdir()
+    after.mkdir()
+    write(before / f"{pair}.jpg", photos[pair])
+    write(after / f"{pair}.png", (original_look or look)(photos[pair]))
+    for name in NAMES:
+        if alone and name not in HELD and name != pair:
+            half = photos[name].shape[1] // 2
+            write(after / f"{name}_left.png", look(photos[name][:, :half]))
+            write(after / f"{name}_right.png", look(photos[name][:, half:]))
+    return before, after
+
+
+def error(grade, look, photo):
+    """Mean |graded - truth| on a photo nothing showed, relative to doing nothing."""
+    graded = grade.apply(photo.astype(np.float32))
+    truth = look(photo)
+    return float(np.mean(np.abs(graded - truth)) / np.mean(np.abs(photo - truth)))
+
+
+def test_edits_without_an_original_are_matched_apart_and_still_named_by_pair_files(tmp_path):
+    before, after = tmp_path / "b", tmp_path / "a"
+    before.mkdir()
+    after.mkdir()
+    for name in ("IMG_1.jpg", "IMG_2.jpg"):
+        (before / name).write_bytes(b"x")
+    for name in ("IMG_1-edit.png", "IMG_3.png", "IMG_4.tif"):
+        (after / name).write_bytes(b"x")
+    found = match_files(before, after)
+    assert [p.name for p in found.pairs] == ["IMG_1"]
+    assert [p.name for p in found.edits_alone] == ["IMG_3.png", "IMG_4.tif"]
+    assert [name for name, _ in found.problems] == ["IMG_2"]  # an original with no edit
+    pairs, problems = pair_files(before, after)  # the pairs only: the others are problems
+    assert [p.name for p in pairs] == ["IMG_1"]
+    assert sorted(name for name, _ in problems) == ["IMG_2", "IMG_3", "IMG_4"]
+
+
+@pytest.mark.slow
+def test_edits_without_originals_correct_the_look_where_the_pair_shows_little(tmp_path,
+                                                                              photos):
+    """One pair (a bridge: greys and a little blue) says little of what a strong look does
+    to other colours; ten edited photos without originals say more."""
+    import wbcgrade.color.look.learn as learn
+
+    before, after = shoot(tmp_path, photos, bleach)
+    with_edits, result = learned_grade(before, after)
+    assert len(result.used) == 1 and len(result.edits_alone) == 10
+    assert result.describe() == ("the look learned from 1 before/after pair and 10 edited "
+                                 "photos without an original")
+    alone_dir = tmp_path / "alone"
+    alone_dir.mkdir()
+    only_pair = shoot(alone_dir, photos, bleach, alone=False)
+    pair_only, _ = learned_grade(*only_pair)
+    for name in HELD:
+        assert error(with_edits, bleach, photos[name]) < 0.85 * error(pair_only, bleach,
+                                                                       photos[name])
+    # where the pair shows its colours, the pair decides
+    pair = photos["bridge"].astype(np.float32)
+    assert np.mean(np.abs(with_edits.apply(pair) - pair_only.apply(pair))) < 0.01
+    assert learn.PAIR_SUPPORT > 0
+
+
+@pytest.mark.slow
+def test_a_pair_and_edits_with_no_look_learn_a_look_that_changes_nothing(tmp_path, photos):
+    def same(rgb):
+        return rgb
+
+    grade, result = learned_grade(*shoot(tmp_path, photos, same))
+    assert len(result.edits_alone) == 10
+    for name in HELD:
+        photo = photos[name].astype(np.float32)
+        assert 255 * np.mean(np.abs(grade.apply(photo) - photo)) < 1.0
+
+
+@pytest.mark.slow
+def test_black_and_white_stays_so_only_when_every_edit_is(tmp_path, photos):
+    def grey(rgb):
+        return np.repeat((rgb @ LUMA)[..., None], 3, axis=-1)
+
+    grade, result = learned_grade(*shoot(tmp_path, photos, grey))
+    assert result.look.monochrome
+    out = grade.apply(photos["astronaut"].astype(np.float32))
+    assert np.max(np.ptp(out, axis=-1)) < 1e-5
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    _, result = learned_grade(*shoot(mixed, photos, bleach, original_look=grey))
+    assert not result.look.monochrome  # edits in colour beside a black-and-white pair
+
+
+@pytest.mark.slow
+def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
+    import OpenImageIO as oiio
+
+    from wbcgrade.cli import main
+
+    originals, edits = shoot(tmp_path, photos, bleach)
+    photo = write(tmp_path / "photo.png", photos["astronaut"])
+    runner = CliRunner()
+    learned = runner.invoke(main, ["apply", str(photo), "--style", str(edits), "--originals",
+                                   str(originals), "-o", str(tmp_path / "learned.png")])
+    assert learned.exit_code == 0, learned.output
+    assert "the look learned from 1 before/after pair and 10 edited photos" in learned.output
+    steps = runner.invoke(main, ["look", "learn", str(originals), str(edits), "-o",
+                                 str(tmp_path / "look.cube")])
+    assert steps.exit_code == 0, steps.output
+    assert "10 edited photos without an original" in steps.output
+    saved = runner.invoke(main, ["apply", str(photo), "--look", str(tmp_path / "look.cube"),
+                                 "-o", str(tmp_path / "saved.png")])
+    assert saved.exit_code == 0, saved.output
+    a, b = (oiio.ImageBuf(str(tmp_path / f"{n}.png")).get_pixels(oiio.UINT8).astype(int)
+            for n in ("learned", "saved"))
+    assert np.max(np.abs(a - b)) <= 1
+    # the grade is the look: the photo moves a good part of the way to the truth
+    truth = np.round(bleach(photos["astronaut"]) * 255)
+    before = np.round(photos["astronaut"] * 255)
+    assert np.mean(np.abs(a - truth)) < 0.6 * np.mean(np.abs(before - truth))
+
+
+def test_originals_need_style_photos_and_no_saved_look(tmp_path):
+    from wbcgrade.cli import main
+
+    photo = write(tmp_path / "p.png", np.full((8, 8, 3), 0.5))
+    folder = tmp_path / "o"
+    folder.mkdir()
+    runner = CliRunner()
+    for extra in ([], ["--preset", "warm"], ["--look", str(photo)],
+                  ["--style", str(folder), "--mode", "palette"]):
+        result = runner.invoke(main, ["apply", str(photo), "--originals", str(folder), *extra])
+        assert result.exit_code == 2 and "--originals" in result.output, (extra, result.output)
+        assert "Traceback" not in result.output
