@@ -76,7 +76,7 @@ def one_run(styles_dir: Path, warm_cache: Path | None) -> dict[str, float]:
         times["style histograms (and scene images)"] = time.perf_counter() - start
         start = time.perf_counter()
         naturals = look.natural_palettes()
-        look._natural_statistics(naturals, styles)
+        look.natural_statistics(naturals, styles)
         times["natural statistics"] = time.perf_counter() - start
         start = time.perf_counter()
         look.set_look_base(styles, naturals)

@@ -1070,9 +1070,9 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
     from wbcgrade.color.look.prior import posterior_statistics_look
     from wbcgrade.color.look.set_extraction import (
         MAP_BINS,
-        _natural_statistics,
-        _space_scale,
         natural_palettes,
+        natural_statistics,
+        space_scale,
     )
     from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
     from wbcgrade.color.presets import styles_in_space
@@ -1087,10 +1087,10 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
         pushed.append(soft_histogram(look(points[keep]), bins, flat[keep]))
     pushed_stats = palette_statistics(np.stack(pushed))
     hists = np.stack([image_histogram(np.asarray(e, np.float64), bins) for e in edits])
-    scale = _space_scale(working)
+    scale = space_scale(working)
     model = posterior_statistics_look(tinted_statistics(hists, pushed_stats, space_scale=scale),
                                       pushed_stats, scale,
-                                      noise_from=_natural_statistics(naturals),
+                                      noise_from=natural_statistics(naturals),
                                       cache=default_cache_dir())
     if model.info.get("share", 0.0) <= 0.0:
         return look

@@ -43,10 +43,12 @@ NO_LOOK = 0.3
 PRIOR_SCALES = (1.0 / 64.0, 1.0 / 16.0, 1.0 / 4.0, 1.0, 4.0)
 #: A collection's own character, as a share of what single natural photos vary by
 #: (its variance: COLLECTION_SHARE ** 2 times theirs), added to every set's noise.
-COLLECTION_SHARE = 0.3
-#: Content of an unusual kind (a set of sunsets, of snow scenes): the collection's share
-#: of the single photos' spread scaled by each factor, with its prior weight.
-UNUSUAL_CONTENT = ((1.0, 0.6), (2.0, 0.3), (4.0, 0.1))
+COLLECTION_SHARE = 0.2
+#: Content of an unusual kind: (factor on the collection's share of the single photos'
+#: spread, the same for the neutral tints alone, prior weight). A set of sunsets or of snow
+#: scenes is unusual as a whole; a set of food or wine photos holds no greys, so its
+#: "neutral" tints are its content's colours.
+UNUSUAL_CONTENT = ((1.0, 0.0, 0.8), (1.0, 6.0, 0.2))
 #: Pull of the covariances towards their diagonals (316 palettes estimate 42 x 42).
 DIAGONAL_SHRINK = 0.2
 #: Random sets drawn to measure the noise of a set's median statistics.
@@ -232,9 +234,9 @@ def build_prior(naturals: np.ndarray, edits: int = 400, sample: int = 64,
 def main() -> None:  # pragma: no cover - a build script
     from tqdm import tqdm
 
-    from wbcgrade.color.look.set_extraction import MAP_BINS, natural_palettes
+    from wbcgrade.color.presets import load_preset
 
-    naturals = natural_palettes().at_bins(MAP_BINS)
+    naturals = load_preset(Path(__file__).parents[1] / "data" / "natural.npz").at_bins(32)
     bar = tqdm(total=400, desc="edits")
     moment = build_prior(naturals, progress=lambda done, total: bar.update(1))
     bar.close()
@@ -271,15 +273,15 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     from wbcgrade.color.look.statistics import (
         MEDIAN_SE,
         MIN_OWN_PHOTOS,
-        _in_colour,
         content_centre,
+        in_colour,
         look_from_differences,
         own_photos_blend,
     )
 
     n_styles = len(styles.quantiles)
     given = 0 if reference is None else len(reference.quantiles)
-    reference = _in_colour(reference, space_scale)
+    reference = in_colour(reference, space_scale)
     unused = given if reference is None else 0
     if reference is not None and (own_count or len(reference.quantiles)) < MIN_OWN_PHOTOS:
         unused, reference = len(reference.quantiles), None
@@ -290,8 +292,12 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     sets, singles = content_noise(naturals if noise_from is None else noise_from, n_styles,
                                   cache)
     own = (1.0 - blend) ** 2 * MEDIAN_SE ** 2 / n_reference * singles if n_reference else 0.0
-    noise = [(sets + (blend * COLLECTION_SHARE * spread) ** 2 * singles + own, weight)
-             for spread, weight in UNUSUAL_CONTENT]
+    tint = np.zeros(len(raw.vector()))
+    tint[len(raw.tone) + len(raw.saturation):] = 1.0  # the neutral tints' rows and columns
+    greyless = np.outer(tint, tint) * singles
+    noise = [(sets + (blend * COLLECTION_SHARE * spread) ** 2 * singles + own
+              + (blend * COLLECTION_SHARE * no_greys) ** 2 * greyless, weight)
+             for spread, no_greys, weight in UNUSUAL_CONTENT]
     # the prior and the noise were measured in sRGB-encoded units; chroma and tint scale
     # with the working space (the log spreads do not)
     prior = load_prior()

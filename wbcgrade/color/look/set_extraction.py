@@ -248,7 +248,7 @@ def colour_photos(styles, working_space: str | None = None):
 
     space = working_space or styles.meta.get("working_space") or default_working_space()
     spread = palette_statistics(styles.at_bins(MAP_BINS), source_bins=styles.bins).spread
-    keep = np.flatnonzero(holds_colour(spread, _space_scale(space)))
+    keep = np.flatnonzero(holds_colour(spread, space_scale(space)))
     if len(keep) == len(styles.names):
         return styles
     return _styles_subset(styles, keep) if len(keep) else None
@@ -465,7 +465,7 @@ def _palettes_digest(palettes) -> str:
     return known[1]
 
 
-def _natural_statistics(naturals, cache_from=None):
+def natural_statistics(naturals, cache_from=None):
     """:func:`~wbcgrade.color.look.statistics.palette_statistics` of the natural palettes,
     once per process and set of palettes, and kept on disk in the looks' cache folder
     (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
@@ -515,14 +515,14 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
         tinted_statistics,
     )
 
-    natural_stats = _natural_statistics(naturals, styles)
+    natural_stats = natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
     own_count = naturals.meta.get("own_count")  # a half's: the whole own set's number
     reference = palette_statistics(own.at_bins(MAP_BINS)) if own is not None else None
     # re-binned from a finer grid, the styles' colours were binned twice (a trace of chroma
     # in a black-and-white set's histograms): both are taken off the chroma spread
     style_hists = styles.at_bins(MAP_BINS)
-    scale = _space_scale(styles.working_space)
+    scale = space_scale(styles.working_space)
     style_stats = tinted_statistics(style_hists, natural_stats, reference,
                                     source_bins=styles.bins, own_count=own_count,
                                     space_scale=scale)
@@ -693,7 +693,7 @@ TRUSTED_EVIDENCE = 2.0
 #: +0.23 / +0.20 / +0.17 and +0.26 / +0.24 / +0.22, worst photo -0.49 / -0.25 /
 #: -0.04 and -0.28 / -0.20 / -0.12 (a look the photo's colours barely show,
 #: e.g. ARRI's on a purple gradient, dE 2.4 from the truth before grading). In
-#: sRGB-encoded units; other working spaces scale it (:func:`_space_scale`).
+#: sRGB-encoded units; other working spaces scale it (:func:`space_scale`).
 NULL_LOOK_SIZE = 0.07
 
 
@@ -744,14 +744,14 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
                 moved = extracted.look(colors) - colors
                 size2 = float(np.sum(weights * np.sum(moved * moved, axis=1))
                               / np.sum(weights))
-                null = NULL_LOOK_SIZE * _space_scale(styles.working_space)
+                null = NULL_LOOK_SIZE * space_scale(styles.working_space)
                 strength *= max(0.0, 1.0 - null ** 2 / max(size2, 1e-300))
     look = LookMap(strength * extracted.look.coefficients, extracted.look.knots)
     return look, extracted, float(strength)
 
 
 @functools.cache
-def _space_scale(working_space: str) -> float:
+def space_scale(working_space: str) -> float:
     """How large colour differences are in ``working_space``'s unit cube against the
     sRGB-encoded one (where :data:`NULL_LOOK_SIZE` was measured): the rms spread of
     the shipped natural palettes' colours there over their spread in sRGB (1 in the

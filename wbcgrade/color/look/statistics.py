@@ -184,7 +184,7 @@ def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
     style shows moves what was grey, and the least colourful colours of a strongly
     tinted photo are not what was grey."""
     first = palette_statistics(hists, source_bins=source_bins)
-    centre = content_centre(naturals, _in_colour(reference, space_scale), own_count)
+    centre = content_centre(naturals, in_colour(reference, space_scale), own_count)
     rough = _nanmedian(first.band_mean, axis=0) - _nanmedian(centre.band_mean, axis=0)
     sd = _robust_sd(naturals.band_mean)
     sigma = np.sqrt((MEDIAN_SE * sd) ** 2 / len(first.quantiles) + (CONTENT_BIAS * sd) ** 2)
@@ -346,7 +346,7 @@ def holds_colour(spread: np.ndarray, space_scale: float = 1.0) -> np.ndarray:
     return np.asarray(spread) >= MONOCHROME_SPREAD * space_scale
 
 
-def _in_colour(reference: PaletteStatistics | None,
+def in_colour(reference: PaletteStatistics | None,
                space_scale: float = 1.0) -> PaletteStatistics | None:
     """The palettes of ``reference`` that hold colour (a black-and-white or toned photo
     says nothing of how colourful ungraded content is), or None when none does."""
@@ -366,7 +366,7 @@ def content_centre(naturals: PaletteStatistics, reference: PaletteStatistics | N
     """What the styles' statistics are compared with: the natural photos' medians, leaned
     towards the user's own photos' (``reference``) by :func:`own_photos_blend` of their
     number (``own_count``: of the whole own set ``reference`` is a part of; one row;
-    ``reference`` in colour: :func:`_in_colour`)."""
+    ``reference`` in colour: :func:`in_colour`)."""
     count = own_count or (0 if reference is None else len(reference.quantiles))
     if reference is None or count < MIN_OWN_PHOTOS:
         return naturals
@@ -441,7 +441,7 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
     n_styles = len(styles.quantiles)
     unused = 0
     given = 0 if reference is None else len(reference.quantiles)
-    reference = _in_colour(reference, space_scale)
+    reference = in_colour(reference, space_scale)
     if reference is None:
         unused = given
     if reference is not None and (own_count or len(reference.quantiles)) < MIN_OWN_PHOTOS:
