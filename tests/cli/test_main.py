@@ -21,27 +21,46 @@ def test_version_and_help(cli):
     assert "demo" not in result.output  # an example script now: examples/demo.py
 
 
-# `wbcgrade --help` as the console script runs it, in a fresh interpreter.
-_HELP = """
+# `wbcgrade ARGS` as the console script runs it, in a fresh interpreter: the numeric
+# modules it imported.
+_RUN = """
 import sys
 from wbcgrade.cli import main
 try:
-    main(["--help"])
+    main(sys.argv[1:])
 except SystemExit as exc:
-    assert exc.code == 0, exc.code
+    print("EXIT", exc.code)
 heavy = sorted(m for m in sys.modules
-               if m.split(".")[0] in ("numba", "numpy", "scipy")
-               or m.startswith(("wbcgrade.core", "wbcgrade.color")))
+               if m.split(".")[0] in ("numba", "numpy", "scipy", "OpenImageIO", "colour",
+                                      "PyOpenColorIO", "cv2")
+               or m.startswith("wbcgrade.core"))
 print("HEAVY", *heavy)
 """
 
 
-def test_help_imports_neither_numba_nor_the_core():
-    run = subprocess.run([sys.executable, "-c", _HELP], capture_output=True, text=True,
-                         timeout=120)
-    assert run.returncode == 0, run.stderr
-    assert "Usage:" in run.stdout
-    assert run.stdout.splitlines()[-1] == "HEAVY", run.stdout.splitlines()[-1]
+def _imports_of(*args: str) -> tuple[str, list[str]]:
+    """(what ``wbcgrade ARGS`` printed, its last two lines: the exit and the heavy modules)."""
+    run = subprocess.run([sys.executable, "-c", _RUN, *args], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT)
+    lines = run.stdout.splitlines()
+    return run.stdout + run.stderr, lines[-2:]
+
+
+@pytest.mark.parametrize("args", [("--help",), ("apply", "--help"), ("batch", "--help"),
+                                  ("video", "--help"), ("report", "--help"),
+                                  ("look", "learn", "--help"), ("look", "extract", "--help")])
+def test_help_imports_no_numerics(args):
+    output, (exit_line, heavy) = _imports_of(*args)
+    assert exit_line == "EXIT 0" and "Usage:" in output, output
+    assert heavy == "HEAVY", heavy
+
+
+@pytest.mark.parametrize("args", [("apply", "{tmp}/missing.jpg", "--preset", "warm"),
+                                  ("apply", "samples/chelsea.jpg", "--bins", "0")])
+def test_mistake_is_answered_before_numerics_load(tmp_path, args):
+    output, (exit_line, heavy) = _imports_of(*(a.format(tmp=tmp_path) for a in args))
+    assert exit_line in ("EXIT 1", "EXIT 2") and "Error:" in output, output
+    assert heavy == "HEAVY", heavy
 
 
 @pytest.mark.slow

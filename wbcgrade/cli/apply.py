@@ -105,13 +105,13 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     FILE applies a saved grade (the JSON of `apply --save-grade`, or a LUT)
     with no fit.
     """
+    options, source = take_grading_options(kwargs, photo=photo)
+    encode = take_write_options(kwargs)
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import bar_callbacks
     from wbcgrade.color.workflow import Progress, apply_photo
 
-    encode = take_write_options(kwargs)
-    options, source = take_grading_options(kwargs)
     look = take_look(ctx, look_path, kwargs, options)
     if look is None and options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")

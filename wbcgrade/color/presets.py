@@ -49,6 +49,7 @@ from wbcgrade.color.colorspace import (
     default_working_space,
     resolve_space,
 )
+from wbcgrade.color.defaults import DEFAULT_PRESET_WIDTH
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
@@ -86,8 +87,6 @@ log = logging.getLogger(__name__)
 
 PRESET_FORMAT = "wbcgrade-preset"
 PRESET_VERSION = 1
-#: Width (in bins) of the Gibbs kernel recorded in presets when none is given.
-DEFAULT_PRESET_WIDTH = 1.5
 _IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp",
                    ".tga", ".dpx", ".jp2", ".heic", ".avif", ".ppm", ".pgm", ".pnm"}
 
