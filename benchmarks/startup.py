@@ -32,7 +32,7 @@ HEAVY = ("numpy", "numba", "scipy", "OpenImageIO", "colour", "PyOpenColorIO", "c
          "wbcgrade.core")
 
 # Runs the CLI as the console script does, then writes the numeric modules it loaded.
-_RUN = """
+_RUN = f"""
 import os, sys
 sys.argv[0] = 'wbcgrade'
 try:
@@ -42,7 +42,7 @@ finally:
     heavy = sorted(h for h in {HEAVY!r} if h in sys.modules)
     with open(os.environ['WBCGRADE_STARTUP_MODULES'], 'w') as f:
         f.write(' '.join(heavy))
-""".format(HEAVY=HEAVY)
+"""
 
 #: (label, arguments after ``wbcgrade``, expected exit: 0, or non-zero for a mistake).
 ROWS = [

@@ -108,3 +108,25 @@ def test_library_warnings_reach_the_user_as_one_line(cli):
         main.commands.pop("warns")
     assert result.exit_code == 0
     assert result.output.strip() == "Warning: sinkhorn stopped after 3 iterations"
+
+
+def test_printed_total_is_the_wall_time_with_start_up(tmp_path):
+    """`apply` prints its start-up as a stage and a total that counts from the process start
+    (the wall time a user waits), not the library's stages alone."""
+    import time
+
+    photo = ROOT / "samples" / "chelsea.jpg"
+    start = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "wbcgrade", "apply", str(photo), "--preset",
+                          "warm", "-o", str(tmp_path / "out.jpg")], capture_output=True,
+                         text=True, timeout=300, cwd=ROOT)
+    wall = time.perf_counter() - start
+    assert run.returncode == 0, run.stderr
+    line = next(t for t in run.stdout.splitlines() if t.startswith("time:"))
+    stages = dict(part.rsplit(" ", 1) for part in line[len("time: "):].split(" (")[0]
+                  .split(", "))
+    total = float(line.rsplit("total ", 1)[1].rstrip("s)"))
+    assert "start-up" in stages and "grade" in stages, line
+    assert sum(float(v.rstrip("s")) for v in stages.values()) <= total + 0.1, line
+    # all but the interpreter's exit: far more than the library's stages (the old total)
+    assert wall * 0.75 <= total <= wall + 0.05, (line, wall)
