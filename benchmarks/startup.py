@@ -7,7 +7,7 @@ numeric modules the command imported (numpy, numba, scipy, OpenImageIO, colour,
 OpenColorIO, cv2, the core). Targets (issue 45): ``--help`` and a mistake import
 none of them; a mistake answered within 0.4 s beyond Python's start.
 
-Options: ``--runs N`` (default 5; medians), ``--only TEXT`` (rows whose command contains
+Options: ``--runs N`` (default 5; medians), ``--only TEXT`` (rows whose label or command contains
 TEXT), ``--no-grade`` (skip the README's first grade, which fills the caches on its
 first run and is timed on the following ones).
 """
@@ -60,7 +60,7 @@ ROWS = [
     ("mistake: report missing photo", "report {tmp}/missing.jpg --preset warm", 1),
     ("mistake: look learn missing", "look learn {tmp}/nobefore {tmp}/noafter "
                                     "-o {tmp}/look.json", 1),
-    ("mistake: look extract missing", "look extract {tmp}/nofolder -o {tmp}/look.json", 1),
+    ("mistake: look extract missing", "look extract {tmp}/nofolder -o {tmp}/look.cube", 1),
     ("mistake: preset build missing", "preset build {tmp}/nofolder -o {tmp}/p.npz", 1),
 ]
 GRADE = ("README first grade (cached)",
@@ -96,7 +96,7 @@ def main() -> None:
     parser.add_argument("--no-grade", action="store_true")
     parser.add_argument("--json", action="store_true", help="also print the rows as JSON")
     ns = parser.parse_args()
-    rows = [r for r in ROWS + ([] if ns.no_grade else [GRADE]) if ns.only in r[1]]
+    rows = [r for r in ROWS + ([] if ns.no_grade else [GRADE]) if ns.only in r[0] or ns.only in r[1]]
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "WBCGRADE_STARTUP_MODULES": f"{tmp}/modules.txt",
                "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT),

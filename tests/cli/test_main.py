@@ -55,8 +55,15 @@ def test_help_imports_no_numerics(args):
     assert heavy == "HEAVY", heavy
 
 
-@pytest.mark.parametrize("args", [("apply", "{tmp}/missing.jpg", "--preset", "warm"),
-                                  ("apply", "samples/chelsea.jpg", "--bins", "0")])
+@pytest.mark.parametrize("args", [
+    ("apply", "{tmp}/missing.jpg", "--preset", "warm"),
+    ("apply", "samples/chelsea.jpg", "--bins", "0"),
+    ("apply", "samples/chelsea.jpg", "--preset", "no-such-look", "-o", "{tmp}/x.jpg"),
+    ("batch", "{tmp}/no-folder", "-o", "{tmp}/out", "--preset", "warm"),
+    ("video", "{tmp}/missing.mp4", "--preset", "warm"),
+    ("look", "learn", "{tmp}/before", "{tmp}/after", "-o", "{tmp}/look.json"),
+    ("preset", "build", "{tmp}/no-folder", "-o", "{tmp}/p.npz"),
+])
 def test_mistake_is_answered_before_numerics_load(tmp_path, args):
     output, (exit_line, heavy) = _imports_of(*(a.format(tmp=tmp_path) for a in args))
     assert exit_line in ("EXIT 1", "EXIT 2") and "Error:" in output, output

@@ -73,15 +73,16 @@ def write_options() -> list:
     return click_options("quality", "bit_depth")
 
 
-def check_photo(photo: str) -> None:
-    """InputError for a PHOTO that does not exist (as the library says it), before the
-    command imports numpy and the core: a mistake is answered at once."""
+def check_photo(photo: str, missing: str = "no such file") -> None:
+    """InputError ``PHOTO: missing`` for an input that does not exist (as the library
+    says it), before the command imports numpy and the core: a mistake is answered
+    at once."""
     from pathlib import Path
 
     from wbcgrade.errors import InputError
 
     if not Path(photo).exists():
-        raise InputError(f"{photo}: no such file")
+        raise InputError(f"{photo}: {missing}")
 
 
 def take_write_options(kwargs: dict):
@@ -416,6 +417,10 @@ def take_grading_options(kwargs: dict, photo: str | None = None) -> tuple:
         raise flag_error(exc) from None
     if photo is not None:
         check_photo(photo)
+    if values["preset"] is not None and values["style_dir"] is None and not saved_look:
+        from wbcgrade.color.preset_names import resolve_preset
+
+        resolve_preset(values["preset"])  # an unknown name, answered before numpy loads
     # numpy and OpenImageIO load here, once the options and PHOTO are known to be valid
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.presets import StyleSource
