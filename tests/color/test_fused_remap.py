@@ -129,3 +129,67 @@ def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, ra
     np.testing.assert_allclose(plain, compiled, rtol=0, atol=5e-5)
     np.testing.assert_allclose(regrain_module._box_numpy(compiled, radius),
                                regrain_module._box(compiled, radius), rtol=0, atol=1e-5)
+
+
+# numpy twins: a small photo's first grade runs numpy instead of loading numba's compiler
+# (wbcgrade.core.numpy_first); both give the same float32 numbers, bit for bit.
+
+def _kernel_trilinear(colors, table, strength):
+    from wbcgrade.color.remap import _trilinear
+    from wbcgrade.core import in_bands
+
+    out = np.empty_like(colors)
+    in_bands(_trilinear, colors.shape[0], colors, table, np.float32(strength), out)
+    return out
+
+
+@pytest.mark.parametrize("size", [2, 9, 33])
+@pytest.mark.parametrize("strength", [1.0, 0.37, 0.0])
+def test_trilinear_numpy_twin_is_the_kernel_bit_for_bit(rng, size, strength):
+    from wbcgrade.color.remap import _trilinear_numpy
+
+    colors = (rng.random((5000, 3)) * 1.4 - 0.2).astype(np.float32)  # out of range too
+    colors[:64] = np.round(colors[:64] * 4) / 4  # nodes, 0 and 1 exactly
+    colors[64] = -0.0
+    table = (rng.random((size,) * 3 + (3,)) * 1.2 - 0.1).astype(np.float32)
+    twin = _trilinear_numpy(colors, table, strength)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), _kernel_trilinear(colors, table, strength)
+                          .view(np.uint32))
+
+
+@pytest.mark.parametrize("shape, coarse, step", [((40, 57), (40, 57), 1.0),
+                                                 ((97, 130), (33, 44), 3.0),
+                                                 ((50, 80), (2, 3), 27.0),
+                                                 ((16, 16), (1, 1), 16.0)])
+def test_upsampled_apply_numpy_twin_is_the_kernel_bit_for_bit(rng, shape, coarse, step):
+    from wbcgrade.core import in_bands
+
+    source = rng.random((*shape, 3)).astype(np.float32)
+    source[0, 0] = 0.0
+    coefficients = (rng.standard_normal((*coarse, 12)) * 0.3).astype(np.float32)
+    lw = coarse[1]
+    fx = np.minimum(np.maximum((np.arange(shape[1]) + 0.5) / step - 0.5, 0.0), lw - 1.0)
+    left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(shape[1], np.int64)
+    right = np.minimum(left + 1, lw - 1)
+    weight = (fx - left).astype(np.float32)
+    kernel = np.empty_like(source)
+    in_bands(regrain_module._apply_rows, shape[0], source, coefficients, step, left, right,
+             weight, kernel)
+    twin = np.empty_like(source)
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, twin)
+    assert np.array_equal(twin.view(np.uint32), kernel.view(np.uint32))
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, source)
+    assert np.array_equal(source.view(np.uint32), kernel.view(np.uint32))  # in place
+
+
+def test_numpy_first_only_for_small_work_before_the_kernel_ran():
+    from wbcgrade.core import compiled, numpy_first
+
+    @compiled()
+    def kernel(x):  # pragma: no cover - compiled
+        return x + 1
+
+    assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
+    kernel(1)
+    assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now

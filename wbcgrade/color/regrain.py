@@ -31,7 +31,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core import compiled, in_bands
+from wbcgrade.core import compiled, in_bands, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
@@ -429,8 +429,42 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
     right = np.minimum(left + 1, lw - 1)
     weight = (fx - left).astype(np.float32)
+    if numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
+        _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
+        return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
              weight, out)
+
+
+#: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
+#: has not run in the process (see :func:`wbcgrade.core.numpy_first`).
+_NUMPY_APPLY_PIXELS = 400_000
+
+
+def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
+                      left: np.ndarray, right: np.ndarray, weight: np.ndarray,
+                      out: np.ndarray) -> None:
+    """``_apply_rows`` over every row with numpy, bit for bit (float32 arithmetic in the
+    kernel's order); ``out`` may be ``source``."""
+    h = source.shape[0]
+    lh = coefficients.shape[0]
+    fy = np.minimum(np.maximum((np.arange(h) + 0.5) / step - 0.5, 0.0), lh - 1.0)
+    y0 = np.minimum(fy.astype(np.int64), lh - 2) if lh > 1 else np.zeros(h, np.int64)
+    ty = (fy - y0).astype(np.float32)[:, None, None]
+    y1 = np.minimum(y0 + 1, lh - 1)
+    one = np.float32(1.0)
+    rows = (one - ty) * coefficients[y0] + ty * coefficients[y1]  # (h, lw, 12)
+    tx = weight[None, :]
+    s0, s1, s2 = source[..., 0], source[..., 1], source[..., 2]
+    at0, at1 = rows[:, left], rows[:, right]  # (h, w, 12)
+    graded = np.empty(source.shape, np.float32)
+    for c in range(3):
+        value = (one - tx) * (at0[..., 9 + c] + at0[..., c] * s0 + at0[..., 3 + c] * s1
+                              + at0[..., 6 + c] * s2) \
+            + tx * (at1[..., 9 + c] + at1[..., c] * s0 + at1[..., 3 + c] * s1
+                    + at1[..., 6 + c] * s2)
+        graded[..., c] = source[..., c] + value
+    np.clip(graded, np.float32(0.0), one, out=out)
 
 
 @compiled(nogil=True, cache=True)

@@ -37,7 +37,7 @@ from typing import Any
 
 import numba
 
-__all__ = ["compiled", "parallel_layer", "in_bands", "THREAD_SAFE_LAYERS"]
+__all__ = ["compiled", "parallel_layer", "in_bands", "numpy_first", "THREAD_SAFE_LAYERS"]
 
 #: numba threading layers that accept parallel calls from several threads at once.
 THREAD_SAFE_LAYERS = ("tbb", "omp")
@@ -154,6 +154,15 @@ def compiled(**options: Any) -> Callable[[Callable], Callable]:
         return dispatcher
 
     return decorate
+
+
+def numpy_first(kernel: Callable, size: int, limit: int) -> bool:
+    """Whether a numpy twin of compiled ``kernel`` (the same numbers, bit for bit) should
+    do ``size`` items of work instead: the work is small (``size <= limit``) and the
+    kernel has not run in this process yet. Its first call loads numba's compiler
+    (about half a second, though the kernel is cached) or, after an install, compiles
+    it (seconds): more than a small photo's whole grade. Once a kernel has run, it runs."""
+    return size <= limit and not getattr(kernel, "overloads", None)
 
 
 def in_bands(kernel: Callable, n: int, *args: Any, min_band: int = 8) -> None:
