@@ -148,7 +148,7 @@ def _kernel_trilinear(colors, table, strength):
 def test_trilinear_numpy_twin_is_the_kernel_bit_for_bit(rng, size, strength):
     from wbcgrade.color.remap import _trilinear_numpy
 
-    colors = (rng.random((5000, 3)) * 1.4 - 0.2).astype(np.float32)  # out of range too
+    colors = (rng.random((20000, 3)) * 1.4 - 0.2).astype(np.float32)  # > 1 chunk, out of range
     colors[:64] = np.round(colors[:64] * 4) / 4  # nodes, 0 and 1 exactly
     colors[64] = -0.0
     table = (rng.random((size,) * 3 + (3,)) * 1.2 - 0.1).astype(np.float32)

@@ -206,7 +206,16 @@ _NUMPY_PIXELS = 400_000
 
 def _trilinear_numpy(colors: np.ndarray, table: np.ndarray, strength: float) -> np.ndarray:
     """``_trilinear`` with numpy, bit for bit (float64 arithmetic in the kernel's order,
-    rounded to float32 once), for finite (N, 3) float32 ``colors``."""
+    rounded to float32 once), for finite (N, 3) float32 ``colors``; in chunks that stay
+    in the CPU's cache."""
+    out = np.empty(colors.shape, np.float32)
+    for start in range(0, colors.shape[0], 16384):
+        out[start:start + 16384] = _trilinear_chunk(colors[start:start + 16384], table,
+                                                    strength)
+    return out
+
+
+def _trilinear_chunk(colors: np.ndarray, table: np.ndarray, strength: float) -> np.ndarray:
     n = table.shape[0]
     x = np.clip(colors.astype(np.float64), 0.0, 1.0)
     position = x * (n - 1)
