@@ -193,3 +193,18 @@ def test_numpy_first_only_for_small_work_before_the_kernel_ran():
     assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
     kernel(1)
     assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now
+
+
+@pytest.mark.parametrize("shape", [(30, 45), (1, 1), (1, 7), (5, 3), (64, 9)])
+@pytest.mark.parametrize("radius", [1, 2, 7, 40])
+def test_uniform_filter_numpy_twin_is_scipys_bit_for_bit(rng, shape, radius):
+    """A small photo's regrain filters with numpy while scipy.ndimage is not loaded (its
+    import costs more than the filter): the numbers of scipy's reflect-mode filter."""
+    from scipy import ndimage
+
+    plane = (rng.random(shape) * rng.choice([1e-3, 1.0, 100.0])).astype(np.float32)
+    expected = np.empty_like(plane)
+    ndimage.uniform_filter(plane, size=2 * radius + 1, mode="reflect", output=expected)
+    twin = regrain_module._uniform_filter_numpy(plane, 2 * radius + 1)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), expected.view(np.uint32))

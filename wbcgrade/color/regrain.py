@@ -285,8 +285,6 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
 def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
     """:func:`_box` with scipy.ndimage's reflect-mode uniform filter (float64 running
     sums), one channel a plane, on as many threads as numba uses."""
-    from scipy import ndimage
-
     x = np.ascontiguousarray(x, dtype=np.float32)
     out = np.empty_like(x)
     if x.size == 0:
@@ -295,8 +293,7 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
     means = np.empty_like(planes)
 
     def window_mean(k: int) -> None:
-        ndimage.uniform_filter(planes[k], size=2 * radius + 1, mode="reflect",
-                               output=means[k])
+        _uniform_filter(planes[k], 2 * radius + 1, means[k])
 
     _threaded(window_mean, x.shape[2])
     out[...] = np.moveaxis(means, 0, -1)
@@ -308,8 +305,6 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
     moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
     of rows. Nothing to compile."""
-    from scipy import ndimage
-
     h, w = guide.shape[:2]
     out = np.empty((h, w, 12), np.float32)
     if h == 0 or w == 0:
@@ -324,14 +319,48 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     def window_mean(k: int) -> None:
         plane = first[k] if k < 6 else np.multiply(first[pairs[k - 6][0]],
                                                    first[pairs[k - 6][1]])
-        ndimage.uniform_filter(np.ascontiguousarray(plane), size=2 * radius + 1,
-                               mode="reflect", output=means[k])
+        _uniform_filter(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
     for start in range(0, h, 64):
         _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64],
                     None if prior is None else prior[start:start + 64])
     return out
+
+
+def _uniform_filter(plane: np.ndarray, size: int, out: np.ndarray) -> None:
+    """``scipy.ndimage.uniform_filter(plane, size, mode="reflect", output=out)`` for a 2-D
+    float32 ``plane``: scipy's own when scipy.ndimage is loaded already, else its numpy
+    twin (:func:`_uniform_filter_numpy`, the same numbers; importing scipy.ndimage costs
+    a small photo's grade more than the filter itself)."""
+    import sys
+
+    if "scipy.ndimage" in sys.modules:
+        sys.modules["scipy.ndimage"].uniform_filter(plane, size=size, mode="reflect",
+                                                    output=out)
+        return
+    out[...] = _uniform_filter_numpy(plane, size)
+
+
+def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:
+    """scipy.ndimage's reflect-mode ``uniform_filter`` of a 2-D float32 plane, bit for bit:
+    along each axis in turn, each line extended by reflection (``d c b a | a b c d | d c
+    b a``), a running float64 sum (the first window's sum, then ``+ entering - leaving``)
+    divided by ``size``, rounded to float32 between the axes."""
+    x = plane
+    before = size // 2
+    after = size - before - 1
+    for axis in (0, 1):
+        lines = np.moveaxis(x, axis, -1).astype(np.float64)
+        n = lines.shape[-1]
+        padded = np.pad(lines, ((0, 0), (before, after)), mode="symmetric")
+        sums = np.empty(lines.shape, np.float64)
+        sums[:, 0] = np.add.accumulate(padded[:, :size], axis=1)[:, -1]  # in order
+        sums[:, 1:] = padded[:, size:size + n - 1] - padded[:, :n - 1]
+        np.add.accumulate(sums, axis=1, out=sums)
+        sums /= size
+        x = np.moveaxis(sums.astype(np.float32), -1, axis)
+    return x
 
 
 def _threaded(task, n: int) -> None:
