@@ -96,7 +96,8 @@ def main() -> None:
     parser.add_argument("--no-grade", action="store_true")
     parser.add_argument("--json", action="store_true", help="also print the rows as JSON")
     ns = parser.parse_args()
-    rows = [r for r in ROWS + ([] if ns.no_grade else [GRADE]) if ns.only in r[0] or ns.only in r[1]]
+    rows = [r for r in ROWS + ([] if ns.no_grade else [GRADE])
+            if ns.only in r[0] or ns.only in r[1]]
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "WBCGRADE_STARTUP_MODULES": f"{tmp}/modules.txt",
                "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT),

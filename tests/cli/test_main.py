@@ -137,3 +137,15 @@ def test_printed_total_is_the_wall_time_with_start_up(tmp_path):
     assert sum(float(v.rstrip("s")) for v in stages.values()) <= total + 0.1, line
     # all but the interpreter's exit: far more than the library's stages (the old total)
     assert wall * 0.75 <= total <= wall + 0.05, (line, wall)
+
+
+def test_small_photos_grade_loads_no_compiler(tmp_path):
+    """The README's first grade (a 0.14-megapixel photo, a shipped preset) runs numpy twins
+    of the compiled kernels: numba (its compiler: seconds after an install, half a second
+    from its cache) and scipy are never imported."""
+    output, (exit_line, heavy) = _imports_of("apply", "samples/chelsea.jpg", "--preset", "warm",
+                                             "-o", str(tmp_path / "out.jpg"))
+    assert exit_line == "EXIT 0" and "wrote" in output, output
+    modules = heavy.split()[1:]
+    assert "numpy" in modules and "OpenImageIO" in modules, modules
+    assert not [m for m in modules if m.split(".")[0] in ("numba", "scipy")], modules

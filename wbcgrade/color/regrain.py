@@ -31,7 +31,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core import compiled, in_bands, numpy_first
+from wbcgrade.core import compiled, in_bands, num_threads, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
@@ -366,9 +366,7 @@ def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:
 def _threaded(task, n: int) -> None:
     """``task(k)`` for k in range(n), on as many threads as numba uses (numpy and
     scipy.ndimage release the GIL in their loops)."""
-    import numba
-
-    threads = min(n, numba.get_num_threads())
+    threads = min(n, num_threads())
     if threads <= 1:
         for k in range(n):
             task(k)

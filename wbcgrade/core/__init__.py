@@ -10,7 +10,7 @@ kernels use: ``compiled`` (numba with a cache that never fails a run),
 
 from wbcgrade.core._barycenter_debiased import debiased_barycenter
 from wbcgrade.core._cpu import fast_cpu, n_workers
-from wbcgrade.core._jit import compiled, in_bands, numpy_first
+from wbcgrade.core._jit import compiled, in_bands, num_threads, numpy_first
 from wbcgrade.core.barycenter import (
     BarycenterResult,
     BarycenterSolver,
@@ -64,6 +64,7 @@ __all__ = [
     "masked_loss",
     "compiled",
     "in_bands",
+    "num_threads",
     "numpy_first",
     "fast_cpu",
     "n_workers",
