@@ -183,14 +183,24 @@ def test_upsampled_apply_numpy_twin_is_the_kernel_bit_for_bit(rng, shape, coarse
     assert np.array_equal(source.view(np.uint32), kernel.view(np.uint32))  # in place
 
 
-def test_numpy_first_only_for_small_work_before_the_kernel_ran():
+def test_numpy_first_only_for_small_work_before_the_kernel_ran(monkeypatch):
+    import wbcgrade.core._jit as jit
     from wbcgrade.core import compiled, numpy_first
+
+    monkeypatch.setattr(jit, "_prefer_compiled", False)  # as in a fresh process
 
     @compiled()
     def kernel(x):  # pragma: no cover - compiled
         return x + 1
 
     assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
+    # a batch of small work: the twin takes up to 4 x the limit, then the kernel is loaded
+    assert [numpy_first(kernel, 100, 100) for _ in range(5)] == [True] * 3 + [False] * 2
+    other = compiled()(lambda x: x - 1)
+    assert numpy_first(other, 10, 100)  # each kernel its own budget
+    monkeypatch.setattr(jit, "_prefer_compiled", True)  # a batch: kernels from the start
+    assert not numpy_first(other, 10, 100)
+    monkeypatch.setattr(jit, "_prefer_compiled", False)
     kernel(1)
     assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core import compiled, in_bands, num_threads, numpy_first
+from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
@@ -328,18 +328,29 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     return out
 
 
+#: Plane pixels the numpy twin of the box filter filters in a process before scipy.ndimage
+#: is imported (about four small photos' regrain: then a batch pays the import once).
+_TWIN_FILTER_PIXELS = 20_000_000
+_twin_filtered = 0
+
+
 def _uniform_filter(plane: np.ndarray, size: int, out: np.ndarray) -> None:
     """``scipy.ndimage.uniform_filter(plane, size, mode="reflect", output=out)`` for a 2-D
-    float32 ``plane``: scipy's own when scipy.ndimage is loaded already, else its numpy
-    twin (:func:`_uniform_filter_numpy`, the same numbers; importing scipy.ndimage costs
-    a small photo's grade more than the filter itself)."""
+    float32 ``plane``: scipy's own when scipy.ndimage is loaded already (or the twin has
+    filtered :data:`_TWIN_FILTER_PIXELS`), else its numpy twin
+    (:func:`_uniform_filter_numpy`, the same numbers; importing scipy.ndimage costs a
+    small photo's grade more than its filters)."""
     import sys
 
-    if "scipy.ndimage" in sys.modules:
-        sys.modules["scipy.ndimage"].uniform_filter(plane, size=size, mode="reflect",
-                                                    output=out)
+    global _twin_filtered
+    if "scipy.ndimage" not in sys.modules and not compiled_preferred() \
+            and _twin_filtered + plane.size <= _TWIN_FILTER_PIXELS:
+        _twin_filtered += plane.size
+        out[...] = _uniform_filter_numpy(plane, size)
         return
-    out[...] = _uniform_filter_numpy(plane, size)
+    from scipy import ndimage
+
+    ndimage.uniform_filter(plane, size=size, mode="reflect", output=out)
 
 
 def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:

@@ -36,8 +36,8 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["compiled", "parallel_layer", "in_bands", "numpy_first", "num_threads",
-           "THREAD_SAFE_LAYERS"]
+__all__ = ["compiled", "parallel_layer", "in_bands", "numpy_first", "prefer_compiled",
+           "compiled_preferred", "num_threads", "THREAD_SAFE_LAYERS"]
 
 #: numba threading layers that accept parallel calls from several threads at once.
 THREAD_SAFE_LAYERS = ("tbb", "omp")
@@ -268,15 +268,46 @@ def num_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: Work each numpy twin has done in this process (see :func:`numpy_first`), by kernel.
+_TWIN_WORK: dict[int, int] = {}
+#: A twin takes work while its total stays under this many times its per-call limit.
+_TWIN_BUDGET = 4
+
+
+_prefer_compiled = False
+
+
+def prefer_compiled() -> None:
+    """From now on in this process, compiled kernels run even on small work (no numpy
+    twins, :func:`numpy_first`): for a process about to grade many photos (a batch),
+    which pays numba's start once and then runs the faster kernels."""
+    global _prefer_compiled
+    _prefer_compiled = True
+
+
+def compiled_preferred() -> bool:
+    """Whether :func:`prefer_compiled` was called in this process."""
+    return _prefer_compiled
+
+
 def numpy_first(kernel: Callable, size: int, limit: int) -> bool:
     """Whether a numpy twin of compiled ``kernel`` (the same numbers, bit for bit) should
-    do ``size`` items of work instead: the work is small (``size <= limit``) and the
-    kernel has not run in this process yet. Its first call loads numba's compiler
-    (about half a second, though the kernel is cached) or, after an install, compiles
-    it (seconds): more than a small photo's whole grade. Once a kernel has run, it runs."""
-    if isinstance(kernel, _Kernel) and kernel._dispatcher is None:
-        return size <= limit  # numba is not even loaded
-    return size <= limit and not getattr(kernel, "overloads", None)
+    do ``size`` items of work instead: the work is small (``size <= limit``), the
+    kernel has not run in this process yet, and the twin's work so far stays under
+    ``4 * limit``. A kernel's first call loads numba's compiler (about half a second,
+    though the kernel is cached) or, after an install, compiles it (seconds): more
+    than a small photo's whole grade; a process that grades many small photos (a
+    batch) pays that once and runs the faster kernel from then on."""
+    if size > limit or _prefer_compiled:
+        return False
+    if not (isinstance(kernel, _Kernel) and kernel._dispatcher is None) \
+            and getattr(kernel, "overloads", None):
+        return False  # the kernel has run: it is the faster one now
+    done = _TWIN_WORK.get(id(kernel), 0) + size
+    if done > _TWIN_BUDGET * limit:
+        return False
+    _TWIN_WORK[id(kernel)] = done
+    return True
 
 
 def in_bands(kernel: Callable, n: int, *args: Any, min_band: int = 8) -> None:
