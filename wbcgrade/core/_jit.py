@@ -244,11 +244,10 @@ def compiled(**options: Any) -> Callable[[Callable], Callable]:
     def decorate(function: Callable) -> Callable:
         kernel = _Kernel(function, options)
         with _MAKING:
-            if _made:  # numba is in use already: as numba.njit would
-                kernel._make(sys.modules["numba"])
-                kernel._rebind_callees()
-                return kernel._dispatcher
             _PENDING.append(kernel)
+            if _made or "numba" in sys.modules:  # numba is loaded: the dispatcher now
+                _make_all()
+                return kernel._dispatcher
         return kernel
 
     return decorate
