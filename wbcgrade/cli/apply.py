@@ -121,16 +121,14 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     started = command_started()
     options, source = take_grading_options(kwargs, photo=photo)
     encode = take_write_options(kwargs)
-    from tqdm import tqdm
-
-    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.cli._progress import bar_callbacks, progress_bar
     from wbcgrade.color.workflow import Progress, apply_photo
 
     look = take_look(ctx, look_path, kwargs, options)
     if look is None and options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     graded_from = time.perf_counter()
-    with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
+    with progress_bar(desc="styles" if look is None else "look", leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source if look is None else look, options, output=output,
                              lut=lut, lut_size=lut_size, lut_format=lut_format,
