@@ -21,27 +21,53 @@ def test_version_and_help(cli):
     assert "demo" not in result.output  # an example script now: examples/demo.py
 
 
-# `wbcgrade --help` as the console script runs it, in a fresh interpreter.
-_HELP = """
+# `wbcgrade ARGS` as the console script runs it, in a fresh interpreter: the numeric
+# modules it imported.
+_RUN = """
 import sys
 from wbcgrade.cli import main
 try:
-    main(["--help"])
+    main(sys.argv[1:])
 except SystemExit as exc:
-    assert exc.code == 0, exc.code
+    print("EXIT", exc.code)
 heavy = sorted(m for m in sys.modules
-               if m.split(".")[0] in ("numba", "numpy", "scipy")
-               or m.startswith(("wbcgrade.core", "wbcgrade.color")))
+               if m.split(".")[0] in ("numba", "numpy", "scipy", "OpenImageIO", "colour",
+                                      "PyOpenColorIO", "cv2")
+               or m.startswith("wbcgrade.core"))
 print("HEAVY", *heavy)
 """
 
 
-def test_help_imports_neither_numba_nor_the_core():
-    run = subprocess.run([sys.executable, "-c", _HELP], capture_output=True, text=True,
-                         timeout=120)
-    assert run.returncode == 0, run.stderr
-    assert "Usage:" in run.stdout
-    assert run.stdout.splitlines()[-1] == "HEAVY", run.stdout.splitlines()[-1]
+def _imports_of(*args: str) -> tuple[str, list[str]]:
+    """(what ``wbcgrade ARGS`` printed, its last two lines: the exit and the heavy modules)."""
+    run = subprocess.run([sys.executable, "-c", _RUN, *args], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT)
+    lines = run.stdout.splitlines()
+    return run.stdout + run.stderr, lines[-2:]
+
+
+@pytest.mark.parametrize("args", [("--help",), ("apply", "--help"), ("batch", "--help"),
+                                  ("video", "--help"), ("report", "--help"),
+                                  ("look", "learn", "--help"), ("look", "extract", "--help")])
+def test_help_imports_no_numerics(args):
+    output, (exit_line, heavy) = _imports_of(*args)
+    assert exit_line == "EXIT 0" and "Usage:" in output, output
+    assert heavy == "HEAVY", heavy
+
+
+@pytest.mark.parametrize("args", [
+    ("apply", "{tmp}/missing.jpg", "--preset", "warm"),
+    ("apply", "samples/chelsea.jpg", "--bins", "0"),
+    ("apply", "samples/chelsea.jpg", "--preset", "no-such-look", "-o", "{tmp}/x.jpg"),
+    ("batch", "{tmp}/no-folder", "-o", "{tmp}/out", "--preset", "warm"),
+    ("video", "{tmp}/missing.mp4", "--preset", "warm"),
+    ("look", "learn", "{tmp}/before", "{tmp}/after", "-o", "{tmp}/look.json"),
+    ("preset", "build", "{tmp}/no-folder", "-o", "{tmp}/p.npz"),
+])
+def test_mistake_is_answered_before_numerics_load(tmp_path, args):
+    output, (exit_line, heavy) = _imports_of(*(a.format(tmp=tmp_path) for a in args))
+    assert exit_line in ("EXIT 1", "EXIT 2") and "Error:" in output, output
+    assert heavy == "HEAVY", heavy
 
 
 @pytest.mark.slow
@@ -89,3 +115,37 @@ def test_library_warnings_reach_the_user_as_one_line(cli):
         main.commands.pop("warns")
     assert result.exit_code == 0
     assert result.output.strip() == "Warning: sinkhorn stopped after 3 iterations"
+
+
+def test_printed_total_is_the_wall_time_with_start_up(tmp_path):
+    """`apply` prints its start-up as a stage and a total that counts from the process start
+    (the wall time a user waits), not the library's stages alone."""
+    import time
+
+    photo = ROOT / "samples" / "chelsea.jpg"
+    start = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "wbcgrade", "apply", str(photo), "--preset",
+                          "warm", "-o", str(tmp_path / "out.jpg")], capture_output=True,
+                         text=True, timeout=300, cwd=ROOT)
+    wall = time.perf_counter() - start
+    assert run.returncode == 0, run.stderr
+    line = next(t for t in run.stdout.splitlines() if t.startswith("time:"))
+    stages = dict(part.rsplit(" ", 1) for part in line[len("time: "):].split(" (")[0]
+                  .split(", "))
+    total = float(line.rsplit("total ", 1)[1].rstrip("s)"))
+    assert "start-up" in stages and "grade" in stages, line
+    assert sum(float(v.rstrip("s")) for v in stages.values()) <= total + 0.1, line
+    # all but the interpreter's exit: far more than the library's stages (the old total)
+    assert wall * 0.75 <= total <= wall + 0.05, (line, wall)
+
+
+def test_small_photos_grade_loads_no_compiler(tmp_path):
+    """The README's first grade (a 0.14-megapixel photo, a shipped preset) runs numpy twins
+    of the compiled kernels: numba (its compiler: seconds after an install, half a second
+    from its cache) and scipy are never imported."""
+    output, (exit_line, heavy) = _imports_of("apply", "samples/chelsea.jpg", "--preset", "warm",
+                                             "-o", str(tmp_path / "out.jpg"))
+    assert exit_line == "EXIT 0" and "wrote" in output, output
+    modules = heavy.split()[1:]
+    assert "numpy" in modules and "OpenImageIO" in modules, modules
+    assert not [m for m in modules if m.split(".")[0] in ("numba", "scipy")], modules

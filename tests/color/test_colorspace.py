@@ -467,3 +467,29 @@ def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     luma = grade.color_map.astype(np.float64) @ cct.luma_weights
     for axis in range(3):
         assert np.diff(luma, axis=axis).min() > -1e-5
+
+
+def test_a_peak_is_searched_once_then_read_back(tmp_path, monkeypatch):
+    """The exposure peak of a working space (four colour conversions) is kept in the
+    cache folder: a later process reads the same number without converting; a damaged
+    file only costs a search."""
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path))
+    working = cs.default_working_space()
+    linear = cs.linear_partner(working)
+    searched = cs._search_peak(linear, working)
+    cs._peak.cache_clear()
+    assert cs.peak(linear, working) == searched
+    assert (tmp_path / "peaks.json").is_file()
+
+    def no_conversion(*args):
+        raise AssertionError("converted again")
+
+    cs._peak.cache_clear()  # a new process: the number comes from the file
+    monkeypatch.setattr(cs, "convert", no_conversion)
+    assert cs.peak(linear, working) == searched
+    (tmp_path / "peaks.json").write_text("{not json", encoding="utf-8")
+    cs._peak.cache_clear()
+    monkeypatch.undo()
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path))
+    assert cs.peak(linear, working) == searched
+    cs._peak.cache_clear()

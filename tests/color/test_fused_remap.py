@@ -129,3 +129,92 @@ def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, ra
     np.testing.assert_allclose(plain, compiled, rtol=0, atol=5e-5)
     np.testing.assert_allclose(regrain_module._box_numpy(compiled, radius),
                                regrain_module._box(compiled, radius), rtol=0, atol=1e-5)
+
+
+# numpy twins: a small photo's first grade runs numpy instead of loading numba's compiler
+# (wbcgrade.core.numpy_first); both give the same float32 numbers, bit for bit.
+
+def _kernel_trilinear(colors, table, strength):
+    from wbcgrade.color.remap import _trilinear
+    from wbcgrade.core import in_bands
+
+    out = np.empty_like(colors)
+    in_bands(_trilinear, colors.shape[0], colors, table, np.float32(strength), out)
+    return out
+
+
+@pytest.mark.parametrize("size", [2, 9, 33])
+@pytest.mark.parametrize("strength", [1.0, 0.37, 0.0])
+def test_trilinear_numpy_twin_is_the_kernel_bit_for_bit(rng, size, strength):
+    from wbcgrade.color.remap import _trilinear_numpy
+
+    colors = (rng.random((20000, 3)) * 1.4 - 0.2).astype(np.float32)  # > 1 chunk, out of range
+    colors[:64] = np.round(colors[:64] * 4) / 4  # nodes, 0 and 1 exactly
+    colors[64] = -0.0
+    table = (rng.random((size,) * 3 + (3,)) * 1.2 - 0.1).astype(np.float32)
+    twin = _trilinear_numpy(colors, table, strength)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), _kernel_trilinear(colors, table, strength)
+                          .view(np.uint32))
+
+
+@pytest.mark.parametrize("shape, coarse, step", [((40, 57), (40, 57), 1.0),
+                                                 ((97, 130), (33, 44), 3.0),
+                                                 ((50, 80), (2, 3), 27.0),
+                                                 ((16, 16), (1, 1), 16.0)])
+def test_upsampled_apply_numpy_twin_is_the_kernel_bit_for_bit(rng, shape, coarse, step):
+    from wbcgrade.core import in_bands
+
+    source = rng.random((*shape, 3)).astype(np.float32)
+    source[0, 0] = 0.0
+    coefficients = (rng.standard_normal((*coarse, 12)) * 0.3).astype(np.float32)
+    lw = coarse[1]
+    fx = np.minimum(np.maximum((np.arange(shape[1]) + 0.5) / step - 0.5, 0.0), lw - 1.0)
+    left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(shape[1], np.int64)
+    right = np.minimum(left + 1, lw - 1)
+    weight = (fx - left).astype(np.float32)
+    kernel = np.empty_like(source)
+    in_bands(regrain_module._apply_rows, shape[0], source, coefficients, step, left, right,
+             weight, kernel)
+    twin = np.empty_like(source)
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, twin)
+    assert np.array_equal(twin.view(np.uint32), kernel.view(np.uint32))
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, source)
+    assert np.array_equal(source.view(np.uint32), kernel.view(np.uint32))  # in place
+
+
+def test_numpy_first_only_for_small_work_before_the_kernel_ran(monkeypatch):
+    import wbcgrade.core._jit as jit
+    from wbcgrade.core import compiled, numpy_first
+
+    monkeypatch.setattr(jit, "_prefer_compiled", False)  # as in a fresh process
+
+    @compiled()
+    def kernel(x):  # pragma: no cover - compiled
+        return x + 1
+
+    assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
+    # a batch of small work: the twin takes up to 4 x the limit, then the kernel is loaded
+    assert [numpy_first(kernel, 100, 100) for _ in range(5)] == [True] * 3 + [False] * 2
+    other = compiled()(lambda x: x - 1)
+    assert numpy_first(other, 10, 100)  # each kernel its own budget
+    monkeypatch.setattr(jit, "_prefer_compiled", True)  # a batch: kernels from the start
+    assert not numpy_first(other, 10, 100)
+    monkeypatch.setattr(jit, "_prefer_compiled", False)
+    kernel(1)
+    assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now
+
+
+@pytest.mark.parametrize("shape", [(30, 45), (1, 1), (1, 7), (5, 3), (64, 9)])
+@pytest.mark.parametrize("radius", [1, 2, 7, 40])
+def test_uniform_filter_numpy_twin_is_scipys_bit_for_bit(rng, shape, radius):
+    """A small photo's regrain filters with numpy while scipy.ndimage is not loaded (its
+    import costs more than the filter): the numbers of scipy's reflect-mode filter."""
+    from scipy import ndimage
+
+    plane = (rng.random(shape) * rng.choice([1e-3, 1.0, 100.0])).astype(np.float32)
+    expected = np.empty_like(plane)
+    ndimage.uniform_filter(plane, size=2 * radius + 1, mode="reflect", output=expected)
+    twin = regrain_module._uniform_filter_numpy(plane, 2 * radius + 1)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), expected.view(np.uint32))

@@ -58,3 +58,16 @@ def test_an_8_bit_file_holds_what_openimageio_would_have_written(tmp_path, rng, 
     written = write_image(tmp_path / f"out{suffix}", pixels, like)
     expected = oiio.ImageBuf(str(source)).get_pixels(oiio.UINT8)
     assert np.array_equal(oiio.ImageBuf(str(written)).get_pixels(oiio.UINT8), expected)
+
+
+@pytest.mark.parametrize("half_even", [True, False])
+def test_to_uint8_numpy_twin_is_the_kernel(rng, half_even):
+    """A small photo's first 8-bit write runs numpy (no numba compiler to load): the same
+    code values as the compiled kernel."""
+    from wbcgrade.color._quantise import _to_uint8, _to_uint8_numpy
+    from wbcgrade.core import in_bands
+
+    values = np.concatenate([_probe_values(), rng.uniform(-0.2, 1.2, 50_000).astype(np.float32)])
+    kernel = np.empty(values.shape, np.uint8)
+    in_bands(_to_uint8, values.shape[0], values, kernel, half_even)
+    assert np.array_equal(_to_uint8_numpy(values, half_even), kernel)

@@ -3,15 +3,46 @@
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
 
-from tqdm import tqdm
+if TYPE_CHECKING:
+    from tqdm import tqdm
+
+
+class _NoBar:
+    """Stands in for a tqdm bar that would not be drawn: every method does nothing."""
+
+    n = 0
+    total = None
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def __getattr__(self, name: str):
+        return lambda *args, **kwargs: None
+
+
+def progress_bar(**options):
+    """``tqdm(disable=None, **options)``: a bar on stderr when it is a terminal; otherwise
+    a stand-in that draws nothing, as tqdm's would not, without importing tqdm (whose
+    import reads its package metadata: a few hundredths of a second of every start)."""
+    isatty = getattr(sys.stderr, "isatty", None)
+    if isatty is None or not isatty():
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(disable=None, **options)
 
 
 @contextlib.contextmanager
 def style_progress() -> Iterator[Callable[[int, int, str], None]]:
     """A tqdm bar over style photos; yields ``progress(done, total, name)``."""
-    with tqdm(desc="style photos", unit="photo", disable=None, leave=False) as bar:
+    with progress_bar(desc="style photos", unit="photo", leave=False) as bar:
 
         def progress(done: int, total: int, name: str) -> None:
             bar.total = total

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import click
 
@@ -24,6 +25,16 @@ from wbcgrade.cli.grading_options import (
 
 def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
+
+
+def _wall_timings(report, started: float, graded_from: float) -> None:
+    """The report's times with start-up (the command's start to the grade's) first and the
+    total the wall time since the command started (:func:`wbcgrade.cli._clock.command_started`)."""
+    import time
+
+    total = time.perf_counter() - started
+    stages = {k: v for k, v in report.timings.items() if k != "total"}
+    report.timings = {"start-up": graded_from - started, **stages, "total": total}
 
 
 def _print_report(report, as_json: bool) -> None:
@@ -105,17 +116,19 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     FILE applies a saved grade (the JSON of `apply --save-grade`, or a LUT)
     with no fit.
     """
-    from tqdm import tqdm
+    from wbcgrade.cli._clock import command_started
 
-    from wbcgrade.cli._progress import bar_callbacks
+    started = command_started()
+    options, source = take_grading_options(kwargs, photo=photo)
+    encode = take_write_options(kwargs)
+    from wbcgrade.cli._progress import bar_callbacks, progress_bar
     from wbcgrade.color.workflow import Progress, apply_photo
 
-    encode = take_write_options(kwargs)
-    options, source = take_grading_options(kwargs)
     look = take_look(ctx, look_path, kwargs, options)
     if look is None and options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
-    with tqdm(desc="styles" if look is None else "look", disable=None, leave=False) as bar:
+    graded_from = time.perf_counter()
+    with progress_bar(desc="styles" if look is None else "look", leave=False) as bar:
         progress = Progress(warn=_warn, **bar_callbacks(bar))
         report = apply_photo(photo, source if look is None else look, options, output=output,
                              lut=lut, lut_size=lut_size, lut_format=lut_format,
@@ -125,6 +138,7 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         from wbcgrade.color.presets import own_style_warning
 
         _warn(own_style_warning(str(photo), report.grade.own_style))
+    _wall_timings(report, started, graded_from)
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")

@@ -73,6 +73,18 @@ def write_options() -> list:
     return click_options("quality", "bit_depth")
 
 
+def check_photo(photo: str, missing: str = "no such file") -> None:
+    """InputError ``PHOTO: missing`` for an input that does not exist (as the library
+    says it), before the command imports numpy and the core: a mistake is answered
+    at once."""
+    from pathlib import Path
+
+    from wbcgrade.errors import InputError
+
+    if not Path(photo).exists():
+        raise InputError(f"{photo}: {missing}")
+
+
 def take_write_options(kwargs: dict):
     """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.imageio.WriteOptions`."""
     from wbcgrade.color.imageio import WriteOptions
@@ -158,6 +170,10 @@ def _learned_look(style_dir: str, originals: str, options):
 
 
 def set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
+    import sys
+
+    if value is None and "wbcgrade.color.imageio" not in sys.modules:
+        return value  # not given, and no limit set yet: nothing to undo (and no numpy loaded)
     from wbcgrade.color.imageio import set_max_image_pixels
 
     set_max_image_pixels(value)  # None: back to $WBCGRADE_MAX_IMAGE_PIXELS or the default
@@ -368,18 +384,17 @@ def check_mode_options(mode: str, given: set[str], saved_look: bool = False) -> 
                               "does not use it", flag)
 
 
-def take_grading_options(kwargs: dict) -> tuple:
+def take_grading_options(kwargs: dict, photo: str | None = None) -> tuple:
     """Pop the grading options from a command's kwargs -> (GradeOptions, StyleSource).
 
     The options are made (and validated) here, once for the run; an option
     out of range is an OptionError naming its flag. ``--input-space`` and
     ``--working-space`` (:data:`space_options`) are taken when the command
     has them and resolved here (an unknown name is an OptionError naming the
-    valid ones, before any work).
+    valid ones, before any work). ``photo``: the command's PHOTO, checked
+    (:func:`check_photo`) once the options are valid, before numpy loads.
     """
-    from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.options import GradeOptions
-    from wbcgrade.color.presets import StyleSource
     from wbcgrade.color.weights import parse_weights
     from wbcgrade.errors import OptionError
 
@@ -400,5 +415,15 @@ def take_grading_options(kwargs: dict) -> tuple:
                                weights=parse_weights(text) if text else None, **spaces)
     except OptionError as exc:
         raise flag_error(exc) from None
+    if photo is not None:
+        check_photo(photo)
+    if values["preset"] is not None and values["style_dir"] is None and not saved_look:
+        from wbcgrade.color.preset_names import resolve_preset
+
+        resolve_preset(values["preset"])  # an unknown name, answered before numpy loads
+    # numpy and OpenImageIO load here, once the options and PHOTO are known to be valid
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.presets import StyleSource
+
     cache = HistogramCache(values["cache_dir"], enabled=not values["no_cache"])
     return options, StyleSource(values["style_dir"], values["preset"], cache)

@@ -9,6 +9,7 @@ import click
 
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
+    check_photo,
     table_options,
     table_rows,
 )
@@ -48,16 +49,19 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     content) moved through one smooth colour map (the look: tone curves and
     a colour matrix); the map is fitted to all style photos at once.
     """
+    from wbcgrade.errors import OptionError
+
+    if (style_dir is None) == (preset is None):
+        raise OptionError("give either STYLE_DIR or preset", "preset")
+    if style_dir is not None:  # answered before numpy loads
+        check_photo(style_dir, "style folder does not exist")
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import style_progress
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.look.extract import extract_look_file
     from wbcgrade.color.presets import StyleSource
-    from wbcgrade.errors import OptionError
 
-    if (style_dir is None) == (preset is None):
-        raise OptionError("give either STYLE_DIR or preset", "preset")
     source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
     with style_progress() as on_style, \
             tqdm(desc="look", unit="style", disable=None, leave=False) as bar:
@@ -115,6 +119,8 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     photo with its original and a folder of others is enough). Each pair that
     cannot be used is named with the reason; the others are used.
     """
+    for path, side in ((before, "BEFORE"), (after, "AFTER")):  # answered before numpy loads
+        check_photo(path, f"no such file or folder ({side})")
     from tqdm import tqdm
 
     from wbcgrade.color.look.learn import learn_look_file

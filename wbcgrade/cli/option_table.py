@@ -14,7 +14,7 @@ flag of a field (:data:`flag_of`), the grading keys and the palette-only and
 look-only sets are derived from it; nothing else spells these names.
 
 Light: importing this module imports click only; defaults that live in heavy
-modules are named (``"wbcgrade.color.lut:DEFAULT_LUT_SIZE"``) and read when the
+modules are named (``"wbcgrade.color.defaults:DEFAULT_LUT_SIZE"``) and read when the
 options are built.
 """
 
@@ -241,7 +241,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("max_image_pixels", "--max-image-pixels", "Refuse images with more pixels than "
            "this, read from the header before decoding [default: $WBCGRADE_MAX_IMAGE_PIXELS "
            "or {default}].", field="max_image_pixels", type=click.IntRange(min=1),
-           help_default="wbcgrade.color.imageio:DEFAULT_MAX_IMAGE_PIXELS",
+           help_default="wbcgrade.color.defaults:DEFAULT_MAX_IMAGE_PIXELS",
            expose_value=False, callback="wbcgrade.cli.grading_options:set_max_image_pixels",
            metavar="N"),
     # colour spaces
@@ -256,7 +256,7 @@ OPTIONS: tuple[Option, ...] = (
            field="spaces.working", json="working_space", metavar="NAME", section=SPACES),
     # outputs
     Option("lut_size", "--lut-size", "Nodes per axis of the LUT.", field="lut_size",
-           type=int, default="wbcgrade.color.lut:DEFAULT_LUT_SIZE", lazy_default=True,
+           type=int, default="wbcgrade.color.defaults:DEFAULT_LUT_SIZE", lazy_default=True,
            show_default=True, section=OUTPUTS),
     Option("lut_format", "--lut-format", "LUT file format: .cube (Resolve/Adobe; with a 1D "
            "shaper for a logarithmic working space) or .clf (Academy/ASC Common LUT Format; "
@@ -340,7 +340,7 @@ OPTIONS: tuple[Option, ...] = (
            "them as needed).", field="bins", type=int, default=32, show_default=True,
            section=HISTOGRAMS),
     Option("preset_width", "--width", "Kernel width (bins) recorded with the preset.",
-           field="width", type=float, default="wbcgrade.color.presets:DEFAULT_PRESET_WIDTH",
+           field="width", type=float, default="wbcgrade.color.defaults:DEFAULT_PRESET_WIDTH",
            lazy_default=True, show_default=True, section=HISTOGRAMS),
     Option("description", "--description", "One line shown by `preset list`.",
            field="description", default=""),

@@ -7,7 +7,7 @@ import os
 
 import click
 
-from wbcgrade.cli.grading_options import LazyOptionsCommand, table_options, table_rows
+from wbcgrade.cli.grading_options import LazyOptionsCommand, check_photo, table_options, table_rows
 
 
 @click.group("preset")
@@ -34,19 +34,21 @@ def build(folder, output, preset_bins, preset_width, description, overwrite, no_
     Each photo is converted from its own colour space (ICC profile, EXR
     metadata) into the working space before its histogram.
     """
-    from wbcgrade.cli._progress import style_progress
-    from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.presets import check_preset_width, load_style_folder, save_preset
     from wbcgrade.errors import InputError, OptionError
 
     bins = preset_bins
     if not 4 <= bins <= 256:
         raise OptionError("bins must be between 4 and 256", "bins")
-    width = check_preset_width(preset_width)
     if not output.lower().endswith(".npz"):
         raise OptionError(f"{output}: output file name must end in .npz", "output", path=output)
     if os.path.exists(output) and not overwrite:
         raise InputError(f"{output}: file exists (use --overwrite to replace it)")
+    check_photo(folder, "style folder does not exist")  # answered before numpy loads
+    from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.presets import check_preset_width, load_style_folder, save_preset
+
+    width = check_preset_width(preset_width)
     if working_space:
         from wbcgrade.color.colorspace import resolve_space
 

@@ -102,17 +102,18 @@ def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames
     another space; the LUT is baked in the clip's own encoding (--input-space,
     else its tags: HDR PQ footage is Rec.2100-PQ, SDR footage sRGB code values).
     """
-    from tqdm import tqdm
-
-    from wbcgrade.cli._progress import bar_callbacks
     from wbcgrade.color.options import flat_defaults
-    from wbcgrade.video.command import grade_clip
-    from wbcgrade.video.workflow import VideoProgress, VideoSettings
 
     defaults = flat_defaults()  # a LUT has no regrain
     kwargs.update(regrain=False, regrain_radius=defaults["regrain_radius"],
                   regrain_eps=defaults["regrain_eps"])
-    options, source = take_grading_options(kwargs)
+    options, source = take_grading_options(kwargs, photo=clip)  # checked before numpy loads
+    from tqdm import tqdm
+
+    from wbcgrade.cli._progress import bar_callbacks
+    from wbcgrade.video.command import grade_clip
+    from wbcgrade.video.workflow import VideoProgress, VideoSettings
+
     look = take_look(ctx, look_path, kwargs, options)
     settings = VideoSettings(per_shot=per_shot, sample_every=sample_every,
                              cut_threshold=cut_threshold, blend=blend_frames, codec=codec,

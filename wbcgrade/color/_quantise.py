@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.core import compiled, in_bands
+from wbcgrade.core import compiled, in_bands, numpy_first
 
 __all__ = ["to_uint8", "HALVES_TO_EVEN"]
 
@@ -51,7 +51,22 @@ def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
     OpenImageIO, :data:`HALVES_TO_EVEN`).
     """
     flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1)
+    half_even = HALVES_TO_EVEN if half_even is None else bool(half_even)
+    if numpy_first(_to_uint8, flat.shape[0], _NUMPY_VALUES):
+        return _to_uint8_numpy(flat, half_even).reshape(pixels.shape)
     out = np.empty(flat.shape, np.uint8)
-    in_bands(_to_uint8, flat.shape[0], flat, out,
-             HALVES_TO_EVEN if half_even is None else bool(half_even), min_band=65536)
+    in_bands(_to_uint8, flat.shape[0], flat, out, half_even, min_band=65536)
     return out.reshape(pixels.shape)
+
+
+#: Values up to which :func:`to_uint8` runs its numpy twin while ``_to_uint8`` has not run
+#: in the process (see :func:`wbcgrade.core.numpy_first`).
+_NUMPY_VALUES = 1_200_000
+
+
+def _to_uint8_numpy(flat: np.ndarray, half_even: bool) -> np.ndarray:
+    """``_to_uint8`` with numpy, value for value."""
+    scaled = (flat * np.float32(255.0)).astype(np.float64)
+    value = np.rint(scaled) if half_even else np.floor(scaled + 0.5)
+    value[~(value > 0.0)] = 0.0  # negative or NaN
+    return np.minimum(value, 255.0).astype(np.uint8)

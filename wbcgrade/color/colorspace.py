@@ -301,6 +301,70 @@ def peak(linear: str, working: str) -> float:
 
 @functools.lru_cache(maxsize=32)
 def _peak(linear: str, working: str, path: str) -> float:
+    """:func:`peak`, kept in the wbcgrade cache folder (``peaks.json``) once searched: the
+    search costs four conversions (a tenth of a second of every grade's start); the
+    same number comes back, whatever the folder holds for other configs or releases."""
+    key = _peak_key(linear, working, path)
+    saved = _saved_peaks()
+    if isinstance(saved.get(key), float):
+        return saved[key]
+    value = _search_peak(linear, working)
+    _save_peak(key, value)
+    return value
+
+
+def _peak_key(linear: str, working: str, path: str) -> str:
+    """What a saved peak depends on: the spaces, the config (a file's size and time), the
+    OpenImageIO and OpenColorIO releases."""
+    import OpenImageIO as oiio
+
+    try:
+        stat = os.stat(path)
+        stamp = f"{stat.st_size}:{stat.st_mtime_ns}"
+    except (OSError, ValueError):  # a built-in config (ocio://...)
+        stamp = ""
+    return "|".join((linear, working, path, stamp, getattr(oiio, "VERSION_STRING", ""),
+                     oiio.get_string_attribute("opencolorio_version")))
+
+
+def _peaks_file():
+    from wbcgrade.color.cache import default_cache_dir
+
+    return default_cache_dir() / "peaks.json"
+
+
+def _saved_peaks() -> dict:
+    import json
+
+    try:
+        saved = json.loads(_peaks_file().read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # none yet, unreadable or damaged: searched again
+        return {}
+    return saved if isinstance(saved, dict) else {}
+
+
+def _save_peak(key: str, value: float) -> None:
+    """Add one peak to ``peaks.json`` (written atomically; a failure only costs a search)."""
+    import json
+    import tempfile
+
+    path = _peaks_file()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        saved = {**_saved_peaks(), key: value}
+        fd, temporary = tempfile.mkstemp(prefix=".peaks.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(saved, f)
+            os.replace(temporary, path)
+        except BaseException:
+            os.unlink(temporary)
+            raise
+    except OSError:
+        pass
+
+
+def _search_peak(linear: str, working: str) -> float:
     def encodes_inside(values: np.ndarray) -> np.ndarray:
         grey = np.repeat(np.asarray(values, dtype=np.float64)[:, None], 3, axis=1)
         return convert(grey, linear, working).max(axis=1) <= 1.0 + 1e-6

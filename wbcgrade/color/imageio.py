@@ -37,6 +37,7 @@ import OpenImageIO as oiio
 
 from wbcgrade._names import readable_name, writable_name, writer_name
 from wbcgrade._publish import atomic_path, check_output_path
+from wbcgrade.color.defaults import DEFAULT_MAX_IMAGE_PIXELS
 from wbcgrade.errors import InputError, first_line
 
 __all__ = [
@@ -56,11 +57,6 @@ __all__ = [
     "check_write_options",
 ]
 
-#: Largest image (width x height) decoded by default: 200 megapixels, about 3 GB
-#: of float32 RGBA pixels. Larger headers are refused before any decoding (a
-#: decompression bomb would otherwise exhaust memory); ``--max-image-pixels``
-#: or ``WBCGRADE_MAX_IMAGE_PIXELS`` raise it.
-DEFAULT_MAX_IMAGE_PIXELS = 200_000_000
 _max_image_pixels: int | None = None
 
 #: Metadata prefixes that are meaningful in any file format.

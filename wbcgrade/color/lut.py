@@ -41,6 +41,7 @@ import numpy as np
 
 from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
+from wbcgrade.color.defaults import DEFAULT_LUT_SIZE
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
 
@@ -50,7 +51,6 @@ __all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_gr
            "lut_format_of",
            "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE", "write_checked_lut"]
 
-DEFAULT_LUT_SIZE = 33
 #: ``--lut-format`` choices and the file name ending each needs.
 LUT_FORMATS = {"cube": ".cube", "clf": ".clf"}
 #: Entries of the ``.cube`` shaper (sampled evenly over its input range, as

@@ -49,6 +49,7 @@ from wbcgrade.color.colorspace import (
     default_working_space,
     resolve_space,
 )
+from wbcgrade.color.defaults import DEFAULT_PRESET_WIDTH
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
@@ -58,6 +59,12 @@ from wbcgrade.color.histogram import (
     to_sparse,
 )
 from wbcgrade.color.imageio import header_pixels, read_image
+from wbcgrade.color.preset_names import (
+    RETIRED_PRESETS,
+    list_presets,
+    resolve_preset,
+    shipped_presets_dir,
+)
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_histogram_cells, read_npz
 
@@ -86,8 +93,6 @@ log = logging.getLogger(__name__)
 
 PRESET_FORMAT = "wbcgrade-preset"
 PRESET_VERSION = 1
-#: Width (in bins) of the Gibbs kernel recorded in presets when none is given.
-DEFAULT_PRESET_WIDTH = 1.5
 _IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".webp",
                    ".tga", ".dpx", ".jp2", ".heic", ".avif", ".ppm", ".pgm", ".pnm"}
 
@@ -506,50 +511,6 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
                     width=None if width is None else float(width),
                     description=str(header.get("description", "")), meta=meta)
-
-
-def shipped_presets_dir() -> Path:
-    """Folder of the presets installed with the package."""
-    return Path(__file__).resolve().parent / "presets_data"
-
-
-def list_presets() -> list[tuple[str, Path]]:
-    """(name, path) of every shipped preset, sorted by name."""
-    folder = shipped_presets_dir()
-    if not folder.is_dir():
-        return []
-    return sorted((p.stem, p) for p in folder.glob("*.npz"))
-
-
-#: Presets shipped before the presets became looks: name -> what to use instead.
-RETIRED_PRESETS = {
-    "landscape": "the palettes of the sample landscapes",
-    "mixed": "the palettes of the sample photos",
-}
-
-
-def resolve_preset(name_or_path: str) -> Path:
-    """A preset file from a shipped preset's NAME or a FILE path.
-
-    An existing path wins; otherwise the name is looked up among the shipped
-    presets. Raises InputError listing the available names (and saying so
-    when the name is one of :data:`RETIRED_PRESETS`).
-    """
-    candidate = Path(name_or_path).expanduser()
-    if candidate.is_file():
-        return candidate
-    shipped = dict(list_presets())
-    if name_or_path in shipped:
-        return shipped[name_or_path]
-    if candidate.suffix or os.sep in name_or_path:
-        raise InputError(f"{name_or_path}: no such preset file")
-    names = ", ".join(shipped) or "none installed"
-    if name_or_path in RETIRED_PRESETS:
-        raise InputError(
-            f"preset {name_or_path!r} ({RETIRED_PRESETS[name_or_path]}) is no longer shipped: "
-            f"the shipped presets are looks ({names}); for palettes of your own photos "
-            "use --style DIR or `wbcgrade preset build DIR -o FILE.npz`")
-    raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")
 
 
 def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:

@@ -31,7 +31,7 @@ import numpy as np
 
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.color.remap import apply_color_map, block_means_mapped
-from wbcgrade.core import compiled, in_bands
+from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
@@ -285,8 +285,6 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
 def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
     """:func:`_box` with scipy.ndimage's reflect-mode uniform filter (float64 running
     sums), one channel a plane, on as many threads as numba uses."""
-    from scipy import ndimage
-
     x = np.ascontiguousarray(x, dtype=np.float32)
     out = np.empty_like(x)
     if x.size == 0:
@@ -295,8 +293,7 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
     means = np.empty_like(planes)
 
     def window_mean(k: int) -> None:
-        ndimage.uniform_filter(planes[k], size=2 * radius + 1, mode="reflect",
-                               output=means[k])
+        _uniform_filter(planes[k], 2 * radius + 1, means[k])
 
     _threaded(window_mean, x.shape[2])
     out[...] = np.moveaxis(means, 0, -1)
@@ -308,8 +305,6 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
     moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
     of rows. Nothing to compile."""
-    from scipy import ndimage
-
     h, w = guide.shape[:2]
     out = np.empty((h, w, 12), np.float32)
     if h == 0 or w == 0:
@@ -324,8 +319,7 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     def window_mean(k: int) -> None:
         plane = first[k] if k < 6 else np.multiply(first[pairs[k - 6][0]],
                                                    first[pairs[k - 6][1]])
-        ndimage.uniform_filter(np.ascontiguousarray(plane), size=2 * radius + 1,
-                               mode="reflect", output=means[k])
+        _uniform_filter(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
     for start in range(0, h, 64):
@@ -334,12 +328,56 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     return out
 
 
+#: Plane pixels the numpy twin of the box filter filters in a process before scipy.ndimage
+#: is imported (about four small photos' regrain: then a batch pays the import once).
+_TWIN_FILTER_PIXELS = 20_000_000
+_twin_filtered = 0
+
+
+def _uniform_filter(plane: np.ndarray, size: int, out: np.ndarray) -> None:
+    """``scipy.ndimage.uniform_filter(plane, size, mode="reflect", output=out)`` for a 2-D
+    float32 ``plane``: scipy's own when scipy.ndimage is loaded already (or the twin has
+    filtered :data:`_TWIN_FILTER_PIXELS`), else its numpy twin
+    (:func:`_uniform_filter_numpy`, the same numbers; importing scipy.ndimage costs a
+    small photo's grade more than its filters)."""
+    import sys
+
+    global _twin_filtered
+    if "scipy.ndimage" not in sys.modules and not compiled_preferred() \
+            and _twin_filtered + plane.size <= _TWIN_FILTER_PIXELS:
+        _twin_filtered += plane.size
+        out[...] = _uniform_filter_numpy(plane, size)
+        return
+    from scipy import ndimage
+
+    ndimage.uniform_filter(plane, size=size, mode="reflect", output=out)
+
+
+def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:
+    """scipy.ndimage's reflect-mode ``uniform_filter`` of a 2-D float32 plane, bit for bit:
+    along each axis in turn, each line extended by reflection (``d c b a | a b c d | d c
+    b a``), a running float64 sum (the first window's sum, then ``+ entering - leaving``)
+    divided by ``size``, rounded to float32 between the axes."""
+    x = plane
+    before = size // 2
+    after = size - before - 1
+    for axis in (0, 1):
+        lines = np.moveaxis(x, axis, -1).astype(np.float64)
+        n = lines.shape[-1]
+        padded = np.pad(lines, ((0, 0), (before, after)), mode="symmetric")
+        sums = np.empty(lines.shape, np.float64)
+        sums[:, 0] = np.add.accumulate(padded[:, :size], axis=1)[:, -1]  # in order
+        sums[:, 1:] = padded[:, size:size + n - 1] - padded[:, :n - 1]
+        np.add.accumulate(sums, axis=1, out=sums)
+        sums /= size
+        x = np.moveaxis(sums.astype(np.float32), -1, axis)
+    return x
+
+
 def _threaded(task, n: int) -> None:
     """``task(k)`` for k in range(n), on as many threads as numba uses (numpy and
     scipy.ndimage release the GIL in their loops)."""
-    import numba
-
-    threads = min(n, numba.get_num_threads())
+    threads = min(n, num_threads())
     if threads <= 1:
         for k in range(n):
             task(k)
@@ -429,8 +467,42 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
     right = np.minimum(left + 1, lw - 1)
     weight = (fx - left).astype(np.float32)
+    if numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
+        _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
+        return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
              weight, out)
+
+
+#: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
+#: has not run in the process (see :func:`wbcgrade.core.numpy_first`).
+_NUMPY_APPLY_PIXELS = 400_000
+
+
+def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
+                      left: np.ndarray, right: np.ndarray, weight: np.ndarray,
+                      out: np.ndarray) -> None:
+    """``_apply_rows`` over every row with numpy, bit for bit (float32 arithmetic in the
+    kernel's order); ``out`` may be ``source``."""
+    h = source.shape[0]
+    lh = coefficients.shape[0]
+    fy = np.minimum(np.maximum((np.arange(h) + 0.5) / step - 0.5, 0.0), lh - 1.0)
+    y0 = np.minimum(fy.astype(np.int64), lh - 2) if lh > 1 else np.zeros(h, np.int64)
+    ty = (fy - y0).astype(np.float32)[:, None, None]
+    y1 = np.minimum(y0 + 1, lh - 1)
+    one = np.float32(1.0)
+    rows = (one - ty) * coefficients[y0] + ty * coefficients[y1]  # (h, lw, 12)
+    tx = weight[None, :]
+    s0, s1, s2 = source[..., 0], source[..., 1], source[..., 2]
+    at0, at1 = rows[:, left], rows[:, right]  # (h, w, 12)
+    graded = np.empty(source.shape, np.float32)
+    for c in range(3):
+        value = (one - tx) * (at0[..., 9 + c] + at0[..., c] * s0 + at0[..., 3 + c] * s1
+                              + at0[..., 6 + c] * s2) \
+            + tx * (at1[..., 9 + c] + at1[..., c] * s0 + at1[..., 3 + c] * s1
+                    + at1[..., 6 + c] * s2)
+        graded[..., c] = source[..., c] + value
+    np.clip(graded, np.float32(0.0), one, out=out)
 
 
 @compiled(nogil=True, cache=True)

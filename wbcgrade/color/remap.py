@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from wbcgrade.color.colorspace import REC709_LUMA, SYCC_LUMA
-from wbcgrade.core import compiled, in_bands
+from wbcgrade.core import compiled, in_bands, numpy_first
 
 __all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
            "identity_map", "blend_map", "keep_lightness",
@@ -190,10 +190,53 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
     shape = rgb.shape
     colors = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1, 3)
     table = np.ascontiguousarray(color_map, dtype=np.float32)
+    if numpy_first(_trilinear, colors.shape[0], _NUMPY_PIXELS) and np.isfinite(colors).all():
+        return _trilinear_numpy(colors, table, strength).reshape(shape)
     out = np.empty_like(colors)
     in_bands(_trilinear, colors.shape[0], colors, table, np.float32(strength), out,
              min_band=4096)
     return out.reshape(shape)
+
+
+#: Colours up to which :func:`apply_color_map` runs its numpy twin while ``_trilinear`` has
+#: not run in the process (the README's photo: 0.14 megapixels in 30 ms, against 0.5 s
+#: to load numba's compiler for the kernel, seconds to compile it after an install).
+_NUMPY_PIXELS = 400_000
+
+
+def _trilinear_numpy(colors: np.ndarray, table: np.ndarray, strength: float) -> np.ndarray:
+    """``_trilinear`` with numpy, bit for bit (float64 arithmetic in the kernel's order,
+    rounded to float32 once), for finite (N, 3) float32 ``colors``; in chunks that stay
+    in the CPU's cache."""
+    out = np.empty(colors.shape, np.float32)
+    for start in range(0, colors.shape[0], 16384):
+        out[start:start + 16384] = _trilinear_chunk(colors[start:start + 16384], table,
+                                                    strength)
+    return out
+
+
+def _trilinear_chunk(colors: np.ndarray, table: np.ndarray, strength: float) -> np.ndarray:
+    n = table.shape[0]
+    x = np.clip(colors.astype(np.float64), 0.0, 1.0)
+    position = x * (n - 1)
+    index = np.minimum(position.astype(np.int64), n - 2)
+    frac = position - index
+    fr, fg, fb = frac[:, 0:1], frac[:, 1:2], frac[:, 2:3]
+    flat = table.reshape(-1, 3)
+    base = (index[:, 0] * n + index[:, 1]) * n + index[:, 2]
+
+    def node(di: int, dj: int, dk: int) -> np.ndarray:
+        return flat[base + ((di * n + dj) * n + dk)].astype(np.float64)
+
+    c00 = node(0, 0, 0) * (1 - fb) + node(0, 0, 1) * fb
+    c01 = node(0, 1, 0) * (1 - fb) + node(0, 1, 1) * fb
+    c10 = node(1, 0, 0) * (1 - fb) + node(1, 0, 1) * fb
+    c11 = node(1, 1, 0) * (1 - fb) + node(1, 1, 1) * fb
+    c0 = c00 * (1 - fg) + c01 * fg
+    c1 = c10 * (1 - fg) + c11 * fg
+    value = c0 * (1 - fr) + c1 * fr
+    t = float(np.float32(strength))
+    return ((1 - t) * x + t * value).astype(np.float32)
 
 
 def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:

@@ -10,7 +10,14 @@ kernels use: ``compiled`` (numba with a cache that never fails a run),
 
 from wbcgrade.core._barycenter_debiased import debiased_barycenter
 from wbcgrade.core._cpu import fast_cpu, n_workers
-from wbcgrade.core._jit import compiled, in_bands
+from wbcgrade.core._jit import (
+    compiled,
+    compiled_preferred,
+    in_bands,
+    num_threads,
+    numpy_first,
+    prefer_compiled,
+)
 from wbcgrade.core.barycenter import (
     BarycenterResult,
     BarycenterSolver,
@@ -63,7 +70,11 @@ __all__ = [
     "RowSubsetGeometry",
     "masked_loss",
     "compiled",
+    "compiled_preferred",
     "in_bands",
+    "num_threads",
+    "numpy_first",
+    "prefer_compiled",
     "fast_cpu",
     "n_workers",
 ]

@@ -15,6 +15,7 @@ Two facts measured on the target machines (docs/architecture.md, threads):
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import platform
 import threading
@@ -28,52 +29,27 @@ __all__ = ["fast_cpu", "n_workers", "parallel_map"]
 
 _FLUSH_FLAGS = 0x8040  # MXCSR: flush-to-zero (bit 15) | denormals-are-zero (bit 6)
 
-if platform.machine().lower() in ("x86_64", "amd64"):
-    from llvmlite import ir
-    from numba import types
-    from numba.core import cgutils
-    from numba.extending import intrinsic
 
-    from wbcgrade.core._jit import compiled
+def _get_flags() -> int:
+    """This thread's MXCSR (x86-64; 0 elsewhere)."""
+    return _flag_functions()[0]()
 
-    def _mxcsr_call(builder, name, ptr):
-        fnty = ir.FunctionType(ir.VoidType(), [ir.PointerType(ir.IntType(8))])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, name)
-        builder.call(fn, [builder.bitcast(ptr, ir.PointerType(ir.IntType(8)))])
 
-    @intrinsic
-    def _stmxcsr(typingctx):  # pragma: no cover - compiled
-        def codegen(context, builder, sig, args):
-            ptr = cgutils.alloca_once(builder, ir.IntType(32))
-            _mxcsr_call(builder, "llvm.x86.sse.stmxcsr", ptr)
-            return builder.load(ptr)
+def _set_flags(value: int) -> None:
+    """Set this thread's MXCSR (x86-64; nothing elsewhere)."""
+    _flag_functions()[1](value)
 
-        return types.uint32(), codegen
 
-    @intrinsic
-    def _ldmxcsr(typingctx, value):  # pragma: no cover - compiled
-        def codegen(context, builder, sig, args):
-            ptr = cgutils.alloca_once_value(builder, args[0])
-            _mxcsr_call(builder, "llvm.x86.sse.ldmxcsr", ptr)
-            return context.get_dummy_value()
+@functools.lru_cache(maxsize=1)
+def _flag_functions() -> tuple[Callable[[], int], Callable[[int], None]]:
+    """The compiled MXCSR reader and writer (:mod:`wbcgrade.core._mxcsr`, numba loaded
+    then, not when the core is imported); on other architectures, stand-ins that keep
+    the defaults."""
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        from wbcgrade.core._mxcsr import get_flags, set_flags
 
-        return types.void(types.uint32), codegen
-
-    @compiled(cache=True)
-    def _get_flags() -> int:  # pragma: no cover - compiled
-        return _stmxcsr()
-
-    @compiled(cache=True)
-    def _set_flags(value: int) -> None:  # pragma: no cover - compiled
-        _ldmxcsr(value)
-
-else:  # pragma: no cover - other architectures keep their defaults
-
-    def _get_flags() -> int:
-        return 0
-
-    def _set_flags(value: int) -> None:
-        return None
+        return get_flags, set_flags
+    return (lambda: 0), (lambda value: None)  # pragma: no cover - other architectures
 
 
 _controller: ThreadpoolController | None = None

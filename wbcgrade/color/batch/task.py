@@ -138,8 +138,12 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
 
 
 def setup_worker(context: BatchContext) -> None:
-    """Run once in each local worker process: the decoding limit of the parent."""
+    """Run once in each local worker process: the decoding limit of the parent; compiled
+    kernels rather than their numpy twins (a worker grades many photos)."""
+    from wbcgrade.core import prefer_compiled
+
     set_max_image_pixels(context.max_image_pixels)
+    prefer_compiled()
 
 
 def absolute_task(task: BatchTask) -> BatchTask:

@@ -122,6 +122,10 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
 
         report_dir.mkdir(parents=True, exist_ok=True)
         context.style_pictures = style_pictures(styles)
+    if len(plan.tasks) > 1:  # many grades: numba's start once, then its faster kernels
+        from wbcgrade.core import prefer_compiled
+
+        prefer_compiled()
     in_process = scheduler is None and jobs == 1
     return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
                      on_result=on_result or progress.result,

@@ -9,11 +9,15 @@ and :mod:`.dense` (:func:`logsumexp_product` on the whole matrix).
 
 from __future__ import annotations
 
-import numba
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from wbcgrade.core._jit import compiled
+
+if TYPE_CHECKING:  # numba.prange: numba is given to the kernels when they are first made
+    import numba
 
 __all__ = ["logsumexp_product", "AxisKernel", "shifted_log_product"]
 
