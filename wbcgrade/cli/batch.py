@@ -46,8 +46,10 @@ def photo_line(result: FileResult) -> str:
         return f"{result.status:<8} {result.relative}: {result.error}"
     outcome = result.grade_outcome
     if outcome is not None and outcome.palette is None:  # a look: no weights to show
+        from wbcgrade.color.outcome import change_words
+
         said = (f"{outcome.source.describe(outcome.n_styles)}, strength {outcome.strength:.2f}, "
-                f"change {outcome.mean_change:.1f}/255")
+                f"colours move {change_words(outcome.mean_change)}")
         if outcome.unchanged:
             said += f" (essentially unchanged: {outcome.reason})"
         return f"graded   {result.relative}: {said}  {result.timings.get('total', 0.0):.1f} s"
@@ -127,7 +129,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
         click.echo(f"  ignored  {name} (not an image)")
     outcome = None if result.series_grade is None else result.series_grade.outcome
     if outcome is not None and outcome.palette is None:
-        click.echo("series grade: " + outcome.headline().removeprefix("grade: "))
+        click.echo("series grade: " + outcome.headline("the series").removeprefix("grade: "))
     elif result.series is not None:
         ranked = sorted(zip(result.style_names, result.series.weights), key=lambda p: -p[1])
         click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))

@@ -33,8 +33,8 @@ from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
 
-__all__ = ["style_pictures", "report_paths", "plan_report", "write_report", "report_entries",
-           "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
+__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "write_report",
+           "report_entries", "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
            "palette_record"]
 
 #: The files of a report folder besides the per-photo ones.
@@ -59,6 +59,19 @@ def report_paths(report_dir: str | os.PathLike, relatives: list[str]) -> list[Pa
     return ([report_dir / name for name in INDEX_FILES]
             + [_record_path(report_dir, rel) for rel in relatives]
             + [report_dir / sheet_path(rel) for rel in relatives])
+
+
+def own_report(report_dir: str | os.PathLike | None) -> bool:
+    """Whether ``report_dir`` holds a report wbcgrade wrote (its ``report.json`` says so):
+    a batch run again with the same ``--report`` folder updates it, as it resumes its
+    photos, instead of refusing its files."""
+    if report_dir is None:
+        return False
+    try:
+        document = json.loads((Path(report_dir) / "report.json").read_text("utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and document.get("format") == "wbcgrade-report"
 
 
 def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),

@@ -52,6 +52,8 @@ class BatchContext:
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
     overwrite : replace existing outputs and sheets (checked before the run).
+    replace_sheets : replace existing sheets (the report folder is the batch's own, from
+        an earlier run: :func:`wbcgrade.color.report.own_report`).
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
     encode : JPEG/WebP quality and bit depth of the outputs.
@@ -65,6 +67,7 @@ class BatchContext:
     style_pictures: dict[str, np.ndarray] | None = None
     write_outputs: bool = True
     overwrite: bool = False
+    replace_sheets: bool = False
     max_image_pixels: int = field(default_factory=max_image_pixels)
     encode: WriteOptions = WriteOptions()
 
@@ -114,7 +117,7 @@ def run_task(task: BatchTask, context: BatchContext,
             sheet = sheet_path(task.relative)
             write_sheet(context.sheet_dir / sheet,
                         sheet_content(result, report.graded, context.style_pictures),
-                        overwrite=replace)
+                        overwrite=replace or context.replace_sheets)
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:

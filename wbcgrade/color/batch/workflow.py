@@ -81,6 +81,11 @@ def _load(source: StyleSource, options: GradeOptions, progress: Progress, plan: 
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, hook)
     options.check_styles(len(styles.names))
+    from wbcgrade.color.presets import one_style_warning
+
+    message = one_style_warning(source, styles, options.map.builder)
+    if message is not None and progress.warn is not None:
+        progress.warn(message)
     return styles
 
 
@@ -109,8 +114,11 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
          overwrite: bool, progress: BatchProgress,
          on_result: Callable[[FileResult], None] | None = None, look=None,
          encode=None) -> BatchResult:
+    from wbcgrade.color.report import own_report
+
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
-                           write_outputs=write_outputs, overwrite=overwrite)
+                           write_outputs=write_outputs, overwrite=overwrite,
+                           replace_sheets=write_outputs and own_report(report_dir))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
         from wbcgrade.color.saved_grade import look_fit
 
@@ -211,8 +219,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     complete (``overwrite`` redoes them), refuses to replace any other file,
     and removes the temporary files of a killed run. One run at a time may
     write into ``out_dir``. With ``consistent`` the whole series shares one
-    grade, also written as a LUT to ``lut``; with ``report_dir`` the palette
-    weight report is written there. Returns the result (``result.lut`` None
+    grade, also written as a LUT to ``lut``; with ``report_dir`` the report is
+    written there (a report an earlier run wrote there is updated, as the photos are
+    resumed: :func:`wbcgrade.color.report.own_report`). Returns the result (``result.lut`` None
     when no photo was graded, so no series grade was made). ``look``: a saved
     grade (:func:`wbcgrade.color.saved_grade.load_look`) applied to every photo
     instead of a fit; ``encode``: JPEG/WebP quality and bit depth of the outputs.
@@ -250,7 +259,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    _plan_report(report_dir, plan, overwrite)
+    from wbcgrade.color.report import own_report
+
+    # the report of an earlier run into this folder is updated as the photos are resumed
+    own = own_report(report_dir)
+    _plan_report(report_dir, plan, overwrite or own)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))
     try:
@@ -290,7 +303,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             from wbcgrade.color.report import write_report
 
             result.report = write_report(report_dir, result, styles, options,
-                                         "consistent" if consistent else "per-photo", overwrite)
+                                         "consistent" if consistent else "per-photo",
+                                         overwrite or own)
         if lut is not None and result.series_grade is not None:
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
