@@ -107,9 +107,15 @@ def run_task(task: BatchTask, context: BatchContext,
         result.color = report.color
         result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
-        from wbcgrade.color.report import palette_record, sheet_content, sheet_path
+        from wbcgrade.color.report import (
+            chart_record,
+            palette_record,
+            sheet_content,
+            sheet_path,
+        )
 
         result.palette = palette_record(report.grade, report.graded.encoding)
+        result.chart = chart_record(report.grade, report.graded.encoding)
         result.timings["total"] = time.perf_counter() - start
         if context.sheet_dir is not None:
             from wbcgrade.color.sheet import write_sheet

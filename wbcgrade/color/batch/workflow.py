@@ -468,27 +468,38 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     styles = _recorded_styles(recorded_styles, names)
     pictures = style_pictures(styles)
     report_dir.mkdir(parents=True, exist_ok=True)
-    results = []
-    for task in plan.tasks:
-        if progress.photo:
-            progress.photo(task.relative)
+
+    def reported(task) -> tuple[Result, str | None]:
+        """A photo's recorded result and its sheet (made from its files) -> (result, why
+        it has no sheet)."""
         result = read_record(folder, task.relative)
         if result is None:
-            result = Result(task.relative, "", str(task.source), "failed",
-                            error=f"no result recorded by the batch in {folder / RESULTS_FOLDER}")
-        else:
-            result.output = str(task.source)
-            sheet = sheet_path(task.relative)
-            try:
-                write_sheet(report_dir / sheet, sheet_from_files(result, pictures),
-                            overwrite=overwrite)
-                result.sheet = sheet.as_posix()
-            except (InputError, ValueError, OSError) as exc:
-                if progress.warn:
-                    progress.warn(f"{task.relative}: no sheet ({exc})")
-        results.append(result)
-        if progress.result:
-            progress.result(result)
+            return Result(task.relative, "", str(task.source), "failed",
+                          error=f"no result recorded by the batch in "
+                                f"{folder / RESULTS_FOLDER}"), None
+        result.output = str(task.source)
+        sheet = sheet_path(task.relative)
+        try:
+            write_sheet(report_dir / sheet, sheet_from_files(result, pictures),
+                        overwrite=overwrite)
+            result.sheet = sheet.as_posix()
+        except (InputError, ValueError, OSError) as exc:
+            return result, f"{task.relative}: no sheet ({exc})"
+        return result, None
+
+    # the sheets in threads (reading, resizing, encoding release the GIL), told in order
+    from concurrent.futures import ThreadPoolExecutor
+
+    results = []
+    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
+        for task, (result, why) in zip(plan.tasks, pool.map(reported, plan.tasks)):
+            if progress.photo:
+                progress.photo(task.relative)
+            if why is not None and progress.warn:
+                progress.warn(why)
+            results.append(result)
+            if progress.result:
+                progress.result(result)
     series = None
     if isinstance(settings.get("series_weights"), dict):
         weights = settings["series_weights"]
