@@ -117,3 +117,37 @@ def test_a_batch_run_again_with_its_report_folder_resumes_it(tmp_path):
     assert refused.exit_code == 1 and "report.json: file exists" in refused.stderr
     assert json.loads((foreign / "report.json").read_text()) == {"mine": True}
     assert np.isfinite(after["time_s"])
+
+
+def test_a_look_grade_gets_a_look_report(tmp_path):
+    """A preset's look: the report shows the look (a colour chart before and after), its
+    source, strength and each photo's change; no empty weight table, no preset photos."""
+    from wbcgrade.color.batch.records import read_record
+    from wbcgrade.color.report import look_chart, sheet_from_files
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in ("chelsea", "coffee"):
+        small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", width=64)
+    out, report = tmp_path / "out", tmp_path / "report"
+    result = run("batch", photos, "-o", out, "--preset", "kodak-2383", "--report", report)
+    assert result.exit_code == 0, result.output
+    for folder in (report, tmp_path / "again"):
+        if folder != report:  # `report` on the finished batch: its results, read
+            again = run("report", out, "-o", folder)
+            assert again.exit_code == 0, again.output
+            assert again.stdout.startswith("reported ") and "\ngraded " not in again.stdout
+        page = (folder / "index.html").read_text()
+        assert "look report" in page and "palette weight report" not in page
+        assert "fit loss" not in page and "<th>change</th>" in page
+        assert "the preset&#x27;s own look" in page and "% on average" in page
+        entries = json.loads((folder / "report.json").read_text())["photos"]
+        for entry in entries:
+            after = np.asarray(entry["look_chart"]["after"])
+            assert after.shape == look_chart().shape
+            assert np.abs(after - look_chart()).mean() > 0.01  # the look moved the chart
+            assert (folder / entry["sheet"]).is_file()
+    record = read_record(out, "chelsea.jpg")
+    record.output = str(out / "chelsea.jpg")
+    content = sheet_from_files(record, {})
+    assert content.styles == [] and content.chart is not None  # not the preset's photos
