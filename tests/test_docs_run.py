@@ -116,16 +116,17 @@ def run_server(line: str, cwd: Path, env: dict[str, str], log: Path,
     with open(log, "w") as out:
         process = subprocess.Popen(["bash", "-c", f"exec {line} --no-browser"], cwd=cwd,
                                    env=env, stdout=out, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + timeout
-        while (time.monotonic() < deadline and process.poll() is None
-               and "http://127.0.0.1" not in log.read_text()):
-            time.sleep(0.2)
-        served = "http://127.0.0.1" in log.read_text()
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
+        try:
+            deadline = time.monotonic() + timeout
+            while (time.monotonic() < deadline and process.poll() is None
+                   and "http://127.0.0.1" not in log.read_text()):
+                time.sleep(0.2)
+            served = "http://127.0.0.1" in log.read_text()
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
                 process.wait(30)
-            except subprocess.TimeoutExpired:
+        finally:  # never left running, whatever happened here
+            if process.poll() is None:
                 process.kill()
                 process.wait()
     stopped = process.returncode in (0, 130, -signal.SIGINT)

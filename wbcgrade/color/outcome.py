@@ -56,7 +56,8 @@ class GradeSource(str, Enum):
         return {
             GradeSource.PRESET_LOOK: "the preset's own look",
             GradeSource.OWN_SCENE: "the look of the style photo that shows this scene",
-            GradeSource.SET_LOOK: f"the look the {n_styles} style photos share",
+            GradeSource.SET_LOOK: (f"the look the {n_styles} style photos share"
+                                   if n_styles != 1 else "the look of the one style photo"),
             GradeSource.PALETTE: f"a blend of the {n_styles} style palettes (palette fit)",
             GradeSource.SAVED: "a saved grade, applied as saved (no fit)",
         }[self]
