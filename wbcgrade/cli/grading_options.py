@@ -248,10 +248,10 @@ OPTION_GROUPS = (
 
 #: The options a short ``--help`` shows (parameter names): where the look comes from, how
 #: much of it, and where the results go; ``--help-all`` shows every option.
-COMMON_OPTIONS = ("style_dir", "preset", "look_path", "mode", "strength", "look_strength",
-                  "output", "output_dir", "out_dir", "recursive", "consistent", "jobs",
-                  "per_shot", "report_dir", "lut", "save_grade", "quality", "overwrite",
-                  "as_json")
+COMMON_OPTIONS = ("style_dir", "preset", "look_path", "originals_dir", "mode", "strength",
+                  "look_strength", "output", "output_dir", "out_dir", "recursive",
+                  "consistent", "jobs", "per_shot", "report_dir", "lut", "save_grade",
+                  "quality", "overwrite", "as_json")
 #: A command with more options than this shows only :data:`COMMON_OPTIONS` by default.
 SHORT_HELP_ABOVE = 24
 
