@@ -69,6 +69,7 @@ from wbcgrade.errors import InputError, first_line
 
 __all__ = ["TEMP_MARK", "LOCK_FILE", "atomic_path", "publish_bytes", "write_png",
            "check_regular_target", "check_folder", "check_output_path", "plan_outputs",
+           "make_folders_for",
            "is_unlocked", "remove_stale_temporaries", "remove_stale_beside", "lock_folder"]
 
 #: Marks the project's temporary files: ``.<stem>.wbcgrade-tmp-XXXXXXXX<ext>``.
@@ -97,6 +98,10 @@ def check_regular_target(target: str | os.PathLike) -> None:
         mode = target.stat().st_mode
     except FileNotFoundError:
         return
+    except NotADirectoryError:  # a file where a folder of the path should be
+        above = next(p for p in target.parents if p.exists())
+        raise InputError(f"{above}: is a file, not a folder; cannot write {target} "
+                         "under it") from None
     except OSError as exc:
         raise InputError(f"{target}: cannot be checked ({exc.strerror})") from None
     if stat.S_ISDIR(mode):
@@ -158,12 +163,29 @@ def check_output_path(target: str | os.PathLike, inputs: Iterable[str | os.PathL
     if make_folders:
         while not folder.exists() and folder != folder.parent:
             folder = folder.parent
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"{folder}: is a file, not a folder; cannot write {given} "
+                             "under it")
     if not folder.is_dir():
         raise InputError(f"{check_folder(given)}: output folder does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{given.parent if str(given.parent) else Path('.')}: output folder "
                          "is not writable")
     return resolved
+
+
+def make_folders_for(*targets: str | os.PathLike | None) -> None:
+    """Create the missing folders of ``targets`` (planned with ``make_folders``), just
+    before they are written: ``-o new/folder/photo.jpg`` makes ``new/folder``. A file in
+    the way is an InputError (a file is never replaced by a folder)."""
+    for target in targets:
+        if target is None:
+            continue
+        folder = Path(target).parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):
+            raise InputError(f"{folder}: is a file, not a folder") from None
 
 
 def plan_outputs(targets: Iterable[str | os.PathLike | None],

@@ -161,7 +161,7 @@ def _bad_photo(tmp_path, case):
     ("ok", ["-o", "{photo}"], "refusing to overwrite the input"),
     ("ok", ["-o", "{photo}", "--overwrite"], "refusing to overwrite the input"),
     ("ok", ["-o", "{existing}"], "file exists"),
-    ("ok", ["-o", "{nowhere}"], "output folder does not exist"),
+    ("ok", ["-o", "{under_a_file}"], "existing.jpg: is a file, not a folder"),
     ("ok", ["--lut", "{existing_cube}"], "file exists"),
     ("ok", ["--strength", "5"], "--strength must be in [0, 4]"),
     ("ok", ["--weights", "1,x"], "comma-separated numbers"),
@@ -176,7 +176,8 @@ def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, mes
     (tmp_path / "existing.cube").write_text("keep me")
     names = {"empty": tmp_path / "empty", "broken": tmp_path / "broken.npz",
              "foreign": tmp_path / "foreign.npz", "photo": photo,
-             "existing": tmp_path / "existing.jpg", "nowhere": tmp_path / "no" / "out.jpg",
+             "existing": tmp_path / "existing.jpg",
+             "under_a_file": tmp_path / "existing.jpg" / "out.jpg",
              "existing_cube": tmp_path / "existing.cube"}
     extra = [str(a).format(**names) for a in extra]
     if not any(a in ("--style", "--preset") for a in extra):

@@ -328,7 +328,7 @@ def test_batch_lines_and_report_of_a_look_grade_have_no_weights(tmp_path, photo)
     result = run("batch", folder, "-o", tmp_path / "out", "--preset", "warm",
                  "--report", tmp_path / "rep")
     assert result.exit_code == 0, result.output
-    assert "the preset's own look, strength 1.00, change" in result.output
+    assert "the preset's own look, strength 1.00, colours move " in result.output
     rows = (tmp_path / "rep" / "weights.csv").read_text().splitlines()
     header = rows[0].split(",")
     for row in rows[1:]:

@@ -30,6 +30,7 @@ from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import WBCGRADE, command_env
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
+from wbcgrade.color.outcome import change_words
 from wbcgrade.color.remap import apply_color_map, identity_map
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install "
@@ -183,7 +184,7 @@ def test_a_preset_opens_on_apply_s_grade_and_saves_what_apply_writes(browser, do
         assert grade["strength"] == outcome["strength"] == 1.0
         words = browser.find_element("id", "grade-words").text
         assert "preset warm" in words and "the preset's own look" in words
-        assert f"mean change of this photo {outcome['mean_change_255']:.1f}/255" in words
+        assert "this photo's colours move " + change_words(outcome["mean_change_255"]) in words
         # the page shows that grade: apply's map on the preview picture
         studio = server.studio
         look = studio.source(0).session.look_grade()

@@ -104,10 +104,14 @@ class _Group(click.Group):
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="wbcgrade")
 def main() -> None:
-    """Colour grading with Wasserstein barycentric coordinates.
+    """Put a look on your photos and clips: a shipped preset's, the look a folder
+    of graded photos shares, or the look of your own before/after edits.
 
-    Grade a photo towards the barycenter of a set of style palettes that is
-    closest to its own palette (Bonneel, Peyré, Cuturi, SIGGRAPH 2016).
+    apply grades a photo, batch a folder, video a clip; look extract and look
+    learn save a look as a LUT. --mode palette is the paper's colour transfer
+    instead: the photo's palette moved onto the closest blend of the style
+    palettes (Wasserstein barycentric coordinates; Bonneel, Peyré, Cuturi,
+    SIGGRAPH 2016). The same core fits measured BRDFs and completes shapes.
     """
 
 

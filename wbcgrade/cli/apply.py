@@ -100,21 +100,23 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
           save_grade, report_dir, **kwargs):
     """Grade PHOTO with the look of a preset or of a folder of style photos.
 
-    The look comes from a preset (--preset NAME_OR_FILE) or a folder of style
-    photos (--style DIR): the look they share, or the look of the style photo
-    that shows PHOTO's own scene. --mode palette instead moves PHOTO's
-    colours onto the closest blend of the style palettes (the barycentric
-    weights are reported). The terminal says which source the grade used,
-    its strength, and how much the photo changed (and why, when it is left
-    nearly unchanged). The photo keeps its format, bit depth, EXIF and
-    ICC profile. By default 8/16-bit photos are graded as sRGB (or the space
-    their ICC profile names, converted) and float (EXR) photos in the
-    sRGB-encoded domain; values above 1 keep their intensity and get the
-    grade of their hue. --working-space (e.g. acescct) grades elsewhere;
-    the output stays in the photo's own space. Raw camera files (DNG, CR2,
-    NEF, ARW, ...) are demosaiced by LibRaw and graded in ACEScct. --look
-    FILE applies a saved grade (the JSON of `apply --save-grade`, or a LUT)
-    with no fit.
+    PHOTO is the photo to grade (JPEG, PNG, TIFF, EXR or a camera raw file);
+    it is only read. The look comes from a shipped preset (--preset), the
+    style photos of a folder (--style DIR: the look they share, or the look of
+    the one that shows PHOTO's own scene) or a saved grade (--look FILE). The
+    graded copy keeps the photo's format, bit depth, EXIF and ICC profile; the
+    terminal says where the look came from, its strength and how much the
+    colours moved.
+
+    --mode palette instead moves PHOTO's colours onto the closest blend of
+    the style palettes (the barycentric weights are reported). By default
+    8/16-bit photos are graded as sRGB (or the space their ICC profile
+    names, converted) and float (EXR) photos in the sRGB-encoded domain;
+    values above 1 keep their intensity and get the grade of their hue.
+    --working-space (e.g. acescct) grades elsewhere; the output stays in the
+    photo's own space. Raw camera files (DNG, CR2, NEF, ARW, ...) are
+    demosaiced by LibRaw and graded in ACEScct. --look FILE applies a saved
+    grade (the JSON of `apply --save-grade`, or a LUT) with no fit.
     """
     from wbcgrade.cli._clock import command_started
 

@@ -37,20 +37,23 @@ def _warn(message: str) -> None:
 SHOWN_WEIGHTS = 4
 
 
-def photo_line(result: FileResult) -> str:
+def photo_line(result: FileResult, verb: str = "graded") -> str:
     """One line about a finished photo: what happened, its name, and for a graded one
-    its largest weights, the fit's loss and the time."""
+    its largest weights, the fit's loss and the time. ``verb`` says what was done to a
+    graded photo ("reported": `report` read what a batch recorded)."""
     if result.status == "skipped":
         return f"skipped  {result.relative} (its output is complete)"
     if result.status != "graded":
         return f"{result.status:<8} {result.relative}: {result.error}"
     outcome = result.grade_outcome
     if outcome is not None and outcome.palette is None:  # a look: no weights to show
+        from wbcgrade.color.outcome import change_words
+
         said = (f"{outcome.source.describe(outcome.n_styles)}, strength {outcome.strength:.2f}, "
-                f"change {outcome.mean_change:.1f}/255")
+                f"colours move {change_words(outcome.mean_change)}")
         if outcome.unchanged:
             said += f" (essentially unchanged: {outcome.reason})"
-        return f"graded   {result.relative}: {said}  {result.timings.get('total', 0.0):.1f} s"
+        return f"{verb:<8} {result.relative}: {said}  {result.timings.get('total', 0.0):.1f} s"
     ranked = sorted(zip(result.names, result.weights), key=lambda pair: -pair[1])
     shown = ", ".join(f"{name} {weight:.3f}" for name, weight in ranked[:SHOWN_WEIGHTS]
                       if weight >= 0.0005)
@@ -58,12 +61,12 @@ def photo_line(result: FileResult) -> str:
     if rest:
         shown += f" (+{rest} more)"
     loss = "" if result.loss is None else f"  loss {result.loss:.4g}"
-    return (f"graded   {result.relative}: {shown}{loss}  "
+    return (f"{verb:<8} {result.relative}: {shown}{loss}  "
             f"{result.timings.get('total', 0.0):.1f} s")
 
 
 @contextlib.contextmanager
-def batch_progress() -> Iterator[BatchProgress]:
+def batch_progress(verb: str = "graded") -> Iterator[BatchProgress]:
     """Two tqdm bars: photos (with the failures counted), and what the work done in this
     process is doing (the photo's name and stage, or the series' palettes being read).
     Each finished photo also gets a line on stdout (:func:`photo_line`; above the bars
@@ -83,7 +86,7 @@ def batch_progress() -> Iterator[BatchProgress]:
             if result.status == "failed":
                 failed.append(result.relative)
                 files.set_postfix(failed=len(failed), refresh=False)
-            tqdm.write(photo_line(result), file=sys.stdout)
+            tqdm.write(photo_line(result, verb), file=sys.stdout)
             if result.own_style:
                 tqdm.write("Warning: " + own_style_warning(result.relative, result.own_style),
                            file=sys.stderr)
@@ -127,7 +130,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
         click.echo(f"  ignored  {name} (not an image)")
     outcome = None if result.series_grade is None else result.series_grade.outcome
     if outcome is not None and outcome.palette is None:
-        click.echo("series grade: " + outcome.headline().removeprefix("grade: "))
+        click.echo("series grade: " + outcome.headline("the series").removeprefix("grade: "))
     elif result.series is not None:
         ranked = sorted(zip(result.style_names, result.series.weights), key=lambda p: -p[1])
         click.echo("series weights: " + ", ".join(f"{n} {w:.3f}" for n, w in ranked[:6]))

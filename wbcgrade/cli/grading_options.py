@@ -262,14 +262,69 @@ OPTION_GROUPS = (
 )
 
 
+#: The options a short ``--help`` shows (parameter names): where the look comes from, how
+#: much of it, and where the results go; ``--help-all`` shows every option.
+COMMON_OPTIONS = ("style_dir", "preset", "look_path", "originals_dir", "mode", "strength",
+                  "look_strength", "output", "output_dir", "out_dir", "recursive",
+                  "consistent", "jobs", "per_shot", "report_dir", "lut", "save_grade",
+                  "quality", "overwrite", "as_json")
+#: A command with more options than this shows only :data:`COMMON_OPTIONS` by default.
+SHORT_HELP_ABOVE = 24
+
+
+def show_all_help(ctx: click.Context, param: click.Parameter, value: bool) -> None:
+    """``--help-all``: the command's whole help (every option, by section), then exit."""
+    if not value or ctx.resilient_parsing:
+        return
+    ctx.meta["wbcgrade.help_all"] = True
+    click.echo(ctx.get_help(), color=ctx.color)
+    ctx.exit()
+
+
 class LazyOptionsCommand(click.Command):
     """A click command whose deferred options are built when its parameters are first used.
 
     Listing the command (``wbcgrade --help``) needs only its name and help
     text; its options, parsing and ``--help`` expand the placeholders left by
-    :func:`lazy_options` in place, in their order. ``--help`` lists the options
-    in sections by what they steer (:data:`OPTION_GROUPS`).
+    :func:`lazy_options` in place, in their order. ``--help-all`` lists every option
+    in sections by what they steer (:data:`OPTION_GROUPS`); ``--help`` does the same for
+    a command with few options, and otherwise shows the first two paragraphs of the help
+    text and the common options (:data:`COMMON_OPTIONS`), so that it fits on a screen.
     """
+
+    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+        params = super().get_params(ctx)
+        if not any(p.name == "help_all" for p in params):
+            from wbcgrade.cli.option_table import click_options
+
+            def holder() -> None:
+                """Collects the option."""
+
+            click_options("help_all")[0](holder)
+            params.insert(len(params) - 1, holder.__click_params__[0])  # before --help
+        return params
+
+    def _short(self, ctx: click.Context) -> bool:
+        """Whether ``--help`` shows the short form (a long command, --help-all not given)."""
+        if ctx.meta.get("wbcgrade.help_all"):
+            return False
+        count = sum(1 for p in self.get_params(ctx) if isinstance(p, click.Option)
+                    and not p.hidden)
+        return count > SHORT_HELP_ABOVE
+
+    def format_help_text(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        if not self._short(ctx) or not self.help:
+            super().format_help_text(ctx, formatter)
+            return
+        import inspect
+
+        paragraphs = inspect.cleandoc(self.help).split("\n\n")
+        formatter.write_paragraph()
+        with formatter.indentation():
+            for number, text in enumerate(paragraphs[:2]):
+                if number:
+                    formatter.write_paragraph()
+                formatter.write_text(text)
 
     @property
     def params(self) -> list[click.Parameter]:
@@ -287,9 +342,22 @@ class LazyOptionsCommand(click.Command):
             record = param.get_help_record(ctx)
             if record is not None:
                 records[param.name] = record
+        if self._short(ctx):
+            rows = [records.pop(name) for name in COMMON_OPTIONS if name in records]
+            rows += [records.pop(name) for name in ("help_all", "help") if name in records]
+            with formatter.section("Common options"):
+                formatter.write_dl(rows)
+            formatter.write_paragraph()
+            formatter.write_text(f"{len(records)} more options (the look's content model, "
+                                 "the colour map and its finish, the palette fit, colour "
+                                 "spaces, LUT and output settings, caches): --help-all.")
+            return
+        has_mode = "mode" in records
         for title, names in (*OPTION_GROUPS, ("Other options", tuple(records))):
             rows = [records.pop(name) for name in names if name in records]
             if rows:
+                if not has_mode and title.startswith("Look grade"):
+                    title = "The look's content model"
                 with formatter.section(title):
                     formatter.write_dl(rows)
 

@@ -81,8 +81,10 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     outcome = found.outcome
     what = ("the preset's own look" if outcome.source.value == "preset-look"
             else f"the look {len(found.styles)} style photos share")
-    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}, look size "
-               f"{outcome.look_size:.1f}/255 (mean change of the cube's colours)")
+    from wbcgrade.color.outcome import change_words
+
+    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}; over the whole "
+               f"colour cube it moves colours {change_words(outcome.look_size)}")
     if outcome.unchanged or outcome.faint:
         state = ("it leaves colours essentially unchanged" if outcome.unchanged
                  else "a faint look")

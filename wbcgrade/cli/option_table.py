@@ -59,6 +59,7 @@ class Option:
     section : the ``--help`` section; PALETTE: options that steer the palette
         fit only, LOOK: the look grade's only.
     case_sensitive : whether a choice (a ``"module:attr"`` list of names) is.
+    eager : processed before the other options (an option that prints and exits).
     upper : a ``"module:attr"`` name of the upper bound of the ``click.IntRange`` type,
         read when built.
     """
@@ -84,6 +85,7 @@ class Option:
     section: str = OTHER
     case_sensitive: bool = True
     upper: str | None = None
+    eager: bool = False
 
     def build(self):
         """The click.option decorator of this row."""
@@ -112,6 +114,8 @@ class Option:
             extra["default"] = default
         if self.hidden:
             extra["hidden"] = True
+        if self.eager:
+            extra["is_eager"] = True
         text = self.help
         if self.help_default is not None:
             shown = _resolve(self.help_default)
@@ -200,8 +204,8 @@ OPTIONS: tuple[Option, ...] = (
     Option("max_iter", "--max-iter", "L-BFGS iterations of the fit at most.",
            field="fit.max_iter", json="max_iter", type=int, default=FIELD_DEFAULT,
            show_default=True, section=PALETTE),
-    Option("strength", "--strength", "How much of the grade: 0 none, 1 in full (x -> (1-t) x "
-           "+ t T(x)); up to 4 makes a faint grade stronger.", field="map.strength",
+    Option("strength", "--strength", "How much of the grade: 0 none, 1 in full; up to 4 makes "
+           "a faint grade stronger.", field="map.strength",
            json="strength", type=float, default=FIELD_DEFAULT, show_default=True,
            section=SOURCE),
     Option("map_size", "--map-size", "Nodes per axis of the smooth colour map (the grade is "
@@ -233,6 +237,10 @@ OPTIONS: tuple[Option, ...] = (
     Option("preserve_luminance", "--preserve-luminance", "Change hue and chroma only; keep "
            "each colour's lightness (Oklab).", field="map.preserve_luminance",
            json="preserve_luminance", is_flag=True, default=False, section=MAP),
+    # help: the default --help of a long command shows its common options only
+    Option("help_all", "--help-all", "Show every option, by what it steers, and exit.",
+           is_flag=True, default=False, expose_value=False, eager=True,
+           callback="wbcgrade.cli.grading_options:show_all_help"),
     # caches and limits
     Option("no_cache", "--no-cache", "Do not read or write cached style histograms.",
            is_flag=True, default=False),
@@ -274,8 +282,8 @@ OPTIONS: tuple[Option, ...] = (
            "little. One hand-edited photo with its original is worth more than a folder "
            "of edits alone.", field="originals", type=_FOLDER, metavar="DIR",
            section=SOURCE),
-    Option("quality", "--quality", "JPEG/WebP quality 1-100 [default: the encoder's, 98 for "
-           "JPEG; 90 gives about the size of a typical camera JPEG].", field="quality",
+    Option("quality", "--quality", "JPEG/WebP quality 1-100 [default: a JPEG photo's own "
+           "quality, else 95 for JPEG; the encoder's for WebP].", field="quality",
            type=click.IntRange(1, 100), metavar="N", section=OUTPUTS),
     Option("bit_depth", "--bit-depth", "Bits per channel of the output (where its format holds "
            "them: JPEG 8; PNG 8/16; TIFF 8/16/float; EXR 16 = half, float) [default: the "

@@ -43,7 +43,7 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
 
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)
-    with batch_progress() as progress:
+    with batch_progress("reported") as progress:
         result = report_folder(target, out_dir, source, options, recursive=recursive,
                                consistent=consistent, overwrite=overwrite, jobs=jobs,
                                scheduler=scheduler, progress=progress)

@@ -43,7 +43,7 @@ def _print_result(result, as_json: bool) -> None:
         if outcome is not None and outcome.palette is None:  # a look: no weights to show
             where = f"shot {number} (frames {shot.first}-{shot.last}) " \
                 if len(result.shots) > 1 else ""
-            for line in outcome.lines():
+            for line in outcome.lines("this clip" if len(result.shots) == 1 else "the shot"):
                 click.echo(where + line)
             continue
         ranked = ", ".join(f"{n} {w:.3f}" for n, w in shot.grade.ranked()[:6])

@@ -450,8 +450,10 @@ class WriteOptions:
 
     Attributes
     ----------
-    quality : 1-100, JPEG and WebP quality (None: the writer's default, 98
-        for JPEG); other formats are lossless and ignore it.
+    quality : 1-100, JPEG and WebP quality (None: for a JPEG, the input's quality when
+        it is a JPEG whose quality can be read (:func:`jpeg_quality`), else
+        :data:`DEFAULT_JPEG_QUALITY`; WebP: the writer's default); other formats are
+        lossless and ignore it.
     bit_depth : "8", "16" or "float" (EXR: "16" is half float), or None:
         the input's where the output format holds it (a raw photo: 16-bit
         integers, float in EXR).
@@ -468,6 +470,50 @@ class WriteOptions:
             raise OptionError("quality must be between 1 and 100", "quality")
         if self.bit_depth is not None and self.bit_depth not in BIT_DEPTHS:
             raise OptionError(f"bit_depth must be one of {', '.join(BIT_DEPTHS)}", "bit_depth")
+
+
+#: JPEG quality of an output when the input's cannot be read (not a JPEG, or no tables).
+DEFAULT_JPEG_QUALITY = 95
+#: The IJG's (libjpeg's) luminance quantisation table at quality 50, in natural (row)
+#: order, as Pillow's ``quantization`` gives it.
+_IJG_LUMA = (16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55,
+             14, 13, 16, 24, 40, 57, 69, 56, 14, 17, 22, 29, 51, 87, 80, 62,
+             18, 22, 37, 56, 68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92,
+             49, 64, 78, 87, 103, 121, 120, 101, 72, 92, 95, 98, 112, 100, 103, 99)
+
+
+def jpeg_quality(path: str | os.PathLike | None) -> int | None:
+    """The quality (1-100) a JPEG was saved at, estimated from its luminance quantisation
+    table (the IJG scale whose table is nearest: exact for libjpeg's, Pillow's, OpenImageIO's
+    and most editors' files); None when ``path`` is not a readable JPEG.
+
+    >>> jpeg_quality("samples/chelsea.jpg") is None or 1 <= jpeg_quality("samples/chelsea.jpg")
+    True
+    """
+    if path is None:
+        return None
+    try:
+        from PIL import Image as PILImage
+
+        with PILImage.open(path) as image:  # reads the header only
+            if image.format != "JPEG":
+                return None
+            tables = getattr(image, "quantization", None) or {}
+            luma = tables.get(0)
+    except Exception:  # noqa: BLE001 - any unreadable file: no quality known
+        return None
+    if luma is None or len(luma) != 64:
+        return None
+    table = np.asarray(luma, dtype=np.float64)
+    base = np.asarray(_IJG_LUMA, dtype=np.float64)
+    best, best_error = None, np.inf
+    for quality in range(1, 101):
+        scale = 5000 / quality if quality < 50 else 200 - 2 * quality
+        scaled = np.clip(np.floor((base * scale + 50) / 100), 1, 255)
+        error = float(np.abs(scaled - table).sum())
+        if error < best_error:
+            best, best_error = quality, error
+    return best
 
 
 def _depth_of(pixel_type: oiio.TypeDesc) -> str:
@@ -696,9 +742,12 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | N
     alpha = like.alpha_channel if alpha_channel is None else alpha_channel
     spec = _output_spec(like, height, width, nchannels, format_name, alpha,
                         _pixel_type(format_name, like, options.bit_depth))
-    if options.quality is not None and format_name in _QUALITY_FORMATS:
+    quality = options.quality
+    if quality is None and format_name == "jpeg":  # the input's quality, else 95
+        quality = jpeg_quality(like.path) or DEFAULT_JPEG_QUALITY
+    if quality is not None and format_name in _QUALITY_FORMATS:
         spec.erase_attribute("CompressionQuality")  # an input's own setting: not this one
-        spec.attribute("Compression", f"{_QUALITY_FORMATS[format_name]}:{options.quality}")
+        spec.attribute("Compression", f"{_QUALITY_FORMATS[format_name]}:{quality}")
     if 0 <= alpha < nchannels:
         # In memory colour is unassociated; EXR stores it multiplied by alpha.
         if format_name == "openexr":

@@ -28,6 +28,7 @@ import numpy as np
 __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
+           "change_words", "VISIBILITY",
            "OWN_PHOTO_KEYS"]
 
 #: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
@@ -55,7 +56,8 @@ class GradeSource(str, Enum):
         return {
             GradeSource.PRESET_LOOK: "the preset's own look",
             GradeSource.OWN_SCENE: "the look of the style photo that shows this scene",
-            GradeSource.SET_LOOK: f"the look the {n_styles} style photos share",
+            GradeSource.SET_LOOK: (f"the look the {n_styles} style photos share"
+                                   if n_styles != 1 else "the look of the one style photo"),
             GradeSource.PALETTE: f"a blend of the {n_styles} style palettes (palette fit)",
             GradeSource.SAVED: "a saved grade, applied as saved (no fit)",
         }[self]
@@ -200,26 +202,28 @@ class GradeOutcome:
         """The fraction of the look applied: its own strength times ``--strength``."""
         return (1.0 if self.look_strength is None else self.look_strength) * self.blend
 
-    def headline(self) -> str:
-        """One line: the source, the strength, the look's size and the photo's change."""
+    def headline(self, subject: str = "this photo") -> str:
+        """One line: the source, the strength and how much ``subject``'s colours move
+        (in percent of the tonal range, and how visible that is: :func:`change_words`)."""
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
             what = (self.file if self.extra.get("learned")  # a look learned for this run
                     else f"the saved grade {self.file} (applied as saved, no fit)")
         if self.source is GradeSource.OWN_SCENE and self.match:
             what = f"the look of the style photo of this scene ({self.match}, " \
-                   f"confidence {self.confidence:.2f})"
+                   f"matched {100 * self.confidence:.0f} % sure)"
         elif self.source is GradeSource.SET_LOOK and self.match and self.confidence > 0:
-            what += (f", moved towards the palette grade of {self.match} "
-                     f"(confidence {self.confidence:.2f})")
-        return (f"grade: {what}; strength {self.strength:.2f}, look size "
-                f"{self.look_size:.1f}/255, mean change of this photo {self.mean_change:.1f}/255")
+            what += (f", nudged {100 * self.confidence:.0f} % towards the colours of "
+                     f"{self.match}, the closest style")
+        return (f"grade: {what}, strength {self.strength:.2f}; {subject}'s colours move "
+                f"{change_words(self.mean_change)}")
 
-    def lines(self) -> list[str]:
+    def lines(self, subject: str = "this photo") -> list[str]:
         """The outcome in words, one line each (the headline, then why and what to do)."""
-        lines = [self.headline()]
+        lines = [self.headline(subject)]
         if self.unchanged:
-            lines.append(f"the photo is essentially unchanged: {self.reason}")
+            lines.append(f"the {subject.removeprefix('this ')} is essentially unchanged: "
+                         f"{self.reason}")
         elif self.faint:
             lines.append(f"a faint grade: {self.reason}")
         if (self.unchanged or self.faint) and self.advice:
@@ -284,7 +288,7 @@ class GradeOutcome:
         faint = not unchanged and (strength < FAINT_STRENGTH or mean_change < FAINT_CHANGE)
         reason = advice = None
         if faint:
-            reason = f"this photo's colours move by {mean_change:.1f}/255 on average"
+            reason = f"the colours move by {change_words(mean_change)}"
             if strength < FAINT_STRENGTH and why_weak is not None:
                 reason += f"; the look is applied at strength {strength:.2f}: {why_weak}"
             advice = unchanged_advice(source, blend, more.get("extra"))
@@ -294,10 +298,10 @@ class GradeOutcome:
             elif why_weak is not None and strength < UNCHANGED_STRENGTH:
                 reason = why_weak
             elif look_size < UNCHANGED_CHANGE:
-                reason = f"the grade itself moves colours by only {look_size:.1f}/255"
+                reason = f"the grade itself moves colours by only {change_words(look_size)}"
             else:
-                reason = (f"the grade moves this photo's colours by only {mean_change:.1f}/255 "
-                          "on average (it changes other colours more)")
+                reason = (f"the grade moves these colours by only {change_words(mean_change)} "
+                          "(it changes other colours more)")
             advice = unchanged_advice(source, blend, more.get("extra"))
         more["faint"] = faint
         if why_weak is not None:
@@ -345,8 +349,8 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
             content = _unused_own_photos(unused) + " to tell a faint look from content); "
         else:
             content = (f"--natural DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
-                       "photos (what `batch` does with the photos it grades) tells a faint "
-                       "look from content better; ")
+                       "photos (what `batch` does with the photos it grades) helps tell a "
+                       "faint look from what the photos show; ")
         return (content + "`wbcgrade look learn BEFORE AFTER` learns the whole look from "
                 "the style photos' originals, if you have them; --mode palette moves the "
                 "photo's colours towards those of the style photos; --strength above 1 "
@@ -359,6 +363,24 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
     if source is GradeSource.PALETTE:
         return "the style palettes are close to the photo's own: choose styles further from it"
     return None
+
+
+#: How visible a mean change of colours is (upper bounds in 1/255 of the sRGB cube, words):
+#: under :data:`UNCHANGED_CHANGE` not visible, under :data:`FAINT_CHANGE` barely visible.
+VISIBILITY = ((UNCHANGED_CHANGE, "not visible"), (FAINT_CHANGE, "barely visible"),
+              (8.0, "subtle"), (20.0, "clear"), (float("inf"), "strong"))
+
+
+def change_words(mean_change: float) -> str:
+    """A mean change of colours (1/255 of the sRGB cube) in words: the percent of the tonal
+    range and how visible it is.
+
+    >>> change_words(0.5), change_words(2.0), change_words(30.0)
+    ('0.2 % on average (not visible)', '0.8 % on average (barely visible)', \
+'11.8 % on average (strong)')
+    """
+    label = next(words for bound, words in VISIBILITY if mean_change < bound)
+    return f"{100 * mean_change / 255:.1f} % on average ({label})"
 
 
 def map_change(color_map: np.ndarray, strength: float, working: str,

@@ -47,6 +47,9 @@ def resolve_preset(name_or_path: str) -> Path:
     shipped = dict(list_presets())
     if name_or_path in shipped:
         return shipped[name_or_path]
+    folded = {name.casefold(): path for name, path in shipped.items()}
+    if name_or_path.casefold() in folded:  # `--preset Warm`: names are lower case
+        return folded[name_or_path.casefold()]
     if candidate.suffix or os.sep in name_or_path:
         raise InputError(f"{name_or_path}: no such preset file")
     names = ", ".join(shipped) or "none installed"

@@ -326,6 +326,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     usable photo.
     """
     folder = Path(folder)
+    if folder.is_file():
+        raise InputError(f"{folder}: is a file; --style takes a folder of style photos (put "
+                         "the photo in a folder of its own, or use --preset)")
     if not folder.is_dir():
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
@@ -624,6 +627,16 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space,
                              on_image=on_image)
+
+
+def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> str | None:
+    """The one-line warning for a look (``mode`` "look") taken from a folder of a single
+    style photo, or None: one photo cannot show which of its colours are the look."""
+    if source.style_dir is None or mode != "look" or len(styles.names) != 1:
+        return None
+    return (f"{source.style_dir}: one style photo; its look is told from what it shows by "
+            "that photo alone (add photos that share the look for a surer one, or use "
+            "--mode palette to move the colours towards this photo's)")
 
 
 #: ``--natural`` naming the shipped natural palettes alone (a batch otherwise also reads

@@ -33,9 +33,9 @@ from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
 
-__all__ = ["style_pictures", "report_paths", "plan_report", "write_report", "report_entries",
-           "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
-           "palette_record"]
+__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "write_report",
+           "report_entries", "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
+           "palette_record", "look_chart", "chart_record"]
 
 #: The files of a report folder besides the per-photo ones.
 INDEX_FILES = ("report.json", "weights.csv", "index.html")
@@ -59,6 +59,19 @@ def report_paths(report_dir: str | os.PathLike, relatives: list[str]) -> list[Pa
     return ([report_dir / name for name in INDEX_FILES]
             + [_record_path(report_dir, rel) for rel in relatives]
             + [report_dir / sheet_path(rel) for rel in relatives])
+
+
+def own_report(report_dir: str | os.PathLike | None) -> bool:
+    """Whether ``report_dir`` holds a report wbcgrade wrote (its ``report.json`` says so):
+    a batch run again with the same ``--report`` folder updates it, as it resumes its
+    photos, instead of refusing its files."""
+    if report_dir is None:
+        return False
+    try:
+        document = json.loads((Path(report_dir) / "report.json").read_text("utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and document.get("format") == "wbcgrade-report"
 
 
 def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),
@@ -128,6 +141,47 @@ def palette_record(grade, encoding: ColorEncoding) -> dict | None:
             "shares": np.round(np.asarray(palette.shares, np.float64), 4).tolist()}
 
 
+def look_chart() -> np.ndarray:
+    """A colour chart, (6, 13, 3) sRGB display colours: five rows of twelve hues at five
+    lightnesses (then a grey of each lightness), and a row of thirteen greys from black to
+    white. What a look does to it shows the look itself (tone, tint, saturation)."""
+    import colorsys
+
+    rows = []
+    for value in (0.25, 0.4, 0.55, 0.7, 0.85):
+        row = [colorsys.hsv_to_rgb(h / 12, 0.55, value) for h in range(12)]
+        rows.append([*row, (value * 0.85,) * 3])
+    rows.append([(g / 12,) * 3 for g in range(13)])
+    return np.asarray(rows, dtype=np.float32)
+
+
+def chart_record(grade, encoding: ColorEncoding) -> dict | None:
+    """The :func:`look_chart` through a look grade's colour map, as the photo's space
+    shows it on screen (``{"after": [[[r, g, b], ...], ...]}``, display sRGB); None for a
+    palette grade (its sheet shows weights)."""
+    from wbcgrade.color.colorspace import convert, default_working_space
+
+    outcome = getattr(grade, "outcome", None)
+    if outcome is None or outcome.palette is not None:
+        return None
+    chart = look_chart()
+    values = chart.reshape(-1, 3)
+    if encoding.input != default_working_space():
+        values = convert(values, default_working_space(), encoding.input)
+    encoded, state = encoding.encode(values)
+    graded = encoding.decode(grade.apply(np.ascontiguousarray(encoded, np.float32)), state)
+    after = encoding.to_display(graded).reshape(chart.shape)
+    return {"after": np.round(np.asarray(after, np.float64), 4).tolist()}
+
+
+def _chart(record: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
+    if not record or "after" not in record:
+        return None
+    after = np.asarray(record["after"], np.float32)
+    chart = look_chart()
+    return (chart, after) if after.shape == chart.shape else None
+
+
 def _palette(record: dict | None):
     from wbcgrade.color.sheet import Palette
 
@@ -144,6 +198,8 @@ def sheet_content(result: FileResult, graded: PhotoGrade,
     # pictures and palettes shown in sRGB, whatever the photo's space
     before = encoding.to_display(image.rgb())
     after = encoding.to_display(np.repeat(graded.pixels[:, :, color], 3 // len(color), axis=2))
+    if result.chart is None:
+        result.chart = chart_record(graded.grade, encoding)
     return _content(result, before, after, _palette(palette_record(graded.grade, encoding)),
                     style_pictures)
 
@@ -152,13 +208,38 @@ def sheet_from_files(result: FileResult, style_pictures: dict[str, np.ndarray] |
     """The SheetContent of a photo a batch graded, from its files (``result.source``, the
     photo; ``result.output``, the graded copy) and its record (weights, losses, the
     palette aimed at): nothing is graded. Raises InputError when a file is unreadable."""
-    from wbcgrade.color.imageio import read_image
-
-    pictures = []
-    for path in (result.source, result.output):
-        image = read_image(path)
-        pictures.append(ColorEncoding.for_image(image).to_display(image.rgb()))
+    pictures = [_sheet_picture(path) for path in (result.source, result.output)]
     return _content(result, *pictures, _palette(result.palette), style_pictures)
+
+
+#: The size the pictures of a sheet made from files are read at, at least (the sheet shows
+#: them at 300 x 480 at most).
+_SHEET_READ = 480
+
+
+def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
+    """A photo as a sheet shows it: display sRGB, small. A JPEG without an ICC profile
+    (sRGB) is decoded at a fraction of its size (the decoder's DCT scaling: a 16-megapixel
+    photo in 0.03 s instead of 0.3 s, and no full-size arrays); any other file is read as
+    ``apply`` reads it and made small before its colours are converted."""
+    from PIL import Image as PILImage
+    from PIL import ImageOps
+
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.sheet import thumbnail
+
+    try:
+        with PILImage.open(path) as image:
+            if image.format == "JPEG" and image.mode in ("RGB", "L") \
+                    and not image.info.get("icc_profile"):
+                image.draft("RGB", (_SHEET_READ, _SHEET_READ))
+                upright = ImageOps.exif_transpose(image).convert("RGB")
+                return np.asarray(upright, dtype=np.float32) / np.float32(255)
+    except (OSError, ValueError, SyntaxError):  # not for Pillow: read as apply reads it
+        pass
+    image = read_image(path)
+    small = thumbnail(image.rgb(), 2 * _SHEET_READ, 2 * _SHEET_READ)
+    return ColorEncoding.for_image(image).to_display(small)
 
 
 def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
@@ -172,17 +253,21 @@ def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
     bins = 16
     outcome = result.grade_outcome
     if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
-        tiles = [StyleTile(name, 0.0, pictures.get(name, np.full((8, 8, 3), 0.5, np.float32)))
-                 for name in result.names]
-        palettes = [("input", histogram_palette(image_histogram(before, bins))),
-                    ("output", histogram_palette(image_histogram(after, bins)))]
+        from wbcgrade.color.outcome import GradeSource
+
+        # the style photos a look was read from (a preset's own look: not its photos)
+        tiles = ([] if outcome.source in (GradeSource.PRESET_LOOK, GradeSource.SAVED) else
+                 [StyleTile(name, 0.0, pictures.get(name, np.full((8, 8, 3), 0.5, np.float32)))
+                  for name in result.names])
+        palettes = [("input", histogram_palette(image_histogram(small_before[::2, ::2], bins))),
+                    ("output", histogram_palette(image_histogram(small_after[::2, ::2], bins)))]
         subtitle = outcome.headline().removeprefix("grade: ")
         if outcome.unchanged:
             subtitle += f"  |  essentially unchanged: {outcome.reason}"
         return SheetContent(title=result.relative, subtitle=subtitle, before=small_before,
                             after=small_after, styles=tiles, palettes=palettes,
-                            styles_label=f"styles ({outcome.source.describe(len(tiles))}; "
-                                         "a look has no weights)")
+                            styles_label="the style photos the look was read from",
+                            chart=_chart(result.chart))
     order = sorted(range(len(result.weights)), key=lambda i: -result.weights[i])
     tiles = [StyleTile(result.names[i], result.weights[i],
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
@@ -274,7 +359,51 @@ figcaption{font-size:13px;color:#444;margin-bottom:4px}
 """
 
 
+def _look_index_html(entries: list[dict], meta: dict) -> str:
+    """The page of a report whose grades are all looks: per photo where the look came
+    from, its strength and how much the colours moved; then each photo's sheet (before and
+    after, the look on a colour chart)."""
+    from wbcgrade.color.outcome import change_words
+
+    esc = html.escape
+    rows = []
+    for entry in entries:
+        photo = esc(entry["photo"])
+        if entry.get("sheet"):
+            photo = f'<a href="#{esc(entry["photo"])}">{photo}</a>'
+        outcome = entry.get("outcome")
+        if not outcome:
+            rows.append(f'<tr><td class="name">{photo}</td><td class="failed" colspan="4">'
+                        f'{esc(entry["status"])}: {esc(entry.get("error", ""))}</td></tr>')
+            continue
+        note = ""
+        if outcome.get("unchanged") or outcome.get("faint"):
+            note = esc(str(outcome.get("reason") or ""))
+        change = change_words(float(outcome.get("mean_change_255", 0)))
+        rows.append(f'<tr><td class="name">{photo}</td>'
+                    f'<td class="name">{esc(str(outcome.get("source_text", "")))}</td>'
+                    f'<td>{float(outcome.get("strength", 0)):.2f}</td>'
+                    f'<td class="name">{esc(change)}</td><td class="name">{note}</td></tr>')
+    figures = "".join(
+        f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
+        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
+        f"</figure>" for e in entries if e.get("sheet"))
+    summary = esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
+    return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+            f"<title>wbcgrade look report</title><style>{_CSS}</style></head><body>"
+            f"<h1>wbcgrade look report</h1><p class=\"meta\">{summary}. Strength: how much of "
+            "the look was applied (1: all of it); change: how far each photo's colours moved, "
+            "in percent of the tonal range. Each sheet shows the photo before and after, and "
+            "the look on a colour chart.</p>"
+            "<table><thead><tr><th>photo</th><th>where the look came from</th>"
+            "<th>strength</th><th>change</th><th>note</th></tr></thead>"
+            f"<tbody>{''.join(rows)}</tbody></table>{figures}</body></html>\n")
+
+
 def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
+    if not any("weights" in entry for entry in entries) and any(
+            entry.get("outcome") for entry in entries):  # looks only: no weights to show
+        return _look_index_html(entries, meta)
     esc = html.escape
     rows = []
     for entry in entries:

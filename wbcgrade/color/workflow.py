@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import plan_outputs
+from wbcgrade._publish import make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.grading import Grade, grade_encoded
@@ -122,7 +122,8 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     and the LUT, whose format ``lut_format`` names, else its ending: ``.cube``
     or ``.clf``) passes :func:`wbcgrade._publish.plan_outputs`: not the photo, not
     an existing file unless ``overwrite``, not a device, not two outputs in
-    one file, a folder that exists and is writable. ``write`` False: nothing
+    one file, a writable folder (a missing one is created when the outputs are written,
+    never over a file). ``write`` False: nothing
     is written (no output). ``saved_grade``: where the grade itself goes (a JSON
     file that ``--look`` reads), planned with the others. ``reads``: the other files
     the grade reads (style photos, presets, a saved look:
@@ -147,7 +148,7 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
         if lut_format == "clf":
             check_clf_support()
     output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],
-                                            overwrite)
+                                            overwrite, make_folders=True)
     return PhotoPlan(photo, output, lut, lut_size, lut_format or "cube", overwrite, encode,
                      saved_grade, output_format)
 
@@ -262,6 +263,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
     if plan.output is not None:
         progress.say("write")
         start = time.perf_counter()
+        make_folders_for(plan.output, plan.lut, plan.saved_grade)
         lut_existed = plan.lut is not None and plan.lut.exists()
         lut_written = False
         try:
@@ -348,6 +350,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, matching_hook(source, options, [plan.photo]))
+    _warn_one_style(source, styles, options, progress.warn)
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
                         keep_input=report_dir is not None)
@@ -357,6 +360,15 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
 
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report
+
+
+def _warn_one_style(source: StyleSource, styles: StyleSet, options: GradeOptions,
+                    warn) -> None:
+    from wbcgrade.color.presets import one_style_warning
+
+    message = one_style_warning(source, styles, options.map.builder)
+    if message is not None and warn is not None:
+        warn(message)
 
 
 def _save_grade(plan: PhotoPlan, grade: Grade) -> None:

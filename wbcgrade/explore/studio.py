@@ -165,9 +165,11 @@ class Explorer:
         grade, mixed, change = blend_looks(
             session.look_grade(), second.session.look_grade(), amount, strength, names,
             session.hists[session.base.fit.bins])
+        from wbcgrade.color.outcome import change_words
+
         words = (f"a blend of two looks: {100 * (1 - amount):.0f} % {names[0]} and "
-                 f"{100 * amount:.0f} % {names[1]} (each the grade apply gives); strength "
-                 f"{strength:.2f}, mean change of this photo {change:.1f}/255")
+                 f"{100 * amount:.0f} % {names[1]} (each the grade apply gives), strength "
+                 f"{strength:.2f}; this photo's colours move {change_words(change)}")
         return grade, mixed, {"source": "blend", "strength": strength, "blend": strength,
                               "look_strength": None, "mean_change_255": round(change, 3),
                               "words": words, "blend_of": list(names), "amount": amount}

@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path, is_unlocked, plan_outputs
+from wbcgrade._publish import atomic_path, is_unlocked, make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
@@ -213,8 +213,8 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
     The output (default :func:`default_output`) must be a container that
     holds the codec; the LUT a ``.cube``; both then pass
     :func:`wbcgrade._publish.plan_outputs` (never the input, never an
-    existing file unless ``overwrite``, a regular file in a writable folder,
-    two different files). Resolved paths are returned. ``reads``: the other files
+    existing file unless ``overwrite``, a regular file in a writable folder, made
+    when missing, two different files). Resolved paths are returned. ``reads``: the other files
     the grade reads (styles, presets, a saved look), never replaced either.
     """
     source = Path(source)
@@ -228,7 +228,7 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
                           path=output)
     if lut is not None and Path(lut).suffix.lower() != ".cube":
         raise OptionError(f"{lut}: lut file name must end in .cube", "lut", path=lut)
-    output, lut = plan_outputs([output, lut], [source, *reads], overwrite)
+    output, lut = plan_outputs([output, lut], [source, *reads], overwrite, make_folders=True)
     return source, output, lut
 
 
@@ -585,6 +585,7 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     progress.say("encode")
     t0 = time.perf_counter()
     names = [f"lut{number:05d}.cube" for number in range(len(segments))]
+    make_folders_for(output, *luts)  # planned: a missing folder of -o or --lut is made
     tmp = stack.enter_context(atomic_path(output, overwrite=overwrite))
     with _writing_in(folder):
         for name, seg in zip(names, segments):

@@ -33,6 +33,7 @@ class FileResult:
     own_style: dict | None = None  # the photo is one of the styles (presets.own_style)
     palette: dict | None = None  # display colours and shares the grade aimed at (sheets)
     outcome: dict | None = None  # what the grade did (GradeOutcome.as_dict())
+    chart: dict | None = None  # a look grade: a colour chart through it (report.chart_record)
 
     @property
     def grade_outcome(self):
@@ -82,6 +83,8 @@ class FileResult:
             entry["own_style"] = self.own_style
         if self.palette:
             entry["target_palette"] = self.palette
+        if self.chart:
+            entry["look_chart"] = self.chart
         if self.color:
             entry["color"] = self.color
         if self.sheet:
@@ -115,7 +118,8 @@ class FileResult:
                    start=str(entry.get("fit_start", "")), sheet=entry.get("sheet"),
                    timings={k: float(v) for k, v in entry.get("timings_s", {}).items()},
                    color=dict(entry.get("color", {})), own_style=entry.get("own_style"),
-                   palette=entry.get("target_palette"), outcome=entry.get("outcome"))
+                   palette=entry.get("target_palette"), outcome=entry.get("outcome"),
+                   chart=entry.get("look_chart"))
 
 
 @dataclass

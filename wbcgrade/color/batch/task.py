@@ -52,6 +52,8 @@ class BatchContext:
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
     overwrite : replace existing outputs and sheets (checked before the run).
+    replace_sheets : replace existing sheets (the report folder is the batch's own, from
+        an earlier run: :func:`wbcgrade.color.report.own_report`).
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
     encode : JPEG/WebP quality and bit depth of the outputs.
@@ -65,6 +67,7 @@ class BatchContext:
     style_pictures: dict[str, np.ndarray] | None = None
     write_outputs: bool = True
     overwrite: bool = False
+    replace_sheets: bool = False
     max_image_pixels: int = field(default_factory=max_image_pixels)
     encode: WriteOptions = WriteOptions()
 
@@ -104,9 +107,15 @@ def run_task(task: BatchTask, context: BatchContext,
         result.color = report.color
         result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
-        from wbcgrade.color.report import palette_record, sheet_content, sheet_path
+        from wbcgrade.color.report import (
+            chart_record,
+            palette_record,
+            sheet_content,
+            sheet_path,
+        )
 
         result.palette = palette_record(report.grade, report.graded.encoding)
+        result.chart = chart_record(report.grade, report.graded.encoding)
         result.timings["total"] = time.perf_counter() - start
         if context.sheet_dir is not None:
             from wbcgrade.color.sheet import write_sheet
@@ -114,7 +123,7 @@ def run_task(task: BatchTask, context: BatchContext,
             sheet = sheet_path(task.relative)
             write_sheet(context.sheet_dir / sheet,
                         sheet_content(result, report.graded, context.style_pictures),
-                        overwrite=replace)
+                        overwrite=replace or context.replace_sheets)
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:

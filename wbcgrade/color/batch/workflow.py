@@ -81,6 +81,11 @@ def _load(source: StyleSource, options: GradeOptions, progress: Progress, plan: 
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, hook)
     options.check_styles(len(styles.names))
+    from wbcgrade.color.presets import one_style_warning
+
+    message = one_style_warning(source, styles, options.map.builder)
+    if message is not None and progress.warn is not None:
+        progress.warn(message)
     return styles
 
 
@@ -109,8 +114,11 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
          overwrite: bool, progress: BatchProgress,
          on_result: Callable[[FileResult], None] | None = None, look=None,
          encode=None) -> BatchResult:
+    from wbcgrade.color.report import own_report
+
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
-                           write_outputs=write_outputs, overwrite=overwrite)
+                           write_outputs=write_outputs, overwrite=overwrite,
+                           replace_sheets=write_outputs and own_report(report_dir))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
         from wbcgrade.color.saved_grade import look_fit
 
@@ -215,8 +223,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     complete (``overwrite`` redoes them), refuses to replace any other file,
     and removes the temporary files of a killed run. One run at a time may
     write into ``out_dir``. With ``consistent`` the whole series shares one
-    grade, also written as a LUT to ``lut``; with ``report_dir`` the palette
-    weight report is written there. Returns the result (``result.lut`` None
+    grade, also written as a LUT to ``lut``; with ``report_dir`` the report is
+    written there (a report an earlier run wrote there is updated, as the photos are
+    resumed: :func:`wbcgrade.color.report.own_report`). Returns the result (``result.lut`` None
     when no photo was graded, so no series grade was made). ``look``: a saved
     grade (:func:`wbcgrade.color.saved_grade.load_look`) applied to every photo
     instead of a fit; ``encode``: JPEG/WebP quality and bit depth of the outputs.
@@ -254,7 +263,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    _plan_report(report_dir, plan, overwrite)
+    from wbcgrade.color.report import own_report
+
+    # the report of an earlier run into this folder is updated as the photos are resumed
+    own = own_report(report_dir)
+    _plan_report(report_dir, plan, overwrite or own)
     if progress.planned:
         progress.planned(len(plan.tasks) + len(plan.done) + len(plan.refused))
     try:
@@ -294,7 +307,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             from wbcgrade.color.report import write_report
 
             result.report = write_report(report_dir, result, styles, options,
-                                         "consistent" if consistent else "per-photo", overwrite)
+                                         "consistent" if consistent else "per-photo",
+                                         overwrite or own)
         if lut is not None and result.series_grade is not None:
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
@@ -458,27 +472,38 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     styles = _recorded_styles(recorded_styles, names)
     pictures = style_pictures(styles)
     report_dir.mkdir(parents=True, exist_ok=True)
-    results = []
-    for task in plan.tasks:
-        if progress.photo:
-            progress.photo(task.relative)
+
+    def reported(task) -> tuple[Result, str | None]:
+        """A photo's recorded result and its sheet (made from its files) -> (result, why
+        it has no sheet)."""
         result = read_record(folder, task.relative)
         if result is None:
-            result = Result(task.relative, "", str(task.source), "failed",
-                            error=f"no result recorded by the batch in {folder / RESULTS_FOLDER}")
-        else:
-            result.output = str(task.source)
-            sheet = sheet_path(task.relative)
-            try:
-                write_sheet(report_dir / sheet, sheet_from_files(result, pictures),
-                            overwrite=overwrite)
-                result.sheet = sheet.as_posix()
-            except (InputError, ValueError, OSError) as exc:
-                if progress.warn:
-                    progress.warn(f"{task.relative}: no sheet ({exc})")
-        results.append(result)
-        if progress.result:
-            progress.result(result)
+            return Result(task.relative, "", str(task.source), "failed",
+                          error=f"no result recorded by the batch in "
+                                f"{folder / RESULTS_FOLDER}"), None
+        result.output = str(task.source)
+        sheet = sheet_path(task.relative)
+        try:
+            write_sheet(report_dir / sheet, sheet_from_files(result, pictures),
+                        overwrite=overwrite)
+            result.sheet = sheet.as_posix()
+        except (InputError, ValueError, OSError) as exc:
+            return result, f"{task.relative}: no sheet ({exc})"
+        return result, None
+
+    # the sheets in threads (reading, resizing, encoding release the GIL), told in order
+    from concurrent.futures import ThreadPoolExecutor
+
+    results = []
+    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
+        for task, (result, why) in zip(plan.tasks, pool.map(reported, plan.tasks)):
+            if progress.photo:
+                progress.photo(task.relative)
+            if why is not None and progress.warn:
+                progress.warn(why)
+            results.append(result)
+            if progress.result:
+                progress.result(result)
     series = None
     if isinstance(settings.get("series_weights"), dict):
         weights = settings["series_weights"]
