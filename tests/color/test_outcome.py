@@ -47,7 +47,7 @@ def test_a_set_look_at_strength_zero_says_the_photo_is_unchanged_and_why():
 
 def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
     """No own photos: --natural DIR is the lever; own photos used: it is not offered again;
-    too few given: says they were not used. Before/after pairs (look learn) every time."""
+    too few given: says they were not used. One original (--originals) first, every time."""
     def advice(**look):
         grade = _look_grade(identity_map(9), 0.0)
         grade.info["look"].update(look)
@@ -57,9 +57,30 @@ def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
     assert "--natural DIR with 6 or more" in plain
     assert "--natural" not in used and "your 9 own photos" in used
     assert "your 4 own photos were not used (6 or more" in few
-    assert all("look learn BEFORE AFTER" in text and "--mode palette" in text
-               for text in (plain, used, few))
+    assert all(text.startswith("the original of one style photo settles it: --originals DIR")
+               and "--mode palette" in text for text in (plain, used, few))
     assert "was not used" in advice(own_photos_unused=1)
+
+
+def test_a_set_look_says_how_sure_it_is_and_what_settles_it():
+    """A set look judged jointly: the line says how sure the look is and how much of it is
+    applied, the strength is --strength's, and an unsure look names --originals."""
+    def lines(probability, share, blend=1.0):
+        nodes = identity_map(9)
+        moved = nodes.copy()
+        moved[..., 2] = np.minimum(nodes[..., 2] + 0.2, 1.0)  # a clear look: not faint
+        grade = _look_grade(moved, share)
+        grade.info["look"].update(rule="posterior", probability=probability)
+        return grade_outcome(grade, _fit(), None, blend=blend).lines()
+
+    sure = lines(0.999, 0.9)
+    assert "the photos show it clearly; 90 % of it applied" in sure[0]
+    assert "strength 1.00" in sure[0] and not any("--originals" in line for line in sure)
+    unsure = lines(0.6, 0.3, blend=2.0)
+    assert "unsure it is a look; 30 % of it applied" in unsure[0]
+    assert "strength 2.00" in unsure[0]
+    assert any(line.startswith("the style photos may share this look") and "--originals DIR"
+               in line for line in unsure)
 
 
 def test_the_terminal_says_whether_the_users_own_photos_were_used():

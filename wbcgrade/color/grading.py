@@ -388,6 +388,9 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
                                   look_size, mean_change, why, match=look.get("match"),
                                   confidence=confidence,
                                   extra={"set_strength": set_strength,
+                                         **({"probability": float(look["probability"])}
+                                            if look.get("rule") == "posterior"
+                                            and look.get("probability") is not None else {}),
                                          **{k: int(look.get(k) or 0) for k in OWN_PHOTO_KEYS}})
     order = np.argsort(-np.asarray(fit.weights), kind="stable")
     best = fit.best_vertex if len(fit.vertex_losses) else None

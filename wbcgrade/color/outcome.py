@@ -215,7 +215,11 @@ class GradeOutcome:
         elif self.source is GradeSource.SET_LOOK and self.match and self.confidence > 0:
             what += (f", nudged {100 * self.confidence:.0f} % towards the colours of "
                      f"{self.match}, the closest style")
-        return (f"grade: {what}, strength {self.strength:.2f}; {subject}'s colours move "
+        if self.source is GradeSource.SET_LOOK and "probability" in self.extra:
+            what += f" ({sureness_words(self.extra['probability'], self.look_strength)})"
+        # a set look judged jointly says how much of it is applied: the strength is --strength's
+        strength = self.blend if "probability" in self.extra else self.strength
+        return (f"grade: {what}, strength {strength:.2f}; {subject}'s colours move "
                 f"{change_words(self.mean_change)}")
 
     def lines(self, subject: str = "this photo") -> list[str]:
@@ -228,6 +232,10 @@ class GradeOutcome:
             lines.append(f"a faint grade: {self.reason}")
         if (self.unchanged or self.faint) and self.advice:
             lines.append(self.advice)
+        if (self.source is GradeSource.SET_LOOK and "probability" in self.extra
+                and self.extra["probability"] < SURE_LOOK and not self.unchanged
+                and not self.faint):
+            lines.append(UNSURE_ADVICE)
         own, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
         if own:
             lines.append(f"content: the look was measured against {own} of your own photos "
@@ -351,10 +359,10 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
             content = (f"--natural DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
                        "photos (what `batch` does with the photos it grades) helps tell a "
                        "faint look from what the photos show; ")
-        return (content + "`wbcgrade look learn BEFORE AFTER` learns the whole look from "
-                "the style photos' originals, if you have them; --mode palette moves the "
-                "photo's colours towards those of the style photos; --strength above 1 "
-                "forces what look there is")
+        return ("the original of one style photo settles it: --originals DIR (a folder "
+                "with it, named as its edit) learns the look from that pair; " + content
+                + "--mode palette moves the photo's colours towards those of the style "
+                "photos; --strength above 1 forces what look there is")
     if source is GradeSource.OWN_SCENE:
         return ("--mode palette moves the photo's colours towards those of the style "
                 "photos; --strength above 1 forces what look there is")
@@ -363,6 +371,26 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
     if source is GradeSource.PALETTE:
         return "the style palettes are close to the photo's own: choose styles further from it"
     return None
+
+
+#: Posterior probability of a look (the set look's ``probability``) from which the terminal
+#: calls the style photos' look sure; under it, the set look's line says how unsure and
+#: names the evidence that settles it (:data:`UNSURE_ADVICE`).
+SURE_LOOK = 0.95
+UNSURE_ADVICE = ("the style photos may share this look or only similar subjects: the "
+                 "original of one of them settles it (--originals DIR: a folder with the "
+                 "unedited photo, named as its edit)")
+
+
+def sureness_words(probability: float, share: float) -> str:
+    """How sure a set's look is and how much of what the photos show is applied, in words.
+
+    >>> sureness_words(0.99, 0.8), sureness_words(0.6, 0.2)
+    ('the photos show it clearly; 80 % of it applied', 'unsure it is a look; 20 % of it applied')
+    """
+    how = ("the photos show it clearly" if probability >= SURE_LOOK else
+           "fairly sure it is a look" if probability >= 0.75 else "unsure it is a look")
+    return f"{how}; {100 * share:.0f} % of it applied"
 
 
 #: How visible a mean change of colours is (upper bounds in 1/255 of the sRGB cube, words):
