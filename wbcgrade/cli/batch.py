@@ -49,7 +49,8 @@ def photo_line(result: FileResult, verb: str = "graded") -> str:
     if outcome is not None and outcome.palette is None:  # a look: no weights to show
         from wbcgrade.color.outcome import change_words
 
-        said = (f"{outcome.source.describe(outcome.n_styles)}, strength {outcome.strength:.2f}, "
+        what, strength = outcome.source_words()
+        said = (f"{what}, strength {strength:.2f}, "
                 f"colours move {change_words(outcome.mean_change)}")
         if outcome.unchanged:
             said += f" (essentially unchanged: {outcome.reason})"

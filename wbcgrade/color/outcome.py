@@ -205,9 +205,16 @@ class GradeOutcome:
     def headline(self, subject: str = "this photo") -> str:
         """One line: the source, the strength and how much ``subject``'s colours move
         (in percent of the tonal range, and how visible that is: :func:`change_words`)."""
+        what, strength = self.source_words()
+        return (f"grade: {what}, strength {strength:.2f}; {subject}'s colours move "
+                f"{change_words(self.mean_change)}")
+
+    def source_words(self) -> tuple[str, float]:
+        """(where the grade came from, in words; the strength to print with it)."""
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
-            what = (self.file if self.extra.get("learned")  # a look learned for this run
+            learned = self.extra.get("learned") or self.file.startswith(LEARNED_PREFIX)
+            what = (self.file if learned  # a look learned for this run (--originals)
                     else f"the saved grade {self.file} (applied as saved, no fit)")
         if self.source is GradeSource.OWN_SCENE and self.match:
             what = f"the look of the style photo of this scene ({self.match}, " \
@@ -218,9 +225,7 @@ class GradeOutcome:
         if self.source is GradeSource.SET_LOOK and "probability" in self.extra:
             what += f" ({sureness_words(self.extra['probability'], self.look_strength)})"
         # a set look judged jointly says how much of it is applied: the strength is --strength's
-        strength = self.blend if "probability" in self.extra else self.strength
-        return (f"grade: {what}, strength {strength:.2f}; {subject}'s colours move "
-                f"{change_words(self.mean_change)}")
+        return what, (self.blend if "probability" in self.extra else self.strength)
 
     def lines(self, subject: str = "this photo") -> list[str]:
         """The outcome in words, one line each (the headline, then why and what to do)."""
@@ -372,6 +377,9 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
         return "the style palettes are close to the photo's own: choose styles further from it"
     return None
 
+
+#: How a look learned for the run (``--originals``) names itself (its ``SavedFrom.file``).
+LEARNED_PREFIX = "the look learned from "
 
 #: Posterior probability of a look (the set look's ``probability``) from which the terminal
 #: calls the style photos' look sure; under it, the set look's line says how unsure and
