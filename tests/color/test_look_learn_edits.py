@@ -158,3 +158,16 @@ def test_originals_need_style_photos_and_no_saved_look(tmp_path):
         result = runner.invoke(main, ["apply", str(photo), "--originals", str(folder), *extra])
         assert result.exit_code == 2 and "--originals" in result.output, (extra, result.output)
         assert "Traceback" not in result.output
+
+
+@pytest.mark.slow
+def test_the_learned_look_says_which_colours_the_pairs_show(tmp_path, photos):
+    """A pair of a coffee cup (browns, reds, whites) shows skin-like and red colours, not
+    skies or foliage; the report says so per region of colour."""
+    _, result = learned_grade(*shoot(tmp_path, photos, bleach, pair="coffee", alone=False))
+    cover = result.coverage
+    assert set(cover) >= {"skin", "skies and water", "foliage", "greys"}
+    assert all(0.0 <= v <= 1.0 for v in cover.values())
+    assert cover["skin"] > 0.5 > cover["skies and water"]
+    assert cover["skin"] > cover["foliage"]
+    assert result.as_dict()["pairs_cover"]["skin"] == pytest.approx(cover["skin"], abs=1e-3)

@@ -151,6 +151,12 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     held = ("" if found.held_out is None else
             f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
     learned = found.describe().replace("the look", f"the {kind}", 1)
+    if found.coverage:
+        sure = ", ".join(f"{name} {100 * share:.0f} %" for name, share in found.coverage.items())
+        rest = ("corrected by the edits without an original" if found.edits_alone
+                else "extrapolated")
+        click.echo(f"  how much of each kind of colour the pairs show (the rest is {rest}): "
+                   f"{sure}")
     click.echo(f"wrote {found.output}: {learned} "
                f"(mean CIEDE2000 after vs look(before) {found.delta_e:.1f}{held}; "
                f"{found.seconds:.1f} s)")

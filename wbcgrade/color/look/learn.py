@@ -663,6 +663,7 @@ class LearnResult:
     seconds: float = 0.0
     output: Path | None = None
     edits_alone: list[str] = field(default_factory=list)
+    coverage: dict[str, float] = field(default_factory=dict)
 
     @property
     def used(self) -> list[PairReport]:
@@ -703,6 +704,7 @@ class LearnResult:
                 "pairs": [p.as_dict() for p in self.pairs],
                 "unpaired": [{"name": n, "problem": why} for n, why in self.problems],
                 "edits_without_original": list(self.edits_alone),
+                "pairs_cover": {k: round(v, 3) for k, v in self.coverage.items()},
                 "warnings": [f"{p.name}: {p.warning}" for p in self.pairs if p.warning]}
 
 
@@ -807,6 +809,9 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
     result.look, result.folds = look, len(folds)
+    result.coverage = colour_coverage(np.concatenate([c[0] for c in colours]),
+                                      np.concatenate([c[2] / max(float(c[2].sum()), 1e-12)
+                                                      for c in colours]), working)
     _flag_disagreements(used, warn)
     _warn_mixed(used, monochrome, toned, warn)
     result.seconds = time.perf_counter() - start
@@ -1040,6 +1045,43 @@ def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
     density = soft_histogram(sources, _SUPPORT_SIZE, weights)
     density = gaussian_filter(density, 1.0, mode="constant") * density.size
     return np.clip(density / PAIR_SUPPORT, 0.0, 1.0)
+
+
+#: Regions of colour the learned look reports its sureness for (:func:`colour_coverage`):
+#: name -> test on sRGB-encoded colours (N, 3) -> (N,) bool.
+COLOUR_REGIONS = {
+    "shadows": lambda c: c @ np.array([0.2126, 0.7152, 0.0722]) < 0.2,
+    "highlights": lambda c: c @ np.array([0.2126, 0.7152, 0.0722]) > 0.8,
+    "greys": lambda c: np.ptp(c, axis=1) < 0.06,
+    "skin": lambda c: (c[:, 0] > c[:, 1]) & (c[:, 1] > c[:, 2]) & (np.ptp(c, axis=1) > 0.06)
+    & (c[:, 0] - c[:, 2] < 0.45) & (c[:, 0] > 0.35),
+    "skies and water": lambda c: (c[:, 2] > c[:, 0] + 0.06) & (c[:, 2] >= c[:, 1]),
+    "foliage": lambda c: (c[:, 1] > c[:, 0] + 0.03) & (c[:, 1] > c[:, 2] + 0.03),
+    "reds": lambda c: (c[:, 0] > c[:, 1] + 0.25) & (c[:, 0] > c[:, 2] + 0.25),
+}
+
+
+def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> dict[str, float]:
+    """How sure the pairs make the look, region by region of colour: the share of what
+    natural photos hold of each region (:data:`COLOUR_REGIONS`) that the pairs' original
+    colours ``sources`` (N, 3, working space) cover (:func:`_support`), in [0, 1]."""
+    from wbcgrade.color.colorspace import convert, default_working_space
+    from wbcgrade.color.histogram import grid_points
+    from wbcgrade.color.look.set_extraction import natural_palettes
+    from wbcgrade.color.presets import styles_in_space
+
+    support = _support(sources, weights).ravel()
+    natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
+    density = natural.mean(axis=0).ravel()
+    nodes = grid_points(_SUPPORT_SIZE)
+    srgb = default_working_space()
+    shown = nodes if working == srgb else np.clip(convert(nodes, working, srgb), 0.0, 1.0)
+    out = {}
+    for name, test in COLOUR_REGIONS.items():
+        mass = density * test(shown)
+        total = float(mass.sum())
+        out[name] = float(mass @ np.minimum(support, 1.0) / total) if total > 0 else 0.0
+    return out
 
 
 def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[np.ndarray],
