@@ -1007,8 +1007,10 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
 #: photos without originals correct the look only where the pairs show little
 #: (:func:`unpaired_correction`).
 PAIR_SUPPORT = 0.5
-#: Grid of the inverse map and of the support.
-_INVERSE_SIZE = 33
+#: Prior probability that the edits without originals show nothing beyond the pairs' look
+#: (a correction is less likely than a look: the pairs already show most of it).
+NO_CORRECTION = 0.8
+#: Grid of the support.
 _SUPPORT_SIZE = 17
 
 
@@ -1133,7 +1135,7 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
     model = posterior_statistics_look(tinted_statistics(hists, pushed_stats, space_scale=scale),
                                       pushed_stats, scale,
                                       noise_from=natural_statistics(naturals),
-                                      cache=default_cache_dir())
+                                      cache=default_cache_dir(), no_look=NO_CORRECTION)
     if model.info.get("share", 0.0) <= 0.0:
         return look
     nodes = grid_points(_SUPPORT_SIZE)

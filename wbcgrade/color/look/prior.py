@@ -253,7 +253,7 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
                               reference: PaletteStatistics | None = None,
                               own_count: int | None = None,
                               noise_from: PaletteStatistics | None = None,
-                              cache: Path | None = None):
+                              cache: Path | None = None, no_look: float = NO_LOOK):
     """The look a style set's statistics support (:func:`posterior_look`), as a
     :class:`~wbcgrade.color.look.statistics.StatisticsLook` whose ``info`` holds the
     probability of a look, the share applied and the evidence.
@@ -269,6 +269,8 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     noise_from : the palettes whose statistics' spread is content's noise (default
         ``naturals``; the same palettes before a known look, whose noise is cached).
     cache : the cache folder that keeps the noise on disk (None: kept in memory only).
+    no_look : prior probability of no look (:data:`NO_LOOK`; higher where a look is
+        already known and only a correction of it is sought).
     """
     from wbcgrade.color.look.statistics import (
         MEDIAN_SE,
@@ -301,7 +303,7 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     # the prior and the noise were measured in sRGB-encoded units; chroma and tint scale
     # with the working space (the log spreads do not)
     prior = load_prior()
-    found = posterior_look(raw, noise, prior)
+    found = posterior_look(raw, noise, prior, no_look)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,
             "probability": round(found.probability, 3), "share": round(found.share, 3),
             "evidence": round(found.evidence, 3),
