@@ -53,6 +53,27 @@ def style_progress() -> Iterator[Callable[[int, int, str], None]]:
         yield progress
 
 
+@contextlib.contextmanager
+def learn_progress(desc: str) -> Iterator[tuple[Callable[[int, int, str], None],
+                                                Callable[[str], None]]]:
+    """A bar over the photos a look is learned from; yields ``(progress(done, total,
+    name), warn(message))`` (a warning clears the bar and goes to stderr)."""
+    import click
+
+    with progress_bar(desc=desc, unit="photo", leave=False) as bar:
+
+        def progress(done: int, total: int, name: str) -> None:
+            bar.total = total
+            bar.n = done
+            bar.set_postfix_str(name, refresh=True)
+
+        def warn(message: str) -> None:
+            bar.clear()
+            click.echo(f"Warning: {message}", err=True)
+
+        yield progress, warn
+
+
 #: What the bar says while each stage of a grade runs (stage names from the library).
 STAGE_TEXT = {"read": "reading the photo", "fit": "fitting the weights",
               "histograms": "photo histograms", "look": "extracting the set's look",

@@ -150,22 +150,12 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
 def _learned_look(style_dir: str, originals: str, options):
     """The look ``look learn ORIGINALS STYLE_DIR`` learns, as a grade (progress on the
     terminal, a warning per file left out)."""
-    from tqdm import tqdm
-
+    from wbcgrade.cli._progress import learn_progress
     from wbcgrade.color.look.learn import learned_grade
 
-    with tqdm(desc="learning the look", unit="photo", disable=None, leave=False) as bar:
-        def on_photo(done: int, total: int, name: str) -> None:
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(name, refresh=True)
-
-        def warn(message: str) -> None:
-            bar.clear()
-            click.echo(f"Warning: {message}", err=True)
-
+    with learn_progress("learning the look") as (progress, warn):
         grade, _ = learned_grade(originals, style_dir, working_space=options.spaces.working,
-                                 warn=warn, progress=on_photo)
+                                 warn=warn, progress=progress)
     return grade
 
 

@@ -123,20 +123,10 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     """
     for path, side in ((before, "BEFORE"), (after, "AFTER")):  # answered before numpy loads
         check_photo(path, f"no such file or folder ({side})")
-    from tqdm import tqdm
-
+    from wbcgrade.cli._progress import learn_progress
     from wbcgrade.color.look.learn import learn_look_file
 
-    with tqdm(desc="photos", unit="photo", disable=None, leave=False) as bar:
-        def on_pair(done: int, total: int, name: str) -> None:
-            bar.total = total
-            bar.n = done
-            bar.set_postfix_str(name, refresh=True)
-
-        def warn(message: str) -> None:
-            bar.clear()
-            click.echo(f"Warning: {message}", err=True)
-
+    with learn_progress("photos") as (on_pair, warn):
         found = learn_look_file(before, after, output, lut_size=lut_size,
                                 working_space=working_space, overwrite=overwrite, warn=warn,
                                 progress=on_pair)

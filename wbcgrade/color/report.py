@@ -384,11 +384,7 @@ def _look_index_html(entries: list[dict], meta: dict) -> str:
                     f'<td class="name">{esc(str(outcome.get("source_text", "")))}</td>'
                     f'<td>{float(outcome.get("strength", 0)):.2f}</td>'
                     f'<td class="name">{esc(change)}</td><td class="name">{note}</td></tr>')
-    figures = "".join(
-        f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
-        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
-        f"</figure>" for e in entries if e.get("sheet"))
-    summary = esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
+    figures, summary = _figures_and_summary(entries, meta)
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
             f"<title>wbcgrade look report</title><style>{_CSS}</style></head><body>"
             f"<h1>wbcgrade look report</h1><p class=\"meta\">{summary}. Strength: how much of "
@@ -398,6 +394,16 @@ def _look_index_html(entries: list[dict], meta: dict) -> str:
             "<table><thead><tr><th>photo</th><th>where the look came from</th>"
             "<th>strength</th><th>change</th><th>note</th></tr></thead>"
             f"<tbody>{''.join(rows)}</tbody></table>{figures}</body></html>\n")
+
+
+def _figures_and_summary(entries: list[dict], meta: dict) -> tuple[str, str]:
+    """The index page's figures (a sheet per photo) and its one-line summary of ``meta``."""
+    esc = html.escape
+    figures = "".join(
+        f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
+        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
+        f"</figure>" for e in entries if e.get("sheet"))
+    return figures, esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
 
 
 def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
@@ -437,11 +443,7 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
                     f'<td>{entry.get("loss", 0):.4g}</td>'
                     f'<td>{esc(str(best.get("style", "")))} {best.get("loss", 0):.4g}</td></tr>')
     head = "".join(f"<th>{esc(n)}</th>" for n in names)
-    figures = "".join(
-        f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
-        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
-        f"</figure>" for e in entries if e.get("sheet"))
-    summary = esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
+    figures, summary = _figures_and_summary(entries, meta)
     return (f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
             f"<title>wbcgrade report</title><style>{_CSS}</style></head><body>"
             f"<h1>wbcgrade palette weight report</h1><p class=\"meta\">{summary}. Weights "

@@ -227,6 +227,15 @@ def _shrink_vectors(difference: np.ndarray, sigma: np.ndarray, dof: float = 3.0)
     return d * factor[..., None]
 
 
+def _read_at(values: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(S, B) per-band values of S palettes read at ``positions`` (B,) on the band axis
+    (missing bands filled from their neighbours; a palette with none stays NaN)."""
+    centres = np.linspace(0.0, 1.0, BANDS)
+    return np.stack([np.interp(positions, centres, _fill(row, centres))
+                     if np.isfinite(row).any() else np.full(BANDS, np.nan)
+                     for row in values])
+
+
 def _fill(values: np.ndarray, axis_values: np.ndarray) -> np.ndarray:
     """Interpolate NaN entries of a 1-D profile from its valid neighbours (edges held)."""
     values = np.asarray(values, dtype=np.float64)
@@ -490,9 +499,7 @@ def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
 
     # the styles' band statistics read at the lightness the tone curve sends each band to
     def at_mapped(values: np.ndarray) -> np.ndarray:  # (S, B) -> (S, B)
-        return np.stack([np.interp(mapped, centres, _fill(row, centres))
-                         if np.isfinite(row).any() else np.full(BANDS, np.nan)
-                         for row in values])
+        return _read_at(values, mapped)
 
     sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
     nat_spread = _nanmedian(centre_of.band_spread, axis=0)
@@ -598,9 +605,7 @@ def look_differences(styles: PaletteStatistics, centre_of: PaletteStatistics,
     valid = np.sum(np.isfinite(styles.band_spread), axis=0)
 
     def at_mapped(values: np.ndarray) -> np.ndarray:  # (S, B) -> (S, B)
-        return np.stack([np.interp(mapped, centres, _fill(row, centres))
-                         if np.isfinite(row).any() else np.full(BANDS, np.nan)
-                         for row in values])
+        return _read_at(values, mapped)
 
     sty_spread = _nanmedian(at_mapped(styles.band_spread), axis=0)
     nat_spread = _nanmedian(centre_of.band_spread, axis=0)
