@@ -76,9 +76,9 @@ def run_task(task: BatchTask, context: BatchContext,
              progress: Progress | None = None) -> FileResult:
     """Grade one photo and write its output (and sheet); failures become a 'failed' result.
 
-    The output was checked when the batch was planned. Only errors about
-    this file (unreadable, corrupt, unwritable) are caught; KeyboardInterrupt
-    and programming errors propagate.
+    The output was checked when the batch was planned. Any error grading this one
+    photo is its failure (an unexpected one named an internal error); only
+    KeyboardInterrupt (and SystemExit) propagate.
     """
     start = time.perf_counter()
     starting = getattr(progress, "photo", None)  # a batch's progress names the photo
@@ -129,6 +129,9 @@ def run_task(task: BatchTask, context: BatchContext,
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
         result.error = first_line(exc)
         result.status = "failed"
+    except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
+        result.error = f"internal error ({type(exc).__name__}: {first_line(exc)})"
+        result.status = "failed"
     result.timings["total"] = time.perf_counter() - start
     return result
 
@@ -144,6 +147,8 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
         return photo_histograms(encoded, options, image.alpha())
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
         return first_line(exc)
+    except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
+        return f"internal error ({type(exc).__name__}: {first_line(exc)})"
 
 
 def setup_worker(context: BatchContext) -> None:
