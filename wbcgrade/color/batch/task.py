@@ -35,7 +35,7 @@ from wbcgrade.color.workflow import PhotoPlan, Progress, grade_file
 from wbcgrade.errors import WbcgradeError, first_line
 
 __all__ = ["BatchContext", "run_task", "read_histograms", "setup_worker", "absolute_task",
-           "absolute_context"]
+           "absolute_context", "lost_task"]
 
 
 @dataclass
@@ -134,6 +134,13 @@ def run_task(task: BatchTask, context: BatchContext,
         result.status = "failed"
     result.timings["total"] = time.perf_counter() - start
     return result
+
+
+def lost_task(task: BatchTask, reason: str) -> FileResult:
+    """The failed result of a photo whose worker process died (``reason``)."""
+    return FileResult(task.relative, str(task.source),
+                      None if task.output is None else str(task.output), "failed",
+                      error=reason, timings={"total": 0.0})
 
 
 def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms | str:
