@@ -32,7 +32,8 @@ from wbcgrade.errors import InputError
 if TYPE_CHECKING:  # numpy is imported where arrays are read (`wbcgrade --help` needs none)
     import numpy as np
 
-__all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
+__all__ = ["MAX_LUT_SIZE", "MAX_MAP_SIZE", "MAX_LUT_DOMAIN", "MAX_STYLES",
+           "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
            "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
            "MAX_ARCHIVE_BYTES", "MEMORY_BUDGET", "MAX_REGRAIN_EPS", "MIN_REGRAIN_EPS",
            "check_count", "check_lut_entries", "check_histogram_cells", "check_memory",
@@ -40,6 +41,11 @@ __all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES
 
 #: Nodes per axis of any 3-D LUT or colour map read or written (256^3 x 3 float32: 200 MB).
 MAX_LUT_SIZE = 256
+#: Nodes per axis of a colour map a grade holds or reads as a look (a saved grade's map, a
+#: preset's look, a LUT file read as a look): as ``--map-size`` allows.
+MAX_MAP_SIZE = 129
+#: The largest magnitude of a LUT's domain bound (DOMAIN_MIN/MAX, spi1d ``From``).
+MAX_LUT_DOMAIN = 1e6
 #: Styles in one preset or style set.
 MAX_STYLES = 4096
 #: Histogram cells of a whole style set (styles x bins^3): 2^25 float64 cells are 256 MB
@@ -120,11 +126,12 @@ def parse_json(text: str | bytes, where: str | os.PathLike) -> object:
         raise InputError(f"{where}: not a readable JSON file ({exc})") from None
 
 
-def check_lut_entries(size: int, path: str | os.PathLike, dims: int = 3) -> int:
+def check_lut_entries(size: int, path: str | os.PathLike, dims: int = 3,
+                      most: int | None = None) -> int:
     """``size`` (nodes per axis of a ``dims``-D text LUT ``path``) when it is between 2 and
-    :data:`MAX_LUT_SIZE` (1-D: 65536) and the file is large enough to hold its entries;
-    else InputError naming the file."""
-    most = MAX_LUT_SIZE if dims == 3 else 65536
+    ``most`` (default :data:`MAX_LUT_SIZE`; 1-D: 65536) and the file is large enough to
+    hold its entries; else InputError naming the file."""
+    most = most if most is not None else MAX_LUT_SIZE if dims == 3 else 65536
     if not 2 <= size <= most:
         raise InputError(f"{path}: a {dims}-D LUT size of {size}; it must be between 2 and "
                          f"{most}")

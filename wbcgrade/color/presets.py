@@ -66,7 +66,7 @@ from wbcgrade.color.preset_names import (
     shipped_presets_dir,
 )
 from wbcgrade.errors import InputError, OptionError
-from wbcgrade.limits import check_histogram_cells, read_npz
+from wbcgrade.limits import check_histogram_cells, check_input_file, parse_json, read_npz
 
 __all__ = [
     "StyleSet",
@@ -438,8 +438,9 @@ def _bad(path: Path, why: str) -> InputError:
 def load_preset(path: str | os.PathLike) -> StyleSet:
     """Read and validate a preset file -> StyleSet (raises InputError with the reason)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{path}: no such preset file")
+    check_input_file(path, "preset file")  # a FIFO or device is refused unopened
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -460,7 +461,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     try:
         if header_bytes.dtype != np.uint8:
             raise ValueError
-        header = json.loads(header_bytes.tobytes().decode("utf-8"))
+        header = parse_json(header_bytes.tobytes(), path)
         if not isinstance(header, dict):
             raise ValueError
     except (ValueError, UnicodeDecodeError):
