@@ -141,10 +141,10 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     if output is not None:
         output_format = check_image_output(output)
         check_write_options(output, encode)
+    check_lut_size(lut_size)
     if lut is not None:
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
-        check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
     output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],

@@ -237,6 +237,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
+    check_lut_size(lut_size)
     if lut is not None:
         if not consistent:
             raise OptionError("lut needs consistent (one grade for the series); per-photo "
@@ -244,7 +245,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                               also=("consistent",))
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
-        check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
     reads = source_files(None if look is not None else source, options.map.natural, look)
