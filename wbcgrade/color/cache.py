@@ -17,7 +17,9 @@ so a stale entry is never found, only left behind.
 A cache never makes a run fail:
 
 - :func:`read_entry` treats anything that is not a readable archive (garbage,
-  zero bytes, cut short, too large) as a miss and removes it, so the value is
+  zero bytes, cut short, too large) or does not match the digest of its name and
+  content that :func:`write_entry` records (values changed, an entry copied under
+  another key), or holds NaN, as a miss and removes it, so the value is
   computed again and a good entry written in its place; callers treat any error
   in using the arrays as a miss too;
 - :func:`write_entry` writes through :func:`wbcgrade._publish.atomic_path` (a
@@ -103,13 +105,45 @@ def file_key(path: str | os.PathLike) -> str:
     return f"{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
 
 
+#: The member of an entry holding :func:`_digest` of its name and arrays.
+DIGEST_MEMBER = "wbcgrade_digest"
+
+
+def _digest(name: str, arrays: dict[str, np.ndarray]) -> bytes:
+    """SHA-256 of an entry's file name (itself the digest of its key) and of every array
+    (name, type, shape, bytes): an entry moved under another key, or whose values were
+    changed, no longer matches."""
+    import numpy as np
+
+    digest = hashlib.sha256(key_bytes(name))
+    for member in sorted(arrays):
+        array = np.ascontiguousarray(arrays[member])
+        digest.update(f"|{member}|{array.dtype.str}|{array.shape}|".encode())
+        digest.update(array.tobytes())
+    return digest.digest()
+
+
 def read_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
     """The arrays of an entry, or None when there is none or it is unusable (then removed,
-    so that the caller computes the value again and writes a good entry in its place)."""
+    so that the caller computes the value again and writes a good entry in its place).
+
+    Unusable: not a readable archive, larger than the archive bounds, without the digest
+    :func:`write_entry` records or not matching it (values changed, an entry copied
+    under another key), or holding NaN or infinite numbers."""
+    import numpy as np
+
     if path is None or not os.path.isfile(path):
         return None
     try:
-        return read_npz(path)
+        arrays = read_npz(path)
+        recorded = arrays.pop(DIGEST_MEMBER, None)
+        if recorded is None or recorded.dtype != np.uint8 \
+                or recorded.tobytes() != _digest(Path(path).name, arrays):
+            raise InputError(f"{path}: does not match its digest")
+        for array in arrays.values():
+            if array.dtype.kind in "fc" and not np.isfinite(array).all():
+                raise InputError(f"{path}: holds NaN or infinite values")
+        return arrays
     except InputError:
         try:
             os.unlink(path)
@@ -144,7 +178,9 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
     folder = str(path.parent)
     try:
         data = io.BytesIO()
-        (np.savez_compressed if compress else np.savez)(data, **arrays)
+        digest = np.frombuffer(_digest(path.name, arrays), dtype=np.uint8)
+        (np.savez_compressed if compress else np.savez)(data, **arrays,
+                                                         **{DIGEST_MEMBER: digest})
         path.parent.mkdir(parents=True, exist_ok=True)
         with _LOCK:
             sweep = folder not in _SWEPT
