@@ -38,8 +38,11 @@ from typing import Any
 
 from wbcgrade.errors import InputError, OptionError
 
-__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT",
+__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT", "MAX_JOBS",
            "PARENT_WATCH_S"]
+
+#: Local worker processes at most (a pool of more cannot even be made: its semaphores).
+MAX_JOBS = 256
 
 #: How long to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
@@ -176,6 +179,8 @@ class Executor:
     def __init__(self, context: Any, jobs: int = 1, scheduler: str | None = None,
                  worker_setup: Callable[[Any], None] | None = None,
                  to_remote: tuple[Callable[[Any], Any], Callable[[Any], Any]] | None = None):
+        if int(jobs) > MAX_JOBS:
+            raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
         self.context, self.jobs, self.scheduler = context, max(1, int(jobs)), scheduler
         self.worker_setup = worker_setup
         self.item_to_remote, self.context_to_remote = to_remote or (_same, _same)

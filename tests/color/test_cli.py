@@ -166,6 +166,9 @@ def _bad_photo(tmp_path, case):
     ("ok", ["--strength", "5"], "--strength must be in [0, 4]"),
     ("ok", ["--weights", "1,x"], "comma-separated numbers"),
     ("ok", ["--weights", "1,1"], "2 numbers for 4 styles"),
+    ("ok", ["--regrain-eps", "1e8"], "--regrain-eps must be between"),  # 1e39: all black
+    ("ok", ["--width", "1e300"], "not a finite number"),
+    ("ok", ["--lut-size", "0"], "--lut-size must be between 2 and 129"),  # even with no --lut
 ])
 def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, message):
     photo = _bad_photo(tmp_path, case)
@@ -185,7 +188,8 @@ def test_bad_input_gives_one_line_and_no_file(tmp_path, styles, case, extra, mes
     before = sorted(p.name for p in tmp_path.iterdir())
     result = run("apply", photo, *extra, *FAST_ARGS)
     # a bad option value is a usage error (2, as click's own); a bad file 1
-    assert result.exit_code == (2 if {"--strength", "--weights"} & set(extra) else 1), \
+    usage = {"--strength", "--weights", "--regrain-eps", "--width", "--lut-size"}
+    assert result.exit_code == (2 if usage & set(extra) else 1), \
         result.output
     assert "Traceback" not in result.output
     errors = [line for line in result.stderr.splitlines() if line.startswith("Error:")]

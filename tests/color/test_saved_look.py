@@ -165,3 +165,19 @@ def test_lut_readers_take_3dl_and_a_bom_and_refuse_degenerate_domains(tmp_path):
     (tmp_path / "swapped.json").write_text(json.dumps(saved))
     with pytest.raises(InputError, match="low"):
         load_look(tmp_path / "swapped.json")
+
+
+def test_a_saved_grade_with_an_unusable_regrain_eps_is_refused(tmp_path):
+    """``"regrain": [0.005, 1e300]`` made an all-black photo with exit 0."""
+    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.remap import identity_map
+    from wbcgrade.color.saved_grade import load_look, look_dict
+    from wbcgrade.errors import InputError
+
+    entry = look_dict(Grade(("a",), np.ones(1), identity_map(3), working="sRGB",
+                            regrain=(0.005, 0.04)))
+    for eps in (1e300, 1e-300):
+        entry["regrain"] = [0.005, eps]
+        (tmp_path / "g.json").write_text(json.dumps(entry))
+        with pytest.raises(InputError, match="eps <="):
+            load_look(tmp_path / "g.json")

@@ -86,3 +86,11 @@ def test_a_dead_worker_loses_its_item_only():
                                             on_lost=lambda item, why: ("lost", item)))
     assert sorted(item for item, _ in pairs) == list(range(12))
     assert dict(pairs) == {i: (("lost", 7) if i == 7 else 2 * i) for i in range(12)}
+
+
+def test_more_jobs_than_a_pool_can_hold_is_an_option_error():
+    """``-j 99999999999999999999`` raised OverflowError from the pool's semaphores."""
+    from wbcgrade.errors import OptionError
+
+    with pytest.raises(OptionError, match="jobs must be between 1 and"):
+        Executor({}, jobs=99999999999999999999)

@@ -142,8 +142,10 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
 
 
 def _check_jobs(jobs: int) -> None:
-    if jobs < 1:
-        raise OptionError("jobs must be at least 1", "jobs")
+    from wbcgrade._executor import MAX_JOBS
+
+    if not 1 <= jobs <= MAX_JOBS:
+        raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
 
 
 def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> None:
