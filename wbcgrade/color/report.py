@@ -300,7 +300,7 @@ def report_entries(report_dir: str | os.PathLike, result: BatchResult) -> list[d
                 if isinstance(previous, dict) and ("weights" in previous
                                                    or "outcome" in previous):
                     entry = {**previous, "status": "skipped"}
-            except (OSError, ValueError):
+            except (OSError, ValueError, RecursionError):  # (nested too deep)
                 pass
         entries.append(entry)
     return entries

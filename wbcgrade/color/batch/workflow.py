@@ -295,13 +295,16 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             progress.warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
                           f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite "
                           "to redo them")
+        if plan.tasks or recorded_batch(out_dir) is None:
+            # recorded before the first photo: a run stopped at any moment leaves outputs
+            # whose settings are known (a rerun and `report OUT` read them)
+            write_settings(out_dir, settings)
         result = _run(plan, styles, options, consistent, jobs, scheduler, report_dir, True,
                       overwrite, progress, _recorder(Path(out_dir), progress), look, encode)
-        if result.count("graded"):
-            if result.series is not None:
-                settings["series_weights"] = dict(zip(styles.names,
-                                                      map(float, result.series.weights)))
-                settings["series_loss"] = float(result.series.loss)
+        if result.count("graded") and result.series is not None:
+            settings["series_weights"] = dict(zip(styles.names,
+                                                  map(float, result.series.weights)))
+            settings["series_loss"] = float(result.series.loss)
             write_settings(out_dir, settings)
         result.time_s = time.perf_counter() - start
         result.own_photos = own_photos
@@ -386,7 +389,7 @@ def recorded_batch(folder: str | os.PathLike) -> dict | None:
         return None
     try:
         settings = json.loads((folder / SETTINGS_FILE).read_text("utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (RecursionError: nested too deep)
         return None
     if not isinstance(settings, dict) or not isinstance(settings.get("style_names"), list):
         return None
