@@ -156,3 +156,29 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
     assert json.loads((out / SETTINGS_FILE).read_text())["styles"]
     result = cli("report", str(out), "-o", str(tmp_path / "rep"))
     assert result.exit_code == 0, result.output
+
+
+def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, folders,
+                                                                   monkeypatch, cli):
+    """A report stopped after its sheets (before index.html) is finished by the next run
+    without --overwrite; a finished report is still never replaced without it."""
+    import wbcgrade.color.report as report
+
+    photos, styles = folders
+    out = tmp_path / "rep"
+    write_report = report.write_report
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "write_report", stopped)
+    args = ("report", str(photos), "-o", str(out), "--preset", "warm", *FAST)
+    assert cli(*args).exit_code == 130
+    assert list((out / "sheets").glob("*.png")) and not (out / "index.html").exists()
+    monkeypatch.setattr(report, "write_report", write_report)
+    result = cli(*args)
+    assert result.exit_code == 0, result.output
+    assert (out / "index.html").is_file()
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+    result = cli(*args)
+    assert result.exit_code == 1 and "exists" in result.output, result.output

@@ -33,9 +33,9 @@ from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
 
-__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "write_report",
-           "report_entries", "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
-           "palette_record", "look_chart", "chart_record"]
+__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
+           "write_report", "report_entries", "report_from_grade", "sheet_content",
+           "sheet_from_files", "sheet_path", "palette_record", "look_chart", "chart_record"]
 
 #: The files of a report folder besides the per-photo ones.
 INDEX_FILES = ("report.json", "weights.csv", "index.html")
@@ -69,7 +69,7 @@ def own_report(report_dir: str | os.PathLike | None) -> bool:
         return False
     try:
         document = json.loads((Path(report_dir) / "report.json").read_text("utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (nested too deep)
         return False
     return isinstance(document, dict) and document.get("format") == "wbcgrade-report"
 
@@ -84,8 +84,27 @@ def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),
         from wbcgrade.errors import InputError
 
         raise InputError(f"{report_dir}: the report folder is a file")
-    return plan_outputs(report_paths(report_dir, relatives), inputs, overwrite,
-                        root=report_dir, make_folders=True)
+    paths = plan_outputs(report_paths(report_dir, relatives), inputs,
+                         report_overwrite(report_dir, overwrite), root=report_dir,
+                         make_folders=True)
+    from wbcgrade._publish import publish_bytes
+
+    report_dir.mkdir(parents=True, exist_ok=True)
+    publish_bytes(report_dir / UNFINISHED_FILE, b"a report is being written here\n",
+                  sync=False)  # removed when index.html is written (write_report)
+    return paths
+
+
+#: Kept in a report folder while its report is written: a report that was stopped is
+#: finished by the next run without ``--overwrite`` (its own files are replaced).
+UNFINISHED_FILE = ".wbcgrade-report-unfinished"
+
+
+def report_overwrite(report_dir: str | os.PathLike, overwrite: bool = False) -> bool:
+    """Whether the files of a report into ``report_dir`` may replace existing ones:
+    ``overwrite``, or the folder holds a report that was stopped before it was written in
+    full (:data:`UNFINISHED_FILE`)."""
+    return bool(overwrite) or (Path(report_dir) / UNFINISHED_FILE).is_file()
 
 
 def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
@@ -467,6 +486,7 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
 
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
+    overwrite = report_overwrite(report_dir, overwrite)
     entries = report_entries(report_dir, result)
     for item, entry in zip(result.results, entries):
         if item.status == "graded":
@@ -489,6 +509,7 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     _write_text(path, json.dumps(document, indent=2, default=float), overwrite)
     _write_text(report_dir / "weights.csv", _csv_text(entries, names), overwrite)
     _write_text(report_dir / "index.html", _index_html(entries, names, meta), overwrite)
+    (report_dir / UNFINISHED_FILE).unlink(missing_ok=True)  # the report is whole
     return path
 
 

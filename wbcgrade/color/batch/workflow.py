@@ -359,6 +359,9 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
         if target.is_file():
             raise InputError(f"{target}: not an image file (by its extension)")
         raise InputError(f"{target}: no photos found")
+    from wbcgrade.color.report import report_overwrite
+
+    overwrite = report_overwrite(out, overwrite)  # a stopped report is finished in place
     _plan_report(out, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks))
