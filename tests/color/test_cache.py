@@ -151,3 +151,32 @@ def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_pat
     assert len([ln for ln in said.splitlines() if "not written" in ln]) == 1, said
     kinds = {p.parent.name for p in (tmp_path / "cache").rglob("*.npz")}
     assert kinds == {"cache", "looks", "scenes"}  # all three kinds were written there
+
+
+def test_natural_folder_follows_no_cache_and_cache_dir(tmp_path, cli, monkeypatch):
+    """``--natural DIR`` read its photos through the default cache whatever the command
+    said: with ``--cache-dir`` they are cached there, with ``--no-cache`` nowhere."""
+    from tests.color.conftest import SAMPLES, small_copy
+
+    default = tmp_path / "default-cache"
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(default))
+    styles = tmp_path / "styles"
+    styles.mkdir()
+    for name in ("aitzgorri", "bridge"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 32)
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "p.jpg", 32)
+
+    def cached(folder):
+        return sorted(p.name for p in folder.rglob("*.npz")) if folder.exists() else []
+
+    for case, flags in (("chosen", ["--cache-dir", tmp_path / "chosen"]),
+                        ("off", ["--no-cache"])):
+        natural = tmp_path / f"natural-{case}"  # (a folder once read is kept in memory)
+        natural.mkdir()
+        for name in ("flower", "sunset", "coffee"):
+            small_copy(SAMPLES / f"{name}.jpg", natural / f"{name}.jpg", 32)
+        result = cli("apply", photo, "--style", styles, "--natural", natural, *flags,
+                     "-o", tmp_path / f"{case}.jpg")
+        assert result.exit_code == 0, result.output
+        assert cached(default) == [], case
+    assert len(cached(tmp_path / "chosen")) >= 2 + 3

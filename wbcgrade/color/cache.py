@@ -44,8 +44,8 @@ from wbcgrade.limits import read_npz
 if TYPE_CHECKING:  # numpy is imported where arrays are written
     import numpy as np
 
-__all__ = ["default_cache_dir", "cache_folder", "key_bytes", "entry_name", "entry_path",
-           "file_key", "read_entry", "write_entry"]
+__all__ = ["default_cache_dir", "set_command_cache", "command_cache", "cache_folder",
+           "key_bytes", "entry_name", "entry_path", "file_key", "read_entry", "write_entry"]
 
 log = logging.getLogger(__name__)
 
@@ -62,12 +62,36 @@ def default_cache_dir() -> Path:
     return Path(base) / "wbcgrade"
 
 
+#: The running command's ``--cache-dir`` / ``--no-cache`` (:func:`set_command_cache`).
+_COMMAND: dict[str, object] = {}
+
+
+def set_command_cache(folder: str | os.PathLike | None = None, enabled: bool = True) -> None:
+    """Set the cache of this process's command: ``folder`` (None: :func:`default_cache_dir`)
+    and whether caching is on. Every cache without a folder of its own follows it (a
+    style set's, the natural palettes', a batch worker's: ``--natural DIR`` too).
+    ``set_command_cache()`` goes back to the defaults."""
+    _COMMAND.clear()
+    if folder is not None or not enabled:
+        _COMMAND.update(folder=None if folder is None else Path(folder), enabled=bool(enabled))
+
+
+def command_cache() -> tuple[Path, bool]:
+    """(the folder, whether caching is on) of this process's command
+    (:func:`set_command_cache`; default: :func:`default_cache_dir`, on)."""
+    folder = _COMMAND.get("folder")
+    return (Path(folder) if folder is not None else default_cache_dir(),
+            bool(_COMMAND.get("enabled", True)))
+
+
 def cache_folder(styles=None) -> Path | None:
     """The cache folder of a StyleSet: its ``meta["cache_dir"]`` when it has one (None:
-    the command said ``--no-cache``), else :func:`default_cache_dir`."""
+    the command said ``--no-cache``), else the command's (:func:`command_cache`; None when
+    caching is off)."""
     meta = getattr(styles, "meta", None) or {}
     if "cache_dir" not in meta:
-        return default_cache_dir()
+        folder, enabled = command_cache()
+        return folder if enabled else None
     return None if meta["cache_dir"] is None else Path(meta["cache_dir"])
 
 

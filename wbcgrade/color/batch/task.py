@@ -19,6 +19,7 @@ import numpy as np
 
 from wbcgrade.color.batch.plan import BatchTask
 from wbcgrade.color.batch.results import FileResult
+from wbcgrade.color.cache import command_cache, set_command_cache
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, photo_histograms
@@ -69,6 +70,8 @@ class BatchContext:
     overwrite: bool = False
     replace_sheets: bool = False
     max_image_pixels: int = field(default_factory=max_image_pixels)
+    #: the command's cache (``cache.command_cache``), for the workers' own caches
+    cache: tuple[Path, bool] = field(default_factory=command_cache)
     encode: WriteOptions = WriteOptions()
 
 
@@ -159,11 +162,13 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
 
 
 def setup_worker(context: BatchContext) -> None:
-    """Run once in each local worker process: the decoding limit of the parent; compiled
-    kernels rather than their numpy twins (a worker grades many photos)."""
+    """Run once in each local worker process: the decoding limit and the cache of the
+    parent's command; compiled kernels rather than their numpy twins (a worker grades many
+    photos)."""
     from wbcgrade.core import prefer_compiled
 
     set_max_image_pixels(context.max_image_pixels)
+    set_command_cache(*context.cache)
     prefer_compiled()
 
 
