@@ -451,6 +451,21 @@ def _look_problem(look: np.ndarray) -> str | None:
 _PRESET_MEMBERS = frozenset({"header", "index", "values", "offsets", "look"})
 
 
+def _check_members(path: Path, raw: bytes) -> None:
+    """A preset's missing arrays named before anything is read (a foreign archive)."""
+    import io
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+            names = {n[:-4] for n in archive.namelist() if n.endswith(".npy")}
+    except (zipfile.BadZipFile, OSError, ValueError):
+        return  # read_npz says what is wrong
+    missing = {"header", "index", "values", "offsets"} - names
+    if missing:
+        raise _bad(path, f"missing {', '.join(sorted(missing))}")
+
+
 def _bad(path: Path, why: str) -> InputError:
     return InputError(f"{path}: not a valid wbcgrade preset ({why})")
 
@@ -467,6 +482,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise _bad(path, f"unreadable file: {exc.strerror or exc}") from None
     if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
         raise _bad(path, "unreadable archive: not a zip (.npz) file")
+    _check_members(path, raw)
     try:
         data = read_npz(raw, path, names=_PRESET_MEMBERS)  # any other member: refused
     except InputError as exc:
