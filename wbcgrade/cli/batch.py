@@ -138,7 +138,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
 
 
 @click.command("batch", cls=LazyOptionsCommand)
-@click.argument("in_dir", type=click.Path(exists=True, file_okay=False, path_type=str))
+@click.argument("in_dir", type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("out_dir", required=True,
                help="Folder for the graded copies (the input tree is mirrored).")
 @grading_options

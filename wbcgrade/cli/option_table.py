@@ -299,7 +299,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("look_path", "--look", "Apply a saved grade instead of fitting one: the JSON "
            "written by `apply --save-grade FILE` (regrain as it was) or a 3-D LUT (.cube from "
            "--lut, .clf, ...; regrained unless --no-regrain). Replaces --style/--preset; the "
-           "fit options are not used.", field="look", type=_FILE, metavar="FILE",
+           "fit options are not used.", field="look", type=_PATH, metavar="FILE",
            section=SOURCE),
     Option("originals_dir", "--originals", "Folder of the originals of some of the --style "
            "photos (paired by file name as `look learn` pairs them; raw originals and "

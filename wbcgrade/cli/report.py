@@ -16,7 +16,7 @@ from wbcgrade.cli.grading_options import (
 
 @click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
-                type=click.Path(exists=True, path_type=str))
+                type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("out_dir", help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
 @space_options

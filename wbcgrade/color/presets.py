@@ -345,6 +345,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     if folder.is_file():
         raise InputError(f"{folder}: is a file; --style takes a folder of style photos (put "
                          "the photo in a folder of its own, or use --preset)")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder}: is not a folder (a FIFO or device?); --style takes a "
+                         "folder of style photos")
     if not folder.is_dir():
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
@@ -708,8 +711,8 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
         natural = None
     if natural is not None and Path(natural).is_dir():  # the user's own ungraded photos
         files += [p for p in Path(natural).iterdir() if p.is_file()]
-    elif natural is not None:
-        files.append(Path(natural))
+    elif natural is not None:  # checked here, whether the grade ends up using it or not
+        files.append(check_input_file(natural, "natural palettes file or folder"))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")
     saved = getattr(look, "saved", None)

@@ -21,6 +21,7 @@ import html
 import io
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -378,13 +379,33 @@ figcaption{font-size:13px;color:#444;margin-bottom:4px}
 """
 
 
+#: Characters a name may hold that would reorder or hide the text around it in a page
+#: (bidirectional controls: U+202E shows "gpj.exe" as "exe.jpg") or are not text at all.
+_UNSAFE_TEXT = re.compile("[\u0000-\u001f\u007f-\u009f\u061c\u200e\u200f\u2028\u2029"
+                          "\u202a-\u202e\u2066-\u2069\ufeff]")
+
+
+def _esc(value: object) -> str:
+    """``value`` as HTML text: escaped, and its bidirectional and control characters
+    written visibly as ``\\uXXXX`` (an entity would still act on the page)."""
+    return _UNSAFE_TEXT.sub(lambda m: f"\\u{ord(m.group()):04x}", html.escape(str(value)))
+
+
+def _url(path: str) -> str:
+    """A relative file name as a link: percent-encoded (its own bytes when not UTF-8), so
+    no character of it acts on the page."""
+    from urllib.parse import quote
+
+    return quote(path, safe="/", errors="surrogateescape")
+
+
 def _look_index_html(entries: list[dict], meta: dict) -> str:
     """The page of a report whose grades are all looks: per photo where the look came
     from, its strength and how much the colours moved; then each photo's sheet (before and
     after, the look on a colour chart)."""
     from wbcgrade.color.outcome import change_words
 
-    esc = html.escape
+    esc = _esc
     rows = []
     for entry in entries:
         photo = esc(entry["photo"])
@@ -417,10 +438,10 @@ def _look_index_html(entries: list[dict], meta: dict) -> str:
 
 def _figures_and_summary(entries: list[dict], meta: dict) -> tuple[str, str]:
     """The index page's figures (a sheet per photo) and its one-line summary of ``meta``."""
-    esc = html.escape
+    esc = _esc
     figures = "".join(
         f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
-        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
+        f'<img src="{_url(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
         f"</figure>" for e in entries if e.get("sheet"))
     return figures, esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
 
@@ -429,7 +450,7 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
     if not any("weights" in entry for entry in entries) and any(
             entry.get("outcome") for entry in entries):  # looks only: no weights to show
         return _look_index_html(entries, meta)
-    esc = html.escape
+    esc = _esc
     rows = []
     for entry in entries:
         weights = {w["style"]: w["weight"] for w in entry.get("weights", [])}

@@ -53,6 +53,7 @@ from wbcgrade.color.lut import (
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.errors import InputError, OptionError
+from wbcgrade.limits import check_input_file
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
            "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
@@ -132,6 +133,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     photo = Path(photo)
     if not photo.exists():
         raise InputError(f"{photo}: no such file")
+    if photo.is_dir():
+        raise InputError(f"{photo}: is a folder, not a photo")
+    check_input_file(photo, "photo")  # a FIFO or device: refused before any output is planned
     if not write:
         output = None
     else:
