@@ -181,3 +181,20 @@ def test_a_saved_grade_with_an_unusable_regrain_eps_is_refused(tmp_path):
         (tmp_path / "g.json").write_text(json.dumps(entry))
         with pytest.raises(InputError, match="eps <="):
             load_look(tmp_path / "g.json")
+
+
+def test_json_nested_200000_deep_is_one_line_not_a_traceback(tmp_path):
+    """A saved grade or a preset header of 200,000 nested brackets raised RecursionError."""
+    from wbcgrade.color.presets import load_preset, shipped_presets_dir
+    from wbcgrade.color.saved_grade import load_look
+    from wbcgrade.errors import InputError
+
+    deep = "[" * 200_000 + "]" * 200_000
+    (tmp_path / "deep.json").write_text(deep)
+    with pytest.raises(InputError, match="nested too deeply"):
+        load_look(tmp_path / "deep.json")
+    arrays = dict(np.load(sorted(shipped_presets_dir().glob("*.npz"))[0]))
+    arrays["header"] = np.frombuffer(deep.encode(), np.uint8)
+    np.savez(tmp_path / "deep.npz", **arrays)
+    with pytest.raises(InputError, match="header is not JSON"):
+        load_preset(tmp_path / "deep.npz")
