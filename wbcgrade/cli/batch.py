@@ -11,6 +11,7 @@ import click
 
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
+    check_photo,
     grading_options,
     lazy_options,
     look_option,
@@ -176,6 +177,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     status 1. --look FILE applies a saved grade (the JSON of `apply --save-grade`,
     or a LUT) to every photo with no fit.
     """
+    check_photo(in_dir, "no such file or folder")  # (exit 1, before numpy loads)
     from wbcgrade.color.batch import grade_folder
 
     if force_alias:
