@@ -218,7 +218,7 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
     if size * MAX_PIXELS_PER_FILE_BYTE < count:
         raise InputError(
             f"{path}: {width}x{height} ({count / 1e6:.1f} megapixels) from a "
-            f"{size / 1e3:.0f} kB file would take about "
+            f"{size / 1e3:.0f} kB file could take up to "
             f"{count * WORK_BYTES_PER_PIXEL / 2 ** 30:.1f} GB to grade, more than the "
             f"{MEMORY_BUDGET / 2 ** 30:.1f} GB budget (a decompression bomb?); give "
             f"--max-image-pixels {count} if the file is trusted")

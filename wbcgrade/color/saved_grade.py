@@ -422,8 +422,12 @@ def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
     file are refused (OpenColorIO would carry them through silently)."""
     from wbcgrade.color.lut import check_clf_support
 
-    ocio = check_clf_support()
     kind = "CLF" if path.suffix.lower() == ".clf" else "LUT"
+    try:
+        ocio = check_clf_support()
+    except InputError:
+        raise InputError(f"{path}: reading a {path.suffix} look needs the opencolorio "
+                         "package: pip install 'wbcgrade[ocio]'") from None
     if kind == "LUT":
         _check_declared_size(path)
     try:
