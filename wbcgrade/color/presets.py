@@ -368,6 +368,10 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
                           "cache_dir": str(cache.folder) if cache.enabled else None})
 
 
+#: The widest Gibbs kernel a preset records, in bins (a grid has at most 256 of them).
+MAX_KERNEL_WIDTH = 1e4
+
+
 def check_preset_width(width: float) -> float:
     """``width`` as a float when it is a usable kernel width (finite, > 0 bins), else an
     OptionError naming the setting ``width``.
@@ -378,9 +382,9 @@ def check_preset_width(width: float) -> float:
         value = float(width)
     except (TypeError, ValueError):
         raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
-    if not (np.isfinite(value) and value > 0):
-        raise OptionError(f"width must be a positive, finite number of bins, got {width}",
-                          "width")
+    if not (np.isfinite(value) and 0 < value <= MAX_KERNEL_WIDTH):
+        raise OptionError(f"width must be a number of bins in (0, {MAX_KERNEL_WIDTH:g}], "
+                          f"got {width}", "width")
     return value
 
 
@@ -521,8 +525,9 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     except InputError as exc:
         raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
     width = header.get("width")
-    if width is not None and not (isinstance(width, (int, float)) and width > 0):
-        raise _bad(path, "bad kernel width")
+    if width is not None and not (isinstance(width, (int, float)) and not isinstance(width, bool)
+                                  and 0 < width <= MAX_KERNEL_WIDTH):
+        raise _bad(path, f"bad kernel width (a number of bins in (0, {MAX_KERNEL_WIDTH:g}])")
     working = header.get("working_space")
     if working is not None and not (isinstance(working, str) and working):
         raise _bad(path, "bad working space")
