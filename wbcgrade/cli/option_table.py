@@ -47,8 +47,11 @@ class FiniteFloat(click.ParamType):
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number", param, ctx)
         if not abs(number) <= MAX_OPTION_MAGNITUDE:  # (NaN fails this too)
-            self.fail(f"{value} is not a finite number of at most {MAX_OPTION_MAGNITUDE:g} in "
-                      "size", param, ctx)
+            from wbcgrade.errors import OptionError  # one line, exit 2, as the library's
+
+            flag = max(getattr(param, "opts", None) or [str(value)], key=len)
+            raise OptionError(f"{flag}: {value} is not a finite number (at most "
+                              f"{MAX_OPTION_MAGNITUDE:g} in size)", flag)
         return number
 
 

@@ -383,8 +383,8 @@ def check_preset_width(width: float) -> float:
     except (TypeError, ValueError):
         raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
     if not (np.isfinite(value) and 0 < value <= MAX_KERNEL_WIDTH):
-        raise OptionError(f"width must be a number of bins in (0, {MAX_KERNEL_WIDTH:g}], "
-                          f"got {width}", "width")
+        raise OptionError(f"width must be a positive, finite number of bins (at most "
+                          f"{MAX_KERNEL_WIDTH:g}), got {width}", "width")
     return value
 
 
