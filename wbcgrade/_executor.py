@@ -38,14 +38,21 @@ from typing import Any
 
 from wbcgrade.errors import InputError, OptionError
 
-__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT",
+__all__ = ["Executor", "cpu_count", "release_cached_objects", "DASK_CONNECT_TIMEOUT", "MAX_JOBS",
            "PARENT_WATCH_S"]
+
+#: Local worker processes at most (a pool of more cannot even be made: its semaphores).
+MAX_JOBS = 256
 
 #: How long to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
 
 #: How often a worker checks that its parent process is still alive (seconds).
 PARENT_WATCH_S = 1.0
+
+#: What an item whose worker process died failed with (``map_unordered``'s ``on_lost``).
+_LOST_REASON = ("its worker process died (killed, out of memory, or a crash in a library); "
+                "the other photos went on")
 
 _WORKER_CONTEXT: Any = None
 _WORKER_INTERRUPTED = False
@@ -172,6 +179,8 @@ class Executor:
     def __init__(self, context: Any, jobs: int = 1, scheduler: str | None = None,
                  worker_setup: Callable[[Any], None] | None = None,
                  to_remote: tuple[Callable[[Any], Any], Callable[[Any], Any]] | None = None):
+        if int(jobs) > MAX_JOBS:
+            raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
         self.context, self.jobs, self.scheduler = context, max(1, int(jobs)), scheduler
         self.worker_setup = worker_setup
         self.item_to_remote, self.context_to_remote = to_remote or (_same, _same)
@@ -243,35 +252,87 @@ class Executor:
                                                       broadcast=True)
 
     def map_unordered(self, function: Callable, items: Iterable[Any], *args: Any,
-                      local_kwargs: dict | None = None) -> Iterator[tuple[Any, Any]]:
+                      local_kwargs: dict | None = None,
+                      on_lost: Callable[[Any, str], Any] | None = None
+                      ) -> Iterator[tuple[Any, Any]]:
         """Yield ``(item, function(item, context, *args))`` as each finishes.
 
         ``function`` must be a module-level function when it runs in other
         processes. ``local_kwargs`` are passed only when running in this process.
         Queued items are cancelled when the caller stops iterating or an
         exception (Ctrl-C included) propagates.
+
+        ``on_lost(item, reason)``: the result of an item whose local worker process
+        died (killed, out of memory, a crash in a library): the pool is started
+        again and the other items go on; an item is lost only when it alone was
+        running when its worker died (:meth:`_pool`). None: the pool's
+        ``BrokenProcessPool`` propagates.
         """
         items = list(items)
         if self.client is not None:
             yield from self._dask(items, function, args)
         elif self.pool is not None:
-            yield from self._pool(items, function, args)
+            yield from self._pool(items, function, args, on_lost)
         else:
             for item in items:
                 yield item, function(item, self.context, *args, **(local_kwargs or {}))
 
-    def _pool(self, items: list, function: Callable, args: tuple):
-        futures = {self.pool.submit(_call_in_worker, function, item, *args): item
-                   for item in items}
-        try:
-            pending = set(futures)
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield futures[future], future.result()
-        finally:
-            for future in futures:
-                future.cancel()
+    def _pool(self, items: list, function: Callable, args: tuple,
+              on_lost: Callable[[Any, str], Any] | None = None):
+        """The items on the local pool. When a worker dies, every unfinished item fails with
+        ``BrokenProcessPool``: the pool is started again, the items that were running are
+        tried again one at a time (the one that dies alone is lost: ``on_lost``), the
+        others as before; an item caught in two deaths is tried alone too."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        queue = list(range(len(items)))  # indices still to run together
+        alone: list[int] = []  # indices to run one at a time
+        strikes = [0] * len(items)
+        while queue or alone:
+            if alone:
+                batch = [alone.pop(0)]
+            else:
+                batch, queue = queue, []
+            futures = {self.pool.submit(_call_in_worker, function, items[i], *args): i
+                       for i in batch}
+            broken: list[int] = []
+            running: set[int] = set()
+            try:
+                pending = set(futures)
+                while pending:
+                    running |= {futures[f] for f in pending if f.running()}
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        try:
+                            result = future.result()
+                        except BrokenProcessPool:
+                            if on_lost is None:
+                                raise
+                            broken.append(futures[future])
+                            continue
+                        yield items[futures[future]], result
+            finally:
+                for future in futures:
+                    future.cancel()
+            if not broken:
+                continue
+            self._restart_broken_pool()
+            if len(batch) == 1:
+                yield items[batch[0]], on_lost(items[batch[0]], _LOST_REASON)
+                continue
+            for index in sorted(broken):
+                strikes[index] += 1
+                if index in running or strikes[index] > 1:
+                    alone.append(index)
+                else:
+                    queue.append(index)
+
+    def _restart_broken_pool(self) -> None:
+        """Replace a pool whose worker died by a fresh one (its workers start on demand)."""
+        _quiet_broken_pool_thread()
+        with contextlib.suppress(Exception):
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        self._start_pool()
 
     def _dask(self, items: list, function: Callable, args: tuple):
         from dask.distributed import as_completed

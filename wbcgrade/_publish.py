@@ -64,10 +64,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._names import safe_text, writable_name, writer_name
+from wbcgrade._names import safe_text
 from wbcgrade.errors import InputError, first_line
 
-__all__ = ["TEMP_MARK", "LOCK_FILE", "atomic_path", "publish_bytes", "write_png",
+__all__ = ["TEMP_MARK", "LOCK_FILE", "atomic_path", "publish_bytes", "write_png", "encode_png",
            "check_regular_target", "check_folder", "check_output_path", "plan_outputs",
            "make_folders_for",
            "is_unlocked", "remove_stale_temporaries", "remove_stale_beside", "lock_folder"]
@@ -351,19 +351,48 @@ def write_png(target: str | os.PathLike, image: np.ndarray, overwrite: bool = Tr
         if np.isnan(pixels).any():
             raise InputError(f"{target}: the image holds NaN values")
         pixels = np.clip(np.round(pixels * 255.0), 0, 255).astype(np.uint8)
-    pixels = np.ascontiguousarray(pixels)
-    with atomic_path(target, suffix=".png", overwrite=overwrite) as tmp, \
-            writable_name(tmp) as name:
-        output = oiio.ImageOutput.create(writer_name(tmp))
-        if output is None:
-            raise OSError(f"{target}: cannot create a PNG writer ({first_line(oiio.geterror())})")
-        spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
+    publish_bytes(target, encode_png(target, np.ascontiguousarray(pixels), spec),
+                  overwrite=overwrite)
+    return target
+
+
+def encode_png(target: str | os.PathLike, pixels: np.ndarray, spec) -> bytes:
+    """The PNG file of ``pixels`` (``spec``: an OpenImageIO ImageSpec), encoded in memory.
+
+    Every error of the writer is an OSError naming ``target`` (the PNG writer reports a
+    short write only through ``geterror()``); the bytes are then published by Python
+    (:func:`publish_bytes`), whose write errors (a full disk, a file size limit) are
+    ordinary exceptions: no truncated file is ever published."""
+    import OpenImageIO as oiio
+
+    oiio.geterror()  # clear stale errors of this thread
+    output = oiio.ImageOutput.create("image.png")
+    if output is None:
+        raise OSError(f"{target}: cannot create a PNG writer ({first_line(oiio.geterror())})")
+    if hasattr(os, "memfd_create"):
+        fd = os.memfd_create("wbcgrade-png", os.MFD_CLOEXEC)
+        name = f"/proc/self/fd/{fd}"
+    else:  # pragma: no cover - not Linux
+        fd, name = tempfile.mkstemp(suffix=".png")
+    try:
         ok = output.open(name, spec) and output.write_image(pixels)
         error = output.geterror()
-        output.close()
-        if not ok:
-            raise OSError(f"{target}: cannot write the PNG ({first_line(error)})")
-    return target
+        closed = output.close()
+        error = "\n".join(e for e in (error, output.geterror(), oiio.geterror()) if e.strip())
+        if not ok or not closed or error.strip():
+            raise OSError(f"{target}: cannot write the PNG ({first_line(error, 'write error')}; "
+                          "disk full or file size limit?)")
+        size = os.fstat(fd).st_size
+        data = os.pread(fd, size, 0)
+        if len(data) != size or not data.startswith(b"\x89PNG"):
+            raise OSError(f"{target}: cannot write the PNG (the encoder wrote {len(data)} of "
+                          f"{size} bytes)")
+        return data
+    finally:
+        os.close(fd)
+        if not name.startswith("/proc/"):  # pragma: no cover - not Linux
+            os.unlink(name)
 
 
 # --------------------------------------------------------------------- stale files, locks

@@ -20,7 +20,9 @@ wbcgrade.errors.InputError: p.npz: 1000000 styles, more than the 4096 wbcgrade r
 from __future__ import annotations
 
 import io
+import json
 import os
+import stat
 import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -30,13 +32,20 @@ from wbcgrade.errors import InputError
 if TYPE_CHECKING:  # numpy is imported where arrays are read (`wbcgrade --help` needs none)
     import numpy as np
 
-__all__ = ["MAX_LUT_SIZE", "MAX_STYLES", "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
+__all__ = ["MAX_LUT_SIZE", "MAX_MAP_SIZE", "MAX_LUT_DOMAIN", "MAX_STYLES",
+           "MAX_HISTOGRAM_CELLS", "MAX_ARRAY_BYTES",
            "MAX_REGRAIN_RADIUS", "MAX_BARYCENTER_ITERATIONS", "MIN_BYTES_PER_LUT_ENTRY",
-           "check_count", "check_lut_entries", "check_histogram_cells", "read_npz",
-           "read_npy"]
+           "MAX_ARCHIVE_BYTES", "MEMORY_BUDGET", "MAX_REGRAIN_EPS", "MIN_REGRAIN_EPS",
+           "check_count", "check_lut_entries", "check_histogram_cells", "check_memory",
+           "check_input_file", "parse_json", "read_npz", "read_npy"]
 
 #: Nodes per axis of any 3-D LUT or colour map read or written (256^3 x 3 float32: 200 MB).
 MAX_LUT_SIZE = 256
+#: Nodes per axis of a colour map a grade holds or reads as a look (a saved grade's map, a
+#: preset's look, a LUT file read as a look): as ``--map-size`` allows.
+MAX_MAP_SIZE = 129
+#: The largest magnitude of a LUT's domain bound (DOMAIN_MIN/MAX, spi1d ``From``).
+MAX_LUT_DOMAIN = 1e6
 #: Styles in one preset or style set.
 MAX_STYLES = 4096
 #: Histogram cells of a whole style set (styles x bins^3): 2^25 float64 cells are 256 MB
@@ -44,6 +53,16 @@ MAX_STYLES = 4096
 MAX_HISTOGRAM_CELLS = 2 ** 25
 #: Bytes of any one array a file holds (a preset's index, a cache entry's values, ...).
 MAX_ARRAY_BYTES = 256 * 2 ** 20
+#: Bytes of all the arrays of one archive together (a preset, a cache entry).
+MAX_ARCHIVE_BYTES = 512 * 2 ** 20
+#: Bytes any one reader may allocate for what one input file declares (decoded pixels and
+#: the work on them, a LUT's table, a map's nodes): a run's memory stays under about 2 GB.
+MEMORY_BUDGET = 1536 * 2 ** 20
+#: The regrain regulariser (squared encoded units; encoded values lie in [0, 1], so their
+#: variance is at most 0.25): beyond the upper bound every pixel goes through the LUT
+#: alike, below the lower one float32 cannot hold it.
+MAX_REGRAIN_EPS = 1e4
+MIN_REGRAIN_EPS = 1e-12
 #: The regrain window's radius, a fraction of the photo's long side (1: the whole photo).
 MAX_REGRAIN_RADIUS = 1.0
 #: Barycenter iterations L (the fit keeps every iteration's state for its gradient).
@@ -60,11 +79,59 @@ def check_count(what: str, count: int, most: int, where: str | os.PathLike) -> i
     return int(count)
 
 
-def check_lut_entries(size: int, path: str | os.PathLike, dims: int = 3) -> int:
+def check_memory(what: str, nbytes: int, where: str | os.PathLike,
+                 hint: str = "") -> int:
+    """``nbytes`` when it is within :data:`MEMORY_BUDGET`, else InputError naming ``where``
+    (checked before allocating ``what``)."""
+    if nbytes > MEMORY_BUDGET:
+        raise InputError(f"{where}: {what} would take {nbytes / 2 ** 20:.0f} MB, more than "
+                         f"the {MEMORY_BUDGET / 2 ** 20:.0f} MB wbcgrade allows one input"
+                         + (f"; {hint}" if hint else ""))
+    return int(nbytes)
+
+
+_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def check_input_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """``path`` as a Path when it names a regular file (links followed), else InputError:
+    missing, a folder, or a FIFO, device or socket (which could block a read for ever
+    or never end). Every input file is checked so before it is opened."""
+    path = Path(path)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such {what}", path=path) from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})", path=path) \
+            from None
+    if stat.S_ISDIR(info.st_mode):
+        raise InputError(f"{path}: is a folder, not a {what}", path=path)
+    if not stat.S_ISREG(info.st_mode):
+        kind = next((name for test, name in _KINDS if test(info.st_mode)), "not a regular file")
+        raise InputError(f"{path}: is {kind}, not a regular {what}; wbcgrade reads regular "
+                         "files only", path=path)
+    return path
+
+
+def parse_json(text: str | bytes, where: str | os.PathLike) -> object:
+    """``json.loads(text)``, every failure an InputError naming ``where``: not JSON, and
+    nesting too deep for the parser (200,000 brackets: a RecursionError)."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise InputError(f"{where}: not a readable JSON file (nested too deeply)") from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where}: not a readable JSON file ({exc})") from None
+
+
+def check_lut_entries(size: int, path: str | os.PathLike, dims: int = 3,
+                      most: int | None = None) -> int:
     """``size`` (nodes per axis of a ``dims``-D text LUT ``path``) when it is between 2 and
-    :data:`MAX_LUT_SIZE` (1-D: 65536) and the file is large enough to hold its entries;
-    else InputError naming the file."""
-    most = MAX_LUT_SIZE if dims == 3 else 65536
+    ``most`` (default :data:`MAX_LUT_SIZE`; 1-D: 65536) and the file is large enough to
+    hold its entries; else InputError naming the file."""
+    most = most if most is not None else MAX_LUT_SIZE if dims == 3 else 65536
     if not 2 <= size <= most:
         raise InputError(f"{path}: a {dims}-D LUT size of {size}; it must be between 2 and "
                          f"{most}")
@@ -89,7 +156,8 @@ def check_histogram_cells(styles: int, bins: int, where: str | os.PathLike) -> N
 
 
 def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None = None,
-             max_bytes: int = MAX_ARRAY_BYTES) -> dict[str, np.ndarray]:
+             max_bytes: int = MAX_ARRAY_BYTES, *, names: frozenset[str] | set[str] | None = None,
+             max_total: int = MAX_ARCHIVE_BYTES) -> dict[str, np.ndarray]:
     """Every array of a NumPy ``.npz`` archive (a path or its bytes), checked before it is read.
 
     Each member's ``.npy`` header is read first: its dtype must be a plain number, bool
@@ -104,11 +172,24 @@ def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None 
     """
     where = where if where is not None else (source if not isinstance(source, bytes)
                                               else "archive")
-    handle = io.BytesIO(source) if isinstance(source, bytes) else Path(source)
+    handle = io.BytesIO(source) if isinstance(source, bytes) else check_input_file(source)
     arrays: dict[str, np.ndarray] = {}
     try:
         with zipfile.ZipFile(handle) as archive:
-            for info in archive.infolist():
+            members = archive.infolist()
+            check_count("archive members", len(members), 64, where)
+            for info in members:
+                if not info.filename.endswith(".npy"):
+                    continue  # not an array (numpy writes none such)
+                if names is not None and info.filename[:-4] not in names:
+                    raise InputError(f"{where}: holds an unknown member "
+                                     f"{info.filename[:-4][:80]!r}")
+            total = sum(info.file_size for info in members if info.filename.endswith(".npy"))
+            if total > max_total + 4096 * len(members):
+                raise InputError(f"{where}: its arrays would take {total} bytes, more than "
+                                 f"the {max_total} wbcgrade reads from one archive")
+            used = 0
+            for info in members:
                 if not info.filename.endswith(".npy"):
                     continue  # not an array (numpy writes none such)
                 name = info.filename[:-4]
@@ -116,8 +197,10 @@ def read_npz(source: str | os.PathLike | bytes, where: str | os.PathLike | None 
                     raise InputError(f"{where}: its array {name!r} would take "
                                      f"{info.file_size} bytes, more than the {max_bytes} "
                                      "wbcgrade reads")
-                with archive.open(info) as member:
-                    arrays[name] = _read_member(member, name, where, max_bytes)
+                with archive.open(info) as member:  # within what the others left
+                    arrays[name] = _read_member(member, name, where,
+                                                min(max_bytes, max_total - used))
+                used += arrays[name].nbytes
     except InputError:
         raise
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile,
@@ -131,6 +214,7 @@ def read_npy(path: str | os.PathLike, max_bytes: int = MAX_ARRAY_BYTES) -> np.nd
     """The array of a ``.npy`` file, its header checked first (as :func:`read_npz`'s members):
     a header claiming more bytes than ``max_bytes`` (or than the file holds: 7 TiB in a
     few bytes) is an InputError naming the file, before any allocation."""
+    check_input_file(path)
     try:
         with open(path, "rb") as handle:
             return _read_member(handle, Path(path).name, path, max_bytes)

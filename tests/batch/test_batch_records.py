@@ -126,3 +126,59 @@ def test_stage_bar_says_what_it_does_and_drops_the_previous_photos_loss():
         assert bar.desc.removesuffix(": ") == "b.jpg: reading the photo" and not bar.postfix
         callbacks["stage"]("scene transfer")
         assert bar.desc.removesuffix(": ") == "b.jpg: scene: colour transport"
+
+
+def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
+        tmp_path, folders, monkeypatch, cli):
+    """A batch stopped during its first photo has recorded its settings already (a rerun
+    that grades nothing and `report OUT` read them); a settings record nested 200,000
+    deep is replaced, not a traceback on every rerun."""
+    import wbcgrade.color.batch.task as task
+    from wbcgrade.color.batch.settings import SETTINGS_FILE
+
+    photos, styles = folders
+    out = tmp_path / "out"
+    run_task = task.run_task
+
+    def stopped(*args, **kwargs):
+        assert (out / SETTINGS_FILE).is_file()  # recorded before any photo is graded
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(task, "run_task", stopped)
+    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", stopped)
+    result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
+    assert result.exit_code == 130, result.output
+    assert (out / SETTINGS_FILE).is_file()
+    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", run_task)
+    (out / SETTINGS_FILE).write_text("[" * 200_000 + "]" * 200_000)
+    result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
+    assert result.exit_code == 0 and "Traceback" not in result.output, result.output
+    assert json.loads((out / SETTINGS_FILE).read_text())["styles"]
+    result = cli("report", str(out), "-o", str(tmp_path / "rep"))
+    assert result.exit_code == 0, result.output
+
+
+def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, folders,
+                                                                   monkeypatch, cli):
+    """A report stopped after its sheets (before index.html) is finished by the next run
+    without --overwrite; a finished report is still never replaced without it."""
+    import wbcgrade.color.report as report
+
+    photos, styles = folders
+    out = tmp_path / "rep"
+    write_report = report.write_report
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "write_report", stopped)
+    args = ("report", str(photos), "-o", str(out), "--preset", "warm", *FAST)
+    assert cli(*args).exit_code == 130
+    assert list((out / "sheets").glob("*.png")) and not (out / "index.html").exists()
+    monkeypatch.setattr(report, "write_report", write_report)
+    result = cli(*args)
+    assert result.exit_code == 0, result.output
+    assert (out / "index.html").is_file()
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+    result = cli(*args)
+    assert result.exit_code == 1 and "exists" in result.output, result.output

@@ -248,3 +248,23 @@ def test_a_second_batch_into_the_same_folder_is_refused(shoot, tmp_path):
     result = _batch(photos, styles, out)  # once it is done
     assert result.exit_code == 0, result.output
     assert "graded 2" in result.output
+
+
+def test_a_gif_or_null_file_fails_alone_and_the_batch_goes_on(shoot, tmp_path):
+    """One GIF (alpha as OpenImageIO's channel 4 of 4) and a zero-byte ``.null`` among the
+    photos: the GIF is graded, the ``.null`` fails alone, every JPEG is graded."""
+    from PIL import Image as PILImage
+
+    photos = tmp_path / "photos"
+    for name in ("chelsea", "coffee", "flower"):
+        small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 32)
+    PILImage.open(photos / "coffee.jpg").convert("RGB").save(photos / "anim.gif")
+    (photos / "x.null").write_bytes(b"")
+    for extra in ((), ("-j", "2", "--consistent")):
+        out = tmp_path / f"out{len(extra)}"
+        result = _batch(photos, shoot[1], out, *extra)
+        assert "Traceback" not in result.output and result.exception is None \
+            or isinstance(result.exception, SystemExit), result.output
+        assert sorted(p.name for p in out.glob("[!.]*.*")) == [
+            "anim.gif", "chelsea.jpg", "coffee.jpg", "flower.jpg"], result.output
+        assert "x.null" in result.output and "failed 1" in result.output

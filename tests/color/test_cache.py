@@ -61,6 +61,34 @@ def test_an_entry_of_the_wrong_arrays_is_a_miss(tmp_path):
     assert store.get(photo, 5) is None
 
 
+@pytest.mark.parametrize("damage", ["nan", "negated", "swapped"])
+def test_a_valid_archive_that_lies_is_a_miss_removed_then_rebuilt(tmp_path, damage):
+    """Entries that are valid archives but not what their key says (NaN values, values
+    changed and saved again, another photo's entry moved under this key): a miss, removed,
+    and the value rebuilt, so one bad entry never poisons the runs after it."""
+    photos = [tmp_path / "p.jpg", tmp_path / "q.jpg"]
+    store = HistogramCache(tmp_path / "cache")
+    stored = []
+    for seed, photo in enumerate(photos):
+        photo.write_bytes(b"pixels%d" % seed)
+        hist = soft_histogram(np.random.default_rng(seed).random((50, 3)), 5)
+        stored.append(store.put(photo, 5, hist))
+    entry, other = (store._key(p, 5, DEFAULT_MAX_PIXELS) for p in photos)
+    arrays = dict(np.load(entry))
+    if damage == "swapped":
+        entry.write_bytes(other.read_bytes())
+    else:
+        arrays["values"] = (np.full_like(arrays["values"], np.nan) if damage == "nan"
+                            else -arrays["values"])
+        with open(entry, "wb") as handle:
+            np.savez(handle, **arrays)
+    assert store.get(photos[0], 5) is None
+    assert not entry.exists()
+    store.put(photos[0], 5, soft_histogram(np.random.default_rng(0).random((50, 3)), 5))
+    assert np.array_equal(store.get(photos[0], 5), stored[0])
+    assert np.array_equal(store.get(photos[1], 5), stored[1])
+
+
 def _write_many(args: tuple[str, int]) -> int:
     path, seed = args
     bad = 0
@@ -123,3 +151,32 @@ def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_pat
     assert len([ln for ln in said.splitlines() if "not written" in ln]) == 1, said
     kinds = {p.parent.name for p in (tmp_path / "cache").rglob("*.npz")}
     assert kinds == {"cache", "looks", "scenes"}  # all three kinds were written there
+
+
+def test_natural_folder_follows_no_cache_and_cache_dir(tmp_path, cli, monkeypatch):
+    """``--natural DIR`` read its photos through the default cache whatever the command
+    said: with ``--cache-dir`` they are cached there, with ``--no-cache`` nowhere."""
+    from tests.color.conftest import SAMPLES, small_copy
+
+    default = tmp_path / "default-cache"
+    monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(default))
+    styles = tmp_path / "styles"
+    styles.mkdir()
+    for name in ("aitzgorri", "bridge"):
+        small_copy(SAMPLES / f"{name}.jpg", styles / f"{name}.jpg", 32)
+    photo = small_copy(SAMPLES / "chelsea.jpg", tmp_path / "p.jpg", 32)
+
+    def cached(folder):
+        return sorted(p.name for p in folder.rglob("*.npz")) if folder.exists() else []
+
+    for case, flags in (("chosen", ["--cache-dir", tmp_path / "chosen"]),
+                        ("off", ["--no-cache"])):
+        natural = tmp_path / f"natural-{case}"  # (a folder once read is kept in memory)
+        natural.mkdir()
+        for name in ("flower", "sunset", "coffee"):
+            small_copy(SAMPLES / f"{name}.jpg", natural / f"{name}.jpg", 32)
+        result = cli("apply", photo, "--style", styles, "--natural", natural, *flags,
+                     "-o", tmp_path / f"{case}.jpg")
+        assert result.exit_code == 0, result.output
+        assert cached(default) == [], case
+    assert len(cached(tmp_path / "chosen")) >= 2 + 3

@@ -269,3 +269,19 @@ def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading, cli):
     with pytest.raises(InputError, match="not a regular file"), _publish.atomic_path(fifo):
         pass
     assert fifo.is_fifo() and hidden_files(tmp_path) == []
+
+
+def test_a_report_under_a_file_size_limit_fails_and_publishes_no_truncated_sheet(tmp_path):
+    """``report`` under a file size limit exited 0 ("failed 0") with a PNG cut at the limit:
+    each sheet is encoded in memory and checked, so the photo fails and no sheet is
+    published that does not decode."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    noise(photos / "a.jpg", 160)
+    run = wbcgrade("report", photos, "--preset", "warm", "-o", tmp_path / "rep", *FAST_ARGS,
+                   cwd=tmp_path, limit_size=True)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert "failed 1" in run.stdout + run.stderr and "Traceback" not in run.stderr
+    for sheet in (tmp_path / "rep").rglob("*.png"):
+        buf = oiio.ImageBuf(str(sheet))
+        assert buf.read() and not buf.has_error, sheet

@@ -302,14 +302,14 @@ def test_barycenter_iterations_are_bounded():
 
 
 @pytest.mark.parametrize("text, words", [
-    ("LUT_3D_SIZE 0\n", ["size of 0", "between 2 and 256"]),
+    ("LUT_3D_SIZE 0\n", ["size of 0", "between 2 and 129"]),
     ("LUT_3D_SIZE 1\n0.1 0.2 0.9\n", ["size of 1"]),
     ("LUT_3D_SIZE\n0 0 0\n", ["line 1", "LUT_3D_SIZE", "whole number"]),
     ("LUT_3D_SIZE abc\n" + "0 0 0\n" * 8, ["line 1", "'abc'"]),
     ("LUT_3D_SIZE 2\nDOMAIN_MIN a b c\n" + "0 0 0\n" * 8, ["line 2", "DOMAIN_MIN", "'a b c'"]),
     ("", ["no LUT_3D_SIZE"]),
     ("LUT_3D_SIZE 2\n" + "0.000 0.000 0.000\n" * 5, ["8 rows", "has 5"]),
-    ("LUT_3D_SIZE 200\n0 0 0\n", ["cannot hold"]),
+    ("LUT_3D_SIZE 100\n0 0 0\n", ["cannot hold"]),
 ])
 def test_a_malformed_cube_is_one_line_naming_the_file_and_the_fault(tmp_path, photo, text,
                                                                      words):

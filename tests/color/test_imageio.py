@@ -238,3 +238,41 @@ def test_output_that_appears_during_a_grade_is_not_replaced(tmp_path):
         with open(tmp, "w") as handle:
             handle.write("ours")
     assert target.read_text() == "ours"
+
+
+def test_gif_alpha_and_synthetic_null_files(tmp_path, rng):
+    """A GIF's alpha is channel 4 of 4 to OpenImageIO: read as the last channel; a file
+    only OpenImageIO's ``null`` reader opens (zero bytes named .null) is not an image."""
+    from PIL import Image as PILImage
+
+    pixels = (rng.random((6, 7, 3)) * 255).astype(np.uint8)
+    PILImage.fromarray(pixels).save(tmp_path / "a.gif")
+    image = read_image(tmp_path / "a.gif")
+    assert image.pixels.shape == (6, 7, 4) and image.alpha_channel == 3
+    assert image.alpha().shape == (6, 7) and image.rgb().shape == (6, 7, 3)
+    (tmp_path / "x.null").write_bytes(b"")
+    (tmp_path / "big.null?RES=9000x9000").write_bytes(b"")
+    for name in ("x.null", "big.null?RES=9000x9000"):
+        with pytest.raises(InputError, match="not a readable image"):
+            read_image(tmp_path / name)
+
+
+def test_only_regular_files_are_read(tmp_path):
+    """A FIFO (which would block the read for ever) or a device is refused unopened
+    (run in a child process: a read that blocks fails the test instead of hanging it)."""
+    import os
+    import subprocess
+    import sys
+
+    os.mkfifo(tmp_path / "pipe.jpg")
+    code = ("from wbcgrade.color.imageio import read_image\n"
+            "for name in ('pipe.jpg', '/dev/zero'):\n"
+            "    try:\n        read_image(name)\n"
+            "    except ValueError as exc:\n        print(exc)\n")
+    try:
+        done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, text=True,
+                              capture_output=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("reading a FIFO blocked")
+    assert "pipe.jpg: is a FIFO" in done.stdout and "is a character device" in done.stdout, \
+        done.stdout + done.stderr

@@ -113,6 +113,8 @@ def _header(**changes):
     ("index", "bin index out of range"),
     ("negative", "negative or non-finite"),
     ("offsets", "inconsistent"),
+    ("width", "bad kernel width"),  # 1e300 was taken (every file field bounded)
+    ("extra", "unknown member 'extra'"),  # 255 MB members were read
 ])
 def test_broken_presets_give_one_clear_error(tmp_path, case, message):
     path = tmp_path / "bad.npz"
@@ -139,6 +141,10 @@ def test_broken_presets_give_one_clear_error(tmp_path, case, message):
         _write_npz(path, header=_header(), **{**good, "values": np.array([1.0, -0.5])})
     elif case == "offsets":
         _write_npz(path, header=_header(), **{**good, "offsets": np.array([0, 1])})
+    elif case == "width":
+        _write_npz(path, header=_header(width=1e300), **good)
+    elif case == "extra":
+        _write_npz(path, header=_header(), extra=np.zeros(4), **good)
     with pytest.raises(InputError, match=message) as info:
         load_preset(path)
     assert "\n" not in str(info.value) and "not a valid wbcgrade preset" in str(info.value)

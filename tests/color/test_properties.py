@@ -77,11 +77,16 @@ def test_an_integer_option_is_accepted_exactly_inside_its_range(group, field, lo
 
 @FEW
 @given(st.floats(allow_nan=True, allow_infinity=True))
-def test_regrain_eps_is_accepted_exactly_when_positive_and_finite(value):
-    if math.isfinite(value) and value > 0:
+def test_regrain_eps_is_accepted_exactly_when_within_its_bounds(value):
+    """Positive and finite, and between MIN_REGRAIN_EPS and MAX_REGRAIN_EPS (1e39 made an
+    all-black photo; below 1e-12 float32 cannot hold it)."""
+    from wbcgrade.limits import MAX_REGRAIN_EPS, MIN_REGRAIN_EPS
+
+    if math.isfinite(value) and MIN_REGRAIN_EPS <= value <= MAX_REGRAIN_EPS:
         assert RegrainOptions(eps=value).eps == value
     else:
-        with pytest.raises(OptionError, match="positive"):
+        with pytest.raises(OptionError, match="positive" if not value > 0 or math.isinf(value)
+                           else "between"):
             RegrainOptions(eps=value)
 
 

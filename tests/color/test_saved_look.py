@@ -124,3 +124,77 @@ def test_cube_files_read_back_as_written(tmp_path, rng):
     wide = load_look(tmp_path / "wide.cube")
     assert wide.color_map.shape == (SAMPLED_LUT_SIZE,) * 3 + (3,)
     assert np.abs(wide.color_map[-1, -1, -1] - table[2, 2, 2]).max() < 1e-5  # 1.0 is mid-domain
+
+
+def test_lut_readers_take_3dl_and_a_bom_and_refuse_degenerate_domains(tmp_path):
+    """``.3dl`` (documented) is read; a ``.cube`` with a UTF-8 byte order mark is read; a
+    reversed or enormous domain, a ``.spi1d`` ``From 0.0 0.0``, a CLF holding NaN, a saved
+    map whose low is above its high: refused, each with a line naming the file."""
+    import itertools
+    import zlib
+
+    from wbcgrade.color.saved_grade import load_look
+    from wbcgrade.errors import InputError
+
+    n = 17
+    lines = [" ".join(str(round(i * 1023 / (n - 1))) for i in range(n))]
+    lines += [f"{round(r * 4095 / (n - 1))} {round(g * 4095 / (n - 1))} "
+              f"{round(b * 4095 / (n - 1) / 2)}" for r, g, b in itertools.product(range(n),
+                                                                               repeat=3)]
+    (tmp_path / "half_blue.3dl").write_text("\n".join(lines) + "\n")
+    table = load_look(tmp_path / "half_blue.3dl").color_map
+    assert abs(float(table[-1, -1, -1, 2]) - 0.5) < 0.01 and float(table[-1, -1, -1, 0]) > 0.99
+    rows = "\n".join(f"{r} {g} {b}" for b in (0, 1) for g in (0, 1) for r in (0, 1))
+    (tmp_path / "bom.cube").write_text("\ufeffLUT_3D_SIZE 2\n" + rows + "\n")
+    assert load_look(tmp_path / "bom.cube").color_map.shape == (2, 2, 2, 3)
+    bad = {"reversed.cube": "LUT_3D_SIZE 2\nDOMAIN_MIN 1 1 1\nDOMAIN_MAX 0 0 0\n" + rows,
+           "huge.cube": "LUT_3D_SIZE 2\nDOMAIN_MIN -1e308 -1e308 -1e308\n"
+                        "DOMAIN_MAX 1e308 1e308 1e308\n" + rows,
+           "flat.spi1d": "Version 1\nFrom 0.0 0.0\nLength 2\nComponents 1\n{\n0.0\n1.0\n}\n",
+           "nan.clf": '<?xml version="1.0" ?>\n<ProcessList id="x" compCLFversion="3">\n'
+                      '<Matrix inBitDepth="32f" outBitDepth="32f"><Array dim="3 3">\n'
+                      'nan 0 0\n0 1 0\n0 0 1\n</Array></Matrix>\n</ProcessList>\n'}
+    for name, text in bad.items():
+        (tmp_path / name).write_text(text + "\n")
+        with pytest.raises(InputError, match=name.replace(".", r"\.")):
+            load_look(tmp_path / name)
+    saved = {"format": "wbcgrade-look", "version": 1, "working_space": "sRGB",
+             "map": {"shape": [2, 2, 2, 3], "low": 1.0, "high": 0.0,
+                     "encoding": "uint16-delta2-planes-zlib-base64",
+                     "data": __import__("base64").b64encode(zlib.compress(bytes(48))).decode()}}
+    (tmp_path / "swapped.json").write_text(json.dumps(saved))
+    with pytest.raises(InputError, match="low"):
+        load_look(tmp_path / "swapped.json")
+
+
+def test_a_saved_grade_with_an_unusable_regrain_eps_is_refused(tmp_path):
+    """``"regrain": [0.005, 1e300]`` made an all-black photo with exit 0."""
+    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.remap import identity_map
+    from wbcgrade.color.saved_grade import load_look, look_dict
+    from wbcgrade.errors import InputError
+
+    entry = look_dict(Grade(("a",), np.ones(1), identity_map(3), working="sRGB",
+                            regrain=(0.005, 0.04)))
+    for eps in (1e300, 1e-300):
+        entry["regrain"] = [0.005, eps]
+        (tmp_path / "g.json").write_text(json.dumps(entry))
+        with pytest.raises(InputError, match="eps <="):
+            load_look(tmp_path / "g.json")
+
+
+def test_json_nested_200000_deep_is_one_line_not_a_traceback(tmp_path):
+    """A saved grade or a preset header of 200,000 nested brackets raised RecursionError."""
+    from wbcgrade.color.presets import load_preset, shipped_presets_dir
+    from wbcgrade.color.saved_grade import load_look
+    from wbcgrade.errors import InputError
+
+    deep = "[" * 200_000 + "]" * 200_000
+    (tmp_path / "deep.json").write_text(deep)
+    with pytest.raises(InputError, match="nested too deeply"):
+        load_look(tmp_path / "deep.json")
+    arrays = dict(np.load(sorted(shipped_presets_dir().glob("*.npz"))[0]))
+    arrays["header"] = np.frombuffer(deep.encode(), np.uint8)
+    np.savez(tmp_path / "deep.npz", **arrays)
+    with pytest.raises(InputError, match="header is not JSON"):
+        load_preset(tmp_path / "deep.npz")

@@ -236,3 +236,15 @@ def test_a_newer_job_replaces_one_still_waiting(server):
     for thread in threads:
         thread.join(600)
     assert outcomes == {"first": 120, "second": "superseded", "third": 1}
+
+
+def test_huge_numbers_and_float_sizes_are_bad_requests(server):
+    """``strength`` 10**400 (OverflowError) and ``"size": 33.0`` answered 500: they are the
+    request's fault (400), with one line saying what is wrong."""
+    body = {"weights": [0.25, 0.25, 0.5]}
+    for name, extra, words in (("look", {"strength": 10 ** 400}, "finite number"),
+                               ("exact", {"strength": 10 ** 400}, "finite number"),
+                               ("export", {"format": "cube", "size": 33.0}, "size must be"),
+                               ("export", {"format": "cube", "size": True}, "size must be")):
+        status, _, payload = api(server, name, {**({} if name == "look" else body), **extra})
+        assert status == 400 and words in error_of(payload), (name, extra, payload)

@@ -65,3 +65,32 @@ def test_a_missing_dask_is_a_one_line_error(monkeypatch):
     with pytest.raises(InputError, match=r"pip install 'wbcgrade\[dask\]'"), \
             Executor({}, scheduler="tcp://127.0.0.1:9"):
         pass
+
+
+def dies_on_seven(item: int, context: dict) -> int:
+    """item * factor, but the worker process is killed (as the OOM killer would) on 7."""
+    import signal
+    import time
+
+    if item == 7:
+        os.kill(os.getpid(), signal.SIGKILL)
+    time.sleep(0.05)
+    return item * context["factor"]
+
+
+def test_a_dead_worker_loses_its_item_only():
+    """A worker killed mid-item: that item is lost (``on_lost``), every other item is run
+    (the pool is started again), and nothing is yielded twice."""
+    with Executor({"factor": 2}, jobs=2) as executor:
+        pairs = list(executor.map_unordered(dies_on_seven, range(12),
+                                            on_lost=lambda item, why: ("lost", item)))
+    assert sorted(item for item, _ in pairs) == list(range(12))
+    assert dict(pairs) == {i: (("lost", 7) if i == 7 else 2 * i) for i in range(12)}
+
+
+def test_more_jobs_than_a_pool_can_hold_is_an_option_error():
+    """``-j 99999999999999999999`` raised OverflowError from the pool's semaphores."""
+    from wbcgrade.errors import OptionError
+
+    with pytest.raises(OptionError, match="jobs must be between 1 and"):
+        Executor({}, jobs=99999999999999999999)

@@ -79,3 +79,49 @@ def test_a_volume_npy_claiming_terabytes_is_one_line_under_2_gb(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.startswith(str(path)) and "more than" in done.stdout
+
+
+def test_one_memory_budget_for_archives_pixels_luts_and_style_sets(tmp_path, monkeypatch):
+    """Archives in total (members of 255 MB each) and unknown preset members, a small PNG
+    declaring a huge image, a second size line of a ``.spi3d``, a style set past the
+    budget: refused before anything is allocated."""
+    import OpenImageIO as oiio
+
+    from wbcgrade import limits
+    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.presets import load_preset, load_style_folder, shipped_presets_dir
+    from wbcgrade.color.saved_grade import load_look
+
+    bomb = io.BytesIO()
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name in "abc":
+            with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
+                member.write(_npy({"descr": "|u1", "fortran_order": False,
+                                   "shape": (255 * 2 ** 20,)}))
+                for _ in range(255):
+                    member.write(bytes(2 ** 20))
+    with pytest.raises(InputError, match="from one archive"):
+        read_npz(bomb.getvalue(), "bomb.npz")
+    preset = sorted(shipped_presets_dir().glob("*.npz"))[0]
+    extra = tmp_path / "extra.npz"
+    extra.write_bytes(preset.read_bytes())
+    with zipfile.ZipFile(extra, "a") as archive:
+        archive.writestr("junk.npy", _npy({"descr": "|u1", "fortran_order": False,
+                                           "shape": (4,)}, bytes(4)))
+    with pytest.raises(InputError, match="unknown member 'junk'"):
+        load_preset(extra)
+    oiio.ImageBuf(np.zeros((4100, 5000, 1), np.uint8)).write(str(tmp_path / "flat.png"))
+    with pytest.raises(InputError, match="budget"):
+        read_image(tmp_path / "flat.png")
+    (tmp_path / "two.spi3d").write_text("SPILUT 1.0\n3 3\n2 2 2\n" + "0 0 0 0 0 0\n" * 8
+                                        + "400 400 400\n")
+    with pytest.raises(InputError, match="400"):
+        load_look(tmp_path / "two.spi3d")
+    styles = tmp_path / "styles"
+    styles.mkdir()
+    for number in range(3):
+        oiio.ImageBuf(np.full((4, 4, 3), 40 * number, np.uint8)).write(
+            str(styles / f"s{number}.png"))
+    monkeypatch.setattr(limits, "MEMORY_BUDGET", 2 * 64 ** 3 * 8 * 2)
+    with pytest.raises(InputError, match="3 style photos"):
+        load_style_folder(styles, 64)

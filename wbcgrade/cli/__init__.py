@@ -99,6 +99,10 @@ class _Group(click.Group):
                 exc = InputError(flag_text(exc))
             click.echo(f"Error: {_message(exc)}", err=True)
             sys.exit(status)
+        finally:  # the command's --cache-dir/--no-cache end with it (in-process runs too)
+            cache = sys.modules.get("wbcgrade.color.cache")
+            if cache is not None:
+                cache.set_command_cache()
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

@@ -79,7 +79,7 @@ def print_palette_fit(palette) -> None:
 
 
 @click.command("apply", cls=LazyOptionsCommand)
-@click.argument("photo", type=click.Path(dir_okay=False, path_type=str))
+@click.argument("photo", type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("output", help="Output photo [default: <stem>_graded.<ext> beside PHOTO].")
 @grading_options
 @space_options

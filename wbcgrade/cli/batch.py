@@ -11,6 +11,7 @@ import click
 
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
+    check_photo,
     grading_options,
     lazy_options,
     look_option,
@@ -138,7 +139,7 @@ def print_summary(result: BatchResult, verb: str = "graded") -> None:
 
 
 @click.command("batch", cls=LazyOptionsCommand)
-@click.argument("in_dir", type=click.Path(exists=True, file_okay=False, path_type=str))
+@click.argument("in_dir", type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("out_dir", required=True,
                help="Folder for the graded copies (the input tree is mirrored).")
 @grading_options
@@ -176,6 +177,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     status 1. --look FILE applies a saved grade (the JSON of `apply --save-grade`,
     or a LUT) to every photo with no fit.
     """
+    check_photo(in_dir, "no such file or folder")  # (exit 1, before numpy loads)
     from wbcgrade.color.batch import grade_folder
 
     if force_alias:

@@ -480,8 +480,10 @@ def take_grading_options(kwargs: dict, photo: str | None = None) -> tuple:
 
         resolve_preset(values["preset"])  # an unknown name, answered before numpy loads
     # numpy and OpenImageIO load here, once the options and PHOTO are known to be valid
+    from wbcgrade.color.cache import set_command_cache
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.presets import StyleSource
 
+    set_command_cache(values["cache_dir"], not values["no_cache"])  # --natural DIR's too
     cache = HistogramCache(values["cache_dir"], enabled=not values["no_cache"])
     return options, StyleSource(values["style_dir"], values["preset"], cache)

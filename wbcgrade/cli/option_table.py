@@ -30,6 +30,34 @@ import click
 __all__ = ["Option", "OPTIONS", "FIELD_DEFAULT", "option", "click_options", "flag_of",
            "names_in", "json_keys"]
 
+
+#: The largest magnitude a number option takes (each is checked to its own range later).
+MAX_OPTION_MAGNITUDE = 1e9
+
+
+class FiniteFloat(click.ParamType):
+    """A float option: a finite number of magnitude at most :data:`MAX_OPTION_MAGNITUDE`
+    (``nan``, ``inf`` and ``1e300`` are usage errors before anything is computed)."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not abs(number) <= MAX_OPTION_MAGNITUDE:  # (NaN fails this too)
+            from wbcgrade.errors import OptionError  # one line, exit 2, as the library's
+
+            flag = max(getattr(param, "opts", None) or [str(value)], key=len)
+            raise OptionError(f"{flag}: {value} is not a finite number (at most "
+                              f"{MAX_OPTION_MAGNITUDE:g} in size)", flag)
+        return number
+
+
+#: The float type of the table's rows.
+FINITE_FLOAT = FiniteFloat()
+
 #: ``Option.default``: the default is the library field's (``GradeOptions`` flat name).
 FIELD_DEFAULT = object()
 
@@ -180,7 +208,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("relaxation", "--relax", "Unbalanced transport: palette colours the photo has no "
            "use for may be left out, at a KL cost of RHO each (a small RHO such as 0.05 leaves "
            "out more; a large one keeps nearly all) [default: none left out, balanced "
-           "transport].", field="transfer.relaxation", json="relaxation", type=float,
+           "transport].", field="transfer.relaxation", json="relaxation", type=FINITE_FLOAT,
            default=FIELD_DEFAULT, metavar="RHO", section=PALETTE),
     # the colour map and its finish
     Option("loss", "--loss", "Fit loss between the barycenter and the photo's histogram.",
@@ -193,12 +221,13 @@ OPTIONS: tuple[Option, ...] = (
            field="fit.bins", json="fit_bins", type=int, default=FIELD_DEFAULT,
            show_default=True, section=PALETTE),
     Option("width", "--width", "Fit kernel width in bins of the fit grid.", field="fit.width",
-           json="width", type=float, default=FIELD_DEFAULT, show_default=True, section=PALETTE),
+           json="width", type=FINITE_FLOAT, default=FIELD_DEFAULT, show_default=True,
+           section=PALETTE),
     Option("gamma", "--gamma", "Fit entropic regularisation gamma (overrides --width).",
-           field="fit.gamma", json="gamma", type=float, section=PALETTE),
+           field="fit.gamma", json="gamma", type=FINITE_FLOAT, section=PALETTE),
     Option("transfer_width", "--transfer-width", "Kernel width in bins of the transfer grid "
            "[default: max(1, (bins-1)/31)].", field="transfer.width", json="transfer_width",
-           type=float, section=PALETTE),
+           type=FINITE_FLOAT, section=PALETTE),
     Option("n_iter", "--iterations", "Barycenter iterations.", field="fit.n_iter",
            json="n_iter", type=int, default=FIELD_DEFAULT, show_default=True, section=PALETTE),
     Option("max_iter", "--max-iter", "L-BFGS iterations of the fit at most.",
@@ -206,18 +235,18 @@ OPTIONS: tuple[Option, ...] = (
            show_default=True, section=PALETTE),
     Option("strength", "--strength", "How much of the grade: 0 none, 1 in full; up to 4 makes "
            "a faint grade stronger.", field="map.strength",
-           json="strength", type=float, default=FIELD_DEFAULT, show_default=True,
+           json="strength", type=FINITE_FLOAT, default=FIELD_DEFAULT, show_default=True,
            section=SOURCE),
     Option("map_size", "--map-size", "Nodes per axis of the smooth colour map (the grade is "
            "this LUT).", field="map.size", json="map_size", type=int, default=FIELD_DEFAULT,
            show_default=True, section=MAP),
     Option("smoothness", "--smoothness", "Curvature penalty of the smooth colour map (0 with "
            "--stiffness 0: the raw transport map, the paper's).", field="map.smoothness",
-           json="smoothness", type=float, default=FIELD_DEFAULT, show_default=True,
+           json="smoothness", type=FINITE_FLOAT, default=FIELD_DEFAULT, show_default=True,
            section=PALETTE),
     Option("stiffness", "--stiffness", "First-difference penalty of the colour map (holds its "
            "local gain near 1: less noise amplification, less contrast change).",
-           field="map.stiffness", json="stiffness", type=float, default=FIELD_DEFAULT,
+           field="map.stiffness", json="stiffness", type=FINITE_FLOAT, default=FIELD_DEFAULT,
            show_default=True, section=PALETTE),
     Option("monotone", "--monotone", "Keep the order of lightness: the map's output luma never "
            "decreases when an input channel increases (no reversed steps in flat areas; a "
@@ -229,11 +258,11 @@ OPTIONS: tuple[Option, ...] = (
            json="regrain", decls=("--regrain/--no-regrain",), default=FIELD_DEFAULT,
            show_default=True, section=MAP),
     Option("regrain_radius", "--regrain-radius", "Regrain window radius, fraction of the long "
-           "side.", field="regrain.radius", json="regrain_radius", type=float,
+           "side.", field="regrain.radius", json="regrain_radius", type=FINITE_FLOAT,
            default=FIELD_DEFAULT, show_default=True, section=MAP),
     Option("regrain_eps", "--regrain-eps", "Regrain: input variations below about sqrt(eps) "
            "(encoded units) are kept as grain.", field="regrain.eps", json="regrain_eps",
-           type=float, default=FIELD_DEFAULT, show_default=True, section=MAP),
+           type=FINITE_FLOAT, default=FIELD_DEFAULT, show_default=True, section=MAP),
     Option("preserve_luminance", "--preserve-luminance", "Change hue and chroma only; keep "
            "each colour's lightness (Oklab).", field="map.preserve_luminance",
            json="preserve_luminance", is_flag=True, default=False, section=MAP),
@@ -273,7 +302,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("look_path", "--look", "Apply a saved grade instead of fitting one: the JSON "
            "written by `apply --save-grade FILE` (regrain as it was) or a 3-D LUT (.cube from "
            "--lut, .clf, ...; regrained unless --no-regrain). Replaces --style/--preset; the "
-           "fit options are not used.", field="look", type=_FILE, metavar="FILE",
+           "fit options are not used.", field="look", type=_PATH, metavar="FILE",
            section=SOURCE),
     Option("originals_dir", "--originals", "Folder of the originals of some of the --style "
            "photos (paired by file name as `look learn` pairs them; raw originals and "
@@ -319,11 +348,11 @@ OPTIONS: tuple[Option, ...] = (
            "--blend-frames at each cut) instead of one grade for the whole clip.",
            field="per_shot", is_flag=True, default=False),
     Option("sample_every", "--sample-every", "Seconds between the frames sampled for the fit.",
-           field="sample_every", type=float,
+           field="sample_every", type=FINITE_FLOAT,
            default="wbcgrade.video.defaults:DEFAULT_SAMPLE_EVERY", lazy_default=True,
            show_default=True, metavar="SECONDS"),
     Option("cut_threshold", "--cut-threshold", "--per-shot: colour change between consecutive "
-           "frames (0-1) that starts a new shot.", field="cut_threshold", type=float,
+           "frames (0-1) that starts a new shot.", field="cut_threshold", type=FINITE_FLOAT,
            default="wbcgrade.video.defaults:DEFAULT_CUT_THRESHOLD", lazy_default=True,
            show_default=True),
     Option("blend_frames", "--blend-frames", "--per-shot: frames over which the grade changes "
@@ -348,7 +377,8 @@ OPTIONS: tuple[Option, ...] = (
            "them as needed).", field="bins", type=int, default=32, show_default=True,
            section=HISTOGRAMS),
     Option("preset_width", "--width", "Kernel width (bins) recorded with the preset.",
-           field="width", type=float, default="wbcgrade.color.defaults:DEFAULT_PRESET_WIDTH",
+           field="width", type=FINITE_FLOAT,
+           default="wbcgrade.color.defaults:DEFAULT_PRESET_WIDTH",
            lazy_default=True, show_default=True, section=HISTOGRAMS),
     Option("description", "--description", "One line shown by `preset list`.",
            field="description", default=""),
@@ -423,7 +453,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("euclidean", "--euclidean", "Fit a linear mixture of the database instead (for "
            "comparison).", is_flag=True, default=False),
     Option("shape_width", "--width", "Kernel standard deviation in voxels (default 1 at 64^3, "
-           "scaled).", type=click.FloatRange(min=0.5)),
+           "scaled).", type=click.FloatRange(0.5, 1000.0)),
     Option("shape_iterations", "--iterations", "Barycenter iterations L.",
            type=click.IntRange(1), upper=_MAX_L, default=_SHAPE + "DEFAULT_N_ITER",
            lazy_default=True, show_default=True),

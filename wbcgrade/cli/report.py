@@ -7,6 +7,7 @@ import click
 from wbcgrade.cli.batch import batch_progress, print_summary, warn_fit_bins
 from wbcgrade.cli.grading_options import (
     LazyOptionsCommand,
+    check_photo,
     grading_options,
     space_options,
     table_options,
@@ -16,7 +17,7 @@ from wbcgrade.cli.grading_options import (
 
 @click.command("report", cls=LazyOptionsCommand)
 @click.argument("target", metavar="PHOTO_OR_DIR",
-                type=click.Path(exists=True, path_type=str))
+                type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("out_dir", help="Report folder [default: <name>_report beside PHOTO_OR_DIR].")
 @grading_options
 @space_options
@@ -39,6 +40,7 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
     style, then the grade's source, strength and change), a PNG sheet per
     photo in sheets/ and index.html.
     """
+    check_photo(target, "no such file or folder")  # (exit 1, before numpy loads)
     from wbcgrade.color.batch import report_folder
 
     options, source = take_grading_options(kwargs)

@@ -60,7 +60,7 @@ def _print_result(result, as_json: bool) -> None:
 
 
 @click.command("video", cls=LazyOptionsCommand)
-@click.argument("clip", type=click.Path(dir_okay=False, path_type=str))
+@click.argument("clip", type=click.Path(path_type=str))  # the library checks it (exit 1)
 @table_options("output", help="Graded clip [default: <stem>_graded.<ext> beside CLIP].")
 @grading_options_except(*_NOT_FOR_VIDEO)
 @table_options("per_shot")

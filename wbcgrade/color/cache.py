@@ -17,7 +17,9 @@ so a stale entry is never found, only left behind.
 A cache never makes a run fail:
 
 - :func:`read_entry` treats anything that is not a readable archive (garbage,
-  zero bytes, cut short, too large) as a miss and removes it, so the value is
+  zero bytes, cut short, too large) or does not match the digest of its name and
+  content that :func:`write_entry` records (values changed, an entry copied under
+  another key), or holds NaN, as a miss and removes it, so the value is
   computed again and a good entry written in its place; callers treat any error
   in using the arrays as a miss too;
 - :func:`write_entry` writes through :func:`wbcgrade._publish.atomic_path` (a
@@ -42,8 +44,8 @@ from wbcgrade.limits import read_npz
 if TYPE_CHECKING:  # numpy is imported where arrays are written
     import numpy as np
 
-__all__ = ["default_cache_dir", "cache_folder", "key_bytes", "entry_name", "entry_path",
-           "file_key", "read_entry", "write_entry"]
+__all__ = ["default_cache_dir", "set_command_cache", "command_cache", "cache_folder",
+           "key_bytes", "entry_name", "entry_path", "file_key", "read_entry", "write_entry"]
 
 log = logging.getLogger(__name__)
 
@@ -60,12 +62,36 @@ def default_cache_dir() -> Path:
     return Path(base) / "wbcgrade"
 
 
+#: The running command's ``--cache-dir`` / ``--no-cache`` (:func:`set_command_cache`).
+_COMMAND: dict[str, object] = {}
+
+
+def set_command_cache(folder: str | os.PathLike | None = None, enabled: bool = True) -> None:
+    """Set the cache of this process's command: ``folder`` (None: :func:`default_cache_dir`)
+    and whether caching is on. Every cache without a folder of its own follows it (a
+    style set's, the natural palettes', a batch worker's: ``--natural DIR`` too).
+    ``set_command_cache()`` goes back to the defaults."""
+    _COMMAND.clear()
+    if folder is not None or not enabled:
+        _COMMAND.update(folder=None if folder is None else Path(folder), enabled=bool(enabled))
+
+
+def command_cache() -> tuple[Path, bool]:
+    """(the folder, whether caching is on) of this process's command
+    (:func:`set_command_cache`; default: :func:`default_cache_dir`, on)."""
+    folder = _COMMAND.get("folder")
+    return (Path(folder) if folder is not None else default_cache_dir(),
+            bool(_COMMAND.get("enabled", True)))
+
+
 def cache_folder(styles=None) -> Path | None:
     """The cache folder of a StyleSet: its ``meta["cache_dir"]`` when it has one (None:
-    the command said ``--no-cache``), else :func:`default_cache_dir`."""
+    the command said ``--no-cache``), else the command's (:func:`command_cache`; None when
+    caching is off)."""
     meta = getattr(styles, "meta", None) or {}
     if "cache_dir" not in meta:
-        return default_cache_dir()
+        folder, enabled = command_cache()
+        return folder if enabled else None
     return None if meta["cache_dir"] is None else Path(meta["cache_dir"])
 
 
@@ -103,13 +129,45 @@ def file_key(path: str | os.PathLike) -> str:
     return f"{path.resolve()}|{stat.st_mtime_ns}|{stat.st_size}"
 
 
+#: The member of an entry holding :func:`_digest` of its name and arrays.
+DIGEST_MEMBER = "wbcgrade_digest"
+
+
+def _digest(name: str, arrays: dict[str, np.ndarray]) -> bytes:
+    """SHA-256 of an entry's file name (itself the digest of its key) and of every array
+    (name, type, shape, bytes): an entry moved under another key, or whose values were
+    changed, no longer matches."""
+    import numpy as np
+
+    digest = hashlib.sha256(key_bytes(name))
+    for member in sorted(arrays):
+        array = np.ascontiguousarray(arrays[member])
+        digest.update(f"|{member}|{array.dtype.str}|{array.shape}|".encode())
+        digest.update(array.tobytes())
+    return digest.digest()
+
+
 def read_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
     """The arrays of an entry, or None when there is none or it is unusable (then removed,
-    so that the caller computes the value again and writes a good entry in its place)."""
+    so that the caller computes the value again and writes a good entry in its place).
+
+    Unusable: not a readable archive, larger than the archive bounds, without the digest
+    :func:`write_entry` records or not matching it (values changed, an entry copied
+    under another key), or holding NaN or infinite numbers."""
+    import numpy as np
+
     if path is None or not os.path.isfile(path):
         return None
     try:
-        return read_npz(path)
+        arrays = read_npz(path)
+        recorded = arrays.pop(DIGEST_MEMBER, None)
+        if recorded is None or recorded.dtype != np.uint8 \
+                or recorded.tobytes() != _digest(Path(path).name, arrays):
+            raise InputError(f"{path}: does not match its digest")
+        for array in arrays.values():
+            if array.dtype.kind in "fc" and not np.isfinite(array).all():
+                raise InputError(f"{path}: holds NaN or infinite values")
+        return arrays
     except InputError:
         try:
             os.unlink(path)
@@ -144,7 +202,9 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
     folder = str(path.parent)
     try:
         data = io.BytesIO()
-        (np.savez_compressed if compress else np.savez)(data, **arrays)
+        digest = np.frombuffer(_digest(path.name, arrays), dtype=np.uint8)
+        (np.savez_compressed if compress else np.savez)(data, **arrays,
+                                                         **{DIGEST_MEMBER: digest})
         path.parent.mkdir(parents=True, exist_ok=True)
         with _LOCK:
             sweep = folder not in _SWEPT

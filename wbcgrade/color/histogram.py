@@ -13,7 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.cache import default_cache_dir, entry_path, file_key, read_entry, write_entry
+from wbcgrade.color.cache import (
+    command_cache,
+    default_cache_dir,
+    entry_path,
+    file_key,
+    read_entry,
+    write_entry,
+)
 from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
 from wbcgrade.errors import InputError
 
@@ -157,7 +164,12 @@ class HistogramCache:
     VERSION = 1
 
     def __init__(self, folder: str | os.PathLike | None = None, enabled: bool = True):
-        self.folder = Path(folder) if folder is not None else default_cache_dir()
+        """``folder`` None: the command's (``cache.command_cache``: ``--cache-dir``, else
+        the default), and off when the command said ``--no-cache``."""
+        if folder is None:
+            folder, on = command_cache()
+            enabled = enabled and on
+        self.folder = Path(folder)
         self.enabled = enabled
 
     def _key(self, path: Path, bins: int, max_pixels: int, space: str = "") -> Path:

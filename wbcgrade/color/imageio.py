@@ -186,7 +186,22 @@ def set_max_image_pixels(limit: int | None) -> None:
     _max_image_pixels = None if limit is None else int(limit)
 
 
+#: Bytes a command spends on each pixel of a photo it reads (decoded values, the working
+#: copies, the graded pixels, a report's sheet; measured: ``apply`` about 35, ``report``
+#: about 78).
+WORK_BYTES_PER_PIXEL = 80
+#: Pixels per byte of file beyond which a photo whose work would pass the memory budget
+#: is taken for a decompression bomb (camera JPEGs hold 1-3 pixels per byte, PNGs fewer;
+#: a 571 kB PNG declaring 14000x14000 holds 343).
+MAX_PIXELS_PER_FILE_BYTE = 10
+
+
 def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> None:
+    """InputError when the image's pixels are over :func:`max_image_pixels`, or when a small
+    file declares more pixels than the memory budget allows (``limits.MEMORY_BUDGET``;
+    unless the limit was raised: the file is trusted), before anything is decoded."""
+    from wbcgrade.limits import MEMORY_BUDGET
+
     count = int(width) * int(height) * max(1, int(depth))
     limit = max_image_pixels()
     if count > limit:
@@ -194,17 +209,50 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
             f"{path}: {width}x{height} is {count / 1e6:.1f} megapixels, over the "
             f"limit of {limit / 1e6:g} megapixels (a decompression bomb?); raise it with "
             f"--max-image-pixels {count} if the file is trusted")
+    if count * WORK_BYTES_PER_PIXEL <= MEMORY_BUDGET or limit != DEFAULT_MAX_IMAGE_PIXELS:
+        return
+    try:
+        size = os.path.getsize(path)
+    except OSError:
+        return
+    if size * MAX_PIXELS_PER_FILE_BYTE < count:
+        raise InputError(
+            f"{path}: {width}x{height} ({count / 1e6:.1f} megapixels) from a "
+            f"{size / 1e3:.0f} kB file could take up to "
+            f"{count * WORK_BYTES_PER_PIXEL / 2 ** 30:.1f} GB to grade, more than the "
+            f"{MEMORY_BUDGET / 2 ** 30:.1f} GB budget (a decompression bomb?); give "
+            f"--max-image-pixels {count} if the file is trusted")
+
+
+def _open_input(path: Path, config: oiio.ImageSpec | None = None) -> oiio.ImageInput:
+    """OpenImageIO's reader of the regular file ``path`` (InputError for anything else: a
+    FIFO or device, which could block for ever, or a file only OpenImageIO's synthetic
+    ``null`` reader opens, which makes up pixels from the file's name)."""
+    from wbcgrade.limits import check_input_file
+
+    check_input_file(path)
+    with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
+        inp = oiio.ImageInput.open(name, config) if config is not None \
+            else oiio.ImageInput.open(name)
+    if inp is None:
+        raise InputError(f"{path}: not a readable image "
+                         f"({first_line(oiio.geterror(), 'unknown format')})")
+    if inp.format_name() in _SYNTHETIC_READERS:
+        inp.close()
+        raise InputError(f"{path}: not a readable image (no image format recognised)")
+    return inp
+
+
+#: OpenImageIO readers that make pixels up instead of reading them from the file.
+_SYNTHETIC_READERS = frozenset({"null"})
 
 
 def header_pixels(path: str | os.PathLike) -> int:
     """Pixels of the image at ``path`` from its header, nothing decoded (0 when OpenImageIO
     reads no header there: :func:`read_image` says what is wrong with the file)."""
     try:
-        with readable_name(Path(path)) as name:
-            inp = oiio.ImageInput.open(name)
-    except (OSError, RuntimeError, ValueError):  # gone, a folder, an unusable name
-        inp = None
-    if inp is None:
+        inp = _open_input(Path(path))
+    except (OSError, RuntimeError, ValueError):  # gone, a folder, a FIFO, not an image
         oiio.geterror()  # (cleared: not this function's error to report)
         return 0
     try:
@@ -255,11 +303,7 @@ def read_image(path: str | os.PathLike) -> Image:
         return _read_raw(path)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF colours as stored
-    with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
-        inp = oiio.ImageInput.open(name, config)
-    if inp is None:
-        raise InputError(f"{path}: not a readable image "
-                         f"({first_line(oiio.geterror(), 'unknown format')})")
+    inp = _open_input(path, config)
     try:
         spec = inp.spec()
         if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
@@ -285,9 +329,12 @@ def read_image(path: str | os.PathLike) -> Image:
         pixels, spec = _from_cmyk(path, pixels, spec)
     orientation = spec.get_int_attribute("Orientation", 1)
     pixels = np.ascontiguousarray(orient(pixels, orientation))
-    alpha = spec.alpha_channel
+    alpha = spec.alpha_channel if 0 <= spec.alpha_channel < pixels.shape[2] else -1
+    if alpha < 0 and spec.alpha_channel >= pixels.shape[2] and pixels.shape[2] in (2, 4):
+        alpha = pixels.shape[2] - 1  # GIF: OpenImageIO counts its alpha as channel 4 of 4
+    names = tuple(spec.channelnames)
     if alpha < 0 and spec.nchannels in (2, 4) and (
-        format_name == "png" or str(spec.channelnames[-1]).upper() in ("A", "ALPHA")
+        format_name == "png" or (names and str(names[-1]).upper() in ("A", "ALPHA"))
     ):
         alpha = spec.nchannels - 1  # grey+alpha or RGBA without an explicit alpha name
     if alpha >= 0 and not spec.get_int_attribute("oiio:UnassociatedAlpha", 0):

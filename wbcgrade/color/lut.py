@@ -71,10 +71,14 @@ def color_map_to_lut(color_map: np.ndarray, size: int = DEFAULT_LUT_SIZE,
 
 
 def check_lut_size(size: int) -> int:
-    """``size`` when it is a usable LUT size (2 to 256 nodes per axis), else OptionError."""
+    """``size`` when it is a usable LUT size (2 to 129 nodes per axis, as a colour map's
+    ``--map-size``: a 256^3 table took 3.9 GB to bake), else OptionError. Checked whether or
+    not a LUT is asked for (an option given is an option checked)."""
+    from wbcgrade.limits import MAX_MAP_SIZE
+
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) \
-            or not 2 <= size <= 256:
-        raise OptionError("lut_size must be between 2 and 256", "lut_size")
+            or not 2 <= size <= MAX_MAP_SIZE:
+        raise OptionError(f"lut_size must be between 2 and {MAX_MAP_SIZE}", "lut_size")
     return int(size)
 
 

@@ -38,7 +38,12 @@ import math
 from dataclasses import dataclass, field, fields
 
 from wbcgrade.errors import OptionError
-from wbcgrade.limits import MAX_BARYCENTER_ITERATIONS, MAX_REGRAIN_RADIUS
+from wbcgrade.limits import (
+    MAX_BARYCENTER_ITERATIONS,
+    MAX_REGRAIN_EPS,
+    MAX_REGRAIN_RADIUS,
+    MIN_REGRAIN_EPS,
+)
 
 __all__ = ["LOSSES", "MODES", "FitOptions", "TransferOptions", "MapOptions", "RegrainOptions",
            "SpaceOptions", "GradeOptions", "FLAT_FIELDS", "flat_defaults", "as_options",
@@ -285,6 +290,10 @@ class RegrainOptions:
             raise _fail("regrain.radius", f"must be at most {MAX_REGRAIN_RADIUS:g} (a fraction "
                                           "of the photo's long side)")
         _positive("regrain", "eps", self.eps)
+        if not MIN_REGRAIN_EPS <= self.eps <= MAX_REGRAIN_EPS:
+            raise _fail("regrain.eps", f"must be between {MIN_REGRAIN_EPS:g} and "
+                                       f"{MAX_REGRAIN_EPS:g} (squared encoded units: larger "
+                                       "keeps no detail at all, smaller is below float32)")
 
     @property
     def settings(self) -> tuple[float, float] | None:

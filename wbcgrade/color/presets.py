@@ -66,7 +66,13 @@ from wbcgrade.color.preset_names import (
     shipped_presets_dir,
 )
 from wbcgrade.errors import InputError, OptionError
-from wbcgrade.limits import check_histogram_cells, read_npz
+from wbcgrade.limits import (
+    MAX_MAP_SIZE,
+    check_histogram_cells,
+    check_input_file,
+    parse_json,
+    read_npz,
+)
 
 __all__ = [
     "StyleSet",
@@ -236,14 +242,23 @@ def _megapixels(path: Path) -> float:
 def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pixels: int,
                      working: str, warn: Callable[[str], None],
                      progress: Callable[[int, int, str], None] | None,
-                     on_image: ImageHook | None = None
-                     ) -> tuple[list[np.ndarray], list[str]]:
+                     on_image: ImageHook | None = None, where: str | os.PathLike = "styles"
+                     ) -> tuple[np.ndarray, list[str]]:
     """Histograms of the readable ``files`` (from ``cache`` when it holds them; the others
-    skipped with a ``warn``ing) and their paths, in the order of ``files``; read in up to
-    :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time."""
+    skipped with a ``warn``ing), stacked, and their paths, in the order of ``files``; read
+    in up to :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time.
+
+    The stack is allocated once, after its size is checked against the memory budget
+    (``limits.check_memory``: InputError naming ``where``), and filled in place."""
     from concurrent.futures import ThreadPoolExecutor
 
     from wbcgrade._executor import cpu_count
+    from wbcgrade.limits import check_memory
+
+    check_memory(f"the histograms of {len(files)} style photos at {bins}^3 bins",
+                 len(files) * bins ** 3 * 8 * 2, where,  # (x2: what the grade makes of them)
+                 "use fewer style photos or fewer --bins")
+    stack = np.empty((len(files), bins, bins, bins))
 
     space = f"{config_path()}|{working}"
     budget = _Budget(READ_MEGAPIXELS)
@@ -262,7 +277,7 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
             budget.give(size)
         return cache.put(path, bins, hist, max_pixels, space), None  # as later runs read it
 
-    hists, used = [], []
+    used: list[str] = []
     threads = max(1, min(READ_THREADS, cpu_count(), len(files)))
     pool = ThreadPoolExecutor(threads)
     try:
@@ -277,13 +292,14 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue
-            hists.append(hist)
+            stack[len(used)] = hist
             used.append(str(path))
+            del hist
     finally:  # interrupted: the photos not started are not read
         pool.shutdown(wait=True, cancel_futures=True)
     if progress:
         progress(len(files), len(files), "")
-    return hists, used
+    return stack[:len(used)], used
 
 
 def photo_palettes(files: list[str | os.PathLike], bins: int,
@@ -299,9 +315,9 @@ def photo_palettes(files: list[str | os.PathLike], bins: int,
     working = resolve_space(working_space) if working_space else default_working_space()
     hists, used = _read_histograms([Path(f) for f in files], bins, cache, max_pixels, working,
                                    warn or log.warning, progress)
-    if not hists:
+    if not len(hists):
         return None
-    return StyleSet(names=[Path(path).name for path in used], histograms=np.stack(hists),
+    return StyleSet(names=[Path(path).name for path in used], histograms=hists,
                     source="", meta={"working_space": working, "ocio_config": config_path(),
                                      "files": used})
 
@@ -329,6 +345,9 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     if folder.is_file():
         raise InputError(f"{folder}: is a file; --style takes a folder of style photos (put "
                          "the photo in a folder of its own, or use --preset)")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder}: is not a folder (a FIFO or device?); --style takes a "
+                         "folder of style photos")
     if not folder.is_dir():
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
@@ -336,17 +355,21 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     working = resolve_space(working_space) if working_space else default_working_space()
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
     hists, used = _read_histograms(files, bins, cache, max_pixels, working, warn, progress,
-                                   on_image)
+                                   on_image, folder)
     names = [Path(path).stem for path in used]
-    if not hists:
+    if not len(hists):
         raise InputError(f"{folder}: no readable photos in the style folder")
     if len(set(names)) != len(names):
         dupes = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"{folder}: several style photos share the name {dupes[0]!r}")
-    return StyleSet(names=names, histograms=np.stack(hists), source=str(folder),
+    return StyleSet(names=names, histograms=hists, source=str(folder),
                     meta={"working_space": working, "ocio_config": config_path(),
                           "files": used,
                           "cache_dir": str(cache.folder) if cache.enabled else None})
+
+
+#: The widest Gibbs kernel a preset records, in bins (a grid has at most 256 of them).
+MAX_KERNEL_WIDTH = 1e4
 
 
 def check_preset_width(width: float) -> float:
@@ -359,9 +382,9 @@ def check_preset_width(width: float) -> float:
         value = float(width)
     except (TypeError, ValueError):
         raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
-    if not (np.isfinite(value) and value > 0):
-        raise OptionError(f"width must be a positive, finite number of bins, got {width}",
-                          "width")
+    if not (np.isfinite(value) and 0 < value <= MAX_KERNEL_WIDTH):
+        raise OptionError(f"width must be a positive, finite number of bins (at most "
+                          f"{MAX_KERNEL_WIDTH:g}), got {width}", "width")
     return value
 
 
@@ -431,6 +454,25 @@ def _look_problem(look: np.ndarray) -> str | None:
     return None
 
 
+#: The arrays a preset holds (``look``: optional).
+_PRESET_MEMBERS = frozenset({"header", "index", "values", "offsets", "look"})
+
+
+def _check_members(path: Path, raw: bytes) -> None:
+    """A preset's missing arrays named before anything is read (a foreign archive)."""
+    import io
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+            names = {n[:-4] for n in archive.namelist() if n.endswith(".npy")}
+    except (zipfile.BadZipFile, OSError, ValueError):
+        return  # read_npz says what is wrong
+    missing = {"header", "index", "values", "offsets"} - names
+    if missing:
+        raise _bad(path, f"missing {', '.join(sorted(missing))}")
+
+
 def _bad(path: Path, why: str) -> InputError:
     return InputError(f"{path}: not a valid wbcgrade preset ({why})")
 
@@ -438,16 +480,18 @@ def _bad(path: Path, why: str) -> InputError:
 def load_preset(path: str | os.PathLike) -> StyleSet:
     """Read and validate a preset file -> StyleSet (raises InputError with the reason)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{path}: no such preset file")
+    check_input_file(path, "preset file")  # a FIFO or device is refused unopened
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise _bad(path, f"unreadable file: {exc.strerror or exc}") from None
     if not raw.startswith(b"PK"):  # else numpy talks of pickles and allow_pickle
         raise _bad(path, "unreadable archive: not a zip (.npz) file")
+    _check_members(path, raw)
     try:
-        data = read_npz(raw, path)
+        data = read_npz(raw, path, names=_PRESET_MEMBERS)  # any other member: refused
     except InputError as exc:
         raise _bad(path, "unreadable archive: " + str(exc).removeprefix(f"{path}: ")) \
             from None
@@ -460,7 +504,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     try:
         if header_bytes.dtype != np.uint8:
             raise ValueError
-        header = json.loads(header_bytes.tobytes().decode("utf-8"))
+        header = parse_json(header_bytes.tobytes(), path)
         if not isinstance(header, dict):
             raise ValueError
     except (ValueError, UnicodeDecodeError):
@@ -481,8 +525,9 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     except InputError as exc:
         raise _bad(path, str(exc).removeprefix(f"{path}: ")) from None
     width = header.get("width")
-    if width is not None and not (isinstance(width, (int, float)) and width > 0):
-        raise _bad(path, "bad kernel width")
+    if width is not None and not (isinstance(width, (int, float)) and not isinstance(width, bool)
+                                  and 0 < width <= MAX_KERNEL_WIDTH):
+        raise _bad(path, f"bad kernel width (a number of bins in (0, {MAX_KERNEL_WIDTH:g}])")
     working = header.get("working_space")
     if working is not None and not (isinstance(working, str) and working):
         raise _bad(path, "bad working space")
@@ -507,6 +552,9 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
     # what the file holds, for keys of what is computed from it (not the dense histograms)
     meta["file_digest"] = hashlib.sha1(raw).hexdigest()
     if look is not None:
+        if look.ndim == 4 and look.shape[0] > MAX_MAP_SIZE:
+            raise _bad(path, f"its look is {look.shape[0]}^3, more than the {MAX_MAP_SIZE}^3 "
+                             "wbcgrade reads")
         meta["look"] = look.astype(np.float32)
         problem = _look_problem(meta["look"])
         if problem:
@@ -668,8 +716,8 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
         natural = None
     if natural is not None and Path(natural).is_dir():  # the user's own ungraded photos
         files += [p for p in Path(natural).iterdir() if p.is_file()]
-    elif natural is not None:
-        files.append(Path(natural))
+    elif natural is not None:  # checked here, whether the grade ends up using it or not
+        files.append(check_input_file(natural, "natural palettes file or folder"))
     else:
         files.append(Path(__file__).with_name("data") / "natural.npz")
     saved = getattr(look, "saved", None)

@@ -21,6 +21,7 @@ import html
 import io
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +34,9 @@ from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
 
-__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "write_report",
-           "report_entries", "report_from_grade", "sheet_content", "sheet_from_files", "sheet_path",
-           "palette_record", "look_chart", "chart_record"]
+__all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
+           "write_report", "report_entries", "report_from_grade", "sheet_content",
+           "sheet_from_files", "sheet_path", "palette_record", "look_chart", "chart_record"]
 
 #: The files of a report folder besides the per-photo ones.
 INDEX_FILES = ("report.json", "weights.csv", "index.html")
@@ -69,7 +70,7 @@ def own_report(report_dir: str | os.PathLike | None) -> bool:
         return False
     try:
         document = json.loads((Path(report_dir) / "report.json").read_text("utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (nested too deep)
         return False
     return isinstance(document, dict) and document.get("format") == "wbcgrade-report"
 
@@ -84,8 +85,27 @@ def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),
         from wbcgrade.errors import InputError
 
         raise InputError(f"{report_dir}: the report folder is a file")
-    return plan_outputs(report_paths(report_dir, relatives), inputs, overwrite,
-                        root=report_dir, make_folders=True)
+    paths = plan_outputs(report_paths(report_dir, relatives), inputs,
+                         report_overwrite(report_dir, overwrite), root=report_dir,
+                         make_folders=True)
+    from wbcgrade._publish import publish_bytes
+
+    report_dir.mkdir(parents=True, exist_ok=True)
+    publish_bytes(report_dir / UNFINISHED_FILE, b"a report is being written here\n",
+                  sync=False)  # removed when index.html is written (write_report)
+    return paths
+
+
+#: Kept in a report folder while its report is written: a report that was stopped is
+#: finished by the next run without ``--overwrite`` (its own files are replaced).
+UNFINISHED_FILE = ".wbcgrade-report-unfinished"
+
+
+def report_overwrite(report_dir: str | os.PathLike, overwrite: bool = False) -> bool:
+    """Whether the files of a report into ``report_dir`` may replace existing ones:
+    ``overwrite``, or the folder holds a report that was stopped before it was written in
+    full (:data:`UNFINISHED_FILE`)."""
+    return bool(overwrite) or (Path(report_dir) / UNFINISHED_FILE).is_file()
 
 
 def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
@@ -300,7 +320,7 @@ def report_entries(report_dir: str | os.PathLike, result: BatchResult) -> list[d
                 if isinstance(previous, dict) and ("weights" in previous
                                                    or "outcome" in previous):
                     entry = {**previous, "status": "skipped"}
-            except (OSError, ValueError):
+            except (OSError, ValueError, RecursionError):  # (nested too deep)
                 pass
         entries.append(entry)
     return entries
@@ -359,13 +379,33 @@ figcaption{font-size:13px;color:#444;margin-bottom:4px}
 """
 
 
+#: Characters a name may hold that would reorder or hide the text around it in a page
+#: (bidirectional controls: U+202E shows "gpj.exe" as "exe.jpg") or are not text at all.
+_UNSAFE_TEXT = re.compile("[\u0000-\u001f\u007f-\u009f\u061c\u200e\u200f\u2028\u2029"
+                          "\u202a-\u202e\u2066-\u2069\ufeff]")
+
+
+def _esc(value: object) -> str:
+    """``value`` as HTML text: escaped, and its bidirectional and control characters
+    written visibly as ``\\uXXXX`` (an entity would still act on the page)."""
+    return _UNSAFE_TEXT.sub(lambda m: f"\\u{ord(m.group()):04x}", html.escape(str(value)))
+
+
+def _url(path: str) -> str:
+    """A relative file name as a link: percent-encoded (its own bytes when not UTF-8), so
+    no character of it acts on the page."""
+    from urllib.parse import quote
+
+    return quote(path, safe="/", errors="surrogateescape")
+
+
 def _look_index_html(entries: list[dict], meta: dict) -> str:
     """The page of a report whose grades are all looks: per photo where the look came
     from, its strength and how much the colours moved; then each photo's sheet (before and
     after, the look on a colour chart)."""
     from wbcgrade.color.outcome import change_words
 
-    esc = html.escape
+    esc = _esc
     rows = []
     for entry in entries:
         photo = esc(entry["photo"])
@@ -398,10 +438,10 @@ def _look_index_html(entries: list[dict], meta: dict) -> str:
 
 def _figures_and_summary(entries: list[dict], meta: dict) -> tuple[str, str]:
     """The index page's figures (a sheet per photo) and its one-line summary of ``meta``."""
-    esc = html.escape
+    esc = _esc
     figures = "".join(
         f'<figure id="{esc(e["photo"])}"><figcaption>{esc(e["photo"])}</figcaption>'
-        f'<img src="{esc(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
+        f'<img src="{_url(e["sheet"])}" alt="sheet of {esc(e["photo"])}" loading="lazy">'
         f"</figure>" for e in entries if e.get("sheet"))
     return figures, esc(", ".join(f"{k}: {v}" for k, v in meta.items() if k != "options"))
 
@@ -410,7 +450,7 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
     if not any("weights" in entry for entry in entries) and any(
             entry.get("outcome") for entry in entries):  # looks only: no weights to show
         return _look_index_html(entries, meta)
-    esc = html.escape
+    esc = _esc
     rows = []
     for entry in entries:
         weights = {w["style"]: w["weight"] for w in entry.get("weights", [])}
@@ -467,6 +507,7 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
 
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
+    overwrite = report_overwrite(report_dir, overwrite)
     entries = report_entries(report_dir, result)
     for item, entry in zip(result.results, entries):
         if item.status == "graded":
@@ -489,6 +530,7 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     _write_text(path, json.dumps(document, indent=2, default=float), overwrite)
     _write_text(report_dir / "weights.csv", _csv_text(entries, names), overwrite)
     _write_text(report_dir / "index.html", _index_html(entries, names, meta), overwrite)
+    (report_dir / UNFINISHED_FILE).unlink(missing_ok=True)  # the report is whole
     return path
 
 

@@ -48,13 +48,18 @@ from wbcgrade.color.grading import Grade
 from wbcgrade.color.outcome import FitStart, SavedFrom
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.color.remap import identity_map
-from wbcgrade.errors import InputError
+from wbcgrade.errors import InputError, first_line
 from wbcgrade.limits import (
-    MAX_LUT_SIZE,
+    MAX_LUT_DOMAIN,
+    MAX_MAP_SIZE,
+    MAX_REGRAIN_EPS,
     MAX_REGRAIN_RADIUS,
     MAX_STYLES,
+    MIN_REGRAIN_EPS,
     check_count,
+    check_input_file,
     check_lut_entries,
+    parse_json,
 )
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
@@ -65,6 +70,8 @@ LOOK_FORMAT = "wbcgrade-look"
 _VERSION = 1
 #: LUT file endings :func:`load_look` reads (besides ``.json``).
 LOOK_SUFFIXES = (".cube", ".clf", ".spi3d", ".spi1d", ".csp", ".3dl")
+#: Bytes of a LUT file read as a look (a 129^3 table as text takes about 60 MB).
+_MAX_LUT_FILE_BYTES = 256 * 2 ** 20
 #: Lattice size on which a LUT that is not a plain 3-D table is sampled.
 SAMPLED_LUT_SIZE = 33
 
@@ -99,10 +106,14 @@ def _decode_array(entry: dict, where: str) -> np.ndarray:
         if shape[3] != 3 or not shape[0] == shape[1] == shape[2] >= 2:
             raise InputError(f"{where}: the saved colour map has shape {shape}, "
                              "not (m, m, m, 3)")
-        if shape[0] > MAX_LUT_SIZE:
+        if shape[0] > MAX_MAP_SIZE:
             raise InputError(f"{where}: the saved colour map is {shape[0]}^3, larger than "
-                             f"the {MAX_LUT_SIZE}^3 wbcgrade reads")
+                             f"the {MAX_MAP_SIZE}^3 wbcgrade reads")
         low, high = _number(entry["low"]), _number(entry["high"])
+        if low > high or max(abs(low), abs(high)) > MAX_LUT_DOMAIN:
+            raise InputError(f"{where}: the saved colour map's \"low\" {low:g} and "
+                             f"\"high\" {high:g} must be in order, within "
+                             f"±{MAX_LUT_DOMAIN:g}")
         if not isinstance(entry["data"], str):
             raise ValueError("its data is not text")
         count = int(np.prod(shape))
@@ -195,12 +206,14 @@ def look_from_dict(entry: dict, where: str = "look") -> Grade:
             if not isinstance(regrain, list) or len(regrain) != 2:
                 raise ValueError
             regrain = (_number(regrain[0]), _number(regrain[1]))
-            if not (0 < regrain[0] <= MAX_REGRAIN_RADIUS and regrain[1] > 0):
+            if not (0 < regrain[0] <= MAX_REGRAIN_RADIUS
+                    and MIN_REGRAIN_EPS <= regrain[1] <= MAX_REGRAIN_EPS):
                 raise ValueError
         except ValueError:
             raise InputError(f"{where}: the saved regrain settings must be [radius, eps] with "
                              f"0 < radius <= {MAX_REGRAIN_RADIUS:g} (a fraction of the long "
-                             "side) and eps > 0") from None
+                             f"side) and {MIN_REGRAIN_EPS:g} <= eps <= {MAX_REGRAIN_EPS:g}"
+                             ) from None
     try:
         loss = None if loss is None else _number(loss)
     except ValueError:
@@ -248,12 +261,13 @@ def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
     a size it would allocate gigabytes for.
     """
     try:
-        text = path.read_text("utf-8")
+        text = path.read_text("utf-8-sig")  # a UTF-8 byte order mark is no keyword
     except UnicodeDecodeError:
         return None
     except OSError as exc:
         raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     comments, rows, size, size_1d, plain = [], [], 0, 0, True
+    domains: dict[str, list[float]] = {}
     for number, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line:
@@ -269,23 +283,26 @@ def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
                 raise InputError(f"{path}: line {number}: {key} must be followed by one "
                                  f"whole number, not {' '.join(fields) or 'nothing'!r}")
             if key == "LUT_3D_SIZE":
-                size = check_lut_entries(int(fields[0]), path, 3)
+                size = check_lut_entries(int(fields[0]), path, 3, MAX_MAP_SIZE)
             else:
                 size_1d = check_lut_entries(int(fields[0]), path, 1)
         elif key in ("DOMAIN_MIN", "DOMAIN_MAX", "LUT_3D_INPUT_RANGE", "LUT_1D_INPUT_RANGE"):
             try:
                 values = [float(v) for v in fields]
-                if len(values) not in (2, 3) or not np.isfinite(values).all():
+                if len(values) not in (2, 3) or not np.isfinite(values).all() \
+                        or np.abs(values).max() > MAX_LUT_DOMAIN:
                     raise ValueError
             except ValueError:
                 raise InputError(f"{path}: line {number}: {key} must be followed by two or "
-                                 f"three finite numbers, not {' '.join(fields) or 'nothing'!r}"
-                                 ) from None
+                                 f"three finite numbers within ±{MAX_LUT_DOMAIN:g}, not "
+                                 f"{' '.join(fields) or 'nothing'!r}") from None
+            domains[key] = values
             if key != "LUT_1D_INPUT_RANGE" and values not in ([0.0] * 3, [1.0] * 3,
                                                                [0.0, 1.0]):
                 plain = False
         elif key != "TITLE":
             plain = False
+    _check_domains(path, domains)
     space = _header_space(comments)
     if not size:
         if size_1d and not rows[size_1d:]:
@@ -311,36 +328,64 @@ def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
     return np.ascontiguousarray(table, dtype=np.float32), space
 
 
+def _check_domains(path: Path, domains: dict[str, list[float]]) -> None:
+    """InputError unless each input range of a ``.cube`` runs upwards on every channel
+    (DOMAIN_MIN below DOMAIN_MAX, an INPUT_RANGE's low below its high)."""
+    pairs = [(domains.get("DOMAIN_MIN", [0.0] * 3), domains.get("DOMAIN_MAX", [1.0] * 3),
+              "DOMAIN_MIN", "DOMAIN_MAX")]
+    pairs += [(values[:1] * 3, values[-1:] * 3, key, key) for key, values in domains.items()
+              if key.endswith("INPUT_RANGE") and len(values) == 2]
+    for low, high, first, second in pairs:
+        if len(low) != 3 or len(high) != 3 or not all(a < b for a, b in zip(low, high)):
+            raise InputError(f"{path}: {first} and {second} give an empty or reversed input "
+                             "range (each low value must be below its high one)")
+
+
 def _check_declared_size(path: Path) -> None:
     """InputError when a LUT file colour-science reads declares a table its size cannot hold
     (a 40-byte ``.spi3d`` declaring 500^3 entries), before colour-science allocates it."""
     try:
+        size = os.path.getsize(path)
+        if size > _MAX_LUT_FILE_BYTES:
+            raise InputError(f"{path}: {size} bytes, more than the {_MAX_LUT_FILE_BYTES} a "
+                             "LUT file read as a look may hold")
         with open(path, "rb") as handle:
-            head = handle.read(4096).decode("ascii", "replace").splitlines()
+            lines = handle.read().decode("ascii", "replace").splitlines()
     except OSError as exc:
         raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     suffix = path.suffix.lower()
-    if suffix == ".spi3d" and len(head) >= 3:  # SPILUT 1.0 / 3 3 / n n n
-        sizes = head[2].split()
-        if len(sizes) != 3 or not all(v.isascii() and v.isdigit() for v in sizes):
-            raise InputError(f"{path}: line 3 must give the LUT's three sizes")
-        if len(set(sizes)) != 1:
-            raise InputError(f"{path}: a 3-D LUT must have the same size on every axis, "
-                             f"not {' x '.join(sizes)}")
-        check_lut_entries(int(sizes[0]), path, 3)
-    elif suffix == ".spi1d":
-        for line in head:
-            parts = line.split()
-            if len(parts) == 2 and parts[0] == "Length":
-                if not (parts[1].isascii() and parts[1].isdigit()):
-                    raise InputError(f"{path}: Length must be a whole number")
-                check_lut_entries(int(parts[1]), path, 1)
-    elif suffix == ".csp":  # bounded by the data it holds: its sizes count lines read
-        for line in head:
-            parts = line.split()
-            if len(parts) == 3 and all(v.isascii() and v.isdigit() for v in parts) \
-                    and len(set(parts)) == 1 and int(parts[0]) > 1:
-                check_lut_entries(int(parts[0]), path, 3)
+    # every line the reader takes for a size is checked (a second size line counts too)
+    for number, line in enumerate(lines, 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        whole = all(v.isascii() and v.isdigit() for v in parts)
+        if suffix == ".spi3d" and len(parts) == 3:  # SPILUT 1.0 / 3 3 / n n n
+            if number == 3 and not whole:
+                raise InputError(f"{path}: line 3 must give the LUT's three sizes")
+            if whole and len(set(parts)) != 1 and number == 3:
+                raise InputError(f"{path}: a 3-D LUT must have the same size on every axis, "
+                                 f"not {' x '.join(parts)}")
+            if whole and len(set(parts)) == 1:
+                check_lut_entries(int(parts[0]), path, 3, MAX_MAP_SIZE)
+        elif suffix == ".spi1d" and parts[0] == "Length" and len(parts) == 2:
+            if not (parts[1].isascii() and parts[1].isdigit()):
+                raise InputError(f"{path}: Length must be a whole number")
+            check_lut_entries(int(parts[1]), path, 1)
+        elif suffix == ".spi1d" and parts[0] == "From":
+            try:
+                low, high = (float(v) for v in parts[1:])
+                if not (abs(low) <= MAX_LUT_DOMAIN and abs(high) <= MAX_LUT_DOMAIN
+                        and low < high):
+                    raise ValueError
+            except ValueError:
+                raise InputError(f"{path}: line {number}: From must give two finite numbers, "
+                                 "the first below the second") from None
+        elif suffix == ".csp" and whole:  # sizes: of a pre-LUT (one number), the 3-D table
+            if len(parts) == 1:
+                check_lut_entries(int(parts[0]), path, 1)
+            elif len(parts) == 3 and len(set(parts)) == 1 and int(parts[0]) > 1:
+                check_lut_entries(int(parts[0]), path, 3, MAX_MAP_SIZE)
 
 
 def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
@@ -372,16 +417,35 @@ def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
 
 
 def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
+    """A CLF or ``.3dl`` (Autodesk/Flame/Lustre) LUT read by OpenColorIO: (the table on the
+    working cube, the space its header names or None). Numbers that are not finite in the
+    file are refused (OpenColorIO would carry them through silently)."""
     from wbcgrade.color.lut import check_clf_support
 
-    ocio = check_clf_support()
+    kind = "CLF" if path.suffix.lower() == ".clf" else "LUT"
+    try:
+        ocio = check_clf_support()
+    except InputError:
+        raise InputError(f"{path}: reading a {path.suffix} look needs the opencolorio "
+                         "package: pip install 'wbcgrade[ocio]'") from None
+    if kind == "LUT":
+        _check_declared_size(path)
     try:
         text = path.read_text("utf-8", errors="replace")
+        if len(text) > _MAX_LUT_FILE_BYTES:
+            raise InputError(f"{path}: more than the {_MAX_LUT_FILE_BYTES} bytes a LUT file "
+                             "read as a look may hold")
+        values = re.sub(r"<Description>.*?</Description>|<!--.*?-->|#[^\n]*", " ", text,
+                        flags=re.S)
+        if re.search(r"(?<![A-Za-z])[-+]?(nan|inf(inity)?)(?![A-Za-z])", values, re.I):
+            raise InputError(f"{path}: the {kind} holds NaN or infinite values")
         group = ocio.Config.CreateRaw().getProcessor(
             ocio.FileTransform(src=str(path), interpolation=ocio.INTERP_LINEAR)
         ).createGroupTransform()
+    except InputError:
+        raise
     except Exception as exc:  # noqa: BLE001 - OpenColorIO raises its own Exception
-        raise InputError(f"{path}: not a readable CLF ({str(exc).splitlines()[0]})") from None
+        raise InputError(f"{path}: not a readable {kind} ({first_line(exc)})") from None
     space = _header_space(re.findall(r"<Description>(.*?)</Description>", text, re.S))
     transforms = list(group)
     if space is not None and transforms and isinstance(transforms[-1], ocio.Lut3DTransform):
@@ -415,15 +479,12 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     """
     from wbcgrade.color.colorspace import default_working_space
 
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file" if not path.exists() else
-                         f"{path}: not a file")
+    path = check_input_file(path)  # a FIFO or device is refused unopened
     suffix = path.suffix.lower()
     if suffix == ".json":
         try:
-            data = json.loads(path.read_text("utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            data = parse_json(path.read_bytes(), path)
+        except OSError as exc:
             raise InputError(f"{path}: not a readable JSON file ({exc})") from None
         entry = data.get("saved_grade") if isinstance(data, dict) and "saved_grade" in data \
             else data
@@ -439,7 +500,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     if suffix not in LOOK_SUFFIXES:
         raise InputError(f"{path}: a saved grade must end in .json or one of "
                          f"{', '.join(LOOK_SUFFIXES)}")
-    table, space = _clf_look(path) if suffix == ".clf" else _cube_look(path)
+    table, space = _clf_look(path) if suffix in (".clf", ".3dl") else _cube_look(path)
     if not np.isfinite(table).all():
         raise InputError(f"{path}: the LUT holds NaN or infinite values")
     if space is not None:

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from wbcgrade._names import safe_text, writable_name, writer_name
-from wbcgrade._publish import atomic_path
+from wbcgrade._names import safe_text
+from wbcgrade._publish import encode_png, publish_bytes
 from wbcgrade.color.histogram import grid_points, resample_histogram
 
 __all__ = ["Palette", "histogram_palette", "thumbnail", "StyleTile", "SheetContent",
@@ -278,13 +278,8 @@ def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960
     spec.attribute("oiio:ColorSpace", "sRGB")
     spec.attribute("png:compressionLevel", 1)  # zlib's fastest: 2x faster, 4 % larger
     pixels = np.round(np.clip(pixels, 0.0, 1.0) * 255).astype(np.uint8)
-    with atomic_path(path, overwrite=overwrite) as tmp, writable_name(tmp) as name:
-        out = oiio.ImageOutput.create(writer_name(tmp))
-        if out is None or not out.open(name, spec):
-            raise OSError(f"{path}: cannot write the sheet ({oiio.geterror().strip()})")
-        ok = out.write_image(np.ascontiguousarray(pixels))
-        error = out.geterror()
-        out.close()
-        if not ok:
-            raise OSError(f"{path}: cannot write the sheet ({error.strip()})")
+    # encoded in memory and checked, then published by Python: a full disk or a file
+    # size limit is an OSError, never a truncated sheet
+    publish_bytes(path, encode_png(path, np.ascontiguousarray(pixels), spec),
+                  overwrite=overwrite)
     return path

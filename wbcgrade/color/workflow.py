@@ -53,6 +53,7 @@ from wbcgrade.color.lut import (
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.errors import InputError, OptionError
+from wbcgrade.limits import check_input_file
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
            "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
@@ -132,6 +133,9 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     photo = Path(photo)
     if not photo.exists():
         raise InputError(f"{photo}: no such file")
+    if photo.is_dir():
+        raise InputError(f"{photo}: is a folder, not a photo")
+    check_input_file(photo, "photo")  # a FIFO or device: refused before any output is planned
     if not write:
         output = None
     else:
@@ -141,10 +145,10 @@ def plan_photo(photo: str | os.PathLike, output: str | os.PathLike | None = None
     if output is not None:
         output_format = check_image_output(output)
         check_write_options(output, encode)
+    check_lut_size(lut_size)
     if lut is not None:
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
-        check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
     output, lut, saved_grade = plan_outputs([output, lut, saved_grade], [photo, *reads],

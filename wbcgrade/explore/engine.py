@@ -525,7 +525,9 @@ def load_photo(photo: str, preview_side: int = PREVIEW_SIDE) -> LoadedPhoto:
     from wbcgrade.errors import InputError
 
     if not Path(photo).is_file():
-        raise InputError(f"{photo}: no such file")
+        raise InputError(f"{photo}: " + ("is a folder, not a photo" if Path(photo).is_dir()
+                                         else "not a regular file" if Path(photo).exists()
+                                         else "no such file"))
     base = _base_options()
     image = read_image(photo)
     encoding = ColorEncoding.for_image(image, base.spaces.input, base.spaces.working)

@@ -184,7 +184,7 @@ class Studio:
         """The LUT file of exactly what the page shows in ``mode``."""
         if lut_format not in self.formats:
             raise RequestError(f"format must be one of {', '.join(self.formats)}")
-        if size not in self.sizes:
+        if isinstance(size, bool) or not isinstance(size, int) or size not in self.sizes:
             raise RequestError(f"size must be one of {', '.join(map(str, self.sizes))}")
         grade, words, command = self.grade_of(mode, settings, strength)
         return self.session.export_grade(grade, lut_format, size, words, command)
@@ -251,7 +251,7 @@ class Studio:
         """The LUT file of exactly what the page shows at ``settings``."""
         if lut_format not in self.formats:
             raise RequestError(f"format must be one of {', '.join(self.formats)}")
-        if size not in self.sizes:
+        if isinstance(size, bool) or not isinstance(size, int) or size not in self.sizes:
             raise RequestError(f"size must be one of {', '.join(map(str, self.sizes))}")
         color_map, _ = self.exact(settings, "export")
         return self.session.export(color_map, settings, lut_format, size)

@@ -90,7 +90,10 @@ def weights_text(weights) -> str:
 def _number(value, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise RequestError(f"{what} must be a number, got {value!r}"[:200])
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer of 400 digits
+        number = math.inf
     if not math.isfinite(number):
         raise RequestError(f"{what} must be a finite number, got {value!r}")
     return number

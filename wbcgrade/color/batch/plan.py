@@ -22,8 +22,8 @@ from pathlib import Path
 
 import OpenImageIO as oiio
 
-from wbcgrade._names import readable_name
 from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
+from wbcgrade.color.imageio import header_pixels
 from wbcgrade.errors import InputError
 
 __all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
@@ -101,17 +101,8 @@ def output_is_complete(source: Path, output: Path) -> bool:
             return False
     except OSError:
         return False
-    sizes = []
-    for path in (source, output):
-        with readable_name(path) as name:  # a non-UTF-8 name: see wbcgrade._names
-            inp = oiio.ImageInput.open(name)
-        if inp is None:
-            oiio.geterror()
-            return False
-        spec = inp.spec()
-        sizes.append(spec.width * spec.height)
-        inp.close()
-    return sizes[0] == sizes[1]
+    sizes = [header_pixels(path) for path in (source, output)]  # regular files only
+    return sizes[0] == sizes[1] > 0
 
 
 def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,

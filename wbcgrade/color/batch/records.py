@@ -51,7 +51,7 @@ def read_record(out_dir: str | os.PathLike, relative: str) -> FileResult | None:
     try:
         entry = json.loads(record_path(out_dir, relative).read_text("utf-8"))
         return FileResult.from_dict(entry)
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):  # (nested too deep)
         return None
 
 

@@ -12,6 +12,7 @@ from wbcgrade.color.batch.task import (
     BatchContext,
     absolute_context,
     absolute_task,
+    lost_task,
     read_histograms,
     run_task,
     setup_worker,
@@ -67,8 +68,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, *, consistent: bool = Fals
                 options = context.options
                 fit_pool, pool = PaletteSum(), PaletteSum()
                 photos, pending, unreadable = plan.all_photos, set(todo), set()
-                for number, (task, value) in enumerate(
-                        executor.map_unordered(read_histograms, photos)):
+                for number, (task, value) in enumerate(executor.map_unordered(
+                        read_histograms, photos, on_lost=lambda task, why: why)):
                     if on_read:
                         on_read(number + 1, len(photos))
                     if isinstance(value, str):
@@ -93,7 +94,8 @@ def run_batch(plan: BatchPlan, context: BatchContext, *, consistent: bool = Fals
                         progress.stage if progress else None)
                     context.shared, context.shared_fit = shared, series
                     executor.set_context(context)
-            graded = executor.map_unordered(run_task, todo, local_kwargs={"progress": progress})
+            graded = executor.map_unordered(run_task, todo, local_kwargs={"progress": progress},
+                                            on_lost=lost_task)
             for task, result in graded:
                 # report the paths as the user gave them (Dask ran on absolute ones)
                 result.source = str(task.source)

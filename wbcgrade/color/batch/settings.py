@@ -31,7 +31,7 @@ def settings_changed(out_dir: str | os.PathLike, settings: dict) -> list[str]:
     """Names of the settings that differ from those recorded in ``out_dir`` (none if unrecorded)."""
     try:
         previous = json.loads((Path(out_dir) / SETTINGS_FILE).read_text("utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (RecursionError: nested too deep)
         return []
     if not isinstance(previous, dict):
         return []

@@ -19,6 +19,7 @@ import numpy as np
 
 from wbcgrade.color.batch.plan import BatchTask
 from wbcgrade.color.batch.results import FileResult
+from wbcgrade.color.cache import command_cache, set_command_cache
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade, PhotoHistograms, photo_histograms
@@ -35,7 +36,7 @@ from wbcgrade.color.workflow import PhotoPlan, Progress, grade_file
 from wbcgrade.errors import WbcgradeError, first_line
 
 __all__ = ["BatchContext", "run_task", "read_histograms", "setup_worker", "absolute_task",
-           "absolute_context"]
+           "absolute_context", "lost_task"]
 
 
 @dataclass
@@ -69,6 +70,8 @@ class BatchContext:
     overwrite: bool = False
     replace_sheets: bool = False
     max_image_pixels: int = field(default_factory=max_image_pixels)
+    #: the command's cache (``cache.command_cache``), for the workers' own caches
+    cache: tuple[Path, bool] = field(default_factory=command_cache)
     encode: WriteOptions = WriteOptions()
 
 
@@ -76,9 +79,9 @@ def run_task(task: BatchTask, context: BatchContext,
              progress: Progress | None = None) -> FileResult:
     """Grade one photo and write its output (and sheet); failures become a 'failed' result.
 
-    The output was checked when the batch was planned. Only errors about
-    this file (unreadable, corrupt, unwritable) are caught; KeyboardInterrupt
-    and programming errors propagate.
+    The output was checked when the batch was planned. Any error grading this one
+    photo is its failure (an unexpected one named an internal error); only
+    KeyboardInterrupt (and SystemExit) propagate.
     """
     start = time.perf_counter()
     starting = getattr(progress, "photo", None)  # a batch's progress names the photo
@@ -129,8 +132,18 @@ def run_task(task: BatchTask, context: BatchContext,
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
         result.error = first_line(exc)
         result.status = "failed"
+    except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
+        result.error = f"internal error ({type(exc).__name__}: {first_line(exc)})"
+        result.status = "failed"
     result.timings["total"] = time.perf_counter() - start
     return result
+
+
+def lost_task(task: BatchTask, reason: str) -> FileResult:
+    """The failed result of a photo whose worker process died (``reason``)."""
+    return FileResult(task.relative, str(task.source),
+                      None if task.output is None else str(task.output), "failed",
+                      error=reason, timings={"total": 0.0})
 
 
 def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms | str:
@@ -144,14 +157,18 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
         return photo_histograms(encoded, options, image.alpha())
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
         return first_line(exc)
+    except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
+        return f"internal error ({type(exc).__name__}: {first_line(exc)})"
 
 
 def setup_worker(context: BatchContext) -> None:
-    """Run once in each local worker process: the decoding limit of the parent; compiled
-    kernels rather than their numpy twins (a worker grades many photos)."""
+    """Run once in each local worker process: the decoding limit and the cache of the
+    parent's command; compiled kernels rather than their numpy twins (a worker grades many
+    photos)."""
     from wbcgrade.core import prefer_compiled
 
     set_max_image_pixels(context.max_image_pixels)
+    set_command_cache(*context.cache)
     prefer_compiled()
 
 

@@ -142,8 +142,10 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
 
 
 def _check_jobs(jobs: int) -> None:
-    if jobs < 1:
-        raise OptionError("jobs must be at least 1", "jobs")
+    from wbcgrade._executor import MAX_JOBS
+
+    if not 1 <= jobs <= MAX_JOBS:
+        raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
 
 
 def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> None:
@@ -237,6 +239,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
 
         options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
+    check_lut_size(lut_size)
     if lut is not None:
         if not consistent:
             raise OptionError("lut needs consistent (one grade for the series); per-photo "
@@ -244,7 +247,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                               also=("consistent",))
         lut_format = lut_format_of(lut, lut_format)
         lut = check_lut_path(lut, lut_format)
-        check_lut_size(lut_size)
         if lut_format == "clf":
             check_clf_support()
     reads = source_files(None if look is not None else source, options.map.natural, look)
@@ -293,13 +295,16 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             progress.warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
                           f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite "
                           "to redo them")
+        if plan.tasks or recorded_batch(out_dir) is None:
+            # recorded before the first photo: a run stopped at any moment leaves outputs
+            # whose settings are known (a rerun and `report OUT` read them)
+            write_settings(out_dir, settings)
         result = _run(plan, styles, options, consistent, jobs, scheduler, report_dir, True,
                       overwrite, progress, _recorder(Path(out_dir), progress), look, encode)
-        if result.count("graded"):
-            if result.series is not None:
-                settings["series_weights"] = dict(zip(styles.names,
-                                                      map(float, result.series.weights)))
-                settings["series_loss"] = float(result.series.loss)
+        if result.count("graded") and result.series is not None:
+            settings["series_weights"] = dict(zip(styles.names,
+                                                  map(float, result.series.weights)))
+            settings["series_loss"] = float(result.series.loss)
             write_settings(out_dir, settings)
         result.time_s = time.perf_counter() - start
         result.own_photos = own_photos
@@ -354,6 +359,9 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
         if target.is_file():
             raise InputError(f"{target}: not an image file (by its extension)")
         raise InputError(f"{target}: no photos found")
+    from wbcgrade.color.report import report_overwrite
+
+    overwrite = report_overwrite(out, overwrite)  # a stopped report is finished in place
     _plan_report(out, plan, overwrite)
     if progress.planned:
         progress.planned(len(plan.tasks))
@@ -384,7 +392,7 @@ def recorded_batch(folder: str | os.PathLike) -> dict | None:
         return None
     try:
         settings = json.loads((folder / SETTINGS_FILE).read_text("utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # (RecursionError: nested too deep)
         return None
     if not isinstance(settings, dict) or not isinstance(settings.get("style_names"), list):
         return None
