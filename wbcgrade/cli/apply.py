@@ -27,14 +27,17 @@ def _warn(message: str) -> None:
     click.echo(f"Warning: {message}", err=True)
 
 
-def _wall_timings(report, started: float, graded_from: float) -> None:
-    """The report's times with start-up (the command's start to the grade's) first and the
-    total the wall time since the command started (:func:`wbcgrade.cli._clock.command_started`)."""
+def _wall_timings(report, started: float, graded_from: float, learned: float = 0.0) -> None:
+    """The report's times with start-up (the command's start to the grade's, less the
+    ``learned`` seconds a look took to learn from --originals) first and the total the wall
+    time since the command started (:func:`wbcgrade.cli._clock.command_started`)."""
     import time
 
     total = time.perf_counter() - started
     stages = {k: v for k, v in report.timings.items() if k != "total"}
-    report.timings = {"start-up": graded_from - started, **stages, "total": total}
+    learn = {"learning the look": learned} if learned else {}
+    report.timings = {"start-up": graded_from - started - learned, **learn, **stages,
+                      "total": total}
 
 
 def _print_report(report, as_json: bool) -> None:
@@ -126,7 +129,9 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     from wbcgrade.cli._progress import bar_callbacks, progress_bar
     from wbcgrade.color.workflow import Progress, apply_photo
 
+    learning = time.perf_counter() if kwargs.get("originals_dir") else None
     look = take_look(ctx, look_path, kwargs, options)
+    learned = 0.0 if learning is None else time.perf_counter() - learning  # --originals
     if look is None and options.fit.bins > 32:
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     graded_from = time.perf_counter()
@@ -140,7 +145,7 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         from wbcgrade.color.presets import own_style_warning
 
         _warn(own_style_warning(str(photo), report.grade.own_style))
-    _wall_timings(report, started, graded_from)
+    _wall_timings(report, started, graded_from, learned)
     _print_report(report, as_json)
     if report.report is not None and not as_json:
         click.echo(f"report: {report.report}")
