@@ -300,9 +300,11 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     noise = [(sets + (blend * COLLECTION_SHARE * spread) ** 2 * singles + own
               + (blend * COLLECTION_SHARE * no_greys) ** 2 * greyless, weight)
              for spread, no_greys, weight in UNUSUAL_CONTENT]
-    # the prior and the noise were measured in sRGB-encoded units; chroma and tint scale
-    # with the working space (the log spreads do not)
-    prior = load_prior()
+    # the prior was learned in sRGB-encoded units (the noise is measured in this space):
+    # luma quantiles and tints scale with the working space, the log spreads do not
+    units = np.full(len(raw.vector()), float(space_scale))
+    units[len(raw.tone):len(raw.tone) + len(raw.saturation)] = 1.0
+    prior = load_prior() * np.outer(units, units)
     found = posterior_look(raw, noise, prior, no_look)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,
             "probability": round(found.probability, 3), "share": round(found.share, 3),
