@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -80,8 +80,7 @@ def _shrunk_to_diagonal(cov: np.ndarray) -> np.ndarray:
 
 
 def _subset(stats: PaletteStatistics, index: np.ndarray) -> PaletteStatistics:
-    return PaletteStatistics(*(getattr(stats, f)[index] for f in (
-        "quantiles", "band_mass", "band_mean", "band_spread", "spread", "band_neutral")))
+    return PaletteStatistics(*(getattr(stats, f.name)[index] for f in fields(stats)))
 
 
 _NOISE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
@@ -98,9 +97,9 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
 
     digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes())
     digest.update(np.ascontiguousarray(naturals.band_neutral).tobytes())
-    digest.update(repr((n_styles, NOISE_DRAWS, DIAGONAL_SHRINK, NOISE_VERSION)).encode())
-    key = (digest.hexdigest(), n_styles)
-    path = entry_path(cache, "looks", "noise-" + key[0])
+    digest.update(repr((NOISE_DRAWS, DIAGONAL_SHRINK, NOISE_VERSION)).encode())
+    key = (f"{digest.hexdigest()}|{n_styles}", n_styles)
+    path = entry_path(cache, "looks", "noise-" + key[0].replace("|", "-"))
     if key not in _NOISE:
         data = read_entry(path)
         try:
@@ -124,7 +123,11 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
             return _shrunk_to_diagonal(np.cov(vectors, rowvar=False))
 
         sets = spread(rng.choice(k, size, replace=False) for _ in range(NOISE_DRAWS))
-        singles = spread((np.array([i]) for i in range(k)), least=1)
+        base = key[0].split("|")[0]
+        known = next((v[1] for (d, _), v in _NOISE.items() if d.split("|")[0] == base),
+                     None)  # a single photo's spread does not depend on the set's size
+        singles = known if known is not None else spread(
+            (np.array([i]) for i in range(k)), least=1)
         if len(_NOISE) > 16:
             _NOISE.pop(next(iter(_NOISE)))
         _NOISE[key] = (sets, singles)
