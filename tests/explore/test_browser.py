@@ -30,7 +30,7 @@ from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import WBCGRADE, command_env
 from wbcgrade.color.imageio import read_image
 from wbcgrade.color.lut import read_cube
-from wbcgrade.color.outcome import change_words
+from wbcgrade.color.outcome import GradeOutcome, change_words
 from wbcgrade.color.remap import apply_color_map, identity_map
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install "
@@ -314,7 +314,9 @@ def test_a_style_folder_opens_on_its_look_with_apply_s_strength(browser, tmp_pat
     assert grade["strength"] == pytest.approx(outcome["strength"], abs=1e-4)
     assert grade["look_strength"] == pytest.approx(outcome["look_strength"], abs=1e-4)
     assert grade["blend"] == outcome["blend"] == 1.0
-    assert f"strength {outcome['strength']:.2f}" in words and "style folder styles" in words
+    # the page says what apply says: the set look's sureness, the share applied, the strength
+    what, strength = GradeOutcome.from_dict(outcome).source_words()
+    assert f"{what}, strength {strength:.2f}" in words and "style folder styles" in words
     assert "--strength 1.5" in command
     applied = run_command(command, tmp_path / "applied.png")
     saved = read_image(save_dir / saved_name).pixels[:, :, :3]

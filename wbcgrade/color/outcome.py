@@ -262,6 +262,8 @@ class GradeOutcome:
                "confidence": round(self.confidence, 4)}
         if self.file is not None:
             out["file"] = self.file
+        if "probability" in self.extra:  # a set look judged jointly: how sure it is a look
+            out["look_probability"] = round(float(self.extra["probability"]), 4)
         if self.palette is not None:
             out["palette"] = self.palette.as_dict()
         return out
@@ -285,7 +287,9 @@ class GradeOutcome:
                    float(entry.get("look_size_255", 0)), float(entry.get("mean_change_255", 0)),
                    bool(entry.get("unchanged", False)), entry.get("reason"),
                    entry.get("advice"), entry.get("match"), float(entry.get("confidence", 0)),
-                   palette, entry.get("file"), bool(entry.get("faint", False)))
+                   palette, entry.get("file"), bool(entry.get("faint", False)),
+                   {"probability": float(entry["look_probability"])}
+                   if "look_probability" in entry else {})
 
     @classmethod
     def judge(cls, source: GradeSource, n_styles: int, look_strength: float | None,
