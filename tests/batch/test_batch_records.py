@@ -182,3 +182,37 @@ def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, fol
     assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
     result = cli(*args)
     assert result.exit_code == 1 and "exists" in result.output, result.output
+
+
+def test_a_batch_report_reads_jpegs_small_and_makes_each_picture_once(tmp_path, monkeypatch):
+    """`report` on a batch's results decodes the photo, its graded copy and the style
+    photos small (never a full-size read) and makes each picture at the size its sheet
+    shows it: the sheet pastes it as it is, resized once (a quick report, issue 47)."""
+    from PIL import Image
+
+    import wbcgrade.color.imageio as imageio
+    import wbcgrade.color.sheet as sheet
+    from wbcgrade.color.batch.results import FileResult
+    from wbcgrade.color.presets import StyleSet
+    from wbcgrade.color.report import sheet_from_files, style_pictures
+
+    rng = np.random.default_rng(0)
+    for name in ("photo", "graded", "style"):  # wide: the sheet's half width decides its size
+        Image.fromarray(rng.integers(0, 256, (400, 1600, 3), dtype=np.uint8)).save(
+            tmp_path / f"{name}.jpg", quality=90)
+
+    def full_size_read(*args, **kwargs):
+        raise AssertionError("a JPEG read at full size")
+
+    monkeypatch.setattr(imageio, "read_image", full_size_read)
+    pictures = style_pictures(StyleSet(["style"], np.ones((1, 4, 4, 4)) / 64, str(tmp_path)))
+    assert pictures["style"].shape == (32, 128, 3)  # the photo itself, fitting 96 x 128
+    result = FileResult("photo.jpg", str(tmp_path / "photo.jpg"), str(tmp_path / "graded.jpg"),
+                        "graded", names=["style"], weights=[1.0], loss=0.1, vertex_losses=[0.1])
+    content = sheet_from_files(result, pictures)
+    height, width = sheet._fit_size(400, 1600, *sheet.picture_box())
+    assert content.before.shape == content.after.shape == (height, width, 3)
+    pixels = sheet.compose_sheet(content)
+    top = left = sheet._PAD
+    shown = pixels[top + 48:top + 48 + height, left:left + width]
+    np.testing.assert_array_equal(shown, content.before)

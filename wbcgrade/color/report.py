@@ -36,7 +36,8 @@ from wbcgrade.color.presets import StyleSet
 
 __all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
            "write_report", "report_entries", "report_from_grade", "sheet_content",
-           "sheet_from_files", "sheet_path", "palette_record", "look_chart", "chart_record"]
+           "sheet_from_files", "sheet_picture", "sheet_path", "palette_record", "look_chart",
+           "chart_record"]
 
 #: The files of a report folder besides the per-photo ones.
 INDEX_FILES = ("report.json", "weights.csv", "index.html")
@@ -115,8 +116,7 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
     Returns {name: (h, w, 3) float32 in [0, 1]}.
     """
     from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import histogram_palette, thumbnail
+    from wbcgrade.color.sheet import histogram_palette
 
     working = styles.working_space
     palette_spaces = (None if working == default_working_space()
@@ -129,10 +129,8 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
     for name, hist in zip(styles.names, styles.histograms):
         picture = None
         if name in files:
-            try:
-                image = read_image(files[name])
-                small = thumbnail(image.rgb(), size, size * 4 // 3)
-                picture = ColorEncoding.for_image(image).to_display(small)  # as it looks
+            try:  # as it looks (a JPEG decoded small)
+                picture = sheet_picture(files[name], size, size * 4 // 3)
             except (ValueError, OSError):
                 picture = None
         if picture is None:
@@ -228,25 +226,30 @@ def sheet_from_files(result: FileResult, style_pictures: dict[str, np.ndarray] |
     """The SheetContent of a photo a batch graded, from its files (``result.source``, the
     photo; ``result.output``, the graded copy) and its record (weights, losses, the
     palette aimed at): nothing is graded. Raises InputError when a file is unreadable."""
-    pictures = [_sheet_picture(path) for path in (result.source, result.output)]
+    from wbcgrade.color.sheet import picture_box
+
+    pictures = [sheet_picture(path, *picture_box()) for path in (result.source, result.output)]
     return _content(result, *pictures, _palette(result.palette), style_pictures)
 
 
-#: The size the pictures of a sheet made from files are read at, at least (the sheet shows
-#: them at 300 x 480 at most).
+#: The size a JPEG is decoded at for a sheet, at least (its pictures are at most 300 x 462):
+#: the decoder's DCT scaling to this, then one filtered resize.
 _SHEET_READ = 480
 
 
-def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
-    """A photo as a sheet shows it: display sRGB, small. A JPEG without an ICC profile
-    (sRGB) is decoded at a fraction of its size (the decoder's DCT scaling: a 16-megapixel
-    photo in 0.03 s instead of 0.3 s, and no full-size arrays); any other file is read as
-    ``apply`` reads it and made small before its colours are converted."""
+def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray:
+    """A photo as a sheet shows it: display sRGB, fitting in ``max_h`` x ``max_w``.
+
+    A JPEG without an ICC profile (sRGB) is decoded at a fraction of its size (the
+    decoder's DCT scaling: a 16-megapixel photo in 0.03 s instead of 0.3 s, and no
+    full-size arrays) and resized in 8 bits (the sheet is 8-bit); any other file is read as
+    ``apply`` reads it and made small before its colours are converted. Raises OSError or
+    ValueError (InputError) when the file cannot be read."""
     from PIL import Image as PILImage
     from PIL import ImageOps
 
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import thumbnail
+    from wbcgrade.color.sheet import _fit_size, thumbnail
 
     try:
         with PILImage.open(path) as image:
@@ -254,23 +257,34 @@ def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
                     and not image.info.get("icc_profile"):
                 image.draft("RGB", (_SHEET_READ, _SHEET_READ))
                 upright = ImageOps.exif_transpose(image).convert("RGB")
-                return np.asarray(upright, dtype=np.float32) / np.float32(255)
+                height, width = _fit_size(upright.height, upright.width, max_h, max_w)
+                small = upright.resize((width, height), PILImage.Resampling.LANCZOS)
+                return np.asarray(small, dtype=np.float32) / np.float32(255)
     except (OSError, ValueError, SyntaxError):  # not for Pillow: read as apply reads it
         pass
     image = read_image(path)
-    small = thumbnail(image.rgb(), 2 * _SHEET_READ, 2 * _SHEET_READ)
-    return ColorEncoding.for_image(image).to_display(small)
+    small = thumbnail(image.rgb(), max_h, max_w)
+    return np.asarray(ColorEncoding.for_image(image).to_display(small), np.float32)
 
 
 def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
              style_pictures: dict[str, np.ndarray] | None):
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
+    from wbcgrade.color.sheet import (
+        SheetContent,
+        StyleTile,
+        histogram_palette,
+        picture_box,
+        thumbnail,
+    )
 
-    small_before = thumbnail(before, 300, 480)
-    small_after = thumbnail(after, 300, 480)
+    small_before = thumbnail(before, *picture_box())  # as the sheet shows them
+    small_after = thumbnail(after, *picture_box())
     pictures = style_pictures or {}
     bins = 16
+    # the main colours of the pictures as shown (every other pixel: the same colours)
+    shown = [histogram_palette(image_histogram(small[::2, ::2], bins))
+             for small in (small_before, small_after)]
     outcome = result.grade_outcome
     if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
         from wbcgrade.color.outcome import GradeSource
@@ -279,22 +293,20 @@ def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
         tiles = ([] if outcome.source in (GradeSource.PRESET_LOOK, GradeSource.SAVED) else
                  [StyleTile(name, 0.0, pictures.get(name, np.full((8, 8, 3), 0.5, np.float32)))
                   for name in result.names])
-        palettes = [("input", histogram_palette(image_histogram(small_before[::2, ::2], bins))),
-                    ("output", histogram_palette(image_histogram(small_after[::2, ::2], bins)))]
         subtitle = outcome.headline().removeprefix("grade: ")
         if outcome.unchanged:
             subtitle += f"  |  essentially unchanged: {outcome.reason}"
         return SheetContent(title=result.relative, subtitle=subtitle, before=small_before,
-                            after=small_after, styles=tiles, palettes=palettes,
+                            after=small_after, styles=tiles,
+                            palettes=[("input", shown[0]), ("output", shown[1])],
                             styles_label="the style photos the look was read from",
                             chart=_chart(result.chart))
     order = sorted(range(len(result.weights)), key=lambda i: -result.weights[i])
     tiles = [StyleTile(result.names[i], result.weights[i],
                        pictures.get(result.names[i], np.full((8, 8, 3), 0.5, np.float32)))
              for i in order if result.weights[i] >= NONZERO_THRESHOLD]
-    palettes = [("input", histogram_palette(image_histogram(before, bins))),
-                *([("barycenter", target)] if target is not None else []),
-                ("output", histogram_palette(image_histogram(after, bins)))]
+    palettes = [("input", shown[0]), *([("barycenter", target)] if target is not None else []),
+                ("output", shown[1])]
     best = int(np.argmin(result.vertex_losses))
     subtitle = (f"loss {result.loss:.4g}  |  best single style {result.names[best]}: "
                 f"{result.vertex_losses[best]:.4g}  |  {result.n_nonzero} of {len(result.names)} "
