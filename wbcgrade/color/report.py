@@ -245,8 +245,8 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
     full-size arrays) and resized in 8 bits (the sheet is 8-bit); any other file is read as
     ``apply`` reads it and made small before its colours are converted. Raises OSError or
     ValueError (InputError) when the file cannot be read."""
+    from PIL import ExifTags, ImageOps
     from PIL import Image as PILImage
-    from PIL import ImageOps
 
     from wbcgrade.color.imageio import read_image
     from wbcgrade.color.sheet import _fit_size, thumbnail
@@ -256,7 +256,10 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
             if image.format == "JPEG" and image.mode in ("RGB", "L") \
                     and not image.info.get("icc_profile"):
                 image.draft("RGB", (_SHEET_READ, _SHEET_READ))
-                upright = ImageOps.exif_transpose(image).convert("RGB")
+                turned = image.getexif().get(ExifTags.Base.Orientation, 1) != 1
+                upright = ImageOps.exif_transpose(image) if turned else image  # (else a copy)
+                if upright.mode != "RGB":
+                    upright = upright.convert("RGB")
                 height, width = _fit_size(upright.height, upright.width, max_h, max_w)
                 small = upright.resize((width, height), PILImage.Resampling.LANCZOS)
                 return np.asarray(small, dtype=np.float32) / np.float32(255)
@@ -280,7 +283,7 @@ def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
 
     small_before = thumbnail(before, *picture_box())  # as the sheet shows them
     small_after = thumbnail(after, *picture_box())
-    pictures = style_pictures or {}
+    pictures = {} if style_pictures is None else style_pictures  # (made on first use)
     bins = 16
     # the main colours of the pictures as shown (every other pixel: the same colours)
     shown = [histogram_palette(image_histogram(small[::2, ::2], bins))
@@ -507,10 +510,12 @@ def _index_html(entries: list[dict], names: list[str], meta: dict) -> str:
 
 def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: StyleSet,
                  options: GradeOptions | dict, mode: str = "per-photo",
-                 overwrite: bool = False) -> Path:
+                 overwrite: bool = False, color: dict | None = None) -> Path:
     """Write report.json, weights.csv, index.html (and per-photo records) into ``report_dir``.
 
     ``options``: the grade's options, or their flat names as a batch recorded them.
+    ``color``: the OpenColorIO config and working space the photos were graded with (a
+    batch's records say), else those in use now.
     Sheets are written by the tasks themselves (``BatchContext.sheet_dir``).
     Existing files are replaced only with ``overwrite`` (:func:`plan_report`
     checked them before any work). Returns the path of report.json.
@@ -530,8 +535,11 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
             "graded": result.count("graded"), "skipped": result.count("skipped"),
             "failed": result.count("failed"), "time_s": round(result.time_s, 2)}
     flat = options.flat() if isinstance(options, GradeOptions) else dict(options)
-    color = {**config_info(), "input_space": flat.get("input_space") or "what each file says",
-             "working_space": flat.get("working_space") or default_working_space()}
+    if color is None:
+        color = {**config_info(), "working_space": default_working_space()}
+    color = {**{k: v for k, v in color.items() if k != "working_space"},
+             "input_space": flat.get("input_space") or "what each file says",
+             "working_space": flat.get("working_space") or color["working_space"]}
     document = {"format": "wbcgrade-report", "version": 1, **meta, "color": color,
                 "style_names": names, "nonzero_threshold": NONZERO_THRESHOLD,
                 "options": flat, "ignored": result.ignored, "photos": entries}

@@ -14,8 +14,9 @@ records instead (:func:`report_batch_output`: nothing is graded).
 from __future__ import annotations
 
 import os
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -478,7 +479,7 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     start = time.perf_counter()
     names = [str(n) for n in settings["style_names"]]
     styles = _recorded_styles(recorded_styles, names)
-    pictures = style_pictures(styles)
+    pictures = _OnFirstUse(lambda: style_pictures(styles))  # a preset's look shows none
     report_dir.mkdir(parents=True, exist_ok=True)
 
     def reported(task) -> tuple[Result, str | None]:
@@ -521,5 +522,41 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     result = BatchResult(results, list(plan.ignored), time.perf_counter() - start, series, names)
     mode = "consistent" if settings.get("consistent") else "per-photo"
     result.report = write_report(report_dir, result, styles, flat, f"{mode} (batch results)",
-                                 overwrite)
+                                 overwrite, _recorded_color(results))
     return result
+
+
+#: What a photo's record says of the colour config it was graded with (ColorEncoding.info).
+_COLOR_KEYS = ("ocio_config", "ocio_config_name", "ocio_version", "openimageio_version",
+               "working_space")
+
+
+def _recorded_color(results) -> dict | None:
+    """The colour config and working space the batch graded with, as its first record with
+    them says (None: none says, the report names those in use now)."""
+    for result in results:
+        if isinstance(result.color, dict) and all(k in result.color for k in _COLOR_KEYS):
+            return {k: result.color[k] for k in _COLOR_KEYS}
+    return None
+
+
+class _OnFirstUse(Mapping):
+    """A mapping made by ``make()`` when it is first read (by any thread, once)."""
+
+    def __init__(self, make: Callable[[], Mapping]):
+        self._make, self._value, self._lock = make, None, threading.Lock()
+
+    def _mapping(self) -> Mapping:
+        with self._lock:
+            if self._value is None:
+                self._value = self._make()
+            return self._value
+
+    def __getitem__(self, key):
+        return self._mapping()[key]
+
+    def __iter__(self):
+        return iter(self._mapping())
+
+    def __len__(self) -> int:
+        return len(self._mapping())
