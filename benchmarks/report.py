@@ -1,20 +1,20 @@
 """``wbcgrade report`` on a finished batch against the batch itself, and the batch's JPEGs.
 
-A folder of photos (default: the shipped ``samples/*.jpg``; ``--long-side N`` resizes
-them, e.g. 4900 for 16-megapixel photos) is graded with ``wbcgrade batch IN -o OUT`` twice:
-``--preset kodak-2383`` (the README's shoot) and ``--style STYLES`` (the README's style
-folder: coffee, flower and sunset); then ``wbcgrade report OUT -o REPORT`` reads each
-batch's results (nothing graded again: sheets and the look report from the photos and
-their graded copies). Each command is a fresh process timed end to end (start-up
-included, the package's bytecode compiled first, as an installed package runs),
-``--repeats`` times; printed, one row a batch: the median wall and CPU seconds (user +
-system) of the batch and of its report, and the report's share of the batch (the issue's
-target: at most 1/5). Then the preset batch's JPEGs against their inputs: the quality each
-was written at (read back from its quantisation tables) and its size relative to the
-input's (target: within 15 %).
+A folder of photos (default: the shipped ``samples/*.jpg``; ``--megapixels N`` resizes
+each to N megapixels, its shape kept; ``--long-side N`` to that long side) is graded
+with ``wbcgrade batch IN -o OUT`` twice: ``--preset kodak-2383`` (the README's shoot)
+and ``--style STYLES`` (the README's style folder: coffee, flower and sunset); then
+``wbcgrade report OUT -o REPORT`` reads each batch's results (nothing graded again:
+sheets and the look report from the photos and their graded copies). Each command is a
+fresh process timed end to end (start-up included, the package's bytecode compiled
+first, as an installed package runs), ``--repeats`` times; printed, one row a batch:
+the median wall and CPU seconds (user + system) of the batch and of its report, and
+the report's share of the batch (the issue's target: at most 1/5). Then the preset
+batch's JPEGs against their inputs: the quality each was written at (read back from
+its quantisation tables) and its size relative to the input's (target: within 15 %).
 
     python benchmarks/report.py                     # the samples, as the README grades them
-    python benchmarks/report.py --long-side 4900    # the same photos at 16 megapixels
+    python benchmarks/report.py --megapixels 16     # the same photos at 16 megapixels
     python benchmarks/report.py --cases preset      # the preset batch only
 """
 
@@ -43,7 +43,8 @@ def timed(*args: str) -> tuple[float, float]:
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if run.returncode != 0:
-        sys.exit(f"wbcgrade {' '.join(args)} failed:\n{run.stderr[-2000:]}")
+        sys.exit(f"wbcgrade {' '.join(args)} failed (exit {run.returncode}):\n"
+                 f"{run.stderr[-2000:]}")
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
@@ -53,20 +54,22 @@ ENV: dict[str, str] = {}
 STYLES = ("coffee.jpg", "flower.jpg", "sunset.jpg")
 
 
-def prepare(source: Path, folder: Path, long_side: int | None) -> list[Path]:
-    """The photos, copied (or resized to ``long_side``, saved at quality 92) into
-    ``folder``."""
+def prepare(source: Path, folder: Path, long_side: int | None = None,
+            megapixels: float | None = None) -> list[Path]:
+    """The photos, copied (or resized to ``megapixels``, else to ``long_side``, saved at
+    quality 92) into ``folder``."""
     from PIL import Image
 
     folder.mkdir(parents=True)
     photos = []
     for path in sorted(source.glob("*.jpg")):
         target = folder / path.name
-        if long_side is None:
+        if long_side is None and megapixels is None:
             shutil.copyfile(path, target)
         else:
             with Image.open(path) as image:
-                scale = long_side / max(image.size)
+                scale = (long_side / max(image.size) if megapixels is None
+                         else (megapixels * 1e6 / (image.width * image.height)) ** 0.5)
                 image.convert("RGB").resize((round(image.width * scale),
                                              round(image.height * scale)),
                                             Image.Resampling.LANCZOS).save(target, quality=92)
@@ -78,6 +81,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--photos", type=Path, default=ROOT / "samples")
     parser.add_argument("--long-side", type=int, default=None)
+    parser.add_argument("--megapixels", type=float, default=None)
     parser.add_argument("--preset", default="kodak-2383")
     parser.add_argument("--cases", nargs="+", choices=("preset", "style"),
                         default=["preset", "style"])
@@ -87,7 +91,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="wbcgrade-report-bench-") as tmp:
         work = Path(tmp)
-        photos = prepare(args.photos, work / "in", args.long_side)
+        photos = prepare(args.photos, work / "in", args.long_side, args.megapixels)
         styles = work / "styles"
         styles.mkdir()
         for name in STYLES:
@@ -99,7 +103,9 @@ def main() -> None:
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "wbcgrade")],
                        env=ENV, check=True, stdout=subprocess.DEVNULL)
         grades = {"preset": ["--preset", args.preset], "style": ["--style", str(styles)]}
-        size = "as shipped" if args.long_side is None else f"long side {args.long_side}"
+        size = ("as shipped" if args.long_side is None and args.megapixels is None else
+                f"{args.megapixels:g} megapixels" if args.megapixels else
+                f"long side {args.long_side}")
         print(f"{len(photos)} photos ({size}), {args.repeats} runs, medians; "
               f"report / batch: wall (each run), CPU")
         print(f"{'batch':<20} {'batch wall':>10} {'CPU':>6} {'report wall':>11} {'CPU':>6}  "

@@ -211,3 +211,13 @@ def test_apply_warns_in_one_line_when_the_photo_is_one_of_the_styles(tmp_path, c
     result = cli("apply", str(other), "--style", str(styles), "-o",
                  str(tmp_path / "cat_out.jpg"), *FAST_ARGS)
     assert result.exit_code == 0 and "own palette" not in result.stderr
+    # the default grade (a look: the style photo of its scene, as large as the style photos
+    # for the scene to be matched) says it without a palette grade's weight and distance
+    photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "mine96.jpg", 96)
+    result = cli("apply", str(photo), "--style", str(styles), "-o",
+                 str(tmp_path / "look_out.jpg"), "--no-cache")
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if "coffee" in line]
+    assert warnings == [f"Warning: {photo} is itself one of the style photos ('coffee'): it "
+                        "is graded with its own look, so little changes; leave it out of the "
+                        "style folder"]

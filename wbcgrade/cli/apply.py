@@ -144,7 +144,9 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     if report.grade.own_style is not None:
         from wbcgrade.color.presets import own_style_warning
 
-        _warn(own_style_warning(str(photo), report.grade.own_style))
+        outcome = report.grade.outcome
+        _warn(own_style_warning(str(photo), report.grade.own_style,
+                                palette=outcome is None or outcome.palette is not None))
     _wall_timings(report, started, graded_from, learned)
     _print_report(report, as_json)
     if report.report is not None and not as_json:

@@ -90,8 +90,9 @@ def batch_progress(verb: str = "graded") -> Iterator[BatchProgress]:
                 files.set_postfix(failed=len(failed), refresh=False)
             tqdm.write(photo_line(result, verb), file=sys.stdout)
             if result.own_style:
-                tqdm.write("Warning: " + own_style_warning(result.relative, result.own_style),
-                           file=sys.stderr)
+                tqdm.write("Warning: " + own_style_warning(
+                    result.relative, result.own_style,
+                    palette=not result.outcome or result.has_weights), file=sys.stderr)
             files.update(1)
 
         def on_planned(total):

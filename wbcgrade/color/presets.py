@@ -764,8 +764,14 @@ def own_style(photo_hist: np.ndarray, style_hists: np.ndarray, names: Sequence[s
     return {"style": str(names[top]), "weight": float(weights[top]), "distance": distance}
 
 
-def own_style_warning(photo: str, found: dict) -> str:
-    """The one-line warning for :func:`own_style`'s finding about ``photo``."""
+def own_style_warning(photo: str, found: dict, palette: bool = True) -> str:
+    """The one-line warning for :func:`own_style`'s finding about ``photo``: in a palette
+    grade's words (its weight, the palettes' distance), or for a look grade
+    (``palette=False``) in a photographer's."""
+    if not palette:
+        return (f"{photo} is itself one of the style photos ({found['style']!r}): it is "
+                "graded with its own look, so little changes; leave it out of the style "
+                "folder")
     return (f"{photo} is graded towards its own palette (style {found['style']!r} has weight "
             f"{found['weight']:.3f} and a palette {found['distance']:.3f} from the photo's): "
             "it is one of the styles, so little changes; leave it out of the style set")
