@@ -51,3 +51,21 @@ def test_outcome_lines_are_in_percent_and_say_how_visible():
     assert unchanged.lines("this clip")[1].startswith("the clip is essentially unchanged")
     assert [change_words(c).split("(")[1] for c in (0.5, 2, 5, 12, 40)] == [
         "not visible)", "barely visible)", "subtle)", "clear)", "strong)"]
+
+
+def test_video_says_what_the_clip_holds_in_plain_words(capsys):
+    """The clip's line: frame rate without trailing zeros, its length in seconds and its
+    streams by kind (was "25.000 fps, 150 frames, yuv420p, 2 stream(s)")."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from wbcgrade.cli.video import _print_result
+
+    info = SimpleNamespace(path=Path("clip.mp4"), width=640, height=360, fps=25.0, frames=150,
+                           duration=6.0, pix_fmt="yuv420p", streams=["video", "audio"])
+    result = SimpleNamespace(info=info, encoding=None, shots=[], timings={"total": 1.0},
+                             output="out.mp4", luts=[], encoder="libx264", pix_fmt="yuv420p")
+    _print_result(result, False)
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == ("clip.mp4: 640x360, 25 fps, 150 frames (6.0 s), yuv420p pixels, "
+                     "streams: 1 video, 1 audio")

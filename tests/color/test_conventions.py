@@ -5,6 +5,7 @@ the input's quality, a batch run again with its ``--report`` folder resumed (iss
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -137,6 +138,10 @@ def test_a_look_grade_gets_a_look_report(tmp_path):
             again = run("report", out, "-o", folder)
             assert again.exit_code == 0, again.output
             assert again.stdout.startswith("reported ") and "\ngraded " not in again.stdout
+            # each line says how long the photo's grade took (not the report)
+            lines = [line for line in again.stdout.splitlines() if ".jpg: " in line]
+            assert len(lines) == 2 and all(re.search(r"  \(graded in \d+\.\d s\)$", line)
+                                           for line in lines), lines
         page = (folder / "index.html").read_text()
         assert "look report" in page and "palette weight report" not in page
         assert "fit loss" not in page and "<th>change</th>" in page

@@ -40,10 +40,14 @@ SHOWN_WEIGHTS = 4
 
 def photo_line(result: FileResult, verb: str = "graded") -> str:
     """One line about a finished photo: what happened, its name, and for a graded one
-    its largest weights, the fit's loss and the time. ``verb`` says what was done to a
-    graded photo ("reported": `report` read what a batch recorded)."""
+    what the grade did (a palette grade: its largest weights and the fit's loss) and the
+    time it took. ``verb`` says what was done to a graded photo ("reported": `report`
+    drew it, the time is its grade's)."""
     if result.status == "skipped":
         return f"skipped  {result.relative} (its output is complete)"
+    took = result.timings.get("total", 0.0)
+    # a report says how long the grade took, not how long the report did
+    took = f"{took:.1f} s" if verb == "graded" else f"(graded in {took:.1f} s)"
     if result.status != "graded":
         return f"{result.status:<8} {result.relative}: {result.error}"
     outcome = result.grade_outcome
@@ -55,7 +59,7 @@ def photo_line(result: FileResult, verb: str = "graded") -> str:
                 f"colours move {change_words(outcome.mean_change)}")
         if outcome.unchanged:
             said += f" (essentially unchanged: {outcome.reason})"
-        return f"{verb:<8} {result.relative}: {said}  {result.timings.get('total', 0.0):.1f} s"
+        return f"{verb:<8} {result.relative}: {said}  {took}"
     ranked = sorted(zip(result.names, result.weights), key=lambda pair: -pair[1])
     shown = ", ".join(f"{name} {weight:.3f}" for name, weight in ranked[:SHOWN_WEIGHTS]
                       if weight >= 0.0005)
@@ -63,8 +67,7 @@ def photo_line(result: FileResult, verb: str = "graded") -> str:
     if rest:
         shown += f" (+{rest} more)"
     loss = "" if result.loss is None else f"  loss {result.loss:.4g}"
-    return (f"{verb:<8} {result.relative}: {shown}{loss}  "
-            f"{result.timings.get('total', 0.0):.1f} s")
+    return f"{verb:<8} {result.relative}: {shown}{loss}  {took}"
 
 
 @contextlib.contextmanager

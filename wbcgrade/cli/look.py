@@ -83,8 +83,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
             else f"the look {len(found.styles)} style photos share")
     from wbcgrade.color.outcome import change_words
 
-    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}; over the whole "
-               f"colour cube it moves colours {change_words(outcome.look_size)}")
+    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}; across every "
+               f"colour it moves colours {change_words(outcome.look_size)}")
     if outcome.unchanged or outcome.faint:
         state = ("it leaves colours essentially unchanged" if outcome.unchanged
                  else "a faint look")

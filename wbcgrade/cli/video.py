@@ -30,8 +30,11 @@ def _print_result(result, as_json: bool) -> None:
         click.echo(json.dumps(result.as_dict(), indent=2, default=float))
         return
     info = result.info
-    click.echo(f"{info.path.name}: {info.width}x{info.height}, {info.fps:.3f} fps, "
-               f"{info.frames} frames, {info.pix_fmt}, {len(info.streams)} stream(s)")
+    kinds = {kind: info.streams.count(kind) for kind in info.streams}
+    streams = ", ".join(f"{count} {kind}" for kind, count in kinds.items())
+    fps = f"{info.fps:.3f}".rstrip("0").rstrip(".")
+    click.echo(f"{info.path.name}: {info.width}x{info.height}, {fps} fps, {info.frames} frames "
+               f"({info.duration:.1f} s), {info.pix_fmt} pixels, streams: {streams}")
     encoding = result.encoding
     from wbcgrade.color.colorspace import default_working_space
 
