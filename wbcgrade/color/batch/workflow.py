@@ -478,8 +478,9 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
         progress.planned(len(plan.tasks))
     start = time.perf_counter()
     names = [str(n) for n in settings["style_names"]]
-    styles = _recorded_styles(recorded_styles, names)
-    pictures = _OnFirstUse(lambda: style_pictures(styles))  # a preset's look shows none
+    styles = StyleSet(names, np.ones((len(names), 1, 1, 1)), recorded_styles)  # (the names)
+    # made (the preset read) only when a sheet shows them: a preset's look shows none
+    pictures = _OnFirstUse(lambda: style_pictures(_recorded_styles(recorded_styles, names)))
     report_dir.mkdir(parents=True, exist_ok=True)
 
     def reported(task) -> tuple[Result, str | None]:
