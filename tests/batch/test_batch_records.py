@@ -210,7 +210,7 @@ def test_a_batch_report_reads_jpegs_small_and_makes_each_picture_once(tmp_path, 
     result = FileResult("photo.jpg", str(tmp_path / "photo.jpg"), str(tmp_path / "graded.jpg"),
                         "graded", names=["style"], weights=[1.0], loss=0.1, vertex_losses=[0.1])
     content = sheet_from_files(result, pictures)
-    height, width = sheet._fit_size(400, 1600, *sheet.picture_box())
+    height, width = sheet.fit_size(400, 1600, *sheet.picture_box())
     assert content.before.shape == content.after.shape == (height, width, 3)
     pixels = sheet.compose_sheet(content)
     top = left = sheet._PAD

@@ -80,8 +80,8 @@ def batch_progress(verb: str = "graded") -> Iterator[BatchProgress]:
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import bar_callbacks
-    from wbcgrade.color.batch import BatchProgress
     from wbcgrade.color.presets import own_style_warning
+    from wbcgrade.color.progress import BatchProgress
 
     with tqdm(desc="photos", unit="photo", disable=None, position=0) as files, \
             tqdm(desc="styles", disable=None, leave=False, position=1) as bar:

@@ -41,14 +41,20 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
     photo in sheets/ and index.html.
     """
     check_photo(target, "no such file or folder")  # (exit 1, before numpy loads)
-    from wbcgrade.color.batch import report_folder
+    from wbcgrade.color.batch.recorded import report_recorded
 
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)
     with batch_progress("reported") as progress:
-        result = report_folder(target, out_dir, source, options, recursive=recursive,
-                               consistent=consistent, overwrite=overwrite, jobs=jobs,
-                               scheduler=scheduler, progress=progress)
+        # a batch's output folder: its results read (the grade's modules never load)
+        result = report_recorded(target, out_dir, source, options, recursive=recursive,
+                                 overwrite=overwrite, jobs=jobs, progress=progress)
+        if result is None:
+            from wbcgrade.color.batch import report_folder
+
+            result = report_folder(target, out_dir, source, options, recursive=recursive,
+                                   consistent=consistent, overwrite=overwrite, jobs=jobs,
+                                   scheduler=scheduler, progress=progress)
     print_summary(result, verb="reported")
     click.echo(f"report: {result.report.parent / 'index.html'}")
     if result.count("failed"):

@@ -120,9 +120,11 @@ def resample_histogram(hist: np.ndarray, bins: int) -> np.ndarray:
     interpolation: mass and mean colour kept) to a coarser grid, the density
     interpolated to a finer one. The histogram itself when ``bins == n``.
     """
-    from wbcgrade.core import resample_grid
+    if hist.shape[0] == bins:
+        return hist
+    from wbcgrade.core import resample_grid  # (only then: the core's start-up is not small)
 
-    return hist if hist.shape[0] == bins else resample_grid(hist, (bins,) * 3, mass=1.0)
+    return resample_grid(hist, (bins,) * 3, mass=1.0)
 
 
 def add_floor(hist: np.ndarray, floor: float = DEFAULT_FLOOR) -> np.ndarray:

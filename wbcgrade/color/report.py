@@ -23,6 +23,7 @@ import json
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,9 +31,11 @@ from wbcgrade._publish import atomic_path, plan_outputs
 from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.fit import NONZERO_THRESHOLD
-from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet
+
+if TYPE_CHECKING:  # (a report of a batch's results loads no grade)
+    from wbcgrade.color.graded import GradeReport, PhotoGrade
 
 __all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
            "write_report", "report_entries", "report_from_grade", "sheet_content",
@@ -249,7 +252,7 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
     from PIL import Image as PILImage
 
     from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import _fit_size, thumbnail
+    from wbcgrade.color.sheet import fit_size, thumbnail
 
     try:
         with PILImage.open(path) as image:
@@ -260,7 +263,7 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
                 upright = ImageOps.exif_transpose(image) if turned else image  # (else a copy)
                 if upright.mode != "RGB":
                     upright = upright.convert("RGB")
-                height, width = _fit_size(upright.height, upright.width, max_h, max_w)
+                height, width = fit_size(upright.height, upright.width, max_h, max_w)
                 small = upright.resize((width, height), PILImage.Resampling.LANCZOS)
                 return np.asarray(small, dtype=np.float32) / np.float32(255)
     except (OSError, ValueError, SyntaxError):  # not for Pillow: read as apply reads it

@@ -30,7 +30,7 @@ from wbcgrade._names import safe_text
 from wbcgrade._publish import encode_png, publish_bytes
 from wbcgrade.color.histogram import grid_points, resample_histogram
 
-__all__ = ["Palette", "histogram_palette", "thumbnail", "picture_box", "StyleTile",
+__all__ = ["Palette", "histogram_palette", "thumbnail", "picture_box", "fit_size", "StyleTile",
            "SheetContent", "compose_sheet", "write_sheet"]
 
 _BACKGROUND = (0.96, 0.96, 0.95)
@@ -100,7 +100,8 @@ def picture_box(width: int = 960) -> tuple[int, int]:
     return PICTURE_HEIGHT, (width - 3 * _PAD) // 2
 
 
-def _fit_size(height: int, width: int, max_h: int, max_w: int) -> tuple[int, int]:
+def fit_size(height: int, width: int, max_h: int, max_w: int) -> tuple[int, int]:
+    """(height, width) of a picture ``height`` x ``width`` scaled to fit ``max_h`` x ``max_w``."""
     scale = min(max_h / height, max_w / width)
     return max(1, round(height * scale)), max(1, round(width * scale))
 
@@ -126,7 +127,7 @@ def _block_mean(pixels: np.ndarray, factor: int) -> np.ndarray:
 def thumbnail(rgb: np.ndarray, max_h: int, max_w: int) -> np.ndarray:
     """(H, W, 3) float display pixels -> resized copy fitting in max_h x max_w (filtered)."""
     height, width = rgb.shape[:2]
-    out_h, out_w = _fit_size(height, width, max_h, max_w)
+    out_h, out_w = fit_size(height, width, max_h, max_w)
     pixels = rgb[:, :, :3]
     if (out_h, out_w) == (height, width):  # already that size (as Pillow's resize: a copy)
         return np.array(pixels, dtype=np.float32)

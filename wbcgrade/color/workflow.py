@@ -23,7 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,33 +52,12 @@ from wbcgrade.color.lut import (
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
+from wbcgrade.color.progress import Progress  # (defined there: no numerics)
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_input_file
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
            "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
-
-
-@dataclass(frozen=True)
-class Progress:
-    """What a command wants to hear while the library works (every callback optional).
-
-    Attributes
-    ----------
-    fit : ``fit(n_evaluations, weights, loss)`` after each evaluation of a fit.
-    stage : ``stage(name)`` as each stage starts ("read", "fit", "barycenter", ...).
-    styles : ``styles(done, total, name)`` while style photos are read.
-    warn : ``warn(message)`` for what the user should know (skipped files, ...).
-    """
-
-    fit: Callable[[int, np.ndarray, float], None] | None = None
-    stage: Callable[[str], None] | None = None
-    styles: Callable[[int, int, str], None] | None = None
-    warn: Callable[[str], None] | None = None
-
-    def say(self, name: str) -> None:
-        if self.stage is not None:
-            self.stage(name)
 
 
 @dataclass(frozen=True)

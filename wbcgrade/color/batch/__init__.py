@@ -33,27 +33,42 @@ commands: :func:`grade_folder`, :func:`report_folder`). Executors are
 :mod:`wbcgrade._executor`.
 """
 
-from wbcgrade.color.batch.plan import (
-    BatchPlan,
-    BatchTask,
-    image_extensions,
-    output_is_complete,
-    plan_batch,
-    recheck_plan,
-    remove_stale_outputs,
-)
-from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.batch.run import run_batch
-from wbcgrade.color.batch.settings import (
-    SETTINGS_FILE,
-    batch_settings,
-    settings_changed,
-    write_settings,
-)
-from wbcgrade.color.batch.task import BatchContext, run_task
-from wbcgrade.color.batch.workflow import BatchProgress, grade_folder, report_folder
+from __future__ import annotations
+
+import importlib
+
+#: Name -> the module of this package that defines it, loaded on first use (PEP 562):
+#: ``wbcgrade report`` on a batch's results imports ``recorded`` and never the grade.
+_NAMES = {
+    "BatchPlan": "plan", "BatchTask": "plan", "image_extensions": "plan",
+    "output_is_complete": "plan", "plan_batch": "plan", "recheck_plan": "plan",
+    "remove_stale_outputs": "plan",
+    "BatchResult": "results", "FileResult": "results",
+    "run_batch": "run",
+    "SETTINGS_FILE": "settings", "batch_settings": "settings",
+    "settings_changed": "settings", "write_settings": "settings",
+    "BatchContext": "task", "run_task": "task",
+    "BatchProgress": "wbcgrade.color.progress", "grade_folder": "workflow",
+    "report_folder": "workflow",
+}
 
 __all__ = ["BatchTask", "BatchPlan", "BatchContext", "FileResult", "BatchResult",
            "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete",
            "batch_settings", "settings_changed", "write_settings", "remove_stale_outputs",
            "recheck_plan", "SETTINGS_FILE", "BatchProgress", "grade_folder", "report_folder"]
+
+
+def __getattr__(name: str):
+    """Load a name of the package on first use (``wbcgrade.color.batch.plan_batch``)."""
+    try:
+        module = _NAMES[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module if "." in module
+                                            else f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

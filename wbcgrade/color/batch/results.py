@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wbcgrade.color.fit import NONZERO_THRESHOLD, FitSummary
-from wbcgrade.color.grading import Grade
+
+if TYPE_CHECKING:  # (a report of a batch's results loads no grade)
+    from wbcgrade.color.grading import Grade
 
 __all__ = ["FileResult", "BatchResult"]
 
