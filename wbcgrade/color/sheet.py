@@ -180,18 +180,26 @@ class SheetContent:
     chart: tuple[np.ndarray, np.ndarray] | None = None
 
 
+def _to_8bit(values) -> np.ndarray:
+    """Display values in [0, 1] (clipped) -> uint8 (rounded), as the PNG holds them."""
+    values = np.clip(np.asarray(values, dtype=np.float32), 0.0, 1.0) * np.float32(255)
+    return np.rint(values, out=values).astype(np.uint8)
+
+
 class _Canvas:
+    """The sheet in 8 bits, as it is written (a quarter of a float canvas's memory)."""
+
     def __init__(self, height: int, width: int):
-        self.pixels = np.empty((height, width, 3), dtype=np.float32)
-        self.pixels[:] = _BACKGROUND
+        self.pixels = np.empty((height, width, 3), dtype=np.uint8)
+        self.pixels[:] = _to_8bit(_BACKGROUND)
         self.texts: list[tuple[int, int, str, int, tuple]] = []
 
     def paste(self, picture: np.ndarray, top: int, left: int) -> None:
         h, w = picture.shape[:2]
-        self.pixels[top:top + h, left:left + w] = np.clip(picture[:, :, :3], 0, 1)
+        self.pixels[top:top + h, left:left + w] = _to_8bit(picture[:, :, :3])
 
     def fill(self, top: int, left: int, height: int, width: int, colour) -> None:
-        self.pixels[top:top + height, left:left + width] = colour
+        self.pixels[top:top + height, left:left + width] = _to_8bit(colour)
 
     def text(self, x: int, baseline: int, text: str, size: int = 14, colour=_INK) -> None:
         self.texts.append((x, baseline, safe_text(text), size, colour))  # non-UTF-8 names
@@ -220,9 +228,10 @@ class _Canvas:
             ImageDraw.Draw(mask).text((x - x0, y - y0), text, font=font, fill=255, anchor="ls")
             alpha = np.asarray(mask, dtype=np.float32)[rows.start - y0:rows.stop - y0,
                                                        columns.start - x0:columns.stop - x0]
-            region = pixels[rows, columns]
-            region += (alpha[:, :, None] / np.float32(255)) * (np.asarray(colour, np.float32)
-                                                                - region)
+            region = pixels[rows, columns].astype(np.float32)
+            region += (alpha[:, :, None] / np.float32(255)) * (
+                np.asarray(colour, np.float32) * np.float32(255) - region)
+            pixels[rows, columns] = np.rint(region)
         return pixels
 
 
@@ -250,7 +259,13 @@ def _no_fonts(error: str) -> None:
 
 
 def compose_sheet(content: SheetContent, width: int = 960) -> np.ndarray:
-    """Lay out a sheet -> (H, width, 3) float32 display pixels in [0, 1]."""
+    """Lay out a sheet -> (H, width, 3) float32 display pixels in [0, 1] (in steps of 1/255:
+    the sheet is composed in 8 bits, as it is written)."""
+    return _compose(content, width).astype(np.float32) / np.float32(255)
+
+
+def _compose(content: SheetContent, width: int) -> np.ndarray:
+    """:func:`compose_sheet`'s sheet as uint8 display pixels (H, width, 3)."""
     pad = _PAD
     pic_h, half = picture_box(width)
     before = thumbnail(content.before, pic_h, half)
@@ -319,15 +334,12 @@ def write_sheet(path: str | os.PathLike, content: SheetContent, width: int = 960
     """Compose a sheet and write it as an 8-bit sRGB PNG (atomically; an existing file
     is replaced only with ``overwrite``)."""
     path = Path(path)
-    pixels = compose_sheet(content, width)
+    pixels = _compose(content, width)
     path.parent.mkdir(parents=True, exist_ok=True)
     spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
     spec.attribute("oiio:ColorSpace", "sRGB")
     spec.attribute("png:compressionLevel", 1)  # zlib's fastest: 2x faster, 4 % larger
     spec.attribute("png:filter", 0x40)  # libpng's average filter alone: 2x faster, 2 % larger
-    np.clip(pixels, 0.0, 1.0, out=pixels)  # (the composed sheet's own array: in place)
-    pixels *= 255
-    pixels = np.rint(pixels, out=pixels).astype(np.uint8)
     # encoded in memory and checked, then published by Python: a full disk or a file
     # size limit is an OSError, never a truncated sheet
     publish_bytes(path, encode_png(path, np.ascontiguousarray(pixels), spec),
