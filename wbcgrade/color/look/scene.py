@@ -24,7 +24,8 @@ The steps, on images of at most :data:`MATCH_SIZE` pixels a side:
    (away from its border, down-weighted on edges where a small misalignment
    mixes colours) give the pairs.
 
-Feature detection and matching use OpenCV.
+Feature detection uses OpenCV; the matches are OpenCV's brute-force ones, computed
+with one BLAS product (:func:`nearest_two`).
 """
 
 from __future__ import annotations
