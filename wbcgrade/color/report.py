@@ -534,10 +534,13 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     report_dir.mkdir(parents=True, exist_ok=True)
     overwrite = report_overwrite(report_dir, overwrite)
     entries = report_entries(report_dir, result)
-    for item, entry in zip(result.results, entries):
-        if item.status == "graded":
-            _write_text(_record_path(report_dir, item.relative), json.dumps(entry, indent=1),
-                        overwrite)
+    records = [(_record_path(report_dir, item.relative), json.dumps(entry, indent=1))
+               for item, entry in zip(result.results, entries) if item.status == "graded"]
+    # several at once: each waits on the disk (its flush), not on the interpreter
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=max(1, min(4, len(records)))) as pool:
+        list(pool.map(lambda record: _write_text(*record, overwrite), records))
     names = list(styles.names)
     meta = {"styles": styles.source, "mode": mode, "photos": len(entries),
             "graded": result.count("graded"), "skipped": result.count("skipped"),
