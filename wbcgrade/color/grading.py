@@ -414,7 +414,7 @@ def grade_encoded(encoded: np.ndarray, styles: StyleSet, options: GradeOptions,
                             encoding, callback, stage)
 
 
-def grade_array(rgb: np.ndarray, styles: StyleSet, options: GradeOptions | None = None,
+def grade_array(rgb: np.ndarray, styles: StyleSet | Grade, options: GradeOptions | None = None,
                 alpha: np.ndarray | None = None, **flat) -> tuple[np.ndarray, Grade]:
     """Grade an image held in memory: arrays in, arrays out (no files).
 
@@ -426,7 +426,9 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, options: GradeOptions | None 
         ``options.spaces.working`` (default sRGB-encoded Rec.709) and returned
         in the input space.
     styles : the style palettes (:func:`wbcgrade.color.presets.load_preset`,
-        :func:`~wbcgrade.color.presets.load_style_folder`).
+        :func:`~wbcgrade.color.presets.load_style_folder`), or a :class:`Grade`
+        (a saved one, :func:`wbcgrade.color.saved_grade.load_look`) applied as it
+        is in its own working space, nothing fitted.
     options : grade settings (default :class:`GradeOptions`); ``flat``
         keywords (the former flat names, e.g. ``relaxation=0.05``) change it.
     alpha : (H, W) optional coverage; transparent pixels do not count.
@@ -446,11 +448,17 @@ def grade_array(rgb: np.ndarray, styles: StyleSet, options: GradeOptions | None 
         rgb = rgb / np.float32(np.iinfo(rgb.dtype).max)
     if not np.all(np.isfinite(rgb)):
         raise InputError("rgb contains NaN or inf")
-    encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+    saved = isinstance(styles, Grade)
+    working = (styles.working or None) if saved else options.spaces.working
+    encoding = ColorEncoding.of(options.spaces.input, working)
     encoded, state = encoding.encode(np.asarray(rgb, dtype=np.float32))
     if alpha is not None:
         alpha = np.asarray(alpha, dtype=np.float32)
         if alpha.shape != encoded.shape[:2]:
             raise InputError(f"alpha must have shape {encoded.shape[:2]}, got {alpha.shape}")
-    grade, _ = grade_encoded(encoded, styles, options, encoding, alpha)
+    if saved:  # what the given grade does to this photo
+        hist = image_histogram(encoded, 16, alpha, options.transfer.max_pixels)
+        grade = replace(styles, outcome=outcome_on_photo(styles, hist))
+    else:
+        grade, _ = grade_encoded(encoded, styles, options, encoding, alpha)
     return encoding.decode(grade.apply(encoded), state), grade

@@ -41,6 +41,7 @@ import numpy as np
 
 from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.defaults import DEFAULT_LUT_SIZE
 from wbcgrade.color.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
@@ -235,7 +236,8 @@ def lut_header(encoding, shaper: bool = False) -> list[str]:
                     f"(OpenColorIO {info['ocio_version']})"]
 
 
-def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAULT_LUT_SIZE,
+def write_grade_lut(path: str | os.PathLike, grade, encoding: ColorEncoding | None = None,
+                    size: int = DEFAULT_LUT_SIZE,
                     lut_format: str | None = None, title: str = "wbcgrade",
                     comments: list[str] | None = None, overwrite: bool = False) -> Path:
     """Write a :class:`~wbcgrade.color.grading.Grade` as a LUT whose header names its spaces.
@@ -246,10 +248,13 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding, size: int = DEFAUL
     encoding : a :class:`~wbcgrade.color.colorspace.ColorEncoding`: its input
         is what the LUT takes and gives (the working space itself: a LUT in
         the working space, with a shaper when it is logarithmic; another
-        space: the grade baked in its code values, :meth:`Grade.lut`).
+        space: the grade baked in its code values, :meth:`Grade.lut`). None:
+        the grade's own working space in and out.
     lut_format : "cube" (colour-science) or "clf" (the ``opencolorio`` package);
         None: the one ``path``'s ending names.
     """
+    if encoding is None:
+        encoding = ColorEncoding.of(grade.working or None, grade.working or None)
     lut_format = lut_format_of(path, lut_format)
     return write_checked_lut(check_lut_path(path, lut_format), lut_format, grade, encoding,
                              size, title=title, comments=comments, overwrite=overwrite)

@@ -478,7 +478,10 @@ def _bad(path: Path, why: str) -> InputError:
 
 
 def load_preset(path: str | os.PathLike) -> StyleSet:
-    """Read and validate a preset file -> StyleSet (raises InputError with the reason)."""
+    """Read and validate a preset file, or a shipped preset by name (``"warm"``) -> StyleSet
+    (raises InputError with the reason)."""
+    if isinstance(path, str) and not Path(path).exists():
+        path = resolve_preset(path)  # a shipped name; else "no such preset file"
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such preset file")

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import publish_bytes
 from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.grading import Grade
 from wbcgrade.color.outcome import FitStart, SavedFrom
@@ -62,7 +63,7 @@ from wbcgrade.limits import (
     parse_json,
 )
 
-__all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look",
+__all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look", "save_grade",
            "look_styles", "look_fit", "look_batch_options", "SAMPLED_LUT_SIZE"]
 
 #: The ``format`` tag of a saved grade.
@@ -162,6 +163,17 @@ def look_dict(grade: Grade) -> dict:
             "names": list(grade.names), "weights": [float(w) for w in grade.weights],
             "loss": None if grade.loss is None else float(grade.loss),
             "map": _encode_array(grade.color_map)}
+
+
+def save_grade(path: str | os.PathLike, grade: Grade, overwrite: bool = False) -> Path:
+    """Write ``grade`` as JSON (what :func:`load_look` and ``--look`` read), with its
+    outcome when it has one, atomically; an existing file only with ``overwrite``."""
+    entry = look_dict(grade)
+    if grade.outcome is not None:
+        entry["outcome"] = grade.outcome.as_dict()
+    path = Path(path)
+    publish_bytes(path, json.dumps(entry, indent=1).encode("utf-8"), overwrite=overwrite)
+    return path
 
 
 def look_from_dict(entry: dict, where: str = "look") -> Grade:

@@ -52,6 +52,7 @@ from wbcgrade.color.lut import (
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
+from wbcgrade.color.saved_grade import save_grade
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_input_file
 
@@ -377,15 +378,5 @@ def _warn_one_style(source: StyleSource, styles: StyleSet, options: GradeOptions
 
 def _save_grade(plan: PhotoPlan, grade: Grade) -> None:
     """Write the grade itself where the plan says (``--save-grade``), atomically."""
-    if plan.saved_grade is None:
-        return
-    import json
-
-    from wbcgrade._publish import publish_bytes
-    from wbcgrade.color.saved_grade import look_dict
-
-    entry = look_dict(grade)
-    if grade.outcome is not None:
-        entry["outcome"] = grade.outcome.as_dict()
-    publish_bytes(plan.saved_grade, json.dumps(entry, indent=1).encode("utf-8"),
-                  overwrite=plan.overwrite)
+    if plan.saved_grade is not None:
+        save_grade(plan.saved_grade, grade, overwrite=plan.overwrite)
