@@ -107,9 +107,9 @@ def fit_outputs(measured: str | os.PathLike, database: str | os.PathLike,
     inputs = {measured.resolve(), *(p.resolve() for p in io.database_files(database))}
     for target, name in ((out, "output"), (png_path, "png")):
         if target is not None and target.resolve() in inputs:
-            raise OptionError(f"{target}: an input; choose another {name}", name, path=target)
+            raise OptionError(f"{target}: an input; choose another {{{name}}}", name, path=target)
     if out.suffix.lower() not in io.BRDF_SUFFIXES:
-        raise OptionError(f"{out}: output needs a .binary or .npz suffix", "output", path=out)
+        raise OptionError(f"{out}: {{output}} needs a .binary or .npz suffix", "output", path=out)
     for target in (out, png_path):
         if target is not None:
             check_output_path(target, overwrite=True)

@@ -21,10 +21,11 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
+from wbcgrade.cli.option_table import flag_text
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 def _wall_timings(report, started: float, graded_from: float, learned: float = 0.0) -> None:

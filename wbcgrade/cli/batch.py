@@ -24,6 +24,7 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
+from wbcgrade.cli.option_table import flag_text
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
     from wbcgrade.color.batch import BatchProgress, BatchResult, FileResult
@@ -31,7 +32,7 @@ if TYPE_CHECKING:  # the colour library imports the core: only inside the comman
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 #: Weights shown on a photo's line (the largest ones).

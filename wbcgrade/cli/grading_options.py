@@ -21,6 +21,7 @@ from wbcgrade.cli.option_table import (
     LOOK,
     PALETTE,
     click_options,
+    flag_error,
     flag_of,
     names_in,
     option,
@@ -183,40 +184,6 @@ LOOK_ONLY = {name: option(name).flag for name in names_in(LOOK)}
 
 #: Option field (``group.field``) or library setting -> the flag that sets it.
 FLAGS = flag_of
-
-
-def flag_error(error):
-    """An OptionError naming library settings -> the same error naming their flags.
-
-    The first mention of ``error.option`` (and of each of ``error.also``), as a
-    whole word (not part of a path: no ``/``, ``\\``, ``.``, ``-`` or ``_`` beside it),
-    becomes the flag that sets it (:data:`FLAGS`); names with no flag are left as
-    they are. The file the message starts with (``error.path``) is never rewritten.
-    """
-    from wbcgrade.errors import OptionError
-
-    flag = FLAGS.get(getattr(error, "option", None))
-    if flag is None:
-        return error
-    return OptionError(flag_text(error), flag, path=getattr(error, "path", None))
-
-
-def flag_text(error) -> str:
-    """The message of a library error with the settings it names (``error.option``,
-    ``.also``, ``.fields``) written as their flags (see :func:`flag_error`)."""
-    import re
-
-    text = str(error)
-    path = getattr(error, "path", None)
-    head = path if path is not None and text.startswith(path) else ""
-    text = text[len(head):]
-    names = (getattr(error, "option", None), *getattr(error, "also", ()),
-             *getattr(error, "fields", ()))
-    for name in names:
-        if name in FLAGS:
-            text = re.sub(rf"(?<![\w./\\-]){re.escape(name)}(?![\w/\\-])", FLAGS[name],
-                          text, count=1)
-    return head + text
 
 
 class _Deferred:

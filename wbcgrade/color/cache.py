@@ -62,14 +62,14 @@ def default_cache_dir() -> Path:
     return Path(base) / "wbcgrade"
 
 
-#: The running command's ``--cache-dir`` / ``--no-cache`` (:func:`set_command_cache`).
+#: The running command's cache folder, or that it has none (:func:`set_command_cache`).
 _COMMAND: dict[str, object] = {}
 
 
 def set_command_cache(folder: str | os.PathLike | None = None, enabled: bool = True) -> None:
     """Set the cache of this process's command: ``folder`` (None: :func:`default_cache_dir`)
     and whether caching is on. Every cache without a folder of its own follows it (a
-    style set's, the natural palettes', a batch worker's: ``--natural DIR`` too).
+    style set's, the natural palettes', a batch worker's: ``map.natural``'s too).
     ``set_command_cache()`` goes back to the defaults."""
     _COMMAND.clear()
     if folder is not None or not enabled:
@@ -86,7 +86,7 @@ def command_cache() -> tuple[Path, bool]:
 
 def cache_folder(styles=None) -> Path | None:
     """The cache folder of a StyleSet: its ``meta["cache_dir"]`` when it has one (None:
-    the command said ``--no-cache``), else the command's (:func:`command_cache`; None when
+    the command turned caching off), else the command's (:func:`command_cache`; None when
     caching is off)."""
     meta = getattr(styles, "meta", None) or {}
     if "cache_dir" not in meta:

@@ -214,20 +214,24 @@ def canonical(short: str) -> str | None:
     return _lookup(config_path()).get(_squash(short))
 
 
-def resolve_space(name: str, option: str = "spaces.working") -> str:
+def resolve_space(name: str, option: str = "spaces.working",
+                  path: str | os.PathLike | None = None) -> str:
     """A colour space name, alias or role -> the config's colour space name.
 
     Case, spaces and punctuation do not matter (``ACEScct``, ``acescct``,
     ``display-p3``, ``Display P3``, ``lin_rec709``). Raises OptionError
-    (one line, naming the setting ``option`` and listing the valid names) otherwise.
+    (one line, naming the setting ``option``, after ``path`` when the name was read
+    from a file, and listing the valid names) otherwise.
     """
     text = str(name).strip()
     found = _lookup(config_path()).get(_squash(text)) if text else None
     if found is None:
         shorts = ", ".join(s for s in SHORT_ALIASES if canonical(s))
+        head = "" if path is None else f"{path}: "
         raise OptionError(
-            f"{option}: unknown colour space {name!r} in OpenColorIO config {config_path()} "
-            f"(valid: {', '.join(space_names())}; or {shorts})", option)
+            f"{head}{{{option}}}: unknown colour space {name!r} in OpenColorIO config "
+            f"{config_path()} (valid: {', '.join(space_names())}; or {shorts})", option,
+            path=path)
     return found
 
 
@@ -243,7 +247,7 @@ def default_working_space() -> str:
     found = canonical("srgb")
     if found is None:
         raise InputError(f"OpenColorIO config {config_path()} has no sRGB-encoded Rec.709 "
-                         "space; name one with spaces.working", fields=("spaces.working",))
+                         "space; name one with {spaces.working}", fields=("spaces.working",))
     return found
 
 

@@ -65,7 +65,7 @@ class GradeReport:
     def fit_start(self) -> FitStart:
         """How the weights were found (:class:`~wbcgrade.color.outcome.FitStart`: a palette
         fit's UNIFORM, VERTEX_REFIT, VERTEX or GIVEN; the look builder's PRESET, SCENE or
-        LOOK; SAVED for a saved grade, ``--look``; SHARED for a series' grade whose fit
+        LOOK; SAVED for a saved grade; SHARED for a series' grade whose fit
         the caller holds)."""
         return self.fit.fit_start if self.fit is not None else FitStart.SHARED
 
@@ -81,10 +81,10 @@ class GradeReport:
         return self.grade.outcome
 
     def as_dict(self) -> dict:
-        """JSON-friendly summary (a few KB: no colour map; ``apply --save-grade FILE``
-        writes the grade itself). The style weights and the fit's loss are there for a
-        palette grade only (under ``"outcome"`` and, as before, ``"weights"``/``"loss"``):
-        a look grade has none that mean anything."""
+        """JSON-friendly summary (a few KB: no colour map;
+        :func:`~wbcgrade.color.saved_grade.save_grade` writes the grade itself). The style
+        weights and the fit's loss are there for a palette grade only (under ``"outcome"``
+        and, as before, ``"weights"``/``"loss"``): a look grade has none that mean anything."""
         outcome = self.outcome
         palette = outcome is None or outcome.palette is not None
         info = {k: v for k, v in dict(self.grade.info).items() if palette or k != "fit"}

@@ -21,7 +21,7 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
    map and regrain), ``grade.lut(size, encoding)`` is the grade as a LUT
    table in any encoding of its working space.
 
-A series (``batch --consistent``, a video shot) takes the same path with a
+A series (a batch's ``consistent`` grade, a video shot) takes the same path with a
 pooled histogram (:class:`wbcgrade.color.histogram.PaletteSum`).
 
 Other ways of building the map plug in with :func:`register_map_builder`:
@@ -265,7 +265,7 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     options.check_styles(len(styles.names))
     name = options.map.builder
     if name not in MAP_BUILDERS:
-        raise OptionError(f"map.builder must be one of {', '.join(MAP_BUILDERS)}",
+        raise OptionError(f"{{map.builder}} must be one of {', '.join(MAP_BUILDERS)}",
                           "map.builder")
     def palette_grade(other: GradeOptions, stage: Callable[[str], None]):
         return grade_histograms(photo, styles, other, encoding, None, stage)
@@ -349,7 +349,7 @@ def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
     The source follows how the builder found the map (``fit.start``: "preset",
     "scene", "look", else a palette fit); the look's strength and match come
     from the look builder's diagnostics (``grade.info["look"]``). ``blend``: the
-    ``--strength`` asked for (default the grade's own blend; above 1 the map was scaled).
+    ``map.strength`` asked for (default the grade's own blend; above 1 the map was scaled).
     """
     blend = float(grade.strength if blend is None else blend)
     look = dict(grade.info.get("look", {}) or {})

@@ -164,8 +164,8 @@ class HistogramCache:
     VERSION = 1
 
     def __init__(self, folder: str | os.PathLike | None = None, enabled: bool = True):
-        """``folder`` None: the command's (``cache.command_cache``: ``--cache-dir``, else
-        the default), and off when the command said ``--no-cache``."""
+        """``folder`` None: the command's (``cache.command_cache``: its cache folder, else
+        the default), and off when the command turned caching off."""
         if folder is None:
             folder, on = command_cache()
             enabled = enabled and on
@@ -210,7 +210,7 @@ class HistogramCache:
 class PaletteSum:
     """Running sum of normalised histograms whose result does not depend on their order.
 
-    The palette of a series (``batch --consistent``, a video shot): every
+    The palette of a series (a batch's ``consistent`` grade, a video shot): every
     photo counts once whatever its size. Each histogram is rounded to fixed
     point (2^-40 of its mass) and summed in int64, so photos may arrive in
     any order (process pool, Dask) and the pooled palette, hence the series

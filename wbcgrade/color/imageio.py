@@ -208,7 +208,8 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
         raise InputError(
             f"{path}: {width}x{height} is {count / 1e6:.1f} megapixels, over the "
             f"limit of {limit / 1e6:g} megapixels (a decompression bomb?); raise it with "
-            f"--max-image-pixels {count} if the file is trusted")
+            f"{{max_image_pixels}} {count} if the file is trusted",
+            fields=("max_image_pixels",))
     if count * WORK_BYTES_PER_PIXEL <= MEMORY_BUDGET or limit != DEFAULT_MAX_IMAGE_PIXELS:
         return
     try:
@@ -221,7 +222,8 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
             f"{size / 1e3:.0f} kB file could take up to "
             f"{count * WORK_BYTES_PER_PIXEL / 2 ** 30:.1f} GB to grade, more than the "
             f"{MEMORY_BUDGET / 2 ** 30:.1f} GB budget (a decompression bomb?); give "
-            f"--max-image-pixels {count} if the file is trusted")
+            f"{{max_image_pixels}} {count} if the file is trusted",
+            fields=("max_image_pixels",))
 
 
 def _open_input(path: Path, config: oiio.ImageSpec | None = None) -> oiio.ImageInput:
@@ -480,7 +482,7 @@ def _output_spec(like: Image, height: int, width: int, nchannels: int,
 
 
 # ------------------------------------------------------------------ output options
-#: ``--bit-depth`` choices.
+#: ``bit_depth`` choices.
 BIT_DEPTHS = ("8", "16", "float")
 _DEPTH_TYPES = {"8": oiio.UINT8, "16": oiio.UINT16, "float": oiio.FLOAT}
 #: The bit depths each writer holds (OpenImageIO format names); a format not
@@ -514,9 +516,9 @@ class WriteOptions:
 
         if self.quality is not None and (isinstance(self.quality, bool)
                                          or not 1 <= int(self.quality) <= 100):
-            raise OptionError("quality must be between 1 and 100", "quality")
+            raise OptionError("{quality} must be between 1 and 100", "quality")
         if self.bit_depth is not None and self.bit_depth not in BIT_DEPTHS:
-            raise OptionError(f"bit_depth must be one of {', '.join(BIT_DEPTHS)}", "bit_depth")
+            raise OptionError(f"{{bit_depth}} must be one of {', '.join(BIT_DEPTHS)}", "bit_depth")
 
 
 #: JPEG quality of an output when the input's cannot be read (not a JPEG, or no tables).
@@ -583,7 +585,7 @@ def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
                            "16" if raw else _depth_of(like.spec.format))
     if held is not None and wanted not in held:
         if strict:
-            raise OptionError(f"bit_depth {bit_depth}: {format_name.upper()} files hold "
+            raise OptionError(f"{{bit_depth}} {bit_depth}: {format_name.upper()} files hold "
                               f"{' or '.join(held)} only", "bit_depth")
         order = {"8": 0, "16": 1, "float": 2}
         wanted = min(held, key=lambda d: abs(order[d] - order[wanted]))

@@ -4,7 +4,7 @@
 it. One ``.cube`` writer (:func:`write_cube`, colour-science's "Resolve
 Cube" text written here, without importing colour-science: ``LUT_3D_SIZE``,
 domain [0, 1], red varying fastest) serves every
-command: ``apply --lut``, ``batch --consistent --lut``, ``video --lut`` and
+command (a photo's LUT, a series' LUT, a clip's LUT) and
 the temporary LUTs ffmpeg's ``lut3d`` reads. :func:`write_grade_lut` writes
 a grade in a colour encoding and names its spaces in the header:
 
@@ -52,7 +52,7 @@ __all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_gr
            "lut_format_of",
            "DEFAULT_LUT_SIZE", "LUT_FORMATS", "SHAPER_SIZE", "write_checked_lut"]
 
-#: ``--lut-format`` choices and the file name ending each needs.
+#: ``lut_format`` choices and the file name ending each needs.
 LUT_FORMATS = {"cube": ".cube", "clf": ".clf"}
 #: Entries of the ``.cube`` shaper (sampled evenly over its input range, as
 #: Resolve reads it; see :func:`shaper_table` for its accuracy).
@@ -73,13 +73,13 @@ def color_map_to_lut(color_map: np.ndarray, size: int = DEFAULT_LUT_SIZE,
 
 def check_lut_size(size: int) -> int:
     """``size`` when it is a usable LUT size (2 to 129 nodes per axis, as a colour map's
-    ``--map-size``: a 256^3 table took 3.9 GB to bake), else OptionError. Checked whether or
+    ``map.size``: a 256^3 table took 3.9 GB to bake), else OptionError. Checked whether or
     not a LUT is asked for (an option given is an option checked)."""
     from wbcgrade.limits import MAX_MAP_SIZE
 
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) \
             or not 2 <= size <= MAX_MAP_SIZE:
-        raise OptionError(f"lut_size must be between 2 and {MAX_MAP_SIZE}", "lut_size")
+        raise OptionError(f"{{lut_size}} must be between 2 and {MAX_MAP_SIZE}", "lut_size")
     return int(size)
 
 
@@ -108,7 +108,7 @@ def cube_text(table: np.ndarray, title: str = "wbcgrade", comments: list[str] | 
     form byte for byte (``TITLE``, ``# `` comments, ``LUT_3D_SIZE``, rows with red varying
     fastest, 6 decimals; with a shaper 7 decimals, ``LUT_1D_SIZE``,
     ``LUT_1D_INPUT_RANGE`` and the header of :func:`_shaper_header_for_readers`),
-    written here: colour-science takes one to two seconds to import, on every ``--lut``
+    written here: colour-science takes one to two seconds to import, on every LUT written
     run (tests/color/test_lut_interop.py compares the two).
     """
     table = np.asarray(table, dtype=np.float64)
@@ -178,7 +178,7 @@ def lut_format_of(path: str | os.PathLike, lut_format: str | None = None,
     for name, ending in LUT_FORMATS.items():
         if suffix == ending:
             return name
-    raise OptionError(f"{path}: {option} file name must end in "
+    raise OptionError(f"{path}: {{{option}}} file name must end in "
                       f"{' or '.join(LUT_FORMATS.values())} (the format follows the ending)",
                       option, path=path)
 
@@ -190,10 +190,10 @@ def check_lut_path(path: str | os.PathLike, lut_format: str | None = None) -> Pa
     if lut_format is None:
         lut_format = lut_format_of(path)
     if lut_format not in LUT_FORMATS:
-        raise OptionError(f"lut_format must be one of {', '.join(LUT_FORMATS)}", "lut_format")
+        raise OptionError(f"{{lut_format}} must be one of {', '.join(LUT_FORMATS)}", "lut_format")
     suffix = LUT_FORMATS[lut_format]
     if path.suffix.lower() != suffix:
-        raise OptionError(f"{path}: LUT file name must end in {suffix} (lut_format "
+        raise OptionError(f"{path}: LUT file name must end in {suffix} ({{lut_format}} "
                           f"{lut_format})", "lut_format", path=path)
     return path
 
@@ -281,7 +281,7 @@ def check_clf_support():
     try:
         import PyOpenColorIO as ocio
     except ImportError:
-        raise OptionError("lut_format clf needs the opencolorio package: "
+        raise OptionError("{lut_format} clf needs the opencolorio package: "
                           "pip install 'wbcgrade[ocio]' (or: pip install opencolorio)",
                           "lut_format") from None
     return ocio

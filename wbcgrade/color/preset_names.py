@@ -1,6 +1,6 @@
 """Where presets are found: the shipped presets' names and files, and a NAME_OR_FILE resolved.
 
-Light (no numpy): the command line checks ``--preset NAME`` before the colour
+Light (no numpy): the command line checks a preset's name before the colour
 library loads. :mod:`wbcgrade.color.presets` re-exports these.
 """
 
@@ -48,7 +48,7 @@ def resolve_preset(name_or_path: str) -> Path:
     if name_or_path in shipped:
         return shipped[name_or_path]
     folded = {name.casefold(): path for name, path in shipped.items()}
-    if name_or_path.casefold() in folded:  # `--preset Warm`: names are lower case
+    if name_or_path.casefold() in folded:  # "Warm": names are lower case
         return folded[name_or_path.casefold()]
     if candidate.suffix or os.sep in name_or_path:
         raise InputError(f"{name_or_path}: no such preset file")
@@ -57,5 +57,6 @@ def resolve_preset(name_or_path: str) -> Path:
         raise InputError(
             f"preset {name_or_path!r} ({RETIRED_PRESETS[name_or_path]}) is no longer shipped: "
             f"the shipped presets are looks ({names}); for palettes of your own photos "
-            "use --style DIR or `wbcgrade preset build DIR -o FILE.npz`")
+            "use {style_dir} DIR or `wbcgrade preset build DIR -o FILE.npz`",
+            fields=("style_dir",))
     raise InputError(f"unknown preset {name_or_path!r} (shipped presets: {names})")

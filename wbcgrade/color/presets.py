@@ -14,7 +14,7 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
   were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid; a compact
-  file (``save_preset(compact=True)``, ``preset build --compact``) stores
+  file (``save_preset(compact=True)``, the preset builder's ``compact``) stores
   uint16 indices (n <= 40) and float16 values scaled by 2**15, which the
   reader takes as they are (each style is renormalised on load);
 - ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``;
@@ -65,7 +65,7 @@ from wbcgrade.color.preset_names import (
     resolve_preset,
     shipped_presets_dir,
 )
-from wbcgrade.errors import InputError, OptionError
+from wbcgrade.errors import InputError, OptionError, Worded
 from wbcgrade.limits import (
     MAX_MAP_SIZE,
     check_histogram_cells,
@@ -257,7 +257,7 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
 
     check_memory(f"the histograms of {len(files)} style photos at {bins}^3 bins",
                  len(files) * bins ** 3 * 8 * 2, where,  # (x2: what the grade makes of them)
-                 "use fewer style photos or fewer --bins")
+                 "use fewer style photos or fewer {transfer.bins}", ("transfer.bins",))
     stack = np.empty((len(files), bins, bins, bins))
 
     space = f"{config_path()}|{working}"
@@ -343,11 +343,12 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     """
     folder = Path(folder)
     if folder.is_file():
-        raise InputError(f"{folder}: is a file; --style takes a folder of style photos (put "
-                         "the photo in a folder of its own, or use --preset)")
+        raise InputError(f"{folder}: is a file; {{style_dir}} takes a folder of style photos "
+                         "(put the photo in a folder of its own, or use {preset})",
+                         fields=("style_dir", "preset"))
     if folder.exists() and not folder.is_dir():
-        raise InputError(f"{folder}: is not a folder (a FIFO or device?); --style takes a "
-                         "folder of style photos")
+        raise InputError(f"{folder}: is not a folder (a FIFO or device?); {{style_dir}} takes "
+                         "a folder of style photos", fields=("style_dir",))
     if not folder.is_dir():
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
@@ -381,9 +382,9 @@ def check_preset_width(width: float) -> float:
     try:
         value = float(width)
     except (TypeError, ValueError):
-        raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
+        raise OptionError(f"{{width}} must be a number of bins, got {width!r}", "width") from None
     if not (np.isfinite(value) and 0 < value <= MAX_KERNEL_WIDTH):
-        raise OptionError(f"width must be a positive, finite number of bins (at most "
+        raise OptionError(f"{{width}} must be a positive, finite number of bins (at most "
                           f"{MAX_KERNEL_WIDTH:g}), got {width}", "width")
     return value
 
@@ -668,7 +669,7 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
     (:func:`styles_in_space`).
     """
     if (source.style_dir is None) == (source.preset is None):
-        raise OptionError("give exactly one of style_dir DIR or preset NAME_OR_FILE",
+        raise OptionError("give exactly one of {style_dir} DIR or {preset} NAME_OR_FILE",
                           "style_dir", also=("preset",))
     if source.preset is not None:
         styles = load_preset(resolve_preset(source.preset))
@@ -680,17 +681,18 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
                              on_image=on_image)
 
 
-def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> str | None:
+def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> Worded | None:
     """The one-line warning for a look (``mode`` "look") taken from a folder of a single
     style photo, or None: one photo cannot show which of its colours are the look."""
     if source.style_dir is None or mode != "look" or len(styles.names) != 1:
         return None
-    return (f"{source.style_dir}: one style photo; its look is told from what it shows by "
-            "that photo alone (add photos that share the look for a surer one, or use "
-            "--mode palette to move the colours towards this photo's)")
+    return Worded(f"{source.style_dir}: one style photo; its look is told from what it shows "
+                  "by that photo alone (add photos that share the look for a surer one, or "
+                  "use {map.builder} palette to move the colours towards this photo's)",
+                  ("map.builder",))
 
 
-#: ``--natural`` naming the shipped natural palettes alone (a batch otherwise also reads
+#: ``map.natural`` naming the shipped natural palettes alone (a batch otherwise also reads
 #: its own photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
 SHIPPED_NATURALS = "shipped"
 
@@ -701,7 +703,7 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
     the natural palettes (``natural``: a preset file or a folder of photos; else, or
     :data:`SHIPPED_NATURALS`, the shipped ones) and a saved ``look``'s file.
 
-    They are inputs: an output naming one of them is refused, ``--overwrite`` or not
+    They are inputs: an output naming one of them is refused, ``overwrite`` or not
     (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
     adds nothing (loading it reports that).
     """

@@ -8,7 +8,7 @@ with the camera's own matrix, with no gamma, no automatic brightening and
 pixels (1.0 = the sensor's white level), which
 :func:`wbcgrade.color.imageio.read_image` tags with the AP0 chromaticities,
 so the rest of the pipeline treats it like a linear EXR: its input space is ACES2065-1 and, unless
-``--working-space`` says otherwise, it is graded in ACEScct
+``spaces.working`` says otherwise, it is graded in ACEScct
 (:data:`RAW_WORKING_SPACE`), whose cube holds the whole range of a raw.
 
 Writing: float outputs (EXR, float TIFF) keep the linear ACES2065-1
@@ -39,7 +39,7 @@ RAW_SUFFIXES = frozenset({
     ".rw2", ".pef", ".srw", ".raw", ".rwl", ".3fr", ".fff", ".iiq", ".erf", ".kdc", ".dcr",
     ".mrw", ".mos", ".mef", ".x3f", ".gpr",
 })
-#: The working space of a raw photo when ``--working-space`` is not given.
+#: The working space of a raw photo when ``spaces.working`` is not given.
 RAW_WORKING_SPACE = "acescct"
 #: What ``batch`` writes a raw photo as (no writer makes raw files): a 16-bit TIFF.
 RAW_OUTPUT_SUFFIX = ".tif"

@@ -164,7 +164,7 @@ def identity_map(bins: int, dtype=np.float32) -> np.ndarray:
 
 
 def blend_map(color_map: np.ndarray, strength: float) -> np.ndarray:
-    """``(1 - t) x + t T(x)`` on the grid: the map for ``--strength t``."""
+    """``(1 - t) x + t T(x)`` on the grid: the map at strength t (``map.strength``)."""
     return (1.0 - strength) * identity_map(color_map.shape[0], color_map.dtype) \
         + strength * color_map
 
@@ -240,7 +240,7 @@ def _trilinear_chunk(colors: np.ndarray, table: np.ndarray, strength: float) -> 
 
 
 def keep_lightness(color_map: np.ndarray, encoding) -> np.ndarray:
-    """A colour map that keeps each input colour's Oklab lightness (``--preserve-luminance``).
+    """A colour map that keeps each input colour's Oklab lightness (``map.preserve_luminance``).
 
     Every node's output takes the hue and chroma (Oklab a, b) of the map and
     the lightness L of the node's own colour, both computed in the working

@@ -4,8 +4,8 @@ A grade is its colour map (a lattice LUT in the working space), the working
 space, the strength and the regrain settings (:class:`~wbcgrade.color.grading.Grade`).
 Two files hold one:
 
-- the JSON that ``wbcgrade apply --json`` prints (or a file holding only its
-  ``"saved_grade"`` entry, :func:`look_dict`): the map itself (16-bit codes,
+- the JSON :func:`save_grade` writes (:func:`look_dict`; or a report's JSON,
+  whose ``"saved_grade"`` entry holds it): the map itself (16-bit codes,
   within 0.002/255, compressed: ~150 kB for 33³), its working space,
   strength, regrain settings, style names and weights. Applied again it
   gives the same photo, regrain included;
@@ -17,7 +17,7 @@ Two files hold one:
   sRGB-encoded Rec.709, the pixel values of ordinary photos) and are
   sampled on a 33³ lattice. A LUT has no regrain settings: the caller
   chooses (``apply`` regrains by default, as a fresh grade does, so a
-  ``.cube`` from ``apply --lut`` gives back the same photo).
+  ``.cube`` of :func:`~wbcgrade.color.lut.write_grade_lut` gives back the same photo).
 
 :func:`load_look` reads either into a Grade; ``grade.apply`` then moves the
 pixels through it (the remap and regrain stages of a fresh grade, no
@@ -166,7 +166,7 @@ def look_dict(grade: Grade) -> dict:
 
 
 def save_grade(path: str | os.PathLike, grade: Grade, overwrite: bool = False) -> Path:
-    """Write ``grade`` as JSON (what :func:`load_look` and ``--look`` read), with its
+    """Write ``grade`` as JSON (what :func:`load_look` reads), with its
     outcome when it has one, atomically; an existing file only with ``overwrite``."""
     entry = look_dict(grade)
     if grade.outcome is not None:
@@ -260,7 +260,7 @@ def _header_space(lines: list[str]) -> str | None:
 def _resolve(name: str, path: Path, option: str) -> str:
     from wbcgrade.color.colorspace import resolve_space
 
-    return resolve_space(name, f"{path}: {option}")
+    return resolve_space(name, option, path)
 
 
 def _plain_cube(path: Path) -> tuple[np.ndarray, str | None] | None:
@@ -473,8 +473,8 @@ def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
 
 
 def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grade:
-    """Read a saved grade: a ``.json`` from ``apply --json`` (or its ``"saved_grade"``), or a
-    3-D LUT (:data:`LOOK_SUFFIXES`).
+    """Read a saved grade: a ``.json`` from :func:`save_grade` (or a report's JSON: its
+    ``"saved_grade"``), or a 3-D LUT (:data:`LOOK_SUFFIXES`).
 
     Parameters
     ----------
@@ -502,7 +502,8 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
             else data
         if not isinstance(entry, dict) or entry.get("format") != LOOK_FORMAT:
             raise InputError(f"{path}: holds no saved grade (write one with "
-                             "`wbcgrade apply PHOTO ... --save-grade grade.json`)")
+                             "`wbcgrade apply PHOTO ... {save_grade} grade.json`)",
+                             fields=("save_grade",))
         grade = look_from_dict(entry, str(path))
         space = grade.working or default_working_space()
         return Grade(grade.names, grade.weights, grade.color_map,
@@ -518,7 +519,7 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     if space is not None:
         space = _resolve(space, path, "the space its header names")
     elif working_space:
-        space = _resolve(working_space, path, "--working-space")
+        space = _resolve(working_space, path, "spaces.working")
     else:
         space = default_working_space()
     kind = suffix.lstrip(".")
@@ -548,7 +549,7 @@ def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
                        report_dir=None):
     """The options of a batch (or clip) graded with a saved grade: its working space.
 
-    ``--consistent``, ``--lut`` and ``--report`` make no sense with one (it is
+    ``consistent``, ``lut`` and ``report_dir`` make no sense with one (it is
     already one grade for every photo, and there are no styles): OptionError.
     """
     from dataclasses import replace
@@ -558,7 +559,7 @@ def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
     for given, name in ((consistent, "consistent"), (lut is not None, "lut"),
                         (report_dir is not None, "report_dir")):
         if given:
-            raise OptionError(f"{name} does not go with look (a saved grade is already one "
+            raise OptionError(f"{{{name}}} does not go with {{look}} (a saved grade is already one "
                               "grade for every photo, with no styles to report)", name,
                               also=("look",))
     return replace(options, spaces=replace(options.spaces, working=look.working))

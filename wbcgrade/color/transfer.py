@@ -83,7 +83,8 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
         overrelaxation=overrelaxation, fine_overrelaxation=fine_overrelaxation)
     color_map = barycentric_projection(result, geometry)
     if not np.all(np.isfinite(color_map)):
-        raise NumericalError("the colour map is not finite (try a larger --transfer-width)")
+        raise NumericalError("the colour map is not finite (try a larger {transfer.width})",
+                             fields=("transfer.width",))
     return np.clip(color_map, 0.0, 1.0).astype(np.float32), result
 
 

@@ -329,7 +329,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     progress = progress or Progress()
     saved = isinstance(source, Grade)
     if saved and report_dir is not None:
-        raise OptionError("report_dir needs styles to compare with; a saved look has none",
+        raise OptionError("{report_dir} needs styles to compare with; a saved {look} has none",
                           "report_dir", also=("look",))
     reads = source_files(None if saved else source, options.map.natural,
                          source if saved else None)

@@ -83,8 +83,8 @@ def tagged_space(info: VideoInfo) -> tuple[str | None, str]:
 
         raise InputError(
             f"{info.path}: tagged {HDR_TRANSFERS[transfer]} ({tags}), but OpenColorIO config "
-            f"{config_path()} has no colour space for it; name one with spaces.input NAME "
-            f"(or spaces.input srgb to grade the code values as sRGB)",
+            f"{config_path()} has no colour space for it; name one with {{spaces.input}} NAME "
+            f"(or {{spaces.input}} srgb to grade the code values as sRGB)",
             fields=("spaces.input", "spaces.input"), path=info.path)
     return found, f"tags {tags}"
 

@@ -109,17 +109,17 @@ class VideoSettings:
     def __post_init__(self) -> None:
         """Validated once, when made (OptionError naming the field)."""
         if self.codec not in CODECS:
-            raise OptionError(f"codec must be one of {', '.join(CODECS)}", "codec")
+            raise OptionError(f"{{codec}} must be one of {', '.join(CODECS)}", "codec")
         if not 0 <= self.crf <= 51:
-            raise OptionError("crf must be between 0 and 51", "crf")
+            raise OptionError("{crf} must be between 0 and 51", "crf")
         check_lut_size(self.lut_size)
         if self.blend < 0:
-            raise OptionError("blend must be 0 or more", "blend")
+            raise OptionError("{blend} must be 0 or more", "blend")
         if not (np.isfinite(self.sample_every) and self.sample_every > 0):
-            raise OptionError("sample_every must be a positive number of seconds",
+            raise OptionError("{sample_every} must be a positive number of seconds",
                               "sample_every")
         if not 0 < self.cut_threshold < 1:
-            raise OptionError("cut_threshold must be between 0 and 1", "cut_threshold")
+            raise OptionError("{cut_threshold} must be between 0 and 1", "cut_threshold")
 
 
 @dataclass
@@ -223,11 +223,11 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
     output = Path(output) if output is not None else default_output(source, settings.codec)
     encoder, containers = CODECS[settings.codec]
     if output.suffix.lower() not in containers:
-        raise OptionError(f"{output}: codec {settings.codec} needs one of "
+        raise OptionError(f"{output}: {{codec}} {settings.codec} needs one of "
                           f"{', '.join(containers)} as the output's extension", "codec",
                           path=output)
     if lut is not None and Path(lut).suffix.lower() != ".cube":
-        raise OptionError(f"{lut}: lut file name must end in .cube", "lut", path=lut)
+        raise OptionError(f"{lut}: {{lut}} file name must end in .cube", "lut", path=lut)
     output, lut = plan_outputs([output, lut], [source, *reads], overwrite, make_folders=True)
     return source, output, lut
 

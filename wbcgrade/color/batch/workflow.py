@@ -51,7 +51,7 @@ from wbcgrade.color.lut import (
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
 from wbcgrade.color.workflow import Progress
-from wbcgrade.errors import InputError, OptionError
+from wbcgrade.errors import InputError, OptionError, Worded
 
 __all__ = ["BatchProgress", "grade_folder", "report_folder", "report_batch_output",
            "recorded_batch"]
@@ -145,7 +145,7 @@ def _check_jobs(jobs: int) -> None:
     from wbcgrade._executor import MAX_JOBS
 
     if not 1 <= jobs <= MAX_JOBS:
-        raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
+        raise OptionError(f"{{jobs}} must be between 1 and {MAX_JOBS}", "jobs")
 
 
 def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> None:
@@ -242,7 +242,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     check_lut_size(lut_size)
     if lut is not None:
         if not consistent:
-            raise OptionError("lut needs consistent (one grade for the series); per-photo "
+            raise OptionError("{lut} needs {consistent} (one grade for the series); per-photo "
                               "LUTs come from `wbcgrade apply --lut`", "lut",
                               also=("consistent",))
         lut_format = lut_format_of(lut, lut_format)
@@ -254,7 +254,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
                       exclude=[report_dir] if report_dir else [], reads=reads)
     if not plan.tasks and not plan.done and not plan.refused:
         raise InputError(f"{in_dir}: no photos found" + ("" if recursive else
-                                                         " (use recursive for sub-folders)"),
+                                                         " (use {recursive} for sub-folders)"),
                          fields=("recursive",), path=in_dir)
     if lut is not None:
         lut = plan_outputs([lut], [*(t.source for t in plan.all_photos), *reads], overwrite)[0]
@@ -292,9 +292,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
-            progress.warn(f"{len(plan.done)} finished output(s) in {out_dir} were made with other "
-                          f"settings ({', '.join(changed[:4])}); they are kept — use --overwrite "
-                          "to redo them")
+            progress.warn(Worded(f"{len(plan.done)} finished output(s) in {out_dir} were made "
+                                 f"with other settings ({', '.join(changed[:4])}); they are "
+                                 "kept — use {overwrite} to redo them", ("overwrite",)))
         if plan.tasks or recorded_batch(out_dir) is None:
             # recorded before the first photo: a run stopped at any moment leaves outputs
             # whose settings are known (a rerun and `report OUT` read them)
@@ -461,8 +461,8 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
             and not _same_styles(source, recorded_styles):
         raise InputError(f"{folder} holds the graded copies of a `wbcgrade batch` with the styles "
                          f"{recorded_styles}; its report reads the batch's results: leave out "
-                         "--style/--preset (or report the photos' own folder to grade them "
-                         "again)")
+                         "{style_dir}/{preset} (or report the photos' own folder to grade them "
+                         "again)", fields=("style_dir", "preset"))
     ignored = _given_options(options, flat) if options is not None else []
     if ignored and progress.warn:
         progress.warn(f"{', '.join(ignored[:4])}: ignored, the report shows the batch's grades "
@@ -470,7 +470,7 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     plan = plan_batch(folder, None, recursive=recursive, exclude=[report_dir])
     if not plan.tasks:
         raise InputError(f"{folder}: no graded photos found"
-                         + ("" if recursive else " (use recursive for sub-folders)"),
+                         + ("" if recursive else " (use {recursive} for sub-folders)"),
                          fields=("recursive",), path=folder)
     _plan_report(report_dir, plan, overwrite)
     if progress.planned:

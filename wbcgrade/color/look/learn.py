@@ -883,7 +883,7 @@ def _output_kind(output: Path) -> str:
         return "json"
     if suffix in (".cube", ".clf"):
         return suffix[1:]
-    raise OptionError(f"{output}: output must be written as .cube, .clf or .json "
+    raise OptionError(f"{output}: {{output}} must be written as .cube, .clf or .json "
                       "(the ending names the format)", "output", path=output)
 
 
