@@ -201,8 +201,8 @@ def test_python_examples_use_only_the_colour_front_door():
         modules, names = color_names_used(code)
         assert modules <= {"wbcgrade.color"}, f"{where}: imports {sorted(modules)}"
         assert names <= set(wc.__all__), f"{where}: uses {sorted(names - set(wc.__all__))}"
-    assert color_names_used("from wbcgrade.color.grading import grade_array")[0] \
-        == {"wbcgrade.color.grading"}
+    assert color_names_used("from wbcgrade.color.grade.grading import grade_array")[0] \
+        == {"wbcgrade.color.grade.grading"}
     assert color_names_used("import wbcgrade.color as wc\nwc.resolve_preset('x')")[1] \
         == {"resolve_preset"}
 

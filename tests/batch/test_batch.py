@@ -13,9 +13,9 @@ import OpenImageIO as oiio
 import pytest
 
 from tests.conftest import run_cli
-from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
-from wbcgrade.color.fit import fit_weights
+from wbcgrade.batch import BatchContext, plan_batch, run_batch
 from wbcgrade.color.options import FitOptions, GradeOptions
+from wbcgrade.color.palette.fit import fit_weights
 from wbcgrade.color.presets import load_preset, load_style_folder
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -157,7 +157,7 @@ def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     result = _batch(series, styles, tmp_path / "out", "--consistent", "--report", str(report),
                     "--lut", str(lut), "--lut-size", "9", "--no-regrain")
     assert result.exit_code == 0, result.output
-    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.mapping.lut import read_cube
 
     assert read_cube(lut).size == 9
     entries = json.loads((report / "report.json").read_text())["photos"]
@@ -175,8 +175,8 @@ def test_the_series_lut_is_baked_for_the_photos_input_space(folders, tmp_path):
     """``--consistent --lut`` with ``--input-space``: the LUT takes the photos' own code
     values (it was baked for sRGB whatever the input space was), so applying it to a
     photo gives the batch's graded photo."""
-    from wbcgrade.color.lut import read_cube
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.lut import read_cube
+    from wbcgrade.color.mapping.remap import apply_color_map
 
     photos, styles = folders
     series = tmp_path / "series"
@@ -300,7 +300,7 @@ def test_fit_is_never_worse_than_the_best_single_style():
 def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
     import contextlib
 
-    import wbcgrade.color.workflow as workflow
+    import wbcgrade.photos.workflow as workflow
 
     photos, styles = folders
     out = tmp_path / "out"
@@ -329,8 +329,8 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_report_hook_for_apply(folders, tmp_path):
-    from wbcgrade.color.report import report_from_grade
-    from wbcgrade.color.workflow import grade_file, plan_photo
+    from wbcgrade.photos.report import report_from_grade
+    from wbcgrade.photos.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10)
@@ -355,10 +355,10 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
     evaluated a second time for the report."""
     from dataclasses import replace
 
-    import wbcgrade.color.builders as builders
-    import wbcgrade.color.fit as fit_module
-    from wbcgrade.color.report import report_from_grade
-    from wbcgrade.color.workflow import grade_file, plan_photo
+    import wbcgrade.color.grade.builders as builders
+    import wbcgrade.color.palette.fit as fit_module
+    from wbcgrade.photos.report import report_from_grade
+    from wbcgrade.photos.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10,
@@ -383,7 +383,7 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
 
 
 def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
-    import wbcgrade.color.sheet as sheet
+    import wbcgrade.photos.sheet as sheet
     from wbcgrade.color.histogram import soft_histogram
 
     colours = np.array([[0.9, 0.1, 0.1]] * 3 + [[0.1, 0.2, 0.8]])

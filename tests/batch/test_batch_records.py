@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from tqdm import tqdm
 
-import wbcgrade.color.builders as builders
-import wbcgrade.color.grading as grading
+import wbcgrade.color.grade.builders as builders
+import wbcgrade.color.grade.grading as grading
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 
 
@@ -133,8 +133,8 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
     """A batch stopped during its first photo has recorded its settings already (a rerun
     that grades nothing and `report OUT` read them); a settings record nested 200,000
     deep is replaced, not a traceback on every rerun."""
-    import wbcgrade.color.batch.task as task
-    from wbcgrade.color.batch.settings import SETTINGS_FILE
+    import wbcgrade.batch.task as task
+    from wbcgrade.batch.settings import SETTINGS_FILE
 
     photos, styles = folders
     out = tmp_path / "out"
@@ -145,11 +145,11 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
         raise KeyboardInterrupt
 
     monkeypatch.setattr(task, "run_task", stopped)
-    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", stopped)
+    monkeypatch.setattr("wbcgrade.batch.run.run_task", stopped)
     result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert result.exit_code == 130, result.output
     assert (out / SETTINGS_FILE).is_file()
-    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", run_task)
+    monkeypatch.setattr("wbcgrade.batch.run.run_task", run_task)
     (out / SETTINGS_FILE).write_text("[" * 200_000 + "]" * 200_000)
     result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert result.exit_code == 0 and "Traceback" not in result.output, result.output
@@ -162,7 +162,7 @@ def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, fol
                                                                    monkeypatch, cli):
     """A report stopped after its sheets (before index.html) is finished by the next run
     without --overwrite; a finished report is still never replaced without it."""
-    import wbcgrade.color.report as report
+    import wbcgrade.photos.report as report
 
     photos, styles = folders
     out = tmp_path / "rep"

@@ -206,7 +206,7 @@ def test_relative_paths_work_with_a_scheduler(shoot, tmp_path):
 
 
 def test_outputs_are_checked_before_any_work(shoot, tmp_path, monkeypatch):
-    import wbcgrade.color.batch.task as batch
+    import wbcgrade.batch.task as batch
 
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")

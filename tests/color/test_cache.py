@@ -1,4 +1,4 @@
-"""The colour domain's disk cache (wbcgrade.color.cache): any file name, a damaged entry
+"""The colour domain's disk cache (wbcgrade.color.io.cache): any file name, a damaged entry
 rebuilt, concurrent writers, and a folder that cannot be written."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbcgrade.color import cache
 from wbcgrade.color.histogram import HistogramCache, soft_histogram
+from wbcgrade.color.io import cache
 from wbcgrade.color.options import DEFAULT_MAX_PIXELS
 
 REPO = Path(__file__).resolve().parents[2]

@@ -13,7 +13,7 @@ from PIL import Image as PILImage
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
 from tests.conftest import run_cli as run
-from wbcgrade.color.imageio import DEFAULT_JPEG_QUALITY, jpeg_quality, read_image, write_image
+from wbcgrade.color.io.images import DEFAULT_JPEG_QUALITY, jpeg_quality, read_image, write_image
 from wbcgrade.color.presets import (
     StyleSource,
     load_style_folder,
@@ -89,7 +89,7 @@ def test_a_jpeg_keeps_the_input_quality_and_about_its_size(tmp_path, quality):
     # asked for: as asked; a PNG's pixels into a JPEG: the default quality
     png = tmp_path / "in.png"
     PILImage.open(source).save(png)
-    from wbcgrade.color.imageio import WriteOptions
+    from wbcgrade.color.io.images import WriteOptions
 
     assert jpeg_quality(write_image(tmp_path / "q.jpg", image.pixels, image,
                                     options=WriteOptions(quality=70))) == 70
@@ -132,8 +132,8 @@ def test_a_batch_run_again_with_its_report_folder_resumes_it(tmp_path):
 def test_a_look_grade_gets_a_look_report(tmp_path):
     """A preset's look: the report shows the look (a colour chart before and after), its
     source, strength and each photo's change; no empty weight table, no preset photos."""
-    from wbcgrade.color.batch.records import read_record
-    from wbcgrade.color.report import look_chart, sheet_from_files
+    from wbcgrade.batch.records import read_record
+    from wbcgrade.photos.report import look_chart, sheet_from_files
 
     photos = tmp_path / "photos"
     photos.mkdir()

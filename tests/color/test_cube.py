@@ -1,4 +1,4 @@
-"""The ``.cube`` writer (wbcgrade.color.lut.cube_text) writes colour-science's "Resolve
+"""The ``.cube`` writer (wbcgrade.color.mapping.lut.cube_text) writes colour-science's "Resolve
 Cube" text byte for byte, without importing colour-science on a ``--lut`` run."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbcgrade.color.lut import _shaper_header_for_readers, cube_text, write_cube
+from wbcgrade.color.mapping.lut import _shaper_header_for_readers, cube_text, write_cube
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-import wbcgrade.color.fit as fitting
+import wbcgrade.color.palette.fit as fitting
 from wbcgrade.color.options import FitOptions
 
 

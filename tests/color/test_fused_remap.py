@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import wbcgrade.color.regrain as regrain_module
-from wbcgrade.color.regrain import regrain, regrain_map
-from wbcgrade.color.remap import apply_color_map, block_means_mapped, identity_map
+import wbcgrade.color.mapping.regrain as regrain_module
+from wbcgrade.color.mapping.regrain import regrain, regrain_map
+from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped, identity_map
 
 
 def _image_and_map(rng, h=61, w=47, size=9):
@@ -135,7 +135,7 @@ def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, ra
 # (wbcgrade.core.numpy_first); both give the same float32 numbers, bit for bit.
 
 def _kernel_trilinear(colors, table, strength):
-    from wbcgrade.color.remap import _trilinear
+    from wbcgrade.color.mapping.remap import _trilinear
     from wbcgrade.core import in_bands
 
     out = np.empty_like(colors)
@@ -146,7 +146,7 @@ def _kernel_trilinear(colors, table, strength):
 @pytest.mark.parametrize("size", [2, 9, 33])
 @pytest.mark.parametrize("strength", [1.0, 0.37, 0.0])
 def test_trilinear_numpy_twin_is_the_kernel_bit_for_bit(rng, size, strength):
-    from wbcgrade.color.remap import _trilinear_numpy
+    from wbcgrade.color.mapping.remap import _trilinear_numpy
 
     colors = (rng.random((20000, 3)) * 1.4 - 0.2).astype(np.float32)  # > 1 chunk, out of range
     colors[:64] = np.round(colors[:64] * 4) / 4  # nodes, 0 and 1 exactly

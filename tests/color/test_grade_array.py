@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from tests.color.conftest import SAMPLES, small_copy, write_array
-from wbcgrade.color.grading import grade_array
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.grade.grading import grade_array
+from wbcgrade.color.io.images import read_image
 from wbcgrade.color.options import FitOptions, GradeOptions, MapOptions, TransferOptions
 from wbcgrade.color.presets import load_style_folder
-from wbcgrade.color.workflow import grade_photo
 from wbcgrade.errors import InputError
+from wbcgrade.photos.workflow import grade_photo
 
 
 @pytest.fixture(scope="module")

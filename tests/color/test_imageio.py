@@ -8,7 +8,7 @@ import pytest
 
 from tests.color.conftest import SAMPLES, write_array
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.imageio import orient, read_image, write_image
+from wbcgrade.color.io.images import orient, read_image, write_image
 from wbcgrade.errors import InputError
 
 
@@ -186,7 +186,7 @@ def test_interrupted_write_removes_the_temporary_file(tmp_path, monkeypatch):
 
 def test_unwritable_output_folder(tmp_path, monkeypatch):
     image = read_image(write_array(tmp_path / "a.png", np.zeros((4, 4, 3)), "uint8"))
-    monkeypatch.setattr("wbcgrade.color.imageio.os.access", lambda *args: False)
+    monkeypatch.setattr("wbcgrade.color.io.images.os.access", lambda *args: False)
     with pytest.raises(InputError, match="not writable"):
         write_image(tmp_path / "out.png", image.pixels, image)
 
@@ -196,7 +196,7 @@ def test_colour_under_partial_alpha_survives_read_and_write(tmp_path, ext):
     """Colour is handled unassociated: not darkened by alpha, not lost where alpha is 0."""
     import OpenImageIO as oiio
 
-    from wbcgrade.color.imageio import read_image, write_image
+    from wbcgrade.color.io.images import read_image, write_image
 
     alpha = np.array([[1.0, 128 / 255], [0.0, 10 / 255]], np.float32)
     colour = np.zeros((2, 2, 4), np.float32)
@@ -265,7 +265,7 @@ def test_only_regular_files_are_read(tmp_path):
     import sys
 
     os.mkfifo(tmp_path / "pipe.jpg")
-    code = ("from wbcgrade.color.imageio import read_image\n"
+    code = ("from wbcgrade.color.io.images import read_image\n"
             "for name in ('pipe.jpg', '/dev/zero'):\n"
             "    try:\n        read_image(name)\n"
             "    except ValueError as exc:\n        print(exc)\n")

@@ -1,11 +1,11 @@
-"""The lattice readers of wbcgrade.color.remap agree: lattice to lattice (separable),
+"""The lattice readers of wbcgrade.color.mapping.remap agree: lattice to lattice (separable),
 at scattered colours (float64, any channels) and the pixels' kernel (LUT export)."""
 
 import numpy as np
 import pytest
 
 from wbcgrade.color.histogram import grid_points
-from wbcgrade.color.remap import (
+from wbcgrade.color.mapping.remap import (
     apply_color_map,
     identity_map,
     interpolate_lattice,

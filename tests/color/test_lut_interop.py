@@ -26,7 +26,7 @@ import pytest
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
 from tests.conftest import run_cli
 from wbcgrade.color import colorspace as cs
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.io.images import read_image
 
 ocio = pytest.importorskip("PyOpenColorIO")
 FAST = [*FAST_ARGS, "--map-size", "17", "--no-regrain"]

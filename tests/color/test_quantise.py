@@ -6,8 +6,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from wbcgrade.color._quantise import HALVES_TO_EVEN, to_uint8
-from wbcgrade.color.imageio import read_image, write_image
+from wbcgrade.color.io._quantise import HALVES_TO_EVEN, to_uint8
+from wbcgrade.color.io.images import read_image, write_image
 
 
 def _oiio_uint8(values: np.ndarray) -> np.ndarray:
@@ -64,7 +64,7 @@ def test_an_8_bit_file_holds_what_openimageio_would_have_written(tmp_path, rng, 
 def test_to_uint8_numpy_twin_is_the_kernel(rng, half_even):
     """A small photo's first 8-bit write runs numpy (no numba compiler to load): the same
     code values as the compiled kernel."""
-    from wbcgrade.color._quantise import _to_uint8, _to_uint8_numpy
+    from wbcgrade.color.io._quantise import _to_uint8, _to_uint8_numpy
     from wbcgrade.core import in_bands
 
     values = np.concatenate([_probe_values(), rng.uniform(-0.2, 1.2, 50_000).astype(np.float32)])

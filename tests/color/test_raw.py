@@ -12,9 +12,9 @@ import pytest
 from tests.color.conftest import FAST_ARGS
 from tests.conftest import run_cli as run
 from wbcgrade.color.colorspace import ColorEncoding, canonical
-from wbcgrade.color.imageio import read_image
-from wbcgrade.color.lut import write_cube
-from wbcgrade.color.remap import identity_map
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping.lut import write_cube
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.errors import InputError
 
 tifffile = pytest.importorskip("tifffile")

@@ -10,7 +10,7 @@ import pytest
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
 from tests.conftest import run_cli as run
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.io.images import read_image
 
 
 def codes(path) -> np.ndarray:
@@ -97,8 +97,8 @@ def test_batch_takes_a_look(tmp_path, photo, style_dir):
 
 @pytest.mark.slow
 def test_video_takes_a_look(tmp_path):
-    from wbcgrade.color.lut import write_cube
-    from wbcgrade.color.remap import identity_map
+    from wbcgrade.color.mapping.lut import write_cube
+    from wbcgrade.color.mapping.remap import identity_map
 
     darker = write_cube(tmp_path / "darker.cube", identity_map(9) * np.float32(0.5))
     out = tmp_path / "clip.mp4"
@@ -109,8 +109,8 @@ def test_video_takes_a_look(tmp_path):
 
 
 def test_cube_files_read_back_as_written(tmp_path, rng):
-    from wbcgrade.color.lut import write_cube
-    from wbcgrade.color.saved_grade import SAMPLED_LUT_SIZE, load_look
+    from wbcgrade.color.grade.saved_grade import SAMPLED_LUT_SIZE, load_look
+    from wbcgrade.color.mapping.lut import write_cube
 
     table = rng.random((5, 5, 5, 3))
     path = write_cube(tmp_path / "r.cube", table)
@@ -133,7 +133,7 @@ def test_lut_readers_take_3dl_and_a_bom_and_refuse_degenerate_domains(tmp_path):
     import itertools
     import zlib
 
-    from wbcgrade.color.saved_grade import load_look
+    from wbcgrade.color.grade.saved_grade import load_look
     from wbcgrade.errors import InputError
 
     n = 17
@@ -169,9 +169,9 @@ def test_lut_readers_take_3dl_and_a_bom_and_refuse_degenerate_domains(tmp_path):
 
 def test_a_saved_grade_with_an_unusable_regrain_eps_is_refused(tmp_path):
     """``"regrain": [0.005, 1e300]`` made an all-black photo with exit 0."""
-    from wbcgrade.color.grading import Grade
-    from wbcgrade.color.remap import identity_map
-    from wbcgrade.color.saved_grade import load_look, look_dict
+    from wbcgrade.color.grade.grading import Grade
+    from wbcgrade.color.grade.saved_grade import load_look, look_dict
+    from wbcgrade.color.mapping.remap import identity_map
     from wbcgrade.errors import InputError
 
     entry = look_dict(Grade(("a",), np.ones(1), identity_map(3), working="sRGB",
@@ -185,8 +185,8 @@ def test_a_saved_grade_with_an_unusable_regrain_eps_is_refused(tmp_path):
 
 def test_json_nested_200000_deep_is_one_line_not_a_traceback(tmp_path):
     """A saved grade or a preset header of 200,000 nested brackets raised RecursionError."""
+    from wbcgrade.color.grade.saved_grade import load_look
     from wbcgrade.color.presets import load_preset, shipped_presets_dir
-    from wbcgrade.color.saved_grade import load_look
     from wbcgrade.errors import InputError
 
     deep = "[" * 200_000 + "]" * 200_000

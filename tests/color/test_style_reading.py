@@ -13,7 +13,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-import wbcgrade.color.imageio as imageio
+import wbcgrade.color.io.images as imageio
 import wbcgrade.color.look.scene as scene
 import wbcgrade.color.presets as presets
 from tests.color.conftest import SAMPLES, STYLE_PHOTOS, small_copy, write_array
@@ -215,7 +215,7 @@ def test_a_thumbnail_of_a_big_picture_is_the_filtered_resize_of_it():
     """Block-averaged first (a big photo's filtered resize took seconds), the thumbnail
     still matches OpenImageIO's filtered resize of the whole picture: a smooth gradient
     within 1/255, a fine stripe pattern averaged to its mean grey, not aliased."""
-    from wbcgrade.color.sheet import PRESHRINK, thumbnail
+    from wbcgrade.photos.sheet import PRESHRINK, thumbnail
 
     height, width = 1203, 1807  # not multiples of the blocks
     y, x = np.mgrid[0:height, 0:width].astype(np.float32)

@@ -10,15 +10,15 @@ import pytest
 from tests.color.conftest import SAMPLES, grade_of, small_copy, write_array
 from wbcgrade.color._colour import colour
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grading import Grade
+from wbcgrade.color.grade.grading import Grade
 from wbcgrade.color.histogram import grid_points, image_histogram
-from wbcgrade.color.imageio import read_image, write_image
+from wbcgrade.color.io.images import read_image, write_image
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, load_style_folder
-from wbcgrade.color.remap import identity_map
 from wbcgrade.color.weights import parse_weights
-from wbcgrade.color.workflow import graded_pixels
 from wbcgrade.errors import InputError
+from wbcgrade.photos.workflow import graded_pixels
 
 
 def _lab(rgb):
@@ -108,7 +108,7 @@ def test_default_transfer_kernel_keeps_colourfulness(scene):
 @pytest.mark.slow
 def test_given_weights_skip_the_fit(scene, fast_options):
     rgb, style_dir = scene
-    from wbcgrade.color.grading import grade_encoded
+    from wbcgrade.color.grade.grading import grade_encoded
 
     styles = load_style_folder(style_dir, fast_options.transfer.bins)
     given = GradeOptions(fast_options.fit, fast_options.transfer, weights=parse_weights("0,1,0,1"))
@@ -152,7 +152,7 @@ def test_render_grey_and_alpha(tmp_path, rng):
 
 def test_coarse_to_fine_plan_matches_a_single_grid_solve(rng):
     from wbcgrade.color.histogram import soft_histogram
-    from wbcgrade.color.transfer import color_transfer_map
+    from wbcgrade.color.palette.transfer import color_transfer_map
 
     photo = soft_histogram(rng.random((4000, 3)) * 0.6, 40)
     target = soft_histogram(0.4 + rng.random((4000, 3)) * 0.6, 40)
@@ -173,7 +173,7 @@ def test_coarse_to_fine_plan_matches_a_single_grid_solve(rng):
 
 def test_the_palette_rebins_only_the_styles_it_uses(rng):
     """A palette of one style re-binned all S style histograms to the palette grid."""
-    from wbcgrade.color.transfer import palette_barycenter
+    from wbcgrade.color.palette.transfer import palette_barycenter
 
     hists = rng.random((4, 16, 16, 16)) ** 6
     hists /= hists.sum(axis=(1, 2, 3), keepdims=True)

@@ -88,9 +88,9 @@ def test_one_memory_budget_for_archives_pixels_luts_and_style_sets(tmp_path, mon
     import OpenImageIO as oiio
 
     from wbcgrade import limits
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.grade.saved_grade import load_look
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.color.presets import load_preset, load_style_folder, shipped_presets_dir
-    from wbcgrade.color.saved_grade import load_look
 
     bomb = io.BytesIO()
     with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as archive:

@@ -100,7 +100,7 @@ class _Group(click.Group):
             click.echo(f"Error: {_message(exc)}", err=True)
             sys.exit(status)
         finally:  # the command's --cache-dir/--no-cache end with it (in-process runs too)
-            cache = sys.modules.get("wbcgrade.color.cache")
+            cache = sys.modules.get("wbcgrade.color.io.cache")
             if cache is not None:
                 cache.set_command_cache()
 

@@ -128,7 +128,7 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     options, source = take_grading_options(kwargs, photo=photo)
     encode = take_write_options(kwargs)
     from wbcgrade.cli._progress import bar_callbacks, progress_bar
-    from wbcgrade.color.workflow import Progress, apply_photo
+    from wbcgrade.photos.workflow import Progress, apply_photo
 
     learning = time.perf_counter() if kwargs.get("originals_dir") else None
     look = take_look(ctx, look_path, kwargs, options)

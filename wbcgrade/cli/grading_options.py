@@ -87,8 +87,8 @@ def check_photo(photo: str, missing: str = "no such file") -> None:
 
 
 def take_write_options(kwargs: dict):
-    """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.imageio.WriteOptions`."""
-    from wbcgrade.color.imageio import WriteOptions
+    """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.io.images.WriteOptions`."""
+    from wbcgrade.color.io.images import WriteOptions
 
     return WriteOptions(quality=kwargs.pop("quality", None),
                         bit_depth=kwargs.pop("bit_depth", None))
@@ -129,7 +129,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
                               "--originals")
         look = _learned_look(style_dir, originals, options)
     else:
-        from wbcgrade.color.saved_grade import load_look
+        from wbcgrade.color.grade.saved_grade import load_look
 
         for name, flag in (("style_dir", "--style"), ("preset", "--preset")):
             if given(name):
@@ -141,7 +141,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     if regrain_given or not is_json:
         changes["regrain"] = options.regrain.settings
     if given("strength"):
-        from wbcgrade.color.grading import strengthened
+        from wbcgrade.color.grade.grading import strengthened
 
         changes["color_map"], changes["strength"] = strengthened(look.color_map,
                                                                  options.map.strength)
@@ -163,9 +163,9 @@ def _learned_look(style_dir: str, originals: str, options):
 def set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
     import sys
 
-    if value is None and "wbcgrade.color.imageio" not in sys.modules:
+    if value is None and "wbcgrade.color.io.images" not in sys.modules:
         return value  # not given, and no limit set yet: nothing to undo (and no numpy loaded)
-    from wbcgrade.color.imageio import set_max_image_pixels
+    from wbcgrade.color.io.images import set_max_image_pixels
 
     set_max_image_pixels(value)  # None: back to $WBCGRADE_MAX_IMAGE_PIXELS or the default
     return value
@@ -443,12 +443,12 @@ def take_grading_options(kwargs: dict, photo: str | None = None) -> tuple:
     if photo is not None:
         check_photo(photo)
     if values["preset"] is not None and values["style_dir"] is None and not saved_look:
-        from wbcgrade.color.preset_names import resolve_preset
+        from wbcgrade.color.io.preset_names import resolve_preset
 
         resolve_preset(values["preset"])  # an unknown name, answered before numpy loads
     # numpy and OpenImageIO load here, once the options and PHOTO are known to be valid
-    from wbcgrade.color.cache import set_command_cache
     from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.io.cache import set_command_cache
     from wbcgrade.color.presets import StyleSource
 
     set_command_cache(values["cache_dir"], not values["no_cache"])  # --natural DIR's too

@@ -23,22 +23,22 @@ from __future__ import annotations
 
 import importlib
 
-#: Front-door name -> (module under ``wbcgrade.color``, its name there).
+#: Front-door name -> (module, its name there).
 _FRONT_DOOR = {
-    "grade_array": ("grading", "grade_array"),
-    "apply_photo": ("workflow", "apply_photo"),
-    "load_preset": ("presets", "load_preset"),
-    "load_style_folder": ("presets", "load_style_folder"),
-    "load_grade": ("saved_grade", "load_look"),
-    "save_grade": ("saved_grade", "save_grade"),
-    "read_image": ("imageio", "read_image"),
-    "write_image": ("imageio", "write_image"),
-    "write_lut": ("lut", "write_grade_lut"),
-    "GradeOptions": ("options", "GradeOptions"),
-    "Grade": ("grading", "Grade"),
-    "GradeOutcome": ("outcome", "GradeOutcome"),
-    "StyleSet": ("presets", "StyleSet"),
-    "Image": ("imageio", "Image"),
+    "grade_array": ("wbcgrade.color.grade.grading", "grade_array"),
+    "apply_photo": ("wbcgrade.photos.workflow", "apply_photo"),
+    "load_preset": ("wbcgrade.color.presets", "load_preset"),
+    "load_style_folder": ("wbcgrade.color.presets", "load_style_folder"),
+    "load_grade": ("wbcgrade.color.grade.saved_grade", "load_look"),
+    "save_grade": ("wbcgrade.color.grade.saved_grade", "save_grade"),
+    "read_image": ("wbcgrade.color.io.images", "read_image"),
+    "write_image": ("wbcgrade.color.io.images", "write_image"),
+    "write_lut": ("wbcgrade.color.mapping.lut", "write_grade_lut"),
+    "GradeOptions": ("wbcgrade.color.options", "GradeOptions"),
+    "Grade": ("wbcgrade.color.grade.grading", "Grade"),
+    "GradeOutcome": ("wbcgrade.color.outcome", "GradeOutcome"),
+    "StyleSet": ("wbcgrade.color.presets", "StyleSet"),
+    "Image": ("wbcgrade.color.io.images", "Image"),
 }
 
 __all__ = list(_FRONT_DOOR)
@@ -50,7 +50,7 @@ def __getattr__(name: str):
         module, attribute = _FRONT_DOOR[name]
     except KeyError:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), attribute)
+    value = getattr(importlib.import_module(module), attribute)
     globals()[name] = value
     return value
 

@@ -332,7 +332,7 @@ def _peak_key(linear: str, working: str, path: str) -> str:
 
 
 def _peaks_file():
-    from wbcgrade.color.cache import default_cache_dir
+    from wbcgrade.color.io.cache import default_cache_dir
 
     return default_cache_dir() / "peaks.json"
 
@@ -524,7 +524,7 @@ class ColorEncoding:
         """The encoding of a decoded photo (``input_space`` None: what the file says;
         ``working_space`` None: ACEScct for a raw photo, else sRGB-encoded Rec.709)."""
         if working_space is None and image.format_name == "raw":
-            from wbcgrade.color.raw import RAW_WORKING_SPACE
+            from wbcgrade.color.io.raw import RAW_WORKING_SPACE
 
             working_space = RAW_WORKING_SPACE
         if input_space:

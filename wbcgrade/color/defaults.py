@@ -1,6 +1,6 @@
 """Default settings of the colour library, in one light module (no numpy, no OpenImageIO).
 
-:mod:`wbcgrade.color.imageio`, :mod:`wbcgrade.color.lut` and
+:mod:`wbcgrade.color.io.images`, :mod:`wbcgrade.color.mapping.lut` and
 :mod:`wbcgrade.color.presets` use these and re-export them; the command line
 reads them here, so that the command line's help and its mistakes import no numerics.
 """

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.cache import (
+from wbcgrade.color.io.cache import (
     command_cache,
     default_cache_dir,
     entry_path,
@@ -157,7 +157,7 @@ class HistogramCache:
     bins, the subsampling limit and the colour spaces (``space``: the
     OpenColorIO config and the working space the colours were converted into),
     so an edited photo is re-read. Entries are small sparse ``.npz`` files at the
-    top of the cache folder (:mod:`wbcgrade.color.cache`: a damaged entry is
+    top of the cache folder (:mod:`wbcgrade.color.io.cache`: a damaged entry is
     rebuilt, one that cannot be written is one warning; caching never makes a run fail).
     """
 

@@ -219,7 +219,7 @@ class MapOptions:
     Attributes
     ----------
     builder : how the map is built (a name registered with
-        :func:`wbcgrade.color.grading.register_map_builder`; :data:`MODES`:
+        :func:`wbcgrade.color.grade.grading.register_map_builder`; :data:`MODES`:
         "look" (the default): the look the style set shares, or the look read
         off the style photos that show the photo's own scene
         (:mod:`wbcgrade.color.look.scene`); "palette": the fitted barycenter
@@ -229,7 +229,7 @@ class MapOptions:
     size : nodes per axis of the smooth colour map (the grade is this lattice
         LUT; a LUT written at the same size holds it exactly).
     smoothness, stiffness : curvature and first-difference penalties of the
-        smooth map fit (:mod:`wbcgrade.color.smooth_map`); both 0: the raw
+        smooth map fit (:mod:`wbcgrade.color.palette.smooth_map`); both 0: the raw
         barycentric projection on the transfer grid is the map (the paper's).
     monotone : make the map's output luma non-decreasing in each input
         channel (the working space's luma, :attr:`ColorEncoding.luma_weights`).
@@ -270,7 +270,7 @@ class MapOptions:
 
 @dataclass(frozen=True)
 class RegrainOptions:
-    """The regrain step (:func:`wbcgrade.color.remap.regrain`).
+    """The regrain step (:func:`wbcgrade.color.mapping.remap.regrain`).
 
     Attributes
     ----------

@@ -437,7 +437,7 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
         the displacement over the cube's colours (a 17^3 lattice).
     """
     from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.remap import apply_color_map
 
     if hist is None:
         colors, mass = grid_points(17), None

@@ -58,8 +58,8 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import header_pixels, read_image
-from wbcgrade.color.preset_names import (
+from wbcgrade.color.io.images import header_pixels, read_image
+from wbcgrade.color.io.preset_names import (
     RETIRED_PRESETS,
     list_presets,
     resolve_preset,
@@ -234,7 +234,7 @@ class _Budget:
 def _megapixels(path: Path) -> float:
     """A photo's size from its header; a raw file (demosaiced in full) counts as the whole
     :data:`READ_MEGAPIXELS`."""
-    from wbcgrade.color.raw import is_raw
+    from wbcgrade.color.io.raw import is_raw
 
     return READ_MEGAPIXELS if is_raw(path) else header_pixels(path) / 1e6
 
@@ -630,7 +630,7 @@ def look_in_space(look: np.ndarray, source: str, working: str,
     (size, size, size, 3) float32 lattice in ``working``.
     """
     from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.remap import apply_color_map
 
     size = int(size or look.shape[0])
     nodes = grid_points(size).astype(np.float32)
@@ -693,7 +693,7 @@ def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> Worde
 
 
 #: ``map.natural`` naming the shipped natural palettes alone (a batch otherwise also reads
-#: its own photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
+#: its own photos: :func:`wbcgrade.batch.workflow.own_photos_content`).
 SHIPPED_NATURALS = "shipped"
 
 

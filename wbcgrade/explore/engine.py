@@ -154,13 +154,13 @@ class _FastGrader:
     """Colour maps on small grids for the live preview (module docstring).
 
     Holds what every move shares: the styles re-binned to the preview grid and
-    the smooth map's factored system (:class:`wbcgrade.color.smooth_map.SmoothMapFitter`:
+    the smooth map's factored system (:class:`wbcgrade.color.palette.smooth_map.SmoothMapFitter`:
     the photo's histogram and the lattice do not change while exploring).
     """
 
     def __init__(self, styles, photo_hist: np.ndarray, base, encoding) -> None:
         from wbcgrade.color.options import as_options
-        from wbcgrade.color.smooth_map import SmoothMapFitter
+        from wbcgrade.color.palette.smooth_map import SmoothMapFitter
 
         self.styles = styles
         self.photo_hist = photo_hist
@@ -181,8 +181,8 @@ class _FastGrader:
         """(9, 9, 9, 3) map at ``weights`` (S,) with ``settings``' other options: the
         palette, the plan (solved cold, so the same weights give the same map) to
         ``tol`` (default :data:`PREVIEW_SINKHORN_TOL`), the smooth map, the finish."""
-        from wbcgrade.color.grading import finish_map
-        from wbcgrade.color.transfer import transport_map
+        from wbcgrade.color.grade.grading import finish_map
+        from wbcgrade.color.palette.transfer import transport_map
 
         options = _options(self.base, settings,
                            **({} if tol is None else {"sinkhorn_tol": tol}))
@@ -254,7 +254,7 @@ class Session:
         return self._look_and_fit()[0]
 
     def _look_and_fit(self):
-        from wbcgrade.color.grading import grade_encoded
+        from wbcgrade.color.grade.grading import grade_encoded
 
         with self._look_lock:
             if self._look is None:
@@ -269,7 +269,7 @@ class Session:
         map's change scaled, as ``apply`` does), its outcome judged at that strength."""
         from dataclasses import replace
 
-        from wbcgrade.color.grading import grade_outcome, strengthened
+        from wbcgrade.color.grade.grading import grade_outcome, strengthened
 
         grade, fit = self._look_and_fit()
         if strength == 1.0:
@@ -285,8 +285,8 @@ class Session:
         its outcome judged on this photo as ``apply --weights`` judges it)."""
         from dataclasses import replace
 
-        from wbcgrade.color.fit import FitSummary
-        from wbcgrade.color.grading import Grade, grade_outcome, strengthened
+        from wbcgrade.color.grade.grading import Grade, grade_outcome, strengthened
+        from wbcgrade.color.palette.fit import FitSummary
 
         weights = np.asarray(settings.weights, dtype=np.float64)
         color_map, blend = strengthened(np.asarray(color_map, dtype=np.float32),
@@ -318,8 +318,8 @@ class Session:
         beside it too, ``<stem>_explore_<n>.grade.json`` (what ``apply --look`` reads;
         :func:`grade_file_of` names it).
         """
-        from wbcgrade.color.workflow import default_output_path, grade_file, plan_photo
         from wbcgrade.errors import InputError
+        from wbcgrade.photos.workflow import default_output_path, grade_file, plan_photo
 
         folder = Path(folder)
         suffix = default_output_path(self.photo).suffix
@@ -348,7 +348,7 @@ class Session:
     def fit(self, callback: Callable[[int, np.ndarray, float], None] | None = None
             ) -> FitResult:
         """Fit the weights as ``apply`` does (never worse than one style alone)."""
-        from wbcgrade.color.fit import fit_weights
+        from wbcgrade.color.palette.fit import fit_weights
 
         fit = self.base.fit
         summary = fit_weights(self.hists[fit.bins], self.styles.at_bins(fit.bins), fit,
@@ -367,7 +367,7 @@ class Session:
     def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
         """The LUT the browser applies: the fast map on the exact map's lattice plus
         ``offset`` (exact minus fast map at the nearest known weights), clipped."""
-        from wbcgrade.color.remap import resample_lattice
+        from wbcgrade.color.mapping.remap import resample_lattice
 
         lut = resample_lattice(fast_map, self.lut_size)
         if offset is not None:
@@ -413,7 +413,7 @@ class Session:
         ``what`` the grade is and the ``command`` that reproduces it) in a temporary
         folder; nothing is written beside the photo.
         """
-        from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
+        from wbcgrade.color.mapping.lut import LUT_FORMATS, write_grade_lut
 
         stem = Path(self.photo).stem
         name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
@@ -445,7 +445,7 @@ def _publish_grade(path: Path, grade) -> None:
     import json
 
     from wbcgrade._publish import publish_bytes
-    from wbcgrade.color.saved_grade import look_dict
+    from wbcgrade.color.grade.saved_grade import look_dict
 
     publish_bytes(path, json.dumps(look_dict(grade), indent=1).encode("utf-8"),
                   overwrite=False)
@@ -461,7 +461,7 @@ def blend_looks(first, second, amount: float, strength: float, names: tuple[str,
     the map at blend 1 the page applies; the photo's mean change in /255, None without
     ``photo_hist``).
     """
-    from wbcgrade.color.grading import Grade, strengthened
+    from wbcgrade.color.grade.grading import Grade, strengthened
     from wbcgrade.color.outcome import map_change
 
     if first.working != second.working or first.color_map.shape != second.color_map.shape:
@@ -486,7 +486,7 @@ def shipped_presets() -> list[str]:
 
 def clf_available() -> bool:
     """Whether CLF LUTs can be written (the ``opencolorio`` package is installed)."""
-    from wbcgrade.color.lut import check_clf_support
+    from wbcgrade.color.mapping.lut import check_clf_support
     from wbcgrade.errors import InputError
 
     try:
@@ -520,9 +520,9 @@ def load_photo(photo: str, preview_side: int = PREVIEW_SIDE) -> LoadedPhoto:
     """Read the photo as ``apply`` does (colour spaces, histograms); nothing is written."""
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import thumbnail
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.errors import InputError
+    from wbcgrade.photos.sheet import thumbnail
 
     if not Path(photo).is_file():
         raise InputError(f"{photo}: " + ("is a folder, not a photo" if Path(photo).is_dir()
@@ -559,7 +559,7 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     from wbcgrade.color.histogram import HistogramCache
     from wbcgrade.color.look.scene import matching_hook
     from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
-    from wbcgrade.color.report import style_pictures
+    from wbcgrade.photos.report import style_pictures
 
     if loaded is None:
         loaded = load_photo(photo, preview_side)
@@ -613,7 +613,7 @@ class ExactGrader:
         ``apply``'s own grade path (``color.grading.grade_histograms``) on the
         photo's histograms, with the weights read from the command line's text.
         """
-        from wbcgrade.color.grading import PhotoHistograms, grade_histograms
+        from wbcgrade.color.grade.grading import PhotoHistograms, grade_histograms
 
         options = _options(self.base, settings, weights=_apply_weights(settings))
         photo = PhotoHistograms(self.hists[options.fit.bins],
@@ -623,7 +623,7 @@ class ExactGrader:
 
     def reference(self, settings: Settings) -> dict:
         """The exact map of ``settings`` and its offset from the fast map there."""
-        from wbcgrade.color.remap import resample_lattice
+        from wbcgrade.color.mapping.remap import resample_lattice
 
         exact = self.color_map(settings)
         fast = self._fast.solve(settings, _apply_weights(settings))
@@ -642,7 +642,7 @@ class ExactGrader:
         weights = np.asarray(_apply_weights(settings))
         weights = weights / weights.sum()
         tol = self.base.transfer.tol
-        from wbcgrade.color.remap import resample_lattice
+        from wbcgrade.color.mapping.remap import resample_lattice
 
         centre = resample_lattice(self._fast.solve(settings, weights, tol), self.lut_size)
         out = np.empty((len(weights), *centre.shape), dtype=np.float32)
@@ -654,7 +654,7 @@ class ExactGrader:
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
-        from wbcgrade.color.fit import fit_problem, loss_at
+        from wbcgrade.color.palette.fit import fit_problem, loss_at
 
         fit = self.base.fit
         if self._loss_problem is None:

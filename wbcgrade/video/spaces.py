@@ -22,7 +22,7 @@ values, whatever space the grade was fitted in:
   exactly as for photos (one :class:`~wbcgrade.color.colorspace.ColorEncoding`,
   :func:`clip_encoding`).
 - The LUT is *baked in the input encoding*
-  (:meth:`wbcgrade.color.grading.Grade.lut` with the clip's encoding):
+  (:meth:`wbcgrade.color.grade.grading.Grade.lut` with the clip's encoding):
   lattice point x (input code values in [0, 1]) -> working space (outside
   its unit cube: clipped for the map, the rest carried past it as a
   residual) -> the grade's colour map -> back into the input space -> x';

@@ -11,7 +11,7 @@
 3. Per shot (the whole clip by default), the sampled frames' palettes are
    pooled as ``batch --consistent`` pools photos (every frame counts once;
    :class:`~wbcgrade.color.histogram.PaletteSum`) and take the one grade
-   path of photos: :func:`~wbcgrade.color.grading.grade_histograms`
+   path of photos: :func:`~wbcgrade.color.grade.grading.grade_histograms`
    (vertex-checked fit, palette, smooth colour map). The grade is its LUT:
    there is no regrain (a LUT sees one pixel at a time; ffmpeg applies it).
 4. The LUTs are written as ``.cube`` files and scheduled over the frames
@@ -30,7 +30,7 @@ converted from the clip's input space (``opts.input_space``, else its tags)
 into the working space (``opts.working_space``) before their histograms are
 taken, the styles are converted into the working space, and each shot's LUT
 is baked in the input encoding (what ``lut3d`` sees:
-:meth:`wbcgrade.color.grading.Grade.lut`). The ``video`` command's
+:meth:`wbcgrade.color.grade.grading.Grade.lut`). The ``video`` command's
 workflow (outputs planned, styles loaded, the clip graded, the report
 written) is :func:`wbcgrade.video.command.grade_clip`.
 """
@@ -52,14 +52,14 @@ import numpy as np
 
 from wbcgrade._publish import atomic_path, is_unlocked, make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
+from wbcgrade.color.grade.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
 from wbcgrade.color.histogram import PaletteSum
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
+from wbcgrade.color.mapping.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet, styles_in_space
-from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError, WbcgradeError
+from wbcgrade.photos.workflow import Progress
 from wbcgrade.video.defaults import (
     ALPHA_CODECS,
     CODECS,
@@ -410,7 +410,7 @@ def _lut_chain(segments: list[Segment], names: list[str]) -> str:
 
 @dataclass(frozen=True)
 class VideoProgress(Progress):
-    """:class:`~wbcgrade.color.workflow.Progress` with ``frames(pass_name, done, total)``
+    """:class:`~wbcgrade.photos.workflow.Progress` with ``frames(pass_name, done, total)``
     during the decoding ("scan") and encoding ("encode") passes."""
 
     frames: Callable[[str, int, int], None] | None = None
@@ -567,8 +567,8 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
-            from wbcgrade.color.grading import grade_outcome
-            from wbcgrade.color.saved_grade import look_fit
+            from wbcgrade.color.grade.grading import grade_outcome
+            from wbcgrade.color.grade.saved_grade import look_fit
 
             grade, fit = look, look_fit(look)
             grade = replace(grade, outcome=grade_outcome(grade, fit, None))

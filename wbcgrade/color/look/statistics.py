@@ -46,7 +46,7 @@ __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "Stat
            "QUANTILES", "BANDS", "MIN_OWN_PHOTOS"]
 
 #: Rec.709 luma weights on encoded values (the look family's lightness; toning is a
-#: function of it: :data:`wbcgrade.color.remap.TONE_LUMA`).
+#: function of it: :data:`wbcgrade.color.mapping.remap.TONE_LUMA`).
 LUMA = np.array(REC709_LUMA)
 #: Levels of the luma quantiles compared (black and white levels at the ends).
 QUANTILES = np.array([0.005, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,

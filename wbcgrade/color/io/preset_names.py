@@ -16,7 +16,7 @@ __all__ = ["shipped_presets_dir", "list_presets", "RETIRED_PRESETS", "resolve_pr
 
 def shipped_presets_dir() -> Path:
     """Folder of the presets installed with the package."""
-    return Path(__file__).resolve().parent / "presets_data"
+    return Path(__file__).resolve().parents[1] / "presets_data"
 
 
 def list_presets() -> list[tuple[str, Path]]:

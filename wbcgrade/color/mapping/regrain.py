@@ -29,8 +29,8 @@ import hashlib
 
 import numpy as np
 
+from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
-from wbcgrade.color.remap import apply_color_map, block_means_mapped
 from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
@@ -576,7 +576,7 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     The same numbers (``follow`` 0); on large images (solved on a subsampled copy) the
     graded image is only needed block-averaged, so the colour map and the
     block means (of the input too) are one pass
-    (:func:`wbcgrade.color.remap.block_means_mapped`) and the full-size graded
+    (:func:`wbcgrade.color.mapping.remap.block_means_mapped`) and the full-size graded
     image is never made (two passes and ~12 bytes a pixel saved).
 
     ``follow``: in [0, 1], how far the input's grain (variations under sqrt(eps)) follows

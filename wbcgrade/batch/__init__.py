@@ -22,18 +22,18 @@ cluster are made absolute first (its workers run in another folder).
 Series mode (``consistent``): every photo's histogram is read first (also
 those already done, so a resumed series gets the same grade), the pooled
 palette takes the one grade path once
-(:func:`wbcgrade.color.grading.grade_histograms`), and each task only applies it.
+(:func:`wbcgrade.color.grade.grading.grade_histograms`), and each task only applies it.
 
 Modules: ``plan`` (which photos, where their outputs go, checked;
 stale temporaries), ``settings`` (what the outputs depend on, recorded in
 the output folder), ``results`` (``FileResult``, ``BatchResult``), ``task``
-(one photo, in a worker: :func:`wbcgrade.color.workflow.grade_file`),
+(one photo, in a worker: :func:`wbcgrade.photos.workflow.grade_file`),
 ``run`` (``run_batch``), ``workflow`` (the ``batch`` and ``report``
 commands: :func:`grade_folder`, :func:`report_folder`). Executors are
 :mod:`wbcgrade._executor`.
 """
 
-from wbcgrade.color.batch.plan import (
+from wbcgrade.batch.plan import (
     BatchPlan,
     BatchTask,
     image_extensions,
@@ -42,16 +42,16 @@ from wbcgrade.color.batch.plan import (
     recheck_plan,
     remove_stale_outputs,
 )
-from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.batch.run import run_batch
-from wbcgrade.color.batch.settings import (
+from wbcgrade.batch.run import run_batch
+from wbcgrade.batch.settings import (
     SETTINGS_FILE,
     batch_settings,
     settings_changed,
     write_settings,
 )
-from wbcgrade.color.batch.task import BatchContext, run_task
-from wbcgrade.color.batch.workflow import BatchProgress, grade_folder, report_folder
+from wbcgrade.batch.task import BatchContext, run_task
+from wbcgrade.batch.workflow import BatchProgress, grade_folder, report_folder
+from wbcgrade.photos.results import BatchResult, FileResult
 
 __all__ = ["BatchTask", "BatchPlan", "BatchContext", "FileResult", "BatchResult",
            "image_extensions", "plan_batch", "run_task", "run_batch", "output_is_complete",

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.fit import NONZERO_THRESHOLD, FitSummary
-from wbcgrade.color.grading import Grade
+from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.palette.fit import NONZERO_THRESHOLD, FitSummary
 
 __all__ = ["FileResult", "BatchResult"]
 

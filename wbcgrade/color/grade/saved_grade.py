@@ -1,7 +1,7 @@
 """Saved grades ("looks"): a grade written once, applied again to other photos with no fit.
 
 A grade is its colour map (a lattice LUT in the working space), the working
-space, the strength and the regrain settings (:class:`~wbcgrade.color.grading.Grade`).
+space, the strength and the regrain settings (:class:`~wbcgrade.color.grade.grading.Grade`).
 Two files hold one:
 
 - the JSON :func:`save_grade` writes (:func:`look_dict`; or a report's JSON,
@@ -17,15 +17,15 @@ Two files hold one:
   sRGB-encoded Rec.709, the pixel values of ordinary photos) and are
   sampled on a 33³ lattice. A LUT has no regrain settings: the caller
   chooses (``apply`` regrains by default, as a fresh grade does, so a
-  ``.cube`` of :func:`~wbcgrade.color.lut.write_grade_lut` gives back the same photo).
+  ``.cube`` of :func:`~wbcgrade.color.mapping.lut.write_grade_lut` gives back the same photo).
 
 :func:`load_look` reads either into a Grade; ``grade.apply`` then moves the
 pixels through it (the remap and regrain stages of a fresh grade, no
 histograms, no fit, no transport).
 
 >>> import numpy as np
->>> from wbcgrade.color.grading import Grade
->>> from wbcgrade.color.remap import identity_map
+>>> from wbcgrade.color.grade.grading import Grade
+>>> from wbcgrade.color.mapping.remap import identity_map
 >>> grade = Grade(("warm",), np.ones(1), identity_map(5) * np.float32(0.9), working="w")
 >>> back = look_from_dict(look_dict(grade), "example")
 >>> float(np.abs(back.color_map - grade.color_map).max()) < 1e-5, back.working, back.names
@@ -44,11 +44,11 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import publish_bytes
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade
+from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.outcome import FitStart, SavedFrom
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.remap import identity_map
 from wbcgrade.errors import InputError, first_line
 from wbcgrade.limits import (
     MAX_LUT_DOMAIN,
@@ -432,7 +432,7 @@ def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
     """A CLF or ``.3dl`` (Autodesk/Flame/Lustre) LUT read by OpenColorIO: (the table on the
     working cube, the space its header names or None). Numbers that are not finite in the
     file are refused (OpenColorIO would carry them through silently)."""
-    from wbcgrade.color.lut import check_clf_support
+    from wbcgrade.color.mapping.lut import check_clf_support
 
     kind = "CLF" if path.suffix.lower() == ".clf" else "LUT"
     try:

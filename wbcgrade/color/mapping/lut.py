@@ -1,6 +1,6 @@
 """A grade as a 3-D LUT file: ``.cube`` or CLF.
 
-:meth:`wbcgrade.color.grading.Grade.lut` makes the table; this module writes
+:meth:`wbcgrade.color.grade.grading.Grade.lut` makes the table; this module writes
 it. One ``.cube`` writer (:func:`write_cube`, colour-science's "Resolve
 Cube" text written here, without importing colour-science: ``LUT_3D_SIZE``,
 domain [0, 1], red varying fastest) serves every
@@ -23,8 +23,8 @@ package: ``pip install 'wbcgrade[ocio]'``) holds the same operators, its
 shaper a half-float-domain 1D LUT (exact at every half value).
 
 >>> import numpy as np, tempfile, os
->>> from wbcgrade.color.lut import read_cube, write_cube
->>> from wbcgrade.color.remap import identity_map
+>>> from wbcgrade.color.mapping.lut import read_cube, write_cube
+>>> from wbcgrade.color.mapping.remap import identity_map
 >>> path = os.path.join(tempfile.mkdtemp(), "identity.cube")
 >>> _ = write_cube(path, identity_map(5), title="identity")
 >>> lut = read_cube(path)
@@ -43,7 +43,7 @@ from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.defaults import DEFAULT_LUT_SIZE
-from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_grade_lut",
@@ -240,7 +240,7 @@ def write_grade_lut(path: str | os.PathLike, grade, encoding: ColorEncoding | No
                     size: int = DEFAULT_LUT_SIZE,
                     lut_format: str | None = None, title: str = "wbcgrade",
                     comments: list[str] | None = None, overwrite: bool = False) -> Path:
-    """Write a :class:`~wbcgrade.color.grading.Grade` as a LUT whose header names its spaces.
+    """Write a :class:`~wbcgrade.color.grade.grading.Grade` as a LUT whose header names its spaces.
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """The transport map: fitted palette -> (unbalanced) Sinkhorn -> smooth map (§5.1).
 
 What the "palette" map builder (``map.builder = "palette"``,
-:func:`wbcgrade.color.builders.palette_map`) does once the weights are
+:func:`wbcgrade.color.grade.builders.palette_map`) does once the weights are
 fitted (:func:`transport_map`):
 
 1. the palette: the styles' barycenter with the fitted weights, on the
@@ -11,7 +11,7 @@ fitted (:func:`transport_map`):
    plan ``T(x_i) = (K (b x))_i / (K b)_i`` on every bin
    (:func:`color_transfer_map`);
 3. a smooth 33^3 lattice LUT fitted to that projection, weighted by the
-   photo's colours (:mod:`wbcgrade.color.smooth_map`).
+   photo's colours (:mod:`wbcgrade.color.palette.smooth_map`).
 
 Everything lives in the working space's unit cube. Defaults and why
 (measured on 2 shared cores, ``benchmarks/apply.py``): the photo's
@@ -34,8 +34,8 @@ import numpy as np
 
 from wbcgrade.color.histogram import DEFAULT_FLOOR, add_floor
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.smooth_map import fit_smooth_map
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.smooth_map import fit_smooth_map
 from wbcgrade.errors import NumericalError
 
 __all__ = ["color_transfer_map", "palette_barycenter", "transport_map"]
@@ -135,7 +135,7 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
     """The colour map moving a photo's colours onto the styles' palette at ``weights``.
 
     The palette, the plan and the smooth map (see the module docstring); the
-    "palette" map builder (:func:`wbcgrade.color.builders.palette_map`) after
+    "palette" map builder (:func:`wbcgrade.color.grade.builders.palette_map`) after
     the weight fit.
 
     Parameters

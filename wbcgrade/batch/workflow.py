@@ -3,8 +3,8 @@
 :func:`grade_folder` (``wbcgrade batch``): plan every output before any
 work (the graded copies, the series LUT, the report's files), take the
 output folder's lock, load the styles, say which recorded settings changed,
-run the batch (:func:`wbcgrade.color.batch.run.run_batch`), record each
-photo's result as it is graded (:mod:`wbcgrade.color.batch.records`), and
+run the batch (:func:`wbcgrade.batch.run.run_batch`), record each
+photo's result as it is graded (:mod:`wbcgrade.batch.records`), and
 write the settings record, the report and the series LUT.
 :func:`report_folder` (``wbcgrade report``): the same run with nothing
 written but the report; on a batch's output folder it reads the batch's
@@ -22,25 +22,24 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import lock_folder, plan_outputs
-from wbcgrade.color.batch.plan import BatchPlan, plan_batch, recheck_plan
-from wbcgrade.color.batch.records import (
+from wbcgrade.batch.plan import BatchPlan, plan_batch, recheck_plan
+from wbcgrade.batch.records import (
     RESULTS_FOLDER,
     read_record,
     remove_stale_records,
     write_record,
 )
-from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.batch.run import run_batch
-from wbcgrade.color.batch.settings import (
+from wbcgrade.batch.run import run_batch
+from wbcgrade.batch.settings import (
     SETTINGS_FILE,
     batch_settings,
     settings_changed,
     write_settings,
 )
-from wbcgrade.color.batch.task import BatchContext
+from wbcgrade.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.look.scene import matching_hook
-from wbcgrade.color.lut import (
+from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
     check_lut_path,
@@ -50,8 +49,9 @@ from wbcgrade.color.lut import (
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
-from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError, Worded
+from wbcgrade.photos.results import BatchResult, FileResult
+from wbcgrade.photos.workflow import Progress
 
 __all__ = ["BatchProgress", "grade_folder", "report_folder", "report_batch_output",
            "recorded_batch"]
@@ -59,7 +59,7 @@ __all__ = ["BatchProgress", "grade_folder", "report_folder", "report_batch_outpu
 
 @dataclass(frozen=True)
 class BatchProgress(Progress):
-    """:class:`~wbcgrade.color.workflow.Progress` with the batch's own callbacks.
+    """:class:`~wbcgrade.photos.workflow.Progress` with the batch's own callbacks.
 
     ``planned(n_photos)`` once the photos are known; ``result(FileResult)``
     as each photo finishes; ``read(done, total)`` while a series reads its
@@ -114,19 +114,19 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
          overwrite: bool, progress: BatchProgress,
          on_result: Callable[[FileResult], None] | None = None, look=None,
          encode=None) -> BatchResult:
-    from wbcgrade.color.report import own_report
+    from wbcgrade.photos.report import own_report
 
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite,
                            replace_sheets=write_outputs and own_report(report_dir))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
-        from wbcgrade.color.saved_grade import look_fit
+        from wbcgrade.color.grade.saved_grade import look_fit
 
         context.shared, context.shared_fit = look, look_fit(look)
     if encode is not None:
         context.encode = encode
     if report_dir is not None:
-        from wbcgrade.color.report import style_pictures
+        from wbcgrade.photos.report import style_pictures
 
         report_dir.mkdir(parents=True, exist_ok=True)
         context.style_pictures = style_pictures(styles)
@@ -150,7 +150,7 @@ def _check_jobs(jobs: int) -> None:
 
 def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> None:
     if report_dir is not None:
-        from wbcgrade.color.report import plan_report
+        from wbcgrade.photos.report import plan_report
 
         plan_report(report_dir, [task.relative for task in plan.tasks],
                     [task.source for task in plan.all_photos], overwrite)
@@ -227,15 +227,15 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     write into ``out_dir``. With ``consistent`` the whole series shares one
     grade, also written as a LUT to ``lut``; with ``report_dir`` the report is
     written there (a report an earlier run wrote there is updated, as the photos are
-    resumed: :func:`wbcgrade.color.report.own_report`). Returns the result (``result.lut`` None
+    resumed: :func:`wbcgrade.photos.report.own_report`). Returns the result (``result.lut`` None
     when no photo was graded, so no series grade was made). ``look``: a saved
-    grade (:func:`wbcgrade.color.saved_grade.load_look`) applied to every photo
+    grade (:func:`wbcgrade.color.grade.saved_grade.load_look`) applied to every photo
     instead of a fit; ``encode``: JPEG/WebP quality and bit depth of the outputs.
     """
     progress = progress or BatchProgress()
     _check_jobs(jobs)
     if look is not None:
-        from wbcgrade.color.saved_grade import look_batch_options
+        from wbcgrade.color.grade.saved_grade import look_batch_options
 
         options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
@@ -261,11 +261,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     if consistent and options.spaces.working is None:  # one working space for the series
         from dataclasses import replace
 
-        from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
+        from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    from wbcgrade.color.report import own_report
+    from wbcgrade.photos.report import own_report
 
     # the report of an earlier run into this folder is updated as the photos are resumed
     own = own_report(report_dir)
@@ -286,7 +286,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         if look is None:
             styles = _load(source, options, progress, plan, consistent)
         else:
-            from wbcgrade.color.saved_grade import look_styles
+            from wbcgrade.color.grade.saved_grade import look_styles
 
             styles = look_styles(look, str(None if look.saved is None else look.saved.file))
         settings = batch_settings(styles, options, consistent)
@@ -309,7 +309,7 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         result.time_s = time.perf_counter() - start
         result.own_photos = own_photos
         if report_dir is not None:
-            from wbcgrade.color.report import write_report
+            from wbcgrade.photos.report import write_report
 
             result.report = write_report(report_dir, result, styles, options,
                                          "consistent" if consistent else "per-photo",
@@ -359,7 +359,7 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
         if target.is_file():
             raise InputError(f"{target}: not an image file (by its extension)")
         raise InputError(f"{target}: no photos found")
-    from wbcgrade.color.report import report_overwrite
+    from wbcgrade.photos.report import report_overwrite
 
     overwrite = report_overwrite(out, overwrite)  # a stopped report is finished in place
     _plan_report(out, plan, overwrite)
@@ -375,7 +375,7 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
                   progress)
     result.time_s = time.perf_counter() - start
     result.own_photos = own_photos
-    from wbcgrade.color.report import write_report
+    from wbcgrade.photos.report import write_report
 
     result.report = write_report(out, result, styles, options,
                                  "consistent" if consistent else "per-photo", overwrite)
@@ -442,16 +442,16 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     """The report of a batch's output folder from what the batch recorded: nothing is graded.
 
     Every graded copy under ``folder`` is reported with the weights, losses
-    and timings its batch recorded (:mod:`wbcgrade.color.batch.records`) and a
+    and timings its batch recorded (:mod:`wbcgrade.batch.records`) and a
     sheet made from the photo and its graded copy. A copy without a record
     fails (the report says so). ``source`` and ``options`` are those given to
     ``wbcgrade report``: styles other than the batch's are refused, other
     options are ignored with a warning.
     """
-    from wbcgrade.color.batch.results import FileResult as Result
-    from wbcgrade.color.fit import FitSummary
-    from wbcgrade.color.report import sheet_from_files, sheet_path, style_pictures, write_report
-    from wbcgrade.color.sheet import write_sheet
+    from wbcgrade.color.palette.fit import FitSummary
+    from wbcgrade.photos.report import sheet_from_files, sheet_path, style_pictures, write_report
+    from wbcgrade.photos.results import FileResult as Result
+    from wbcgrade.photos.sheet import write_sheet
 
     progress = progress or BatchProgress()
     folder, report_dir = Path(folder), Path(report_dir)

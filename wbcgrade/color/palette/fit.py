@@ -10,7 +10,7 @@ runs ahead in its own thread beside the fit from uniform weights
 (docs/architecture.md, threads).
 
 >>> import numpy as np
->>> from wbcgrade.color.fit import fit_weights
+>>> from wbcgrade.color.palette.fit import fit_weights
 >>> from wbcgrade.color.histogram import soft_histogram
 >>> from wbcgrade.color.options import FitOptions
 >>> rng = np.random.default_rng(0)

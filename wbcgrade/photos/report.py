@@ -4,7 +4,7 @@ Folder layout (REPORT_DIR)::
 
     report.json          styles, options, and one entry per photo (see FileResult.as_dict)
     weights.csv          one row per photo, one column per style (plus loss columns)
-    sheets/<photo>.png   one sheet per graded photo (see wbcgrade.color.sheet)
+    sheets/<photo>.png   one sheet per graded photo (see wbcgrade.photos.sheet)
     photos/<photo>.json  the entry of each photo, reused when a rerun skips the photo
     index.html           self-contained page: the weight table and every sheet
                          (inline CSS, sheets referenced by relative paths)
@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import atomic_path, plan_outputs
-from wbcgrade.color.batch.results import BatchResult, FileResult
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import NONZERO_THRESHOLD
-from wbcgrade.color.graded import GradeReport, PhotoGrade
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import NONZERO_THRESHOLD
 from wbcgrade.color.presets import StyleSet
+from wbcgrade.photos.graded import GradeReport, PhotoGrade
+from wbcgrade.photos.results import BatchResult, FileResult
 
 __all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
            "write_report", "report_entries", "report_from_grade", "sheet_content",
@@ -115,8 +115,8 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
     Returns {name: (h, w, 3) float32 in [0, 1]}.
     """
     from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import histogram_palette, thumbnail
+    from wbcgrade.color.io.images import read_image
+    from wbcgrade.photos.sheet import histogram_palette, thumbnail
 
     working = styles.working_space
     palette_spaces = (None if working == default_working_space()
@@ -151,7 +151,7 @@ def palette_record(grade, encoding: ColorEncoding) -> dict | None:
     """The main colours of the palette a grade aimed at (its barycenter), display-encoded,
     as JSON (``{"colors": [[r, g, b], ...], "shares": [...]}``); None when the grade
     has no barycenter (a look)."""
-    from wbcgrade.color.sheet import histogram_palette
+    from wbcgrade.photos.sheet import histogram_palette
 
     if grade.barycenter is None:
         return None
@@ -203,7 +203,7 @@ def _chart(record: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def _palette(record: dict | None):
-    from wbcgrade.color.sheet import Palette
+    from wbcgrade.photos.sheet import Palette
 
     if not record:
         return None
@@ -245,8 +245,8 @@ def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import ImageOps
 
-    from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import thumbnail
+    from wbcgrade.color.io.images import read_image
+    from wbcgrade.photos.sheet import thumbnail
 
     try:
         with PILImage.open(path) as image:
@@ -265,7 +265,7 @@ def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
 def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
              style_pictures: dict[str, np.ndarray] | None):
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
+    from wbcgrade.photos.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
 
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
@@ -538,11 +538,11 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
                       options: GradeOptions, overwrite: bool = False) -> Path:
     """The report of one photo graded by ``wbcgrade apply`` (``apply --report``).
 
-    ``graded`` is what :func:`wbcgrade.color.workflow.grade_file` returned:
+    ``graded`` is what :func:`wbcgrade.photos.workflow.grade_file` returned:
     its fit summary gives the loss, the single-style losses and how the
     weights were found, its pixels the sheet. Returns the path of report.json.
     """
-    from wbcgrade.color.sheet import write_sheet
+    from wbcgrade.photos.sheet import write_sheet
 
     report_dir = Path(report_dir)
     fit = graded.fit

@@ -23,7 +23,7 @@ from pathlib import Path
 import OpenImageIO as oiio
 
 from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
-from wbcgrade.color.imageio import header_pixels
+from wbcgrade.color.io.images import header_pixels
 from wbcgrade.errors import InputError
 
 __all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
@@ -140,7 +140,7 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             raise InputError(f"{out}: output path exists and is not a folder")
         if out.exists() and out.resolve() == root.resolve():
             raise InputError(f"{out}: the output folder must differ from the input folder")
-    from wbcgrade.color.raw import RAW_SUFFIXES, output_name
+    from wbcgrade.color.io.raw import RAW_SUFFIXES, output_name
 
     exts = image_extensions() | RAW_SUFFIXES
     skip_dirs = [Path(p) for p in exclude] + ([out] if out is not None else [])
@@ -177,7 +177,7 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
 
 def _recorded(out: Path, task: BatchTask) -> bool:
     """Whether a batch's result record of ``task`` is there and readable."""
-    from wbcgrade.color.batch.records import read_record
+    from wbcgrade.batch.records import read_record
 
     return read_record(out, task.relative) is not None
 

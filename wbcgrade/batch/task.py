@@ -4,7 +4,7 @@ These functions run in worker processes (local or Dask): they take the
 task and the :class:`BatchContext` that the executor sends once to each
 worker, and turn failures about the file into values, so that one bad photo
 does not stop the others. A photo is graded and written by the same
-:func:`wbcgrade.color.workflow.grade_file` as ``wbcgrade apply``.
+:func:`wbcgrade.photos.workflow.grade_file` as ``wbcgrade apply``.
 """
 
 from __future__ import annotations
@@ -17,13 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.batch.plan import BatchTask
-from wbcgrade.color.batch.results import FileResult
-from wbcgrade.color.cache import command_cache, set_command_cache
+from wbcgrade.batch.plan import BatchTask
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade, PhotoHistograms, photo_histograms
-from wbcgrade.color.imageio import (
+from wbcgrade.color.grade.grading import Grade, PhotoHistograms, photo_histograms
+from wbcgrade.color.io.cache import command_cache, set_command_cache
+from wbcgrade.color.io.images import (
     WriteOptions,
     check_image_output,
     max_image_pixels,
@@ -31,9 +29,11 @@ from wbcgrade.color.imageio import (
     set_max_image_pixels,
 )
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.workflow import PhotoPlan, Progress, grade_file
 from wbcgrade.errors import WbcgradeError, first_line
+from wbcgrade.photos.results import FileResult
+from wbcgrade.photos.workflow import PhotoPlan, Progress, grade_file
 
 __all__ = ["BatchContext", "run_task", "read_histograms", "setup_worker", "absolute_task",
            "absolute_context", "lost_task"]
@@ -54,7 +54,7 @@ class BatchContext:
     write_outputs : False to grade in memory only (``wbcgrade report``).
     overwrite : replace existing outputs and sheets (checked before the run).
     replace_sheets : replace existing sheets (the report folder is the batch's own, from
-        an earlier run: :func:`wbcgrade.color.report.own_report`).
+        an earlier run: :func:`wbcgrade.photos.report.own_report`).
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
     encode : JPEG/WebP quality and bit depth of the outputs.
@@ -110,7 +110,7 @@ def run_task(task: BatchTask, context: BatchContext,
         result.color = report.color
         result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
-        from wbcgrade.color.report import (
+        from wbcgrade.photos.report import (
             chart_record,
             palette_record,
             sheet_content,
@@ -121,7 +121,7 @@ def run_task(task: BatchTask, context: BatchContext,
         result.chart = chart_record(report.grade, report.graded.encoding)
         result.timings["total"] = time.perf_counter() - start
         if context.sheet_dir is not None:
-            from wbcgrade.color.sheet import write_sheet
+            from wbcgrade.photos.sheet import write_sheet
 
             sheet = sheet_path(task.relative)
             write_sheet(context.sheet_dir / sheet,

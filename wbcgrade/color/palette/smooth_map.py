@@ -31,8 +31,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg
 
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.options import DEFAULT_MAP_SIZE, DEFAULT_SMOOTHNESS, DEFAULT_STIFFNESS
-from wbcgrade.color.remap import identity_map
 
 __all__ = ["fit_smooth_map", "SmoothMapFitter", "interpolation_matrix", "DEFAULT_MAP_SIZE",
            "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS"]

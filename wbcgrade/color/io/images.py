@@ -283,7 +283,7 @@ def read_image(path: str | os.PathLike) -> Image:
     Image with display-oriented float32 pixels (H, W, C).
 
     Raw camera files (DNG, CR2, NEF, ARW, ...) are demosaiced by LibRaw
-    (:func:`wbcgrade.color.raw.read_raw`): scene-linear float pixels. CMYK
+    (:func:`wbcgrade.color.io.raw.read_raw`): scene-linear float pixels. CMYK
     JPEGs come back as RGB (through their CMYK ICC profile when they carry
     one), without the CMYK profile.
 
@@ -299,7 +299,7 @@ def read_image(path: str | os.PathLike) -> Image:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
-    from wbcgrade.color.raw import is_raw
+    from wbcgrade.color.io.raw import is_raw
 
     if is_raw(path):
         return _read_raw(path)
@@ -349,8 +349,8 @@ def read_image(path: str | os.PathLike) -> Image:
 
 def _read_raw(path: Path) -> Image:
     """A raw camera file as a scene-linear float image tagged with the ACES AP0 primaries
-    (:func:`wbcgrade.color.raw.read_raw`; the pixel limit checked before demosaicing)."""
-    from wbcgrade.color.raw import AP0_CHROMATICITIES, read_raw
+    (:func:`wbcgrade.color.io.raw.read_raw`; the pixel limit checked before demosaicing)."""
+    from wbcgrade.color.io.raw import AP0_CHROMATICITIES, read_raw
 
     pixels, extra = read_raw(path, lambda width, height: _check_pixel_count(path, width, height))
     height, width = pixels.shape[:2]
@@ -805,7 +805,7 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | N
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)
     if spec.format.basetype == oiio.UINT8:  # converted here on every core (OIIO's: one)
-        from wbcgrade.color._quantise import to_uint8
+        from wbcgrade.color.io._quantise import to_uint8
 
         return spec, to_uint8(pixels), format_name
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):

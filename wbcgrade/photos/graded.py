@@ -1,9 +1,9 @@
 """What grading one photo produced: the graded pixels in memory and the run's report.
 
-:class:`PhotoGrade` (:func:`wbcgrade.color.workflow.grade_photo`) and
-:class:`GradeReport` (:func:`wbcgrade.color.workflow.grade_file`), kept
+:class:`PhotoGrade` (:func:`wbcgrade.photos.workflow.grade_photo`) and
+:class:`GradeReport` (:func:`wbcgrade.photos.workflow.grade_file`), kept
 apart from the workflow so that what reads them (the palette weight report,
-:mod:`wbcgrade.color.report`) needs nothing of the workflow.
+:mod:`wbcgrade.photos.report`) needs nothing of the workflow.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade
-from wbcgrade.color.imageio import Image
+from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.io.images import Image
 from wbcgrade.color.outcome import FitStart
+from wbcgrade.color.palette.fit import FitSummary
 
 __all__ = ["PhotoGrade", "GradeReport"]
 
@@ -82,7 +82,7 @@ class GradeReport:
 
     def as_dict(self) -> dict:
         """JSON-friendly summary (a few KB: no colour map;
-        :func:`~wbcgrade.color.saved_grade.save_grade` writes the grade itself). The style
+        :func:`~wbcgrade.color.grade.saved_grade.save_grade` writes the grade itself). The style
         weights and the fit's loss are there for a palette grade only (under ``"outcome"``
         and, as before, ``"weights"``/``"loss"``): a look grade has none that mean anything."""
         outcome = self.outcome

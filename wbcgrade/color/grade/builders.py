@@ -1,9 +1,9 @@
 """What a map builder gets and returns, and the "palette" builder.
 
-A builder (:data:`wbcgrade.color.grading.MAP_BUILDERS`) takes a :class:`MapRequest`
+A builder (:data:`wbcgrade.color.grade.grading.MAP_BUILDERS`) takes a :class:`MapRequest`
 and returns a :class:`BuiltMap`; :func:`palette_map` is the "palette" one, the
 "look" one is :func:`wbcgrade.color.look.builder.look_map`. Apart from the grade
-path (:mod:`wbcgrade.color.grading`) so that a builder can live in its own package
+path (:mod:`wbcgrade.color.grade.grading`) so that a builder can live in its own package
 without importing the path that calls it.
 """
 
@@ -16,9 +16,9 @@ from typing import NamedTuple
 import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary, fit_weights
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import FitSummary, fit_weights
 from wbcgrade.color.presets import StyleSet
 
 __all__ = ["FitCallback", "quiet", "PhotoHistograms", "MapRequest", "BuiltMap", "palette_map"]
@@ -64,7 +64,7 @@ class MapRequest:
     callback : ``callback(n_evaluations, weights, loss)`` of a weight fit, or None.
     stage : ``stage(name)`` as each stage starts (progress).
     palette_grade : ``palette_grade(options, stage) -> (Grade, FitSummary)``, the whole
-        grade path (:func:`wbcgrade.color.grading.grade_histograms`) on the same photo,
+        grade path (:func:`wbcgrade.color.grade.grading.grade_histograms`) on the same photo,
         styles and encoding with other options (the "look" builder's palette grade of
         the photo's scene), or None.
     """
@@ -81,7 +81,7 @@ class MapRequest:
 class BuiltMap(NamedTuple):
     """What a map builder returns: the map before finishing, the palette it aimed at
     (or None), diagnostics, seconds per stage, and the weights with how sure the
-    builder is of them (a :class:`~wbcgrade.color.fit.FitSummary`)."""
+    builder is of them (a :class:`~wbcgrade.color.palette.fit.FitSummary`)."""
 
     color_map: np.ndarray
     palette: np.ndarray | None
@@ -92,10 +92,10 @@ class BuiltMap(NamedTuple):
 
 def palette_map(request: MapRequest) -> BuiltMap:
     """The "palette" builder: the weights (never worse than one style alone), then the
-    map onto their barycenter palette (:func:`wbcgrade.color.transfer.transport_map`)."""
+    map onto their barycenter palette (:func:`wbcgrade.color.palette.transfer.transport_map`)."""
     # imported here: the transport and its smooth map (scipy.sparse, ~0.1 s) are needed to
     # build a palette grade, not to apply a saved one
-    from wbcgrade.color.transfer import transport_map
+    from wbcgrade.color.palette.transfer import transport_map
 
     options, styles = request.options, request.styles
     request.stage("fit")

@@ -8,10 +8,10 @@ data flow (docs/architecture.md):
 
 1. the outputs are planned and checked once, before any work
    (:func:`plan_photo`, through :func:`wbcgrade._publish.plan_outputs`);
-2. the photo is read (:func:`wbcgrade.color.imageio.read_image`) and
+2. the photo is read (:func:`wbcgrade.color.io.images.read_image`) and
    encoded into the working space (:class:`~wbcgrade.color.colorspace.ColorEncoding`);
 3. the grade path fits and builds the grade
-   (:func:`wbcgrade.color.grading.grade_encoded`), or a series' shared
+   (:func:`wbcgrade.color.grade.grading.grade_encoded`), or a series' shared
    grade is used as it is;
 4. the pixels go through the grade and back into the photo's space
    (:func:`grade_photo`);
@@ -31,9 +31,9 @@ import numpy as np
 
 from wbcgrade._publish import make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.graded import GradeReport, PhotoGrade
-from wbcgrade.color.grading import Grade, grade_encoded
-from wbcgrade.color.imageio import (
+from wbcgrade.color.grade.grading import Grade, grade_encoded
+from wbcgrade.color.grade.saved_grade import save_grade
+from wbcgrade.color.io.images import (
     Image,
     WriteOptions,
     check_image_output,
@@ -42,7 +42,7 @@ from wbcgrade.color.imageio import (
     stage_image,
 )
 from wbcgrade.color.look.scene import matching_hook
-from wbcgrade.color.lut import (
+from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
     check_lut_path,
@@ -52,9 +52,9 @@ from wbcgrade.color.lut import (
 )
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
-from wbcgrade.color.saved_grade import save_grade
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_input_file
+from wbcgrade.photos.graded import GradeReport, PhotoGrade
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
            "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
@@ -88,7 +88,7 @@ class PhotoPlan:
 
     ``output`` None: graded in memory only (``wbcgrade report``); ``lut`` None: no LUT.
     Paths are resolved (links followed). ``lut_format`` and ``output_format`` (the image
-    format's name, :func:`~wbcgrade.color.imageio.check_image_output`) are what the
+    format's name, :func:`~wbcgrade.color.io.images.check_image_output`) are what the
     checks found: the writers use them as they are.
     """
 
@@ -105,7 +105,7 @@ class PhotoPlan:
 
 def default_output_path(photo: str | os.PathLike) -> Path:
     """``<stem>_graded<ext>`` beside the photo (a raw photo's: ``<stem>_graded.tif``)."""
-    from wbcgrade.color.raw import output_name
+    from wbcgrade.color.io.raw import output_name
 
     photo = Path(photo)
     return photo.with_name(f"{photo.stem}_graded{output_name(photo).suffix}")
@@ -165,7 +165,7 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
 
     Colour channels go through the encoding, the grade and back; alpha and
     any extra channels pass through untouched. A grey photo stays grey: the
-    luma of its graded colours (:func:`wbcgrade.color.output.grey_of`).
+    luma of its graded colours (:func:`wbcgrade.photos.output.grey_of`).
     ``encoded`` may pass the ``(encoded, state)`` of ``encoding.encode`` the
     caller already has (not modified unless ``in_place``). ``in_place``: the
     encoded colours may be graded where they are, saving a full-size array;
@@ -189,7 +189,7 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
         out = image.pixels.copy()
         out[:, :, chans] = graded
         return out, image.alpha_channel
-    from wbcgrade.color.output import grey_of
+    from wbcgrade.photos.output import grey_of
 
     out = image.pixels.copy()
     out[:, :, chans[0]] = grey_of(graded, image.is_float)
@@ -203,7 +203,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
 
     With ``shared`` (a series grade, in the same working space), its colour
     map is applied as it is; otherwise the photo gets its own grade
-    (:func:`wbcgrade.color.grading.grade_encoded`). ``keep_input`` False:
+    (:func:`wbcgrade.color.grade.grading.grade_encoded`). ``keep_input`` False:
     nothing will look at the ungraded pixels afterwards (no report sheet), so
     a photo graded in its own space is graded in place (the returned
     ``image.pixels`` then hold graded colours).
@@ -221,7 +221,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     if shared is not None:  # what the shared (series or saved) grade does to this photo
         from dataclasses import replace
 
-        from wbcgrade.color.grading import outcome_on_photo
+        from wbcgrade.color.grade.grading import outcome_on_photo
         from wbcgrade.color.histogram import image_histogram
 
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
@@ -272,7 +272,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
         lut_existed = plan.lut is not None and plan.lut.exists()
         lut_written = False
         try:
-            from wbcgrade.color.output import output_pixels
+            from wbcgrade.photos.output import output_pixels
 
             pixels = output_pixels(graded.pixels, graded.alpha_channel, graded.image,
                                    graded.encoding, plan.output, plan.encode)
@@ -318,8 +318,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     - a :class:`~wbcgrade.color.presets.StyleSource`: the styles are loaded
       and the photo gets its own grade (:func:`grade_file`); with
       ``report_dir`` the palette weight report is written too;
-    - a :class:`~wbcgrade.color.grading.Grade` (a saved grade,
-      :func:`wbcgrade.color.saved_grade.load_look`): applied as it is, in its
+    - a :class:`~wbcgrade.color.grade.grading.Grade` (a saved grade,
+      :func:`wbcgrade.color.grade.saved_grade.load_look`): applied as it is, in its
       own working space, nothing fitted (``fit_start`` "saved"); a report
       needs styles, so ``report_dir`` is an OptionError.
 
@@ -336,11 +336,11 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     plan = plan_photo(photo, output, lut=lut, lut_size=lut_size, lut_format=lut_format,
                       overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
-        from wbcgrade.color.report import plan_report
+        from wbcgrade.photos.report import plan_report
 
         plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
     if saved:
-        from wbcgrade.color.saved_grade import look_fit, look_styles
+        from wbcgrade.color.grade.saved_grade import look_fit, look_styles
 
         spaces = options.spaces
         if spaces.working != source.working:
@@ -361,7 +361,7 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                         keep_input=report_dir is not None)
     _save_grade(plan, report.grade)
     if report_dir is not None:
-        from wbcgrade.color.report import report_from_grade
+        from wbcgrade.photos.report import report_from_grade
 
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report

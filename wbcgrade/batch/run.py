@@ -6,9 +6,8 @@ import time
 from collections.abc import Callable
 
 from wbcgrade._executor import Executor
-from wbcgrade.color.batch.plan import BatchPlan, remove_stale_outputs, remove_temporaries
-from wbcgrade.color.batch.results import BatchResult, FileResult
-from wbcgrade.color.batch.task import (
+from wbcgrade.batch.plan import BatchPlan, remove_stale_outputs, remove_temporaries
+from wbcgrade.batch.task import (
     BatchContext,
     absolute_context,
     absolute_task,
@@ -18,9 +17,10 @@ from wbcgrade.color.batch.task import (
     setup_worker,
 )
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grading import PhotoHistograms, grade_histograms
+from wbcgrade.color.grade.grading import PhotoHistograms, grade_histograms
 from wbcgrade.color.histogram import PaletteSum
-from wbcgrade.color.workflow import Progress
+from wbcgrade.photos.results import BatchResult, FileResult
+from wbcgrade.photos.workflow import Progress
 
 __all__ = ["run_batch"]
 
@@ -39,7 +39,7 @@ def run_batch(plan: BatchPlan, context: BatchContext, *, consistent: bool = Fals
     consistent : one grade for the whole series: every photo's histograms
         (also those already done, so a resumed series gets the same grade)
         pooled (:class:`wbcgrade.color.histogram.PaletteSum`), one pass of the
-        grade path (:func:`wbcgrade.color.grading.grade_histograms`), and each
+        grade path (:func:`wbcgrade.color.grade.grading.grade_histograms`), and each
         task only applies the grade.
     jobs : local worker processes (1: in this process).
     scheduler : Dask scheduler address (overrides ``jobs``).

@@ -2,12 +2,12 @@
 are display-encoded.
 
 Two decisions between the graded pixels and the file
-(:func:`wbcgrade.color.workflow.grade_file` calls them):
+(:func:`wbcgrade.photos.workflow.grade_file` calls them):
 
 - a grey photo (one colour channel) is written grey: :func:`grey_of` takes
   the luma of its graded colours (a grade may tint it; the tint is dropped);
 - scene-linear pixels (an EXR, a raw photo) written into an integer file
-  (JPEG, PNG, 8/16-bit TIFF; :func:`wbcgrade.color.imageio.output_type`)
+  (JPEG, PNG, 8/16-bit TIFF; :func:`wbcgrade.color.io.images.output_type`)
   are converted from their linear space into sRGB-encoded Rec.709, as an
   integer file without a profile is read (:func:`output_pixels`). Float
   files keep the linear values (and their primaries).
@@ -26,7 +26,7 @@ from wbcgrade.color.colorspace import (
     convert,
     default_working_space,
 )
-from wbcgrade.color.imageio import Image, WriteOptions, output_type
+from wbcgrade.color.io.images import Image, WriteOptions, output_type
 
 __all__ = ["grey_of", "output_pixels"]
 

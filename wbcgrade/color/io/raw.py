@@ -6,14 +6,14 @@ converts the camera's RGB into ACES2065-1 (linear, AP0 primaries, D60)
 with the camera's own matrix, with no gamma, no automatic brightening and
 16 bits per channel. :func:`read_raw` returns that as scene-linear float
 pixels (1.0 = the sensor's white level), which
-:func:`wbcgrade.color.imageio.read_image` tags with the AP0 chromaticities,
+:func:`wbcgrade.color.io.images.read_image` tags with the AP0 chromaticities,
 so the rest of the pipeline treats it like a linear EXR: its input space is ACES2065-1 and, unless
 ``spaces.working`` says otherwise, it is graded in ACEScct
 (:data:`RAW_WORKING_SPACE`), whose cube holds the whole range of a raw.
 
 Writing: float outputs (EXR, float TIFF) keep the linear ACES2065-1
 values; integer outputs (JPEG, PNG, 8/16-bit TIFF) are sRGB-encoded
-(:func:`wbcgrade.color.output.output_pixels`); a 16-bit TIFF or PNG is
+(:func:`wbcgrade.photos.output.output_pixels`); a 16-bit TIFF or PNG is
 the default for a raw photo, 8-bit only for JPEG.
 """
 
@@ -73,7 +73,7 @@ def read_raw(path: str | os.PathLike,
         white level; display-oriented), primaries :data:`AP0_CHROMATICITIES`.
     extra : ``{"raw": {"white_balance": [...], "libraw": "X.Y.Z"}}``.
 
-    :func:`wbcgrade.color.imageio.read_image` wraps this into an image.
+    :func:`wbcgrade.color.io.images.read_image` wraps this into an image.
 
     Raises
     ------

@@ -4,7 +4,7 @@ As each photo is graded, its result (weights, losses, timings, the palette it
 was moved towards, the colour spaces; :meth:`FileResult.as_dict`) is written
 to ``OUT/.wbcgrade-results/<photo path>.json`` (atomically, by the process
 that runs the batch). ``wbcgrade report OUT`` reads these records and the
-settings record (:mod:`wbcgrade.color.batch.settings`) instead of grading the
+settings record (:mod:`wbcgrade.batch.settings`) instead of grading the
 photos again. A photo skipped by a rerun keeps the record of the run that
 graded it.
 """
@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 
 from wbcgrade._publish import atomic_path, remove_stale_temporaries
-from wbcgrade.color.batch.results import FileResult
+from wbcgrade.photos.results import FileResult
 
 __all__ = ["RESULTS_FOLDER", "record_path", "write_record", "read_record",
            "remove_stale_records"]

@@ -8,9 +8,9 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
    names (:data:`MAP_BUILDERS`):
 
    - "palette" (:func:`palette_map`): the weights
-     (:func:`wbcgrade.color.fit.fit_weights`: barycentric coordinates never
+     (:func:`wbcgrade.color.palette.fit.fit_weights`: barycentric coordinates never
      worse than the best single style), then the fitted palette, Sinkhorn
-     and the smooth map (:func:`wbcgrade.color.transfer.transport_map`);
+     and the smooth map (:func:`wbcgrade.color.palette.transfer.transport_map`);
    - "look" (:func:`wbcgrade.color.look.builder.look_map`): the look the style
      set shares (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
      photo by how sure it is that a style shows the photo's own scene;
@@ -25,14 +25,14 @@ A series (a batch's ``consistent`` grade, a video shot) takes the same path with
 pooled histogram (:class:`wbcgrade.color.histogram.PaletteSum`).
 
 Other ways of building the map plug in with :func:`register_map_builder`:
-a builder (:mod:`wbcgrade.color.builders`) takes a :class:`MapRequest` (the
+a builder (:mod:`wbcgrade.color.grade.builders`) takes a :class:`MapRequest` (the
 photo's histograms, the styles in the working space, the options, the
 encoding, progress callbacks, the grade path itself for a palette grade) and
 returns a :class:`BuiltMap` (the map before finishing, the palette it aimed
 at, diagnostics, timings, and the weights with how sure it is of them).
 
 >>> import numpy as np
->>> from wbcgrade.color.grading import grade_array
+>>> from wbcgrade.color.grade.grading import grade_array
 >>> from wbcgrade.color.options import GradeOptions
 >>> from wbcgrade.color.presets import load_preset, resolve_preset
 >>> styles = load_preset(resolve_preset("warm"))
@@ -53,7 +53,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from wbcgrade.color.builders import (
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grade.builders import (
     BuiltMap,
     FitCallback,
     MapRequest,
@@ -61,11 +62,18 @@ from wbcgrade.color.builders import (
     palette_map,
     quiet,
 )
-from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.look.builder import look_map
-from wbcgrade.color.lut import check_lut_size, color_map_to_lut
+from wbcgrade.color.mapping.lut import check_lut_size, color_map_to_lut
+from wbcgrade.color.mapping.regrain import regrain_map
+from wbcgrade.color.mapping.remap import (
+    apply_color_map,
+    identity_map,
+    keep_lightness,
+    monochrome_toning,
+    monotone_lightness,
+    to_monochrome,
+)
 from wbcgrade.color.options import GradeOptions, as_options
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
@@ -79,16 +87,8 @@ from wbcgrade.color.outcome import (
     TransportCheck,
     map_change,
 )
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
-from wbcgrade.color.regrain import regrain_map
-from wbcgrade.color.remap import (
-    apply_color_map,
-    identity_map,
-    keep_lightness,
-    monochrome_toning,
-    monotone_lightness,
-    to_monochrome,
-)
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
@@ -126,7 +126,7 @@ class Grade:
     transport : how the transfer's Sinkhorn solve ended
         (:class:`~wbcgrade.color.outcome.TransportCheck`), None when there was none.
     regrain_follow : in [0, 1], how far the regrain lets the input's grain follow the map
-        where it lowers contrast or saturation (:func:`wbcgrade.color.regrain.regrain_map`'s
+        where it lowers contrast or saturation (:func:`wbcgrade.color.mapping.regrain.regrain_map`'s
         ``follow``): 1 for a preset's own look, a scene's look by the match's confidence
         (:func:`regrain_follow`); 0, the grain as it is, for the others.
     """
@@ -237,10 +237,10 @@ def finish_map(color_map: np.ndarray, options: GradeOptions,
     """The finishing steps of every map, in the working space's own terms.
 
     ``map.preserve_luminance``: each colour keeps its Oklab lightness
-    (:func:`wbcgrade.color.remap.keep_lightness`, through the encoding);
+    (:func:`wbcgrade.color.mapping.remap.keep_lightness`, through the encoding);
     otherwise ``map.monotone``: the map's luma, with the working encoding's
     luma weights, made non-decreasing in each channel
-    (:func:`wbcgrade.color.remap.monotone_lightness`).
+    (:func:`wbcgrade.color.mapping.remap.monotone_lightness`).
     """
     if options.map.preserve_luminance:
         return keep_lightness(color_map, encoding)
@@ -427,7 +427,7 @@ def grade_array(rgb: np.ndarray, styles: StyleSet | Grade, options: GradeOptions
         in the input space.
     styles : the style palettes (:func:`wbcgrade.color.presets.load_preset`,
         :func:`~wbcgrade.color.presets.load_style_folder`), or a :class:`Grade`
-        (a saved one, :func:`wbcgrade.color.saved_grade.load_look`) applied as it
+        (a saved one, :func:`wbcgrade.color.grade.saved_grade.load_look`) applied as it
         is in its own working space, nothing fitted.
     options : grade settings (default :class:`GradeOptions`); ``flat``
         keywords (the former flat names, e.g. ``relaxation=0.05``) change it.
