@@ -20,24 +20,12 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import OpenImageIO as oiio
-
 from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
-from wbcgrade.color.io.images import header_pixels
+from wbcgrade.color.io.images import header_pixels, image_extensions
 from wbcgrade.errors import InputError
 
 __all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
            "recheck_plan", "remove_stale_outputs", "remove_temporaries"]
-
-
-def image_extensions() -> set[str]:
-    """Lower-case file extensions (with the dot) that OpenImageIO can read."""
-    text = oiio.get_string_attribute("extension_list")
-    exts = set()
-    for entry in text.split(";"):
-        _, _, names = entry.partition(":")
-        exts.update(f".{e.strip().lower()}" for e in names.split(",") if e.strip())
-    return exts
 
 
 @dataclass(frozen=True)

@@ -16,3 +16,7 @@ DEFAULT_MAX_IMAGE_PIXELS = 200_000_000
 DEFAULT_LUT_SIZE = 33
 #: Width (in bins) of the Gibbs kernel recorded in presets when none is given.
 DEFAULT_PRESET_WIDTH = 1.5
+#: Fewer of the user's own photos than this say too little of their content and are not
+#: used by the set look (a median of four own photos: film looks' worst photo -0.32 in the
+#: harness of :data:`wbcgrade.color.look.statistics.OWN_PHOTO_NOISE`).
+MIN_OWN_PHOTOS = 6

@@ -25,6 +25,8 @@ from enum import Enum
 
 import numpy as np
 
+from wbcgrade.color.defaults import MIN_OWN_PHOTOS
+
 __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
@@ -342,8 +344,6 @@ OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
 def _unused_own_photos(count: int) -> str:
     """The start of the words for own photos given but not used (the caller closes the
     parenthesis)."""
-    from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-
     return (f"your {count} own photo{'s were' if count != 1 else ' was'} not used "
             f"({MIN_OWN_PHOTOS} or more in colour are needed")
 
@@ -356,8 +356,6 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
     if blend < UNCHANGED_STRENGTH:
         return "raise --strength (1 applies the grade in full)"
     if source is GradeSource.SET_LOOK:
-        from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-
         look = look or {}
         own, unused = int(look.get("own_photos") or 0), int(look.get("own_photos_unused") or 0)
         if own:

@@ -249,6 +249,16 @@ def _open_input(path: Path, config: oiio.ImageSpec | None = None) -> oiio.ImageI
 _SYNTHETIC_READERS = frozenset({"null"})
 
 
+def image_extensions() -> set[str]:
+    """Lower-case file extensions (with the dot) that OpenImageIO can read."""
+    text = oiio.get_string_attribute("extension_list")
+    exts = set()
+    for entry in text.split(";"):
+        _, _, names = entry.partition(":")
+        exts.update(f".{e.strip().lower()}" for e in names.split(",") if e.strip())
+    return exts
+
+
 def header_pixels(path: str | os.PathLike) -> int:
     """Pixels of the image at ``path`` from its header, nothing decoded (0 when OpenImageIO
     reads no header there: :func:`read_image` says what is wrong with the file)."""

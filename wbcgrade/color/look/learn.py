@@ -141,7 +141,7 @@ class PairFiles:
 
 
 def _image_files(folder: Path) -> list[Path]:
-    from wbcgrade.batch.plan import image_extensions
+    from wbcgrade.color.io.images import image_extensions
     from wbcgrade.color.io.raw import RAW_SUFFIXES
 
     exts = image_extensions() | RAW_SUFFIXES

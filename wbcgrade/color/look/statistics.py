@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbcgrade.color.colorspace import REC709_LUMA
+from wbcgrade.color.defaults import MIN_OWN_PHOTOS
 from wbcgrade.color.histogram import grid_points
 
 __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
@@ -334,9 +335,6 @@ def _look_evidence(styles: PaletteStatistics, naturals: PaletteStatistics,
 #: 8 -> film looks +0.32 / +0.33 / +0.32 (worst -0.07 / -0.05 / -0.03); the own photos
 #: alone, as before, +0.28 (-0.16); the shipped palettes alone +0.27 (+0.00).
 OWN_PHOTO_NOISE = 5.0
-#: Fewer of the user's own photos than this say too little of their content and are not
-#: used (a median of four own photos: film looks' worst photo -0.32 in the harness above).
-MIN_OWN_PHOTOS = 6
 
 
 def own_photos_blend(count: int) -> float:
