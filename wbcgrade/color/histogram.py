@@ -22,6 +22,7 @@ from wbcgrade.color.io.cache import (
     write_entry,
 )
 from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
+from wbcgrade.core import resample_grid
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -120,8 +121,6 @@ def resample_histogram(hist: np.ndarray, bins: int) -> np.ndarray:
     interpolation: mass and mean colour kept) to a coarser grid, the density
     interpolated to a finer one. The histogram itself when ``bins == n``.
     """
-    from wbcgrade.core import resample_grid
-
     return hist if hist.shape[0] == bins else resample_grid(hist, (bins,) * 3, mass=1.0)
 
 

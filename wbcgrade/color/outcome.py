@@ -25,7 +25,10 @@ from enum import Enum
 
 import numpy as np
 
+from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
 from wbcgrade.color.defaults import MIN_OWN_PHOTOS
+from wbcgrade.color.histogram import grid_points
+from wbcgrade.color.mapping.remap import apply_color_map
 
 __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
@@ -434,9 +437,6 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
         per-channel change of its colours; None: the mean length |T(x) - x| of
         the displacement over the cube's colours (a 17^3 lattice).
     """
-    from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.mapping.remap import apply_color_map
-
     if hist is None:
         colors, mass = grid_points(17), None
     else:
@@ -450,8 +450,6 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
                                        float(strength)), dtype=np.float64)
     before = np.asarray(colors, dtype=np.float64)
     if working:
-        from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
-
         srgb = default_working_space()
         space = working if working == srgb else resolve_space(working)
         if space != srgb:

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._executor import cpu_count
 from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.color.colorspace import (
     ColorEncoding,
@@ -54,8 +55,10 @@ from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
     from_sparse,
+    grid_points,
     image_histogram,
     resample_histogram,
+    soft_histogram,
     to_sparse,
 )
 from wbcgrade.color.io.images import header_pixels, read_image
@@ -65,11 +68,14 @@ from wbcgrade.color.io.preset_names import (
     resolve_preset,
     shipped_presets_dir,
 )
+from wbcgrade.color.io.raw import is_raw
+from wbcgrade.color.mapping.remap import apply_color_map
 from wbcgrade.errors import InputError, OptionError, Worded
 from wbcgrade.limits import (
     MAX_MAP_SIZE,
     check_histogram_cells,
     check_input_file,
+    check_memory,
     parse_json,
     read_npz,
 )
@@ -234,8 +240,6 @@ class _Budget:
 def _megapixels(path: Path) -> float:
     """A photo's size from its header; a raw file (demosaiced in full) counts as the whole
     :data:`READ_MEGAPIXELS`."""
-    from wbcgrade.color.io.raw import is_raw
-
     return READ_MEGAPIXELS if is_raw(path) else header_pixels(path) / 1e6
 
 
@@ -252,8 +256,6 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
     (``limits.check_memory``: InputError naming ``where``), and filled in place."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from wbcgrade._executor import cpu_count
-    from wbcgrade.limits import check_memory
 
     check_memory(f"the histograms of {len(files)} style photos at {bins}^3 bins",
                  len(files) * bins ** 3 * 8 * 2, where,  # (x2: what the grade makes of them)
@@ -580,8 +582,6 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
     space such as ACEScct holds every sRGB colour. The converted set is
     kept on ``styles`` (converted once per working space).
     """
-    from wbcgrade.color.histogram import grid_points, soft_histogram
-
 
     source = styles.working_space
     if working_space == source:  # a config name already (the encoding's, a set's)
@@ -629,9 +629,6 @@ def look_in_space(look: np.ndarray, source: str, working: str,
     -------
     (size, size, size, 3) float32 lattice in ``working``.
     """
-    from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.mapping.remap import apply_color_map
-
     size = int(size or look.shape[0])
     nodes = grid_points(size).astype(np.float32)
     there = convert(nodes, working, source)

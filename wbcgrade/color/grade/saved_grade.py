@@ -44,12 +44,15 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade._publish import publish_bytes
+from wbcgrade.color._colour import colour_science
+from wbcgrade.color.colorspace import default_working_space, resolve_space
 from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.mapping.lut import check_clf_support
 from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.outcome import FitStart, SavedFrom
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.errors import InputError, first_line
+from wbcgrade.errors import InputError, OptionError, first_line
 from wbcgrade.limits import (
     MAX_LUT_DOMAIN,
     MAX_MAP_SIZE,
@@ -258,8 +261,6 @@ def _header_space(lines: list[str]) -> str | None:
 
 
 def _resolve(name: str, path: Path, option: str) -> str:
-    from wbcgrade.color.colorspace import resolve_space
-
     return resolve_space(name, option, path)
 
 
@@ -407,7 +408,7 @@ def _cube_look(path: Path) -> tuple[np.ndarray, str | None]:
         if plain is not None:
             return plain
     _check_declared_size(path)
-    from wbcgrade.color._colour import colour
+    colour = colour_science()
 
     try:
         lut = colour.read_LUT(str(path))
@@ -432,8 +433,6 @@ def _clf_look(path: Path) -> tuple[np.ndarray, str | None]:
     """A CLF or ``.3dl`` (Autodesk/Flame/Lustre) LUT read by OpenColorIO: (the table on the
     working cube, the space its header names or None). Numbers that are not finite in the
     file are refused (OpenColorIO would carry them through silently)."""
-    from wbcgrade.color.mapping.lut import check_clf_support
-
     kind = "CLF" if path.suffix.lower() == ".clf" else "LUT"
     try:
         ocio = check_clf_support()
@@ -489,8 +488,6 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     of its space, ``saved`` the file and its kind (also under ``info["saved_look"]``,
     for the JSON).
     """
-    from wbcgrade.color.colorspace import default_working_space
-
     path = check_input_file(path)  # a FIFO or device is refused unopened
     suffix = path.suffix.lower()
     if suffix == ".json":
@@ -554,7 +551,6 @@ def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,
     """
     from dataclasses import replace
 
-    from wbcgrade.errors import OptionError
 
     for given, name in ((consistent, "consistent"), (lut is not None, "lut"),
                         (report_dir is not None, "report_dir")):

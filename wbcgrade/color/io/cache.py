@@ -38,6 +38,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from wbcgrade._publish import publish_bytes, remove_stale_temporaries
 from wbcgrade.errors import InputError
 from wbcgrade.limits import read_npz
 
@@ -196,7 +197,6 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
         return False
     import numpy as np
 
-    from wbcgrade._publish import publish_bytes, remove_stale_temporaries
 
     path = Path(path)
     folder = str(path.parent)

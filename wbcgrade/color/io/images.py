@@ -38,7 +38,10 @@ import OpenImageIO as oiio
 from wbcgrade._names import readable_name, writable_name, writer_name
 from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.color.defaults import DEFAULT_MAX_IMAGE_PIXELS
-from wbcgrade.errors import InputError, first_line
+from wbcgrade.color.io._quantise import to_uint8
+from wbcgrade.color.io.raw import AP0_CHROMATICITIES, is_raw, read_raw
+from wbcgrade.errors import InputError, OptionError, first_line
+from wbcgrade.limits import MEMORY_BUDGET, check_input_file
 
 __all__ = [
     "Image",
@@ -200,8 +203,6 @@ def _check_pixel_count(path: Path, width: int, height: int, depth: int = 1) -> N
     """InputError when the image's pixels are over :func:`max_image_pixels`, or when a small
     file declares more pixels than the memory budget allows (``limits.MEMORY_BUDGET``;
     unless the limit was raised: the file is trusted), before anything is decoded."""
-    from wbcgrade.limits import MEMORY_BUDGET
-
     count = int(width) * int(height) * max(1, int(depth))
     limit = max_image_pixels()
     if count > limit:
@@ -230,8 +231,6 @@ def _open_input(path: Path, config: oiio.ImageSpec | None = None) -> oiio.ImageI
     """OpenImageIO's reader of the regular file ``path`` (InputError for anything else: a
     FIFO or device, which could block for ever, or a file only OpenImageIO's synthetic
     ``null`` reader opens, which makes up pixels from the file's name)."""
-    from wbcgrade.limits import check_input_file
-
     check_input_file(path)
     with readable_name(path) as name:  # a non-UTF-8 name: OpenImageIO's binding refuses it
         inp = oiio.ImageInput.open(name, config) if config is not None \
@@ -309,8 +308,6 @@ def read_image(path: str | os.PathLike) -> Image:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
-    from wbcgrade.color.io.raw import is_raw
-
     if is_raw(path):
         return _read_raw(path)
     config = oiio.ImageSpec()
@@ -360,8 +357,6 @@ def read_image(path: str | os.PathLike) -> Image:
 def _read_raw(path: Path) -> Image:
     """A raw camera file as a scene-linear float image tagged with the ACES AP0 primaries
     (:func:`wbcgrade.color.io.raw.read_raw`; the pixel limit checked before demosaicing)."""
-    from wbcgrade.color.io.raw import AP0_CHROMATICITIES, read_raw
-
     pixels, extra = read_raw(path, lambda width, height: _check_pixel_count(path, width, height))
     height, width = pixels.shape[:2]
     spec = oiio.ImageSpec(width, height, 3, oiio.FLOAT)
@@ -522,8 +517,6 @@ class WriteOptions:
     bit_depth: str | None = None
 
     def __post_init__(self) -> None:
-        from wbcgrade.errors import OptionError
-
         if self.quality is not None and (isinstance(self.quality, bool)
                                          or not 1 <= int(self.quality) <= 100):
             raise OptionError("{quality} must be between 1 and 100", "quality")
@@ -585,8 +578,6 @@ def _pixel_type(format_name: str, like: Image, bit_depth: str | None,
                 strict: bool = False) -> oiio.TypeDesc:
     """The pixel type written: ``bit_depth`` (else the input's; a raw photo's 16-bit
     integers, float in EXR), or the nearest the format holds (``strict``: OptionError)."""
-    from wbcgrade.errors import OptionError
-
     held = _FORMAT_DEPTHS.get(format_name)
     raw = bool(like.extra.get("raw"))
     if bit_depth is None and not raw and (held is None or _depth_of(like.spec.format) in held):
@@ -815,8 +806,6 @@ def _prepare(path: Path, pixels: np.ndarray, like: Image, alpha_channel: int | N
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)
     if spec.format.basetype == oiio.UINT8:  # converted here on every core (OIIO's: one)
-        from wbcgrade.color.io._quantise import to_uint8
-
         return spec, to_uint8(pixels), format_name
     if spec.format.basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         pixels = np.clip(pixels, 0.0, 1.0)

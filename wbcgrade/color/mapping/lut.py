@@ -41,10 +41,12 @@ import numpy as np
 
 from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
-from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color._colour import colour_science
+from wbcgrade.color.colorspace import ColorEncoding, config_info, convert
 from wbcgrade.color.defaults import DEFAULT_LUT_SIZE
 from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
+from wbcgrade.limits import MAX_MAP_SIZE
 
 __all__ = ["color_map_to_lut", "write_cube", "cube_text", "read_cube", "write_grade_lut",
            "lut_header",
@@ -75,8 +77,6 @@ def check_lut_size(size: int) -> int:
     """``size`` when it is a usable LUT size (2 to 129 nodes per axis, as a colour map's
     ``map.size``: a 256^3 table took 3.9 GB to bake), else OptionError. Checked whether or
     not a LUT is asked for (an option given is an option checked)."""
-    from wbcgrade.limits import MAX_MAP_SIZE
-
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) \
             or not 2 <= size <= MAX_MAP_SIZE:
         raise OptionError(f"{{lut_size}} must be between 2 and {MAX_MAP_SIZE}", "lut_size")
@@ -162,7 +162,7 @@ def _shaper_header_for_readers(header: list[str]) -> list[str]:
 
 def read_cube(path: str | os.PathLike):
     """Read a .cube file with colour-science (returns a ``colour.LUT3D``)."""
-    from wbcgrade.color._colour import colour
+    colour = colour_science()
 
     return colour.read_LUT(str(path))
 
@@ -207,8 +207,6 @@ def shaper_table(encoding, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[f
     encodes as 0 and 1 (ACEScct: about -0.0069 and 222.9), so the shaper
     covers exactly the 3D LUT's input cube.
     """
-    from wbcgrade.color.colorspace import convert
-
     high = float(encoding.peak)
     ramp = -np.geomspace(1e-6, 1.0, 2049)[::-1]  # the low end: the grey encoded as 0
     enc = convert(np.repeat(ramp[:, None], 3, axis=1), encoding.linear, encoding.working)[:, 0]
@@ -221,8 +219,6 @@ def shaper_table(encoding, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[f
 
 def lut_header(encoding, shaper: bool = False) -> list[str]:
     """Comment lines naming the spaces a LUT expects and produces, and the config."""
-    from wbcgrade.color.colorspace import config_info
-
     info = config_info()
     if encoding.input != encoding.working:  # baked in the input's code values
         lines = [f"input space: {encoding.input} ({encoding.source})",
@@ -290,8 +286,6 @@ def check_clf_support():
 def _write_clf(path: Path, table: np.ndarray, encoding, shaper: bool, title: str,
                notes: list[str], overwrite: bool) -> Path:
     ocio = check_clf_support()
-    from wbcgrade.color.colorspace import convert
-
     group = ocio.GroupTransform()
     metadata = group.getFormatMetadata()
     metadata.setName(title)

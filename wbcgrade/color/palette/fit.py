@@ -35,6 +35,7 @@ import numpy as np
 from wbcgrade.color.histogram import add_floor
 from wbcgrade.color.options import FitOptions
 from wbcgrade.color.outcome import FitStart
+from wbcgrade.core import GridGeometry, barycenter, barycentric_coordinates, get_loss, n_workers
 
 __all__ = ["NONZERO_THRESHOLD", "FitSummary", "fit_geometry", "fit_problem", "loss_at",
            "vertex_losses", "fit_weights", "given_weights"]
@@ -98,8 +99,6 @@ class FitSummary:
 def fit_geometry(options: FitOptions):
     """The core grid geometry the weights are fitted on (float32 products where they are
     exact enough; the core falls back to float64)."""
-    from wbcgrade.core import GridGeometry
-
     return GridGeometry((options.bins,) * 3, options.kernel_gamma, np.float32)
 
 
@@ -114,8 +113,6 @@ def fit_problem(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOption
 def loss_at(target, hists, geometry, weights, options: FitOptions) -> float:
     """The fit's loss of the barycenter of ``hists`` at ``weights`` (S,) against ``target``
     (the three from :func:`fit_problem`)."""
-    from wbcgrade.core import barycenter, get_loss
-
     keep = np.flatnonzero(weights > 0)
     P = barycenter(hists[keep], weights[keep] / weights[keep].sum(), geometry, options.n_iter)
     value, _ = get_loss(options.loss).value_and_grad(P, target, geometry)
@@ -182,8 +179,6 @@ class _HeldProgress:
 
 def _speculate() -> bool:
     """Whether a second core is there for the refit from the best vertex."""
-    from wbcgrade.core import n_workers
-
     return n_workers() >= 2
 
 
@@ -210,8 +205,6 @@ def fit_weights(photo_fit: np.ndarray, style_fit: np.ndarray, options: FitOption
     """
     if options.weights is not None:
         return given_weights(photo_fit, style_fit, options, np.asarray(options.weights))
-    from wbcgrade.core import barycentric_coordinates
-
     start = time.perf_counter()
     target, hists, geometry = fit_problem(photo_fit, style_fit, options)
     n_styles = len(hists)

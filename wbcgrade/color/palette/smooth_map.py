@@ -33,6 +33,7 @@ from scipy.sparse.linalg import cg
 
 from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.options import DEFAULT_MAP_SIZE, DEFAULT_SMOOTHNESS, DEFAULT_STIFFNESS
+from wbcgrade.core import fast_cpu
 
 __all__ = ["fit_smooth_map", "SmoothMapFitter", "interpolation_matrix", "DEFAULT_MAP_SIZE",
            "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS"]
@@ -271,7 +272,6 @@ class SmoothMapFitter:
         """(n, n, n, 3) raw map -> (size, size, size, 3) float32 smooth map, clipped to [0, 1]."""
         from scipy.linalg import cho_solve
 
-        from wbcgrade.core import fast_cpu
 
         n, size = self.bins, self.size
         if raw_map.shape != (n, n, n, 3):

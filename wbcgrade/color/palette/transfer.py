@@ -36,6 +36,13 @@ from wbcgrade.color.histogram import DEFAULT_FLOOR, add_floor
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.palette.smooth_map import fit_smooth_map
 from wbcgrade.color.presets import StyleSet
+from wbcgrade.core import (
+    BarycenterSolver,
+    GridGeometry,
+    barycentric_projection,
+    multiscale_sinkhorn,
+)
+from wbcgrade.core.geometry import refine_grid
 from wbcgrade.errors import NumericalError
 
 __all__ = ["color_transfer_map", "palette_barycenter", "transport_map"]
@@ -72,8 +79,6 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     color_map : (n, n, n, 3) float32 in [0, 1], the raw barycentric projection
     result : wbcgrade.core.SinkhornResult of the final solve
     """
-    from wbcgrade.core import GridGeometry, barycentric_projection, multiscale_sinkhorn
-
     n = photo_hist.shape[0]
     sigma = width / (n - 1)  # kernel in colour units, the same on every grid
     geometry = GridGeometry((n,) * 3, 2.0 * sigma ** 2)
@@ -107,9 +112,6 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
     -------
     ((bins, bins, bins) float64 summing to 1, info dict)
     """
-    from wbcgrade.core import BarycenterSolver, GridGeometry
-    from wbcgrade.core.geometry import refine_grid
-
     transfer = options.transfer
     n = transfer.bins
     m = min(n, transfer.palette_bins)
@@ -150,8 +152,6 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
     timings)``; the raw projection on the transfer grid is the map when
     ``map.smoothness`` and ``map.stiffness`` are 0.
     """
-    from wbcgrade.core import GridGeometry
-
     say = stage or (lambda name: None)
     transfer, shape = options.transfer, options.map
     timings: dict[str, float] = {}
