@@ -162,20 +162,20 @@ def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, fol
                                                                    monkeypatch, cli):
     """A report stopped after its sheets (before index.html) is finished by the next run
     without --overwrite; a finished report is still never replaced without it."""
-    import wbcgrade.photos.report as report
+    import wbcgrade.batch.workflow as workflow  # the report command's own workflow
 
     photos, styles = folders
     out = tmp_path / "rep"
-    write_report = report.write_report
+    write_report = workflow.write_report
 
     def stopped(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(report, "write_report", stopped)
+    monkeypatch.setattr(workflow, "write_report", stopped)
     args = ("report", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert cli(*args).exit_code == 130
     assert list((out / "sheets").glob("*.png")) and not (out / "index.html").exists()
-    monkeypatch.setattr(report, "write_report", write_report)
+    monkeypatch.setattr(workflow, "write_report", write_report)
     result = cli(*args)
     assert result.exit_code == 0, result.output
     assert (out / "index.html").is_file()

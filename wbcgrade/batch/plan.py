@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbcgrade._publish import check_output_path, is_unlocked, remove_stale_temporaries
+from wbcgrade.batch.records import read_record
 from wbcgrade.color.io.images import header_pixels, image_extensions
+from wbcgrade.color.io.raw import RAW_SUFFIXES, output_name
 from wbcgrade.errors import InputError
 
 __all__ = ["BatchTask", "BatchPlan", "image_extensions", "output_is_complete", "plan_batch",
@@ -128,8 +130,6 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
             raise InputError(f"{out}: output path exists and is not a folder")
         if out.exists() and out.resolve() == root.resolve():
             raise InputError(f"{out}: the output folder must differ from the input folder")
-    from wbcgrade.color.io.raw import RAW_SUFFIXES, output_name
-
     exts = image_extensions() | RAW_SUFFIXES
     skip_dirs = [Path(p) for p in exclude] + ([out] if out is not None else [])
     plan = BatchPlan(tasks=[])
@@ -165,8 +165,6 @@ def plan_batch(in_path: str | os.PathLike, out_dir: str | os.PathLike | None,
 
 def _recorded(out: Path, task: BatchTask) -> bool:
     """Whether a batch's result record of ``task`` is there and readable."""
-    from wbcgrade.batch.records import read_record
-
     return read_record(out, task.relative) is not None
 
 

@@ -31,8 +31,11 @@ from wbcgrade.color.io.images import (
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
+from wbcgrade.core import prefer_compiled
 from wbcgrade.errors import WbcgradeError, first_line
+from wbcgrade.photos.report import chart_record, palette_record, sheet_content, sheet_path
 from wbcgrade.photos.results import FileResult
+from wbcgrade.photos.sheet import write_sheet
 from wbcgrade.photos.workflow import PhotoPlan, Progress, grade_file
 
 __all__ = ["BatchContext", "run_task", "read_histograms", "setup_worker", "absolute_task",
@@ -110,19 +113,10 @@ def run_task(task: BatchTask, context: BatchContext,
         result.color = report.color
         result.own_style = report.grade.own_style
         result.outcome = None if report.outcome is None else report.outcome.as_dict()
-        from wbcgrade.photos.report import (
-            chart_record,
-            palette_record,
-            sheet_content,
-            sheet_path,
-        )
-
         result.palette = palette_record(report.grade, report.graded.encoding)
         result.chart = chart_record(report.grade, report.graded.encoding)
         result.timings["total"] = time.perf_counter() - start
         if context.sheet_dir is not None:
-            from wbcgrade.photos.sheet import write_sheet
-
             sheet = sheet_path(task.relative)
             write_sheet(context.sheet_dir / sheet,
                         sheet_content(result, report.graded, context.style_pictures),
@@ -165,8 +159,6 @@ def setup_worker(context: BatchContext) -> None:
     """Run once in each local worker process: the decoding limit and the cache of the
     parent's command; compiled kernels rather than their numpy twins (a worker grades many
     photos)."""
-    from wbcgrade.core import prefer_compiled
-
     set_max_image_pixels(context.max_image_pixels)
     set_command_cache(*context.cache)
     prefer_compiled()

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._executor import MAX_JOBS
 from wbcgrade._publish import lock_folder, plan_outputs
 from wbcgrade.batch.plan import BatchPlan, plan_batch, recheck_plan
 from wbcgrade.batch.records import (
@@ -38,7 +39,11 @@ from wbcgrade.batch.settings import (
 )
 from wbcgrade.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grade.saved_grade import look_batch_options, look_fit, look_styles
+from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.scene import matching_hook
+from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE, colour_photos
+from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
 from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -48,9 +53,32 @@ from wbcgrade.color.mapping.lut import (
     write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
+from wbcgrade.color.palette.fit import FitSummary
+from wbcgrade.color.presets import (
+    StyleSet,
+    StyleSource,
+    load_preset,
+    load_styles,
+    one_style_warning,
+    photo_palettes,
+    resolve_preset,
+    save_preset,
+    source_files,
+)
+from wbcgrade.core import prefer_compiled
 from wbcgrade.errors import InputError, OptionError, Worded
+from wbcgrade.photos.report import (
+    own_report,
+    plan_report,
+    report_overwrite,
+    sheet_from_files,
+    sheet_path,
+    style_pictures,
+    write_report,
+)
 from wbcgrade.photos.results import BatchResult, FileResult
+from wbcgrade.photos.results import FileResult as Result
+from wbcgrade.photos.sheet import write_sheet
 from wbcgrade.photos.workflow import Progress
 
 __all__ = ["BatchProgress", "grade_folder", "report_folder", "report_batch_output",
@@ -81,8 +109,6 @@ def _load(source: StyleSource, options: GradeOptions, progress: Progress, plan: 
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, hook)
     options.check_styles(len(styles.names))
-    from wbcgrade.color.presets import one_style_warning
-
     message = one_style_warning(source, styles, options.map.builder)
     if message is not None and progress.warn is not None:
         progress.warn(message)
@@ -114,25 +140,17 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
          overwrite: bool, progress: BatchProgress,
          on_result: Callable[[FileResult], None] | None = None, look=None,
          encode=None) -> BatchResult:
-    from wbcgrade.photos.report import own_report
-
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite,
                            replace_sheets=write_outputs and own_report(report_dir))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
-        from wbcgrade.color.grade.saved_grade import look_fit
-
         context.shared, context.shared_fit = look, look_fit(look)
     if encode is not None:
         context.encode = encode
     if report_dir is not None:
-        from wbcgrade.photos.report import style_pictures
-
         report_dir.mkdir(parents=True, exist_ok=True)
         context.style_pictures = style_pictures(styles)
     if len(plan.tasks) > 1:  # many grades: numba's start once, then its faster kernels
-        from wbcgrade.core import prefer_compiled
-
         prefer_compiled()
     in_process = scheduler is None and jobs == 1
     return run_batch(plan, context, consistent=consistent, jobs=jobs, scheduler=scheduler,
@@ -142,16 +160,12 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
 
 
 def _check_jobs(jobs: int) -> None:
-    from wbcgrade._executor import MAX_JOBS
-
     if not 1 <= jobs <= MAX_JOBS:
         raise OptionError(f"{{jobs}} must be between 1 and {MAX_JOBS}", "jobs")
 
 
 def _plan_report(report_dir: Path | None, plan: BatchPlan, overwrite: bool) -> None:
     if report_dir is not None:
-        from wbcgrade.photos.report import plan_report
-
         plan_report(report_dir, [task.relative for task in plan.tasks],
                     [task.source for task in plan.all_photos], overwrite)
 
@@ -176,9 +190,6 @@ def own_photos_content(options: GradeOptions, in_dir: str | os.PathLike, plan: B
     how many photos that is (0: not used)."""
     from dataclasses import replace
 
-    from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE, colour_photos
-    from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-    from wbcgrade.color.presets import photo_palettes, save_preset
 
     if (look is not None or options.map.natural is not None or options.map.builder != "look"
             or source is None or source.style_dir is None):
@@ -235,8 +246,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     progress = progress or BatchProgress()
     _check_jobs(jobs)
     if look is not None:
-        from wbcgrade.color.grade.saved_grade import look_batch_options
-
         options = look_batch_options(options, look, consistent, lut, report_dir)
     report_dir = None if report_dir is None else Path(report_dir)
     check_lut_size(lut_size)
@@ -261,12 +270,9 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
     if consistent and options.spaces.working is None:  # one working space for the series
         from dataclasses import replace
 
-        from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 
         if any(is_raw(t.source) for t in plan.all_photos):
             options = replace(options, spaces=replace(options.spaces, working=RAW_WORKING_SPACE))
-    from wbcgrade.photos.report import own_report
-
     # the report of an earlier run into this folder is updated as the photos are resumed
     own = own_report(report_dir)
     _plan_report(report_dir, plan, overwrite or own)
@@ -286,8 +292,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         if look is None:
             styles = _load(source, options, progress, plan, consistent)
         else:
-            from wbcgrade.color.grade.saved_grade import look_styles
-
             styles = look_styles(look, str(None if look.saved is None else look.saved.file))
         settings = batch_settings(styles, options, consistent)
         changed = settings_changed(out_dir, settings)
@@ -309,8 +313,6 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         result.time_s = time.perf_counter() - start
         result.own_photos = own_photos
         if report_dir is not None:
-            from wbcgrade.photos.report import write_report
-
             result.report = write_report(report_dir, result, styles, options,
                                          "consistent" if consistent else "per-photo",
                                          overwrite or own)
@@ -359,8 +361,6 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
         if target.is_file():
             raise InputError(f"{target}: not an image file (by its extension)")
         raise InputError(f"{target}: no photos found")
-    from wbcgrade.photos.report import report_overwrite
-
     overwrite = report_overwrite(out, overwrite)  # a stopped report is finished in place
     _plan_report(out, plan, overwrite)
     if progress.planned:
@@ -375,8 +375,6 @@ def report_folder(target: str | os.PathLike, report_dir: str | os.PathLike | Non
                   progress)
     result.time_s = time.perf_counter() - start
     result.own_photos = own_photos
-    from wbcgrade.photos.report import write_report
-
     result.report = write_report(out, result, styles, options,
                                  "consistent" if consistent else "per-photo", overwrite)
     return result
@@ -402,8 +400,6 @@ def recorded_batch(folder: str | os.PathLike) -> dict | None:
 def _recorded_styles(recorded: str, names: list[str]) -> StyleSet:
     """The styles a batch recorded, for the sheets' pictures: the preset when it is still
     there with these names, else the names alone (a folder's pictures are its photos)."""
-    from wbcgrade.color.presets import load_preset
-
     if Path(recorded).is_file():
         try:
             styles = load_preset(recorded)
@@ -415,8 +411,6 @@ def _recorded_styles(recorded: str, names: list[str]) -> StyleSet:
 
 
 def _same_styles(given: StyleSource, recorded: str) -> bool:
-    from wbcgrade.color.presets import resolve_preset
-
     if given.style_dir is not None:
         return Path(given.style_dir).resolve() == Path(recorded).resolve()
     try:
@@ -448,11 +442,6 @@ def report_batch_output(folder: str | os.PathLike, report_dir: str | os.PathLike
     ``wbcgrade report``: styles other than the batch's are refused, other
     options are ignored with a warning.
     """
-    from wbcgrade.color.palette.fit import FitSummary
-    from wbcgrade.photos.report import sheet_from_files, sheet_path, style_pictures, write_report
-    from wbcgrade.photos.results import FileResult as Result
-    from wbcgrade.photos.sheet import write_sheet
-
     progress = progress or BatchProgress()
     folder, report_dir = Path(folder), Path(report_dir)
     recorded_styles = str(settings.get("styles", ""))

@@ -26,13 +26,25 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import atomic_path, plan_outputs
-from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade._publish import atomic_path, plan_outputs, publish_bytes
+from wbcgrade.color.colorspace import ColorEncoding, config_info, convert, default_working_space
+from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.io.images import read_image
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import GradeSource, change_words
 from wbcgrade.color.palette.fit import NONZERO_THRESHOLD
 from wbcgrade.color.presets import StyleSet
+from wbcgrade.errors import InputError
 from wbcgrade.photos.graded import GradeReport, PhotoGrade
 from wbcgrade.photos.results import BatchResult, FileResult
+from wbcgrade.photos.sheet import (
+    Palette,
+    SheetContent,
+    StyleTile,
+    histogram_palette,
+    thumbnail,
+    write_sheet,
+)
 
 __all__ = ["style_pictures", "report_paths", "own_report", "plan_report", "report_overwrite",
            "write_report", "report_entries", "report_from_grade", "sheet_content",
@@ -82,14 +94,10 @@ def plan_report(report_dir: str | os.PathLike, relatives: list[str], inputs=(),
     folder, none is an input, none exists unless ``overwrite``)."""
     report_dir = Path(report_dir)
     if report_dir.exists() and not report_dir.is_dir():
-        from wbcgrade.errors import InputError
-
         raise InputError(f"{report_dir}: the report folder is a file")
     paths = plan_outputs(report_paths(report_dir, relatives), inputs,
                          report_overwrite(report_dir, overwrite), root=report_dir,
                          make_folders=True)
-    from wbcgrade._publish import publish_bytes
-
     report_dir.mkdir(parents=True, exist_ok=True)
     publish_bytes(report_dir / UNFINISHED_FILE, b"a report is being written here\n",
                   sync=False)  # removed when index.html is written (write_report)
@@ -114,10 +122,6 @@ def style_pictures(styles: StyleSet, size: int = 96) -> dict[str, np.ndarray]:
 
     Returns {name: (h, w, 3) float32 in [0, 1]}.
     """
-    from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.io.images import read_image
-    from wbcgrade.photos.sheet import histogram_palette, thumbnail
-
     working = styles.working_space
     palette_spaces = (None if working == default_working_space()
                       else ColorEncoding.of(None, working))
@@ -151,8 +155,6 @@ def palette_record(grade, encoding: ColorEncoding) -> dict | None:
     """The main colours of the palette a grade aimed at (its barycenter), display-encoded,
     as JSON (``{"colors": [[r, g, b], ...], "shares": [...]}``); None when the grade
     has no barycenter (a look)."""
-    from wbcgrade.photos.sheet import histogram_palette
-
     if grade.barycenter is None:
         return None
     palette = histogram_palette(grade.barycenter)  # in the working space
@@ -179,8 +181,6 @@ def chart_record(grade, encoding: ColorEncoding) -> dict | None:
     """The :func:`look_chart` through a look grade's colour map, as the photo's space
     shows it on screen (``{"after": [[[r, g, b], ...], ...]}``, display sRGB); None for a
     palette grade (its sheet shows weights)."""
-    from wbcgrade.color.colorspace import convert, default_working_space
-
     outcome = getattr(grade, "outcome", None)
     if outcome is None or outcome.palette is not None:
         return None
@@ -203,8 +203,6 @@ def _chart(record: dict | None) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def _palette(record: dict | None):
-    from wbcgrade.photos.sheet import Palette
-
     if not record:
         return None
     return Palette(np.asarray(record["colors"], np.float64), np.asarray(record["shares"]))
@@ -245,8 +243,6 @@ def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import ImageOps
 
-    from wbcgrade.color.io.images import read_image
-    from wbcgrade.photos.sheet import thumbnail
 
     try:
         with PILImage.open(path) as image:
@@ -264,17 +260,12 @@ def _sheet_picture(path: str | os.PathLike) -> np.ndarray:
 
 def _content(result: FileResult, before: np.ndarray, after: np.ndarray, target,
              style_pictures: dict[str, np.ndarray] | None):
-    from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.photos.sheet import SheetContent, StyleTile, histogram_palette, thumbnail
-
     small_before = thumbnail(before, 300, 480)
     small_after = thumbnail(after, 300, 480)
     pictures = style_pictures or {}
     bins = 16
     outcome = result.grade_outcome
     if outcome is not None and outcome.palette is None:  # a look: what it did, no weights
-        from wbcgrade.color.outcome import GradeSource
-
         # the style photos a look was read from (a preset's own look: not its photos)
         tiles = ([] if outcome.source in (GradeSource.PRESET_LOOK, GradeSource.SAVED) else
                  [StyleTile(name, 0.0, pictures.get(name, np.full((8, 8, 3), 0.5, np.float32)))
@@ -403,8 +394,6 @@ def _look_index_html(entries: list[dict], meta: dict) -> str:
     """The page of a report whose grades are all looks: per photo where the look came
     from, its strength and how much the colours moved; then each photo's sheet (before and
     after, the look on a colour chart)."""
-    from wbcgrade.color.outcome import change_words
-
     esc = _esc
     rows = []
     for entry in entries:
@@ -503,8 +492,6 @@ def write_report(report_dir: str | os.PathLike, result: BatchResult, styles: Sty
     Existing files are replaced only with ``overwrite`` (:func:`plan_report`
     checked them before any work). Returns the path of report.json.
     """
-    from wbcgrade.color.colorspace import config_info, default_working_space
-
     report_dir = Path(report_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
     overwrite = report_overwrite(report_dir, overwrite)
@@ -542,8 +529,6 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
     its fit summary gives the loss, the single-style losses and how the
     weights were found, its pixels the sheet. Returns the path of report.json.
     """
-    from wbcgrade.photos.sheet import write_sheet
-
     report_dir = Path(report_dir)
     fit = graded.fit
     result = FileResult(graded.photo.name, str(graded.photo),

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.outcome import GradeOutcome
 from wbcgrade.color.palette.fit import NONZERO_THRESHOLD, FitSummary
 
 __all__ = ["FileResult", "BatchResult"]
@@ -41,8 +42,6 @@ class FileResult:
         from before outcomes, a photo not graded)."""
         if not self.outcome:
             return None
-        from wbcgrade.color.outcome import GradeOutcome
-
         return GradeOutcome.from_dict(self.outcome)
 
     @property

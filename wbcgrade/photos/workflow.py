@@ -31,8 +31,9 @@ import numpy as np
 
 from wbcgrade._publish import make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grade.grading import Grade, grade_encoded
-from wbcgrade.color.grade.saved_grade import save_grade
+from wbcgrade.color.grade.grading import Grade, grade_encoded, outcome_on_photo
+from wbcgrade.color.grade.saved_grade import look_fit, look_styles, save_grade
+from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.io.images import (
     Image,
     WriteOptions,
@@ -41,6 +42,7 @@ from wbcgrade.color.io.images import (
     read_image,
     stage_image,
 )
+from wbcgrade.color.io.raw import output_name
 from wbcgrade.color.look.scene import matching_hook
 from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
@@ -51,10 +53,18 @@ from wbcgrade.color.mapping.lut import (
     write_checked_lut,
 )
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet, StyleSource, load_styles, source_files
+from wbcgrade.color.presets import (
+    StyleSet,
+    StyleSource,
+    load_styles,
+    one_style_warning,
+    source_files,
+)
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.limits import check_input_file
 from wbcgrade.photos.graded import GradeReport, PhotoGrade
+from wbcgrade.photos.output import grey_of, output_pixels
+from wbcgrade.photos.report import plan_report, report_from_grade
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
            "plan_photo", "graded_pixels", "grade_photo", "grade_file", "apply_photo"]
@@ -105,8 +115,6 @@ class PhotoPlan:
 
 def default_output_path(photo: str | os.PathLike) -> Path:
     """``<stem>_graded<ext>`` beside the photo (a raw photo's: ``<stem>_graded.tif``)."""
-    from wbcgrade.color.io.raw import output_name
-
     photo = Path(photo)
     return photo.with_name(f"{photo.stem}_graded{output_name(photo).suffix}")
 
@@ -189,8 +197,6 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
         out = image.pixels.copy()
         out[:, :, chans] = graded
         return out, image.alpha_channel
-    from wbcgrade.photos.output import grey_of
-
     out = image.pixels.copy()
     out[:, :, chans[0]] = grey_of(graded, image.is_float)
     return out, image.alpha_channel
@@ -221,8 +227,6 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     if shared is not None:  # what the shared (series or saved) grade does to this photo
         from dataclasses import replace
 
-        from wbcgrade.color.grade.grading import outcome_on_photo
-        from wbcgrade.color.histogram import image_histogram
 
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
@@ -272,8 +276,6 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
         lut_existed = plan.lut is not None and plan.lut.exists()
         lut_written = False
         try:
-            from wbcgrade.photos.output import output_pixels
-
             pixels = output_pixels(graded.pixels, graded.alpha_channel, graded.image,
                                    graded.encoding, plan.output, plan.encode)
             with stage_image(plan.output, pixels, graded.image, plan.overwrite,
@@ -336,12 +338,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     plan = plan_photo(photo, output, lut=lut, lut_size=lut_size, lut_format=lut_format,
                       overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
-        from wbcgrade.photos.report import plan_report
-
         plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
     if saved:
-        from wbcgrade.color.grade.saved_grade import look_fit, look_styles
-
         spaces = options.spaces
         if spaces.working != source.working:
             from dataclasses import replace
@@ -361,16 +359,12 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                         keep_input=report_dir is not None)
     _save_grade(plan, report.grade)
     if report_dir is not None:
-        from wbcgrade.photos.report import report_from_grade
-
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report
 
 
 def _warn_one_style(source: StyleSource, styles: StyleSet, options: GradeOptions,
                     warn) -> None:
-    from wbcgrade.color.presets import one_style_warning
-
     message = one_style_warning(source, styles, options.map.builder)
     if message is not None and warn is not None:
         warn(message)

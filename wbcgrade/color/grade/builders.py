@@ -19,7 +19,6 @@ from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.palette.fit import FitSummary, fit_weights
-from wbcgrade.color.palette.transfer import transport_map
 from wbcgrade.color.presets import StyleSet
 
 __all__ = ["FitCallback", "quiet", "PhotoHistograms", "MapRequest", "BuiltMap", "palette_map"]
@@ -95,7 +94,9 @@ def palette_map(request: MapRequest) -> BuiltMap:
     """The "palette" builder: the weights (never worse than one style alone), then the
     map onto their barycenter palette (:func:`wbcgrade.color.palette.transfer.transport_map`)."""
     # imported here: the transport and its smooth map (scipy.sparse, ~0.1 s) are needed to
-    # build a palette grade, not to apply a saved one
+    # build a palette grade, not to apply a saved one (nor a small photo's look grade)
+    from wbcgrade.color.palette.transfer import transport_map
+
     options, styles = request.options, request.styles
     request.stage("fit")
     fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
