@@ -415,50 +415,88 @@ def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
     assert (tmp_path / "report" / "index.html").is_file()
 
 
-def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
-    """Six or more photos directly in the batch's folder are the look's content model
-    beside the shipped palettes: said on the summary, recorded in the settings, and the
-    grade differs from the shipped palettes' alone (``--natural shipped``); their palettes
-    are read once and kept in the output folder; a broken photo among them is skipped there
-    as in the grade, two photos of one stem are both read; five photos are too few."""
-    _, styles = folders
-    photos = tmp_path / "mine"
-    names = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
-    for name in names:
+#: The batch folder's own photos (six or more: the look's content model).
+OWN_NAMES = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
+
+
+@pytest.fixture(scope="module")
+def own_photos(tmp_path_factory) -> tuple[Path, Path]:
+    """(a folder of seven photos, a broken one and a stem twice; a folder of six warm style
+    photos)."""
+    root = tmp_path_factory.mktemp("own")
+    photos = root / "mine"
+    for name in OWN_NAMES:
         small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 40)
     (photos / "broken.jpg").write_bytes((photos / "chelsea.jpg").read_bytes()[:300])
     _write_png(photos / "coffee.png", _pixels(photos / "coffee.jpg"))  # a stem twice
-    warm = tmp_path / "warm"
+    warm = root / "warm"
     for name in ("sunset", "coffee", "flower", "seeding", "aitzgorri", "bridge"):
         img = _pixels(small_copy(SAMPLES / f"{name}.jpg", warm / f"{name}.png", 40))
         _write_png(warm / f"{name}.png", np.clip(img[..., :3] * [1.1, 0.95, 0.7], 0, 1))
-    own = run_cli("batch", str(photos), "-o", str(tmp_path / "own"), "--style", str(warm),
-                  "--no-cache")
+    return photos, warm
+
+
+@pytest.fixture(scope="module")
+def own_batch(own_photos, tmp_path_factory) -> tuple[Path, object]:
+    """(the output folder, the result) of a batch of ``own_photos`` with the warm styles."""
+    photos, warm = own_photos
+    out = tmp_path_factory.mktemp("own_out") / "own"
+    return out, run_cli("batch", str(photos), "-o", str(out), "--style", str(warm),
+                        "--no-cache")
+
+
+def test_a_batch_measures_the_look_against_its_own_photos(own_batch):
+    """Six or more photos directly in the batch's folder are the look's content model
+    beside the shipped palettes: said on the summary, recorded in the settings; their
+    palettes are read once and kept in the output folder; a broken photo among them is
+    skipped there as in the grade, two photos of one stem are both read."""
+    out, own = own_batch
     assert own.exit_code == 1, own.output  # the broken photo fails; the others are graded
     assert "graded 8, skipped 0, failed 1" in own.output
     assert "measured against 8 photos of the folder" in own.output
-    settings = json.loads((tmp_path / "own" / ".wbcgrade-batch.json").read_text())
-    kept = tmp_path / "own" / ".wbcgrade-own-photos.npz"  # their palettes, read once
+    settings = json.loads((out / ".wbcgrade-batch.json").read_text())
+    kept = out / ".wbcgrade-own-photos.npz"  # their palettes, read once
     assert settings["options"]["natural"] == str(kept.resolve())
     assert len(load_preset(kept).names) == 8
+
+
+@pytest.mark.slow
+def test_the_own_photos_change_the_grade_from_the_shipped_palettes(own_photos, own_batch,
+                                                                    tmp_path):
+    """The grade differs from the shipped palettes' alone (``--natural shipped``)."""
+    photos, warm = own_photos
+    out, _ = own_batch
     shipped = run_cli("batch", str(photos), "-o", str(tmp_path / "shipped"), "--style",
                       str(warm), "--natural", "shipped", "--no-cache")
     assert "graded 8" in shipped.output and "content:" not in shipped.output
-    differ = [np.abs(_pixels(tmp_path / "own" / f"{n}.jpg")
-                     - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max() for n in names]
+    differ = [np.abs(_pixels(out / f"{n}.jpg") - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max()
+              for n in OWN_NAMES]
     assert max(differ) > 2 / 255
+
+
+def test_five_own_photos_are_too_few(own_photos, tmp_path):
+    photos, warm = own_photos
     few = tmp_path / "few"
     few.mkdir()
-    for name in names[:5]:
+    for name in OWN_NAMES[:5]:
         shutil.copy(photos / f"{name}.jpg", few / f"{name}.jpg")
     result = run_cli("batch", str(few), "-o", str(tmp_path / "few_out"), "--style", str(warm),
                      "--no-cache")
     assert result.exit_code == 0 and "content:" not in result.output
-    # a preset's look is baked in: no content model is read
+
+
+def test_a_presets_look_reads_no_content_of_the_batch(own_photos, tmp_path):
+    """A preset's look is baked in: no content model is read."""
+    photos, _ = own_photos
     preset = run_cli("batch", str(photos), "-o", str(tmp_path / "preset"), "--preset", "warm",
                      "--no-cache")
     assert "graded 8" in preset.output and "content:" not in preset.output
-    # a folder graded towards its own look: its photos are the styles, not its content
+
+
+@pytest.mark.slow
+def test_a_folder_graded_towards_its_own_look_is_not_its_own_content(own_photos, tmp_path):
+    """A folder graded towards its own look: its photos are the styles, not its content."""
+    _, warm = own_photos
     itself = run_cli("batch", str(warm), "-o", str(tmp_path / "itself"), "--style", str(warm),
                      "--no-cache")
     assert itself.exit_code == 0 and "content:" not in itself.output

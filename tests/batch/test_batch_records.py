@@ -158,6 +158,7 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
     assert result.exit_code == 0, result.output
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, folders,
                                                                    monkeypatch, cli):
     """A report stopped after its sheets (before index.html) is finished by the next run

@@ -153,6 +153,7 @@ def test_the_default_grade_works_when_the_cache_folder_cannot_be_written(tmp_pat
     assert kinds == {"cache", "looks", "scenes"}  # all three kinds were written there
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_natural_folder_follows_no_cache_and_cache_dir(tmp_path, cli, monkeypatch):
     """``--natural DIR`` read its photos through the default cache whatever the command
     said: with ``--cache-dir`` they are cached there, with ``--no-cache`` nowhere."""

@@ -271,6 +271,7 @@ def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading, cli):
     assert fifo.is_fifo() and hidden_files(tmp_path) == []
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_a_report_under_a_file_size_limit_fails_and_publishes_no_truncated_sheet(tmp_path):
     """``report`` under a file size limit exited 0 ("failed 0") with a PNG cut at the limit:
     each sheet is encoded in memory and checked, so the photo fails and no sheet is

@@ -101,6 +101,7 @@ def test_a_folder_read_for_a_look_is_decoded_once_and_its_scene_images_are_the_s
         assert np.array_equal(first.descriptors, later.descriptors)
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_apply_decodes_each_style_photo_once(tmp_path, monkeypatch, cli):
     """Through the command line, with style photos larger than the matching size (their
     scene images shrunk from the decode the histograms are read from)."""
