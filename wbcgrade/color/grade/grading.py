@@ -308,9 +308,7 @@ def regrain_follow(fit: FitSummary) -> float:
     (:attr:`Grade.regrain_follow`): fully for a preset's own look, for the look read off
     the style photo of the photo's scene as far as the match is sure (the map is that much
     the scene's; the rest is the set's look); not at all for a set's look read from
-    statistics, a guess at the look's slopes (day for night's highlights, estimated flatter
-    than the look has them, softened a dandelion field's seed heads: gradient correlation
-    0.92 -> 0.78)."""
+    statistics, whose slopes are a guess (docs/benchmarks.md, regrain of a set's look)."""
     if fit.start == FitStart.PRESET:
         return 1.0
     if fit.start == FitStart.SCENE:
