@@ -30,6 +30,7 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_TOL,
     DEFAULT_WIDTH,
 )
+from wbcgrade.brdf.fit import fit_brdf
 from wbcgrade.errors import NumericalError, OptionError
 
 __all__ = ["FitRun", "MeasurementFit", "write_database", "default_fit_output", "fit_outputs",
@@ -255,8 +256,6 @@ def fit_measurement(
     NumericalError
         A fit whose PSNR is not defined (NaN).
     """
-    from wbcgrade.brdf.fit import fit_brdf  # the core: imported only when fitting
-
     measured = Path(measured)
     out, png_path = fit_outputs(measured, database, keeps, output, png, no_png)
     dirs = sampling.hemisphere_directions(directions)

@@ -9,7 +9,10 @@ import webbrowser
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from wbcgrade.errors import OptionError
+from wbcgrade.explore.engine import load_session
 from wbcgrade.explore.server import ExploreServer, Studio, make_server
+from wbcgrade.explore.studio import Explorer, style_choices
 
 __all__ = ["start_studio", "open_browser", "serve"]
 
@@ -33,10 +36,6 @@ def start_studio(photo: str, style_dir: str | None = None,
     folder), which must be a folder that exists; nothing else is written.
     ``prefetch``: the other sources are loaded in the background at once.
     """
-    from wbcgrade.errors import OptionError
-    from wbcgrade.explore.engine import load_session
-    from wbcgrade.explore.studio import Explorer, style_choices
-
     say = stage or (lambda name: None)
     presets = [preset] if isinstance(preset, str) else list(preset or [])
     if (style_dir is None) == (not presets):

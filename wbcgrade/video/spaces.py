@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import ColorEncoding, config_info, resolve_space
+from wbcgrade.color.colorspace import ColorEncoding, config_info, config_path, resolve_space
 from wbcgrade.color.options import SpaceOptions
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import VideoInfo
@@ -79,8 +79,6 @@ def tagged_space(info: VideoInfo) -> tuple[str | None, str]:
     candidates = _TAGGED.get((transfer, primaries)) or _TAGGED.get((transfer, None))
     found = _first_known(candidates) if candidates else None
     if found is None:
-        from wbcgrade.color.colorspace import config_path
-
         raise InputError(
             f"{info.path}: tagged {HDR_TRANSFERS[transfer]} ({tags}), but OpenColorIO config "
             f"{config_path()} has no colour space for it; name one with {{spaces.input}} NAME "

@@ -52,7 +52,14 @@ import numpy as np
 
 from wbcgrade._publish import atomic_path, is_unlocked, make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grade.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
+from wbcgrade.color.grade.grading import (
+    Grade,
+    PhotoHistograms,
+    grade_histograms,
+    grade_outcome,
+    photo_histograms,
+)
+from wbcgrade.color.grade.saved_grade import look_fit
 from wbcgrade.color.histogram import PaletteSum
 from wbcgrade.color.mapping.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
@@ -567,9 +574,6 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
-            from wbcgrade.color.grade.grading import grade_outcome
-            from wbcgrade.color.grade.saved_grade import look_fit
-
             grade, fit = look, look_fit(look)
             grade = replace(grade, outcome=grade_outcome(grade, fit, None))
         else:
