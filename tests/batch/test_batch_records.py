@@ -128,6 +128,7 @@ def test_stage_bar_says_what_it_does_and_drops_the_previous_photos_loss():
         assert bar.desc.removesuffix(": ") == "b.jpg: scene: colour transport"
 
 
+@pytest.mark.slow  # over 4 s of the fast tier: the whole suite runs it
 def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
         tmp_path, folders, monkeypatch, cli):
     """A batch stopped during its first photo has recorded its settings already (a rerun

@@ -58,6 +58,7 @@ def test_the_text_is_colour_sciences(tmp_path, size, title, comments, shaper):
     assert written.read_text("utf-8") == expected
 
 
+@pytest.mark.slow  # over 4 s of the fast tier: the whole suite runs it
 def test_a_lut_run_does_not_import_colour_science(tmp_path):
     script = ("import sys\nfrom wbcgrade.cli import main\n"
               "try:\n    main()\nexcept SystemExit as exit:\n"

@@ -60,6 +60,7 @@ def test_command_line_quotes_paths_and_names_every_setting(tmp_path):
                                                              "--no-regrain"]
 
 
+@pytest.mark.slow  # over 4 s of the fast tier: the whole suite runs it
 def test_a_session_on_a_style_folder_decodes_each_style_photo_for_its_look_once(
         tmp_path, monkeypatch):
     """The explorer opens on apply's look grade: its scene matching reads the style photos
