@@ -362,7 +362,7 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
 
 @pytest.mark.slow
 def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):
-    from tests.color.test_raw import write_dng
+    from tests.color.io.test_raw import write_dng
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.io.images import read_image
 

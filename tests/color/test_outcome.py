@@ -317,7 +317,7 @@ def test_preset_on_a_raw_photo_is_the_jpeg_look(tmp_path):
     """A raw photo (graded in ACEScct) gets the preset's own look: the same as its sRGB
     rendering graded in sRGB, not a look re-extracted from the preset's palettes."""
     pytest.importorskip("tifffile")
-    from tests.color.test_raw import WHITE, write_dng
+    from tests.color.io.test_raw import WHITE, write_dng
     from wbcgrade.color.colorspace import ColorEncoding
 
     rng = np.random.default_rng(3)

@@ -109,7 +109,7 @@ def cube_text(table: np.ndarray, title: str = "wbcgrade", comments: list[str] | 
     fastest, 6 decimals; with a shaper 7 decimals, ``LUT_1D_SIZE``,
     ``LUT_1D_INPUT_RANGE`` and the header of :func:`_shaper_header_for_readers`),
     written here: colour-science takes one to two seconds to import, on every LUT written
-    run (tests/color/test_lut_interop.py compares the two).
+    run (tests/color/mapping/test_lut_interop.py compares the two).
     """
     table = np.asarray(table, dtype=np.float64)
     size = table.shape[0]
@@ -146,7 +146,7 @@ def _shaper_header_for_readers(header: list[str]) -> list[str]:
     stays as a comment), and ``LUT_3D_SIZE`` before the 1D keywords (ffmpeg's ``lut3d``,
     which has no shaper, then stops at ``LUT_1D_SIZE`` with "Invalid data" instead of
     reading the shaper's entries as the 3D table). OpenColorIO and colour-science take
-    the keywords in any order (tests/color/test_lut_interop.py)."""
+    the keywords in any order (tests/color/mapping/test_lut_interop.py)."""
     size_3d = [line for line in header if line.startswith("LUT_3D_SIZE")]
     out = []
     for line in header:

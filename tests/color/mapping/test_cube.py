@@ -12,7 +12,7 @@ import pytest
 
 from wbcgrade.color.mapping.lut import _shaper_header_for_readers, cube_text, write_cube
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def colour_science_text(path: Path, table, title, comments, shaper) -> str:

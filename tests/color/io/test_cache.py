@@ -16,7 +16,7 @@ from wbcgrade.color.histogram import HistogramCache, soft_histogram
 from wbcgrade.color.io import cache
 from wbcgrade.color.options import DEFAULT_MAX_PIXELS
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 ODD_NAMES = ["a photo with spaces.jpg", "\u00e9t\u00e9 \u5199\u771f \U0001f4f7.jpg",
              os.fsdecode(b"caf\xe9.jpg"), "x" * 251 + ".jpg", "-rf --no-cache.jpg"]
