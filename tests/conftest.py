@@ -35,6 +35,8 @@ def pytest_terminal_summary(terminalreporter):
     """One line with the time of the fast tier (``-m "not slow"``) and of the whole run, so
     that a run of the whole suite (``.ci/run``) also says what the fast tier takes."""
     (fast, fast_s), (slow, slow_s) = _TIER_TIMES["fast"], _TIER_TIMES["slow"]
+    if fast + slow == 0:  # nothing ran (--collect-only)
+        return
     terminalreporter.write_line(
         f"test time: fast tier {fast} tests {fast_s:.0f} s, slow {slow} tests {slow_s:.0f} s, "
         f"together {fast_s + slow_s:.0f} s (the tests' own set-up, call and tear-down, "
