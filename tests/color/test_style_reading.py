@@ -147,8 +147,7 @@ def test_big_photos_are_not_decoded_together(folder, monkeypatch):
     """At most READ_MEGAPIXELS in flight; a photo bigger than that alone."""
     monkeypatch.setattr(presets, "READ_THREADS", 4)
     monkeypatch.setattr(presets, "_megapixels", lambda path: 30.0)
-    import wbcgrade._executor as executor
-    monkeypatch.setattr(executor, "cpu_count", lambda: 4)
+    monkeypatch.setattr(presets, "cpu_count", lambda: 4)  # (the executor's, as presets has it)
     in_flight, most = [0], [0]
     lock = threading.Lock()
     real = presets._photo_histogram
