@@ -71,7 +71,7 @@ def main() -> None:
     parser.add_argument("--preset", default="kodak-2383")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    from wbcgrade.color.imageio import jpeg_quality
+    from wbcgrade.color.io.images import jpeg_quality
 
     with tempfile.TemporaryDirectory(prefix="wbcgrade-report-bench-") as tmp:
         work = Path(tmp)

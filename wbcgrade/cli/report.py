@@ -41,7 +41,7 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
     photo in sheets/ and index.html.
     """
     check_photo(target, "no such file or folder")  # (exit 1, before numpy loads)
-    from wbcgrade.color.batch import report_folder
+    from wbcgrade.batch import report_folder
 
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)

@@ -31,7 +31,7 @@ colour after it. The steps:
    the look's output is made grey; when every after is toned (sepia,
    selenium: one tint per lightness) or black and white, the output is its
    luma plus the afters' mean tint at that luma
-   (:func:`wbcgrade.color.remap.to_monochrome`), so that no colour of a
+   (:func:`wbcgrade.color.mapping.remap.to_monochrome`), so that no colour of a
    photo survives the look.
 5. **Report**: the mean CIEDE2000 between each after and the look applied
    to its original, fitted and held out (the pairs split into
@@ -39,7 +39,7 @@ colour after it. The steps:
    without them), and a warning for a pair that disagrees with the others.
 
 :func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
-saved grade (``.json``) that :func:`wbcgrade.color.saved_grade.load_look`
+saved grade (``.json``) that :func:`wbcgrade.color.grade.saved_grade.load_look`
 reads: ``apply --look``, ``batch --look`` and ``video --look`` use it.
 """
 
@@ -54,6 +54,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.histogram import grid_points
+from wbcgrade.color.look.edits import fit_edit
+from wbcgrade.color.look.family import fit_look_map
 from wbcgrade.errors import InputError, OptionError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
@@ -148,8 +151,8 @@ class PairFiles:
 
 
 def _image_files(folder: Path) -> list[Path]:
-    from wbcgrade.color.batch.plan import image_extensions
-    from wbcgrade.color.raw import RAW_SUFFIXES
+    from wbcgrade.color.io.images import image_extensions
+    from wbcgrade.color.io.raw import RAW_SUFFIXES
 
     exts = image_extensions() | RAW_SUFFIXES
     return sorted(p for p in folder.iterdir()
@@ -165,7 +168,7 @@ def _pair_key(path: Path, edited: bool) -> str:
 
 #: Which of several files sharing a stem is taken: raw first, then lossless, then the rest.
 def _preference(path: Path) -> tuple[int, str]:
-    from wbcgrade.color.raw import is_raw
+    from wbcgrade.color.io.raw import is_raw
 
     suffix = path.suffix.lower()
     rank = 0 if is_raw(path) else 1 if suffix in (".tif", ".tiff", ".exr", ".png", ".dng") \
@@ -264,7 +267,7 @@ def learn_space(pairs: Sequence[PairFiles], working_space: str | None = None) ->
     """The working space the look is learned in: ``working_space``, else ACEScct when an
     original is a raw file (the space a raw photo is graded in), else sRGB-encoded Rec.709."""
     from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.raw import RAW_WORKING_SPACE, is_raw
+    from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 
     if working_space:
         return resolve_space(working_space, "spaces.working")
@@ -297,7 +300,7 @@ class PairImages:
 def _read_small(path: Path, working: str) -> np.ndarray:
     """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.color.look.scene import shrink_colors
 
     image = read_image(path)
@@ -331,7 +334,7 @@ def _tint_spread(image: np.ndarray) -> float:
     another lightness's tint); all pixels when under a tenth are flat. (h, w, 3) image."""
     import cv2
 
-    from wbcgrade.color.remap import TONE_LUMA
+    from wbcgrade.color.mapping.remap import TONE_LUMA
 
     image = np.asarray(image, dtype=np.float32)
     luma = image @ TONE_LUMA.astype(np.float32)
@@ -352,7 +355,7 @@ def _band_tints(colours: np.ndarray, weights: np.ndarray
 
     Returns (each colour's band (N,), each band's mean luma (B,), each band's mean tint
     (B, 3)); a band with no weight has luma NaN and tint 0."""
-    from wbcgrade.color.remap import TONE_LUMA
+    from wbcgrade.color.mapping.remap import TONE_LUMA
 
     luma = colours @ TONE_LUMA
     band = np.clip((luma * _TONE_BANDS).astype(np.intp), 0, _TONE_BANDS - 1)
@@ -530,7 +533,7 @@ class LearnedLook:
     monochrome : the output is grey (the mean of the fitted channels).
     toning : (lumas (m,), tints (m, 3)) of a toned look: the output is the fitted
         output's luma plus the afters' mean tint at that luma
-        (:func:`wbcgrade.color.remap.to_monochrome`); None otherwise.
+        (:func:`wbcgrade.color.mapping.remap.to_monochrome`); None otherwise.
     """
 
     look: object
@@ -544,7 +547,7 @@ class LearnedLook:
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
-        from wbcgrade.color.remap import to_monochrome
+        from wbcgrade.color.mapping.remap import to_monochrome
 
         out = self.look(rgb)
         if self.monochrome:
@@ -570,10 +573,6 @@ def _pooled(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
 def _edit_prior(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]):
     """The :class:`LookMap` of the edit that best explains the parts' pairs
     (:data:`EDIT_PRIOR_PAIRS`), or None for as many pairs or more."""
-    from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.look.edits import fit_edit
-    from wbcgrade.color.look.family import fit_look_map
-
     if not parts or len(parts) >= EDIT_PRIOR_PAIRS:
         return None
     edit = fit_edit(*_pooled(parts))
@@ -912,7 +911,7 @@ def _output_kind(output: Path) -> str:
         return "json"
     if suffix in (".cube", ".clf"):
         return suffix[1:]
-    raise OptionError(f"{output}: output must be written as .cube, .clf or .json "
+    raise OptionError(f"{output}: {{output}} must be written as .cube, .clf or .json "
                       "(the ending names the format)", "output", path=output)
 
 
@@ -931,7 +930,7 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
     before, after : two photos, or two folders (:func:`match_files`): the originals,
         and the edited photos (those without an original count too).
 
-    Returns (:class:`~wbcgrade.color.grading.Grade`, :class:`LearnResult`).
+    Returns (:class:`~wbcgrade.color.grade.grading.Grade`, :class:`LearnResult`).
 
     Raises
     ------
@@ -940,8 +939,8 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
         ``warn`` first).
     """
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grading import Grade
-    from wbcgrade.color.lut import check_lut_size
+    from wbcgrade.color.grade.grading import Grade
+    from wbcgrade.color.mapping.lut import check_lut_size
     from wbcgrade.color.outcome import SavedFrom
 
     check_lut_size(lut_size)
@@ -996,8 +995,8 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
 
     from wbcgrade._publish import plan_outputs, publish_bytes
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.lut import check_lut_size, write_grade_lut
-    from wbcgrade.color.saved_grade import look_dict
+    from wbcgrade.color.grade.saved_grade import look_dict
+    from wbcgrade.color.mapping.lut import check_lut_size, write_grade_lut
 
     output = Path(output)
     kind = _output_kind(output)
@@ -1137,8 +1136,8 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
 
     Returns a :class:`CorrectedLook`, or ``look`` itself when nothing is left to correct.
     """
-    from wbcgrade.color.cache import default_cache_dir
     from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
+    from wbcgrade.color.io.cache import default_cache_dir
     from wbcgrade.color.look.family import fit_look_map
     from wbcgrade.color.look.prior import posterior_statistics_look
     from wbcgrade.color.look.set_extraction import (
