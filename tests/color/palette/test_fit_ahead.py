@@ -26,7 +26,7 @@ def _problem(kind: str):
 
 
 def _run(monkeypatch, photo, styles, opts, ahead: bool):
-    monkeypatch.setattr(fitting, "_speculate", lambda: ahead)
+    monkeypatch.setattr(fitting, "_speculate", lambda *bins: ahead)
     calls = []
     summary = fitting.fit_weights(
         photo, styles, opts, lambda n, w, v: calls.append((n, w.copy(), v)))
@@ -55,3 +55,11 @@ def test_an_unneeded_refit_stops(monkeypatch):
     while any(t.name.startswith("refit-ahead") for t in threading.enumerate()):
         assert time.monotonic() < deadline, "the refit ran on"
         time.sleep(0.01)
+
+
+def test_the_default_grid_fits_in_one_thread(monkeypatch):
+    """On the default 16³ grid an evaluation is mostly Python: a refit in a second thread
+    would share the interpreter lock and slow the fit, so none runs ahead there."""
+    monkeypatch.setattr("wbcgrade.core.n_workers", lambda: 2)
+    assert not fitting._speculate(FitOptions().bins)
+    assert fitting._speculate(fitting.SPECULATE_BINS)

@@ -185,3 +185,21 @@ def test_the_palette_rebins_only_the_styles_it_uses(rng):
         expected, _ = palette_barycenter(StyleSet(styles.names, hists).at_bins, weights, opts)
         assert np.array_equal(target, expected)
     assert np.array_equal(styles.at_bins(8, [2, 0]), styles.at_bins(8)[[2, 0]])
+
+
+def test_the_palette_leaves_out_styles_of_negligible_weight(rng):
+    """A style the fit left at ~1e-13 (softmax weights never reach 0) is not computed: the
+    palette is that of the other styles, and changes by far less than a code."""
+    from wbcgrade.color.palette.transfer import palette_barycenter
+
+    hists = rng.random((3, 16, 16, 16)) ** 6
+    hists /= hists.sum(axis=(1, 2, 3), keepdims=True)
+    opts = GradeOptions(mode="palette", bins=16, palette_bins=8, n_iter=5)
+    styles = StyleSet(["a", "b", "c"], hists)
+    target, _ = palette_barycenter(styles, np.array([0.4, 0.6, 1e-13]), opts)
+    expected, _ = palette_barycenter(StyleSet(styles.names, hists), np.array([0.4, 0.6, 0.0]),
+                                     opts)
+    assert np.array_equal(target, expected)
+    kept, _ = palette_barycenter(StyleSet(styles.names, hists), np.array([0.4, 0.6, 1e-3]),
+                                 opts)
+    assert not np.array_equal(kept, expected)  # a small weight that counts is kept

@@ -85,6 +85,13 @@ CORRECTION_NODES = 17
 CORRECTION_SMOOTHNESS = 3e-6
 #: Folds of the held-out check (leave-one-out below this many pairs).
 LEARN_FOLDS = 4
+#: Below this many pairs the look is pulled, where the pairs' colours say little, towards
+#: the photographer's edit that best explains them (:func:`~wbcgrade.color.look.edits.fit_edit`)
+#: rather than towards no look: one photo's colours leave most of the cube to
+#: extrapolation, and an edit extrapolates as edits do. Measured on ``benchmarks/learn.py
+#: --originals 1`` (16 film looks, 384 px): held-out looks +0.575 to +0.625 (worst photo
+#: -0.169 to -0.076), tuned looks +0.735 to +0.743.
+EDIT_PRIOR_PAIRS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
 MONO_CHROMA = 0.02
@@ -553,24 +560,44 @@ class LearnedLook:
         return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
 
 
+def _pooled(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The parts' (sources, targets, weights) in one, each part weighing the same."""
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            np.concatenate([p[2] / max(float(p[2].sum()), 1e-12) for p in parts]))
+
+
+def _edit_prior(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+    """The :class:`LookMap` of the edit that best explains the parts' pairs
+    (:data:`EDIT_PRIOR_PAIRS`), or None for as many pairs or more."""
+    from wbcgrade.color.histogram import grid_points
+    from wbcgrade.color.look.edits import fit_edit
+    from wbcgrade.color.look.family import fit_look_map
+
+    if not parts or len(parts) >= EDIT_PRIOR_PAIRS:
+        return None
+    edit = fit_edit(*_pooled(parts))
+    points = grid_points(17)
+    return fit_look_map(points, edit(points), np.ones(len(points)), None, 1e-4, 1e-6)
+
+
 def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome: bool,
-         robust: Sequence[np.ndarray] | None = None, rounds: int = 3, toned: bool = False
-         ) -> tuple[LearnedLook, list[np.ndarray], float]:
+         robust: Sequence[np.ndarray] | None = None, rounds: int = 3, toned: bool = False,
+         prior=None) -> tuple[LearnedLook, list[np.ndarray], float]:
     """Fit the parts' pairs, each part weighing the same; ``monochrome``: the output
     made grey, ``toned``: made its luma plus the afters' mean tint at that luma (the
     afters' tints, robustly weighted, in bands of their luma: more faithful than the
-    grey axis of a map fitted to colourful originals).
+    grey axis of a map fitted to colourful originals); ``prior``: the map where the pairs
+    say little (default no look; :func:`_edit_prior`).
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
     from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look
     from wbcgrade.core import fast_cpu
 
-    sources = np.concatenate([p[0] for p in parts])
-    targets = np.concatenate([p[1] for p in parts])
-    weights = np.concatenate([p[2] / max(float(p[2].sum()), 1e-12) for p in parts])
+    sources, targets, weights = _pooled(parts)
     start = None if robust is None else np.concatenate(list(robust))
-    look, final = fit_pairs_look(sources, targets, weights, rounds=rounds, robust=start,
-                                 correct=False)
+    look, final = fit_pairs_look(sources, targets, weights, prior, rounds=rounds,
+                                 robust=start, correct=False)
     with fast_cpu():
         correction = fit_correction(look.look(sources), targets, final, CORRECTION_NODES,
                                     CORRECTION_SMOOTHNESS)
@@ -789,10 +816,11 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     monochrome = all(r.monochrome for r in used) and all(alone_mono)
     toned = (not monochrome and any(r.toned for r in used)
              and all(r.monochrome or r.toned is not False for r in used))
-    look, robust, _ = _fit(colours, monochrome, toned=toned)
-    if alone and not monochrome and not toned:
-        sources = np.concatenate([c[0] for c in colours])
-        weights = np.concatenate([c[2] / max(float(c[2].sum()), 1e-12) for c in colours])
+    plain = monochrome or toned  # (an edit's colours are not what such a look keeps)
+    look, robust, _ = _fit(colours, monochrome, toned=toned,
+                           prior=None if plain else _edit_prior(colours))
+    if alone and not plain:
+        sources, _, weights = _pooled(colours)
         corrected = unpaired_correction(look.look, [i.after for i in read]
                                         + [image for _, image in alone],
                                         [i.before for i in read], sources, weights, working)
@@ -803,8 +831,9 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     folds = _folds(len(colours))
     for held in folds:
         rest = [i for i in range(len(colours)) if i not in set(held.tolist())]
-        fold_look, _, _ = _fit([colours[i] for i in rest], monochrome,
-                               [robust[i] for i in rest], rounds=1, toned=toned)
+        kept = [colours[i] for i in rest]
+        fold_look, _, _ = _fit(kept, monochrome, [robust[i] for i in rest], rounds=1,
+                               toned=toned, prior=None if plain else _edit_prior(kept))
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))

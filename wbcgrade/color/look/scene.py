@@ -24,7 +24,8 @@ The steps, on images of at most :data:`MATCH_SIZE` pixels a side:
    (away from its border, down-weighted on edges where a small misalignment
    mixes colours) give the pairs.
 
-Feature detection and matching use OpenCV.
+Feature detection uses OpenCV; the matches are OpenCV's brute-force ones, computed
+with one BLAS product (:func:`nearest_two`).
 """
 
 from __future__ import annotations
@@ -179,6 +180,51 @@ def scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
     return SceneImage(small, points, np.asarray(descriptors, dtype=np.float32))
 
 
+#: Rows of the query descriptors whose distances to every train descriptor are held at once.
+_DISTANCE_ROWS = 1024
+
+
+def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each query descriptor's two nearest train descriptors (L2): ((N, 2) float32 distances,
+    (N, 2) indices), exactly OpenCV's brute-force ``knnMatch(k=2)`` (``cv2.batchDistance``).
+
+    ``train`` needs two rows or more. SIFT descriptors hold whole numbers in 0..255: then
+    every squared distance, computed with one BLAS product (``|q|^2 + |t|^2 - 2 q.t``), is
+    an exact float32 whole number below 2^24 whatever the order of the sums, as in OpenCV's
+    loop; its float32 square root is OpenCV's distance, and ties go to the lower index
+    as OpenCV's insertion does. Other descriptors go to OpenCV itself.
+    """
+    query = np.ascontiguousarray(query, dtype=np.float32)
+    train = np.ascontiguousarray(train, dtype=np.float32)
+    whole = all(len(x) and x.min() >= 0 and x.max() <= 255 and np.array_equal(x, np.rint(x))
+                for x in (query, train))
+    if not whole or query.shape[1] > 128 or len(train) < 2:
+        cv2 = _cv2()
+        distance, nearest = cv2.batchDistance(query, train, cv2.CV_32F,
+                                              normType=cv2.NORM_L2, K=2)
+        return distance, nearest
+    train_t = np.ascontiguousarray(train.T)
+    train_sq = np.einsum("ij,ij->i", train, train)
+    distance = np.empty((len(query), 2), np.float32)
+    nearest = np.empty((len(query), 2), np.int32)
+    rows = np.arange(len(query))
+    for lo in range(0, len(query), _DISTANCE_ROWS):
+        block = query[lo:lo + _DISTANCE_ROWS]
+        sq = block @ train_t  # whole numbers: every step below is exact
+        sq *= -2.0
+        sq += train_sq[None, :]
+        sq += np.einsum("ij,ij->i", block, block)[:, None]
+        d = np.sqrt(np.maximum(sq, 0.0, out=sq), out=sq)
+        here = rows[: len(block)]
+        first = np.argmin(d, axis=1)  # the lowest index among equal distances
+        distance[lo:lo + len(block), 0] = d[here, first]
+        d[here, first] = np.inf
+        second = np.argmin(d, axis=1)
+        distance[lo:lo + len(block), 1] = d[here, second]
+        nearest[lo:lo + len(block), 0], nearest[lo:lo + len(block), 1] = first, second
+    return distance, nearest
+
+
 def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
                 why: list[str] | None = None) -> SceneMatch | None:
     """The framing that lays ``style`` over ``photo``, or None when it shows another scene
@@ -192,13 +238,13 @@ def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
     if len(photo.points) < MIN_INLIERS or len(style.points) < MIN_INLIERS:
         return no(f"too little texture: {min(len(photo.points), len(style.points))} "
                   f"keypoints, {MIN_INLIERS} needed")
-    matcher = cv2.BFMatcher(cv2.NORM_L2)
-    pairs = matcher.knnMatch(photo.descriptors, style.descriptors, k=2)
-    good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < ratio * p[1].distance]
+    distance, nearest = nearest_two(photo.descriptors, style.descriptors)
+    good = np.flatnonzero(distance[:, 0].astype(np.float64)
+                          < ratio * distance[:, 1].astype(np.float64))
     if len(good) < MIN_INLIERS:
         return no(f"{len(good)} keypoints in common, {MIN_INLIERS} needed")
-    src = style.points[[m.trainIdx for m in good]]
-    dst = photo.points[[m.queryIdx for m in good]]
+    src = style.points[nearest[good, 0]]
+    dst = photo.points[good]
     homography, mask = cv2.findHomography(src, dst, cv2.RANSAC, 3.0)
     if homography is None or mask is None:
         return no(f"{len(good)} keypoints in common but no framing fits them")

@@ -47,6 +47,9 @@ from wbcgrade.errors import NumericalError
 
 __all__ = ["color_transfer_map", "palette_barycenter", "transport_map"]
 
+#: Weights below this share of the largest are left out of the palette's barycenter.
+NEGLIGIBLE_WEIGHT = 1e-6
+
 
 def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: float,
                        tol: float = 1e-3, max_iter: int = 2000, floor: float = DEFAULT_FLOOR,
@@ -100,7 +103,9 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
     Computed (the fit's L = ``options.fit.n_iter`` iterations, the transfer
     kernel) on ``min(transfer.bins, transfer.palette_bins)`` bins per axis
     and, when that is coarser than the transfer grid, interpolated onto it
-    (densities, renormalised).
+    (densities, renormalised). Styles whose weight is below
+    :data:`NEGLIGIBLE_WEIGHT` of the largest are left out (the others' weights
+    renormalised).
 
     Parameters
     ----------
@@ -117,7 +122,9 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
     m = min(n, transfer.palette_bins)
     sigma = transfer.width_bins / (n - 1)
     geometry = GridGeometry((m,) * 3, 2.0 * sigma ** 2)
-    keep = np.flatnonzero(np.asarray(weights) > 0)
+    # styles whose weight is negligible (the softmax fit leaves ~1e-13) change the palette
+    # by less than 1e-5 of a bin's mass: not computed (each costs 1/S of the barycenter)
+    keep = np.flatnonzero(np.asarray(weights) > NEGLIGIBLE_WEIGHT * np.max(weights))
     hists = (style_hists.at_bins(m, keep) if isinstance(style_hists, StyleSet)
              else style_hists(m)[keep])
     floored = np.stack([add_floor(h, transfer.floor) for h in hists])

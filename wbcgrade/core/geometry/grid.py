@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 
 import numpy as np
@@ -57,6 +58,11 @@ class GridGeometry(Geometry):
         self._log_kernels = [-c / self.gamma for c in costs]
         self.kernels = [_gibbs(c, self.gamma, self.dtype) for c in costs]
         self._axis_kernels = [AxisKernel(lk) for lk in self._log_kernels]
+        #: (bins before, bins of, bins after) each axis within one histogram, and whether
+        #: the axis is the last: ``apply_into``'s views (no ``np.prod`` per product).
+        self._axis_views = [(math.prod(shape[:axis]), n, math.prod(shape[axis + 1:]),
+                             axis == len(shape) - 1, kernel)
+                            for axis, (n, kernel) in enumerate(zip(shape, self.kernels))]
         #: Entries the last ``log_apply`` recomputed one by one (see ``log_apply``).
         self.last_log_repairs = 0
 
@@ -106,11 +112,10 @@ class GridGeometry(Geometry):
 
     def apply_into(self, block: NDArray, out: NDArray) -> None:
         """K x for a contiguous block of histograms ``(m, *shape)``, written into ``out``."""
-        last, m = self.ndim - 1, block.shape[0]
-        for axis, kernel in enumerate(self.kernels):
-            before = m * int(np.prod(self.shape[:axis]))
-            n, after = self.shape[axis], int(np.prod(self.shape[axis + 1 :]))
-            if axis == last:  # after == 1: one product with the transposed kernel
+        m = block.shape[0]
+        for before, n, after, last, kernel in self._axis_views:
+            before *= m
+            if last:  # after == 1: one product with the transposed kernel
                 np.matmul(block.reshape(before, n), kernel.T, out=out.reshape(before, n))
             else:
                 block = np.matmul(kernel, block.reshape(before, n, after))
