@@ -90,7 +90,7 @@ def wbcgrade(*args: str) -> list[str]:
 
 
 def read_8bit(path: Path) -> np.ndarray:
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     return np.asarray(read_image(path).pixels, dtype=np.float64)
 
@@ -102,7 +102,7 @@ def energy_problem(photo: Path, styles: Path, bins: int):
     """(target, style histograms, fit geometry at ``bins``, opts) of the apply pipeline."""
     from wbcgrade.color.colorspace import ColorEncoding
     from wbcgrade.color.histogram import add_floor, image_histogram
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.color.options import FitOptions, TransferOptions
     from wbcgrade.color.presets import load_style_folder
     from wbcgrade.core import GridGeometry
@@ -193,7 +193,7 @@ def floors(photo: Path) -> list[tuple[str, str, str, str]]:
     """Median seconds of the operations that bound the stages (see the module doc)."""
     import OpenImageIO as oiio
 
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.core import GridGeometry
     from wbcgrade.core._cpu import fast_cpu
 
@@ -206,7 +206,7 @@ def floors(photo: Path) -> list[tuple[str, str, str, str]]:
             times.append(time.perf_counter() - start)
         return statistics.median(times)
 
-    from wbcgrade.color._quantise import to_uint8
+    from wbcgrade.color.io._quantise import to_uint8
 
     pixels = read_image(photo).pixels
     codes = to_uint8(pixels)  # apply converts to 8-bit codes itself (on every core)

@@ -60,7 +60,7 @@ def make_histograms(n: int, count: int, seed: int = 0) -> np.ndarray:
 def photo_histograms(n: int, count: int, path: str) -> None:
     """Histograms of the first ``count`` sample photos at n bins, saved to ``path`` (.npy)."""
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     files = sorted(glob.glob(str(PHOTOS / "*.jpg")))[:count]
     if len(files) < count:

@@ -157,7 +157,7 @@ def browser_latencies(url: str, moves: int) -> tuple[list[float], list[float]]:
 
 
 def run_case(photo: str, preset: str, moves: int, browser: bool, rng) -> dict:
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.remap import apply_color_map
     from wbcgrade.explore.app import start_studio
     from wbcgrade.explore.engine import ExactGrader
     from wbcgrade.explore.settings import settings_from_json

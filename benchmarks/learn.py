@@ -17,7 +17,7 @@ photo is graded):
    Times: wall and CPU seconds (the process's, all threads; the steadier figure on a
    shared machine);
 3. the written ``.cube`` read back as ``apply --look`` reads it
-   (:func:`wbcgrade.color.saved_grade.load_look`) and applied, with no regrain, to
+   (:func:`wbcgrade.color.grade.saved_grade.load_look`) and applied, with no regrain, to
    the other photos (9); each output (8-bit) against the look applied to the
    photo (the truth) in CIEDE2000: ``recovered = 1 - dE / dE0`` (dE0: the
    untouched photo against the truth). 1: the look reproduced; 0: no better
@@ -119,8 +119,8 @@ def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, varia
 
     ``originals``: only the first so many edited photos have their original in BEFORE
     (the others are graded photos without one)."""
+    from wbcgrade.color.grade.saved_grade import load_look
     from wbcgrade.color.look.learn import learn_look_file
-    from wbcgrade.color.saved_grade import load_look
 
     before, after = folder / f"{variant}-before", folder / f"{variant}-after"
     before.mkdir()

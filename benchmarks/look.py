@@ -257,7 +257,7 @@ def wbcgrade_grade(photo: np.ndarray, styles: list[np.ndarray], style_names: lis
     Returns (graded (H, W, 3) float in [0, 1], {style name: weight}).
     """
     from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import StyleSet
@@ -436,7 +436,7 @@ def known_content(photo: np.ndarray, styles: list[np.ndarray], context: Context)
 def extract_route(photo: np.ndarray, styles: list[np.ndarray], context: Context) -> np.ndarray:
     """The fit-once route: ``look extract`` (the set's look as a LUT, once per set), then
     ``apply --look`` (that LUT applied in full, with the default regrain)."""
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.look import set_look_map
     from wbcgrade.color.presets import StyleSet, load_preset
 

@@ -158,7 +158,7 @@ def metrics(inp: np.ndarray, out: np.ndarray, styles: list[np.ndarray]) -> dict:
 
 
 def read_rgb(path: Path) -> np.ndarray:
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     return np.clip(read_image(path).rgb(), 0.0, 1.0).astype(np.float64)
 
@@ -251,9 +251,9 @@ def load_set(photos: Path, names: list[str], bins: int):
 def grade_wbcgrade(path: Path, styles, opts, lut_dir: Path):
     """(graded 8-bit pixels, LUT-applied and map-applied 8-bit pixels, grade) for one photo."""
     from wbcgrade.color._colour import colour
-    from wbcgrade.color.lut import color_map_to_lut, write_cube
-    from wbcgrade.color.remap import apply_color_map
-    from wbcgrade.color.workflow import grade_photo
+    from wbcgrade.color.mapping.lut import color_map_to_lut, write_cube
+    from wbcgrade.color.mapping.remap import apply_color_map
+    from wbcgrade.photos.workflow import grade_photo
 
     graded = grade_photo(path, styles, opts)
     out = to_8bit(graded.pixels[..., :3])

@@ -87,7 +87,7 @@ def main() -> None:
                         default=["preset", "style"])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    from wbcgrade.color.imageio import jpeg_quality
+    from wbcgrade.color.io.images import jpeg_quality
 
     with tempfile.TemporaryDirectory(prefix="wbcgrade-report-bench-") as tmp:
         work = Path(tmp)

@@ -33,7 +33,7 @@ from look import DEFAULT_PHOTOS, EXCLUDED, delta_e, lab, read_photo  # noqa: E40
 def grade(photo: np.ndarray, styles: list[np.ndarray], names: list[str]):
     """The default grade of ``photo`` towards style images: (graded, reported strength)."""
     from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.histogram import image_histogram
     from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import StyleSet

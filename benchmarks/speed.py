@@ -87,7 +87,7 @@ def learn_pairs(folder: Path, count: int = 12, cropped: int = 4) -> tuple[Path, 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from learn import apply_hald, hald_table, resized_cropped, to_8bit, write_8bit
 
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     table = hald_table(SHARED / "looks" / "fuji_velvia_50.png")
     names = sorted(p.stem for p in PHOTOS.glob("*.jpg") if p.stem != "seeding_full")[:count]

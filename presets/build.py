@@ -143,7 +143,7 @@ def build(folder: Path, out: Path, sheets: Path | None) -> None:
 
 def try_presets(photo: Path, sheets: Path, size: int = 512) -> Path:
     """Grade ``photo`` (downscaled to ``size``) with every shipped preset in both modes."""
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import list_presets, load_preset
 

@@ -20,6 +20,29 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(basetemp, ignore_errors=True)
 
 
+#: Tier ("fast": not marked slow, "slow") -> [tests run, seconds of their set-up, call and
+#: tear-down], printed at the end of the run (:func:`pytest_terminal_summary`).
+_TIER_TIMES = {"fast": [0, 0.0], "slow": [0, 0.0]}
+
+
+def pytest_runtest_logreport(report):
+    tier = _TIER_TIMES["slow" if "slow" in report.keywords else "fast"]
+    tier[1] += report.duration
+    tier[0] += report.when == "call"
+
+
+def pytest_terminal_summary(terminalreporter):
+    """One line with the time of the fast tier (``-m "not slow"``) and of the whole run, so
+    that a run of the whole suite (``.ci/run``) also says what the fast tier takes."""
+    (fast, fast_s), (slow, slow_s) = _TIER_TIMES["fast"], _TIER_TIMES["slow"]
+    if fast + slow == 0:  # nothing ran (--collect-only)
+        return
+    terminalreporter.write_line(
+        f"test time: fast tier {fast} tests {fast_s:.0f} s, slow {slow} tests {slow_s:.0f} s, "
+        f"together {fast_s + slow_s:.0f} s (the tests' own set-up, call and tear-down, "
+        "summed)")
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _system_temporary_folder_in_basetemp(tmp_path_factory):
     """Every temporary file of the session (``tempfile``, and ``$TMPDIR`` for the commands

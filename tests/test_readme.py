@@ -165,6 +165,48 @@ def test_readme_python_example_runs_as_written(line, code, tmp_path):
     assert run.returncode == 0, f"{line}: the example fails:\n{run.stderr[-2000:]}"
 
 
+def color_names_used(code: str) -> tuple[set[str], set[str]]:
+    """(modules of ``wbcgrade.color`` an example imports, names it takes from the package):
+    ``import wbcgrade.color as wc`` then ``wc.NAME``, or ``from wbcgrade.color import NAME``."""
+    import ast
+
+    modules, names, aliases = set(), set(), set()
+    tree = ast.parse(code)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("wbcgrade.color"):
+                    modules.add(alias.name)
+                    aliases.add(alias.asname or alias.name)
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("wbcgrade"):
+            if node.module == "wbcgrade" and any(a.name == "color" for a in node.names):
+                modules.add("wbcgrade.color")
+                aliases.update(a.asname or a.name for a in node.names if a.name == "color")
+            elif node.module.startswith("wbcgrade.color"):
+                modules.add(node.module)
+                names.update(alias.name for alias in node.names)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and ast.unparse(node.value) in aliases:
+            names.add(node.attr)
+    return modules, names
+
+
+def test_python_examples_use_only_the_colour_front_door():
+    """The README's and docs' Python examples reach the colour library through
+    ``wbcgrade.color``'s front door alone (its ``__all__``)."""
+    import wbcgrade.color as wc
+
+    assert len(wc.__all__) <= 15
+    for where, code in PYTHON:
+        modules, names = color_names_used(code)
+        assert modules <= {"wbcgrade.color"}, f"{where}: imports {sorted(modules)}"
+        assert names <= set(wc.__all__), f"{where}: uses {sorted(names - set(wc.__all__))}"
+    assert color_names_used("from wbcgrade.color.grade.grading import grade_array")[0] \
+        == {"wbcgrade.color.grade.grading"}
+    assert color_names_used("import wbcgrade.color as wc\nwc.resolve_preset('x')")[1] \
+        == {"resolve_preset"}
+
+
 def _wbcgrade_lines() -> list[tuple[int, list[str]]]:
     """Every ``wbcgrade ...`` command of the README's bash and text blocks (synopses too),
     split into words: brackets and ``A|B`` alternatives opened up."""

@@ -148,7 +148,7 @@ def _dask_client(address: str):
     try:
         from dask.distributed import Client
     except ImportError:
-        raise OptionError("scheduler needs Dask: pip install 'wbcgrade[dask]' "
+        raise OptionError("{scheduler} needs Dask: pip install 'wbcgrade[dask]' "
                           "(dask[distributed])", "scheduler") from None
     try:
         return Client(address, timeout=DASK_CONNECT_TIMEOUT)
@@ -180,7 +180,7 @@ class Executor:
                  worker_setup: Callable[[Any], None] | None = None,
                  to_remote: tuple[Callable[[Any], Any], Callable[[Any], Any]] | None = None):
         if int(jobs) > MAX_JOBS:
-            raise OptionError(f"jobs must be between 1 and {MAX_JOBS}", "jobs")
+            raise OptionError(f"{{jobs}} must be between 1 and {MAX_JOBS}", "jobs")
         self.context, self.jobs, self.scheduler = context, max(1, int(jobs)), scheduler
         self.worker_setup = worker_setup
         self.item_to_remote, self.context_to_remote = to_remote or (_same, _same)

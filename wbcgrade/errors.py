@@ -4,23 +4,81 @@ Library code raises these (or ``ValueError``/``OSError``); the CLI turns them
 into one-line messages (:func:`first_line`).
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+
+
+def named(text: str, settings: Iterable[str], name_of: Mapping[str, str] | None = None) -> str:
+    """``text`` with each of ``settings`` it names as ``{setting}`` written as ``name_of``
+    says (the command line: its flags), else as the setting itself.
+
+    >>> named("raise {map.strength}", ["map.strength"])
+    'raise map.strength'
+    >>> named("raise {map.strength}", ["map.strength"], {"map.strength": "--strength"})
+    'raise --strength'
+    """
+    for setting in settings:
+        text = text.replace("{" + setting + "}", (name_of or {}).get(setting, setting))
+    return text
+
+
+class Worded(str):
+    """A library text that names settings (``"raise {map.strength}"``): as a str, each is
+    written as the library names it (``map.strength``); :meth:`worded` writes them as a
+    caller names them (the command line: as flags, ``--strength``)."""
+
+    template: str
+    settings: tuple[str, ...]
+
+    def __new__(cls, template: str, settings: Iterable[str] = ()) -> Worded:
+        settings = tuple(settings)
+        text = super().__new__(cls, named(template, settings))
+        text.template, text.settings = template, settings
+        return text
+
+    def worded(self, name_of: Mapping[str, str]) -> str:
+        """The text with its settings written as ``name_of`` says."""
+        return named(getattr(self, "template", str(self)), getattr(self, "settings", ()),
+                     name_of)
+
 
 class WbcgradeError(Exception):
-    """A failure a user can act on (bad file, bad option, unsafe computation)."""
+    """A failure a user can act on (bad file, bad option, unsafe computation).
+
+    ``fields``: settings the message names as the library does (``"recursive"``,
+    ``"spaces.working"``), each written ``{recursive}`` in the message (:func:`named`);
+    the CLI writes them as their flags (:meth:`worded`).
+    """
+
+    def __init__(self, *args, fields: tuple[str, ...] = ()) -> None:
+        self.fields = tuple(fields)
+        self.template = args[0] if args and isinstance(args[0], str) else None
+        if self.template is not None:
+            args = (named(self.template, self.settings), *args[1:])
+        super().__init__(*args)
+
+    @property
+    def settings(self) -> tuple[str, ...]:
+        """The settings the message names."""
+        return self.fields
+
+    def worded(self, name_of: Mapping[str, str]) -> str:
+        """The message with the settings it names written as ``name_of`` says."""
+        if getattr(self, "template", None) is None:
+            return str(self)
+        return named(self.template, self.settings, name_of)
 
 
 class InputError(WbcgradeError, ValueError):
     """An input file or array is unusable (unreadable, corrupt, wrong shape).
 
-    ``fields``: settings the message names as the library does (``"recursive"``,
-    ``"spaces.working"``), each once, in a hint; the CLI writes them as their flags.
-    ``path``: the file or folder the message starts with (``"PATH: ..."``), which the
-    CLI never rewrites.
+    ``fields``: the settings the message names (:class:`WbcgradeError`).
+    ``path``: the file or folder the message starts with (``"PATH: ..."``).
     """
 
     def __init__(self, *args, fields: tuple[str, ...] = (), path: object = None) -> None:
-        super().__init__(*args)
-        self.fields = tuple(fields)
+        super().__init__(*args, fields=fields)
         self.path = None if path is None else str(path)
 
 
@@ -33,18 +91,22 @@ class OptionError(InputError):
 
     ``option`` names the setting as the library does (a field such as
     ``"transfer.bins"``, or a parameter such as ``"lut_size"``), and the
-    message names it the same way; ``also`` names other settings the message
-    mentions. The CLI writes each as the flag that sets it (``--bins``) and
-    reports the error as a usage error (exit status 2), like click's own.
-    ``path``: the file or folder the message starts with (``"PATH: ..."``),
-    which the CLI never rewrites (a folder may be called ``codec``).
+    message names it the same way, in braces (``"{transfer.bins} must be ..."``,
+    :func:`named`); ``also`` names other settings the message mentions. The CLI
+    writes each as the flag that sets it (``--bins``, :meth:`worded`) and reports
+    the error as a usage error (exit status 2), like click's own.
+    ``path``: the file or folder the message starts with (``"PATH: ..."``).
     """
 
     def __init__(self, message: str, option: str, also: tuple[str, ...] = (),
                  path: object = None) -> None:
-        super().__init__(message, path=path)
         self.option = option
         self.also = tuple(also)
+        super().__init__(message, path=path)
+
+    @property
+    def settings(self) -> tuple[str, ...]:
+        return (self.option, *self.also, *self.fields)
 
 
 class Terminated(KeyboardInterrupt):

@@ -80,13 +80,13 @@ def check_count(what: str, count: int, most: int, where: str | os.PathLike) -> i
 
 
 def check_memory(what: str, nbytes: int, where: str | os.PathLike,
-                 hint: str = "") -> int:
+                 hint: str = "", fields: tuple[str, ...] = ()) -> int:
     """``nbytes`` when it is within :data:`MEMORY_BUDGET`, else InputError naming ``where``
-    (checked before allocating ``what``)."""
+    (checked before allocating ``what``); ``fields``: the settings ``hint`` names."""
     if nbytes > MEMORY_BUDGET:
         raise InputError(f"{where}: {what} would take {nbytes / 2 ** 20:.0f} MB, more than "
                          f"the {MEMORY_BUDGET / 2 ** 20:.0f} MB wbcgrade allows one input"
-                         + (f"; {hint}" if hint else ""))
+                         + (f"; {hint}" if hint else ""), fields=fields)
     return int(nbytes)
 
 

@@ -13,9 +13,9 @@ import OpenImageIO as oiio
 import pytest
 
 from tests.conftest import run_cli
-from wbcgrade.color.batch import BatchContext, plan_batch, run_batch
-from wbcgrade.color.fit import fit_weights
+from wbcgrade.batch import BatchContext, plan_batch, run_batch
 from wbcgrade.color.options import FitOptions, GradeOptions
+from wbcgrade.color.palette.fit import fit_weights
 from wbcgrade.color.presets import load_preset, load_style_folder
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -157,7 +157,7 @@ def test_consistent_gives_every_photo_the_same_grade(folders, tmp_path):
     result = _batch(series, styles, tmp_path / "out", "--consistent", "--report", str(report),
                     "--lut", str(lut), "--lut-size", "9", "--no-regrain")
     assert result.exit_code == 0, result.output
-    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.mapping.lut import read_cube
 
     assert read_cube(lut).size == 9
     entries = json.loads((report / "report.json").read_text())["photos"]
@@ -175,8 +175,8 @@ def test_the_series_lut_is_baked_for_the_photos_input_space(folders, tmp_path):
     """``--consistent --lut`` with ``--input-space``: the LUT takes the photos' own code
     values (it was baked for sRGB whatever the input space was), so applying it to a
     photo gives the batch's graded photo."""
-    from wbcgrade.color.lut import read_cube
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.lut import read_cube
+    from wbcgrade.color.mapping.remap import apply_color_map
 
     photos, styles = folders
     series = tmp_path / "series"
@@ -300,7 +300,7 @@ def test_fit_is_never_worse_than_the_best_single_style():
 def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
     import contextlib
 
-    import wbcgrade.color.workflow as workflow
+    import wbcgrade.photos.workflow as workflow
 
     photos, styles = folders
     out = tmp_path / "out"
@@ -329,8 +329,8 @@ def test_interrupt_leaves_no_partial_file(folders, tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_report_hook_for_apply(folders, tmp_path):
-    from wbcgrade.color.report import report_from_grade
-    from wbcgrade.color.workflow import grade_file, plan_photo
+    from wbcgrade.photos.report import report_from_grade
+    from wbcgrade.photos.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10)
@@ -355,10 +355,10 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
     evaluated a second time for the report."""
     from dataclasses import replace
 
-    import wbcgrade.color.builders as builders
-    import wbcgrade.color.fit as fit_module
-    from wbcgrade.color.report import report_from_grade
-    from wbcgrade.color.workflow import grade_file, plan_photo
+    import wbcgrade.color.grade.builders as builders
+    import wbcgrade.color.palette.fit as fit_module
+    from wbcgrade.photos.report import report_from_grade
+    from wbcgrade.photos.workflow import grade_file, plan_photo
 
     photos, styles = folders
     opts = GradeOptions(mode="palette", bins=8, fit_bins=6, max_iter=3, n_iter=10,
@@ -383,7 +383,7 @@ def test_the_apply_report_labels_every_kind_of_fit(folders, tmp_path, monkeypatc
 
 
 def test_palette_and_sheet_without_fonts(tmp_path, monkeypatch):
-    import wbcgrade.color.sheet as sheet
+    import wbcgrade.photos.sheet as sheet
     from wbcgrade.color.histogram import soft_histogram
 
     colours = np.array([[0.9, 0.1, 0.1]] * 3 + [[0.1, 0.2, 0.8]])
@@ -416,50 +416,88 @@ def test_apply_report_option_writes_a_report(folders, tmp_path, cli):
     assert (tmp_path / "report" / "index.html").is_file()
 
 
-def test_a_batch_measures_the_look_against_its_own_photos(folders, tmp_path):
-    """Six or more photos directly in the batch's folder are the look's content model
-    beside the shipped palettes: said on the summary, recorded in the settings, and the
-    grade differs from the shipped palettes' alone (``--natural shipped``); their palettes
-    are read once and kept in the output folder; a broken photo among them is skipped there
-    as in the grade, two photos of one stem are both read; five photos are too few."""
-    _, styles = folders
-    photos = tmp_path / "mine"
-    names = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
-    for name in names:
+#: The batch folder's own photos (six or more: the look's content model).
+OWN_NAMES = ["aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding"]
+
+
+@pytest.fixture(scope="module")
+def own_photos(tmp_path_factory) -> tuple[Path, Path]:
+    """(a folder of seven photos, a broken one and a stem twice; a folder of six warm style
+    photos)."""
+    root = tmp_path_factory.mktemp("own")
+    photos = root / "mine"
+    for name in OWN_NAMES:
         small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 40)
     (photos / "broken.jpg").write_bytes((photos / "chelsea.jpg").read_bytes()[:300])
     _write_png(photos / "coffee.png", _pixels(photos / "coffee.jpg"))  # a stem twice
-    warm = tmp_path / "warm"
+    warm = root / "warm"
     for name in ("sunset", "coffee", "flower", "seeding", "aitzgorri", "bridge"):
         img = _pixels(small_copy(SAMPLES / f"{name}.jpg", warm / f"{name}.png", 40))
         _write_png(warm / f"{name}.png", np.clip(img[..., :3] * [1.1, 0.95, 0.7], 0, 1))
-    own = run_cli("batch", str(photos), "-o", str(tmp_path / "own"), "--style", str(warm),
-                  "--no-cache")
+    return photos, warm
+
+
+@pytest.fixture(scope="module")
+def own_batch(own_photos, tmp_path_factory) -> tuple[Path, object]:
+    """(the output folder, the result) of a batch of ``own_photos`` with the warm styles."""
+    photos, warm = own_photos
+    out = tmp_path_factory.mktemp("own_out") / "own"
+    return out, run_cli("batch", str(photos), "-o", str(out), "--style", str(warm),
+                        "--no-cache")
+
+
+def test_a_batch_measures_the_look_against_its_own_photos(own_batch):
+    """Six or more photos directly in the batch's folder are the look's content model
+    beside the shipped palettes: said on the summary, recorded in the settings; their
+    palettes are read once and kept in the output folder; a broken photo among them is
+    skipped there as in the grade, two photos of one stem are both read."""
+    out, own = own_batch
     assert own.exit_code == 1, own.output  # the broken photo fails; the others are graded
     assert "graded 8, skipped 0, failed 1" in own.output
     assert "measured against 8 photos of the folder" in own.output
-    settings = json.loads((tmp_path / "own" / ".wbcgrade-batch.json").read_text())
-    kept = tmp_path / "own" / ".wbcgrade-own-photos.npz"  # their palettes, read once
+    settings = json.loads((out / ".wbcgrade-batch.json").read_text())
+    kept = out / ".wbcgrade-own-photos.npz"  # their palettes, read once
     assert settings["options"]["natural"] == str(kept.resolve())
     assert len(load_preset(kept).names) == 8
+
+
+@pytest.mark.slow
+def test_the_own_photos_change_the_grade_from_the_shipped_palettes(own_photos, own_batch,
+                                                                    tmp_path):
+    """The grade differs from the shipped palettes' alone (``--natural shipped``)."""
+    photos, warm = own_photos
+    out, _ = own_batch
     shipped = run_cli("batch", str(photos), "-o", str(tmp_path / "shipped"), "--style",
                       str(warm), "--natural", "shipped", "--no-cache")
     assert "graded 8" in shipped.output and "content:" not in shipped.output
-    differ = [np.abs(_pixels(tmp_path / "own" / f"{n}.jpg")
-                     - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max() for n in names]
+    differ = [np.abs(_pixels(out / f"{n}.jpg") - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max()
+              for n in OWN_NAMES]
     assert max(differ) > 2 / 255
+
+
+def test_five_own_photos_are_too_few(own_photos, tmp_path):
+    photos, warm = own_photos
     few = tmp_path / "few"
     few.mkdir()
-    for name in names[:5]:
+    for name in OWN_NAMES[:5]:
         shutil.copy(photos / f"{name}.jpg", few / f"{name}.jpg")
     result = run_cli("batch", str(few), "-o", str(tmp_path / "few_out"), "--style", str(warm),
                      "--no-cache")
     assert result.exit_code == 0 and "content:" not in result.output
-    # a preset's look is baked in: no content model is read
+
+
+def test_a_presets_look_reads_no_content_of_the_batch(own_photos, tmp_path):
+    """A preset's look is baked in: no content model is read."""
+    photos, _ = own_photos
     preset = run_cli("batch", str(photos), "-o", str(tmp_path / "preset"), "--preset", "warm",
                      "--no-cache")
     assert "graded 8" in preset.output and "content:" not in preset.output
-    # a folder graded towards its own look: its photos are the styles, not its content
+
+
+@pytest.mark.slow
+def test_a_folder_graded_towards_its_own_look_is_not_its_own_content(own_photos, tmp_path):
+    """A folder graded towards its own look: its photos are the styles, not its content."""
+    _, warm = own_photos
     itself = run_cli("batch", str(warm), "-o", str(tmp_path / "itself"), "--style", str(warm),
                      "--no-cache")
     assert itself.exit_code == 0 and "content:" not in itself.output

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from tqdm import tqdm
 
-import wbcgrade.color.builders as builders
-import wbcgrade.color.grading as grading
+import wbcgrade.color.grade.builders as builders
+import wbcgrade.color.grade.grading as grading
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 
 
@@ -128,13 +128,14 @@ def test_stage_bar_says_what_it_does_and_drops_the_previous_photos_loss():
         assert bar.desc.removesuffix(": ") == "b.jpg: scene: colour transport"
 
 
+@pytest.mark.slow  # over 4 s of the fast tier: the whole suite runs it
 def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
         tmp_path, folders, monkeypatch, cli):
     """A batch stopped during its first photo has recorded its settings already (a rerun
     that grades nothing and `report OUT` read them); a settings record nested 200,000
     deep is replaced, not a traceback on every rerun."""
-    import wbcgrade.color.batch.task as task
-    from wbcgrade.color.batch.settings import SETTINGS_FILE
+    import wbcgrade.batch.task as task
+    from wbcgrade.batch.settings import SETTINGS_FILE
 
     photos, styles = folders
     out = tmp_path / "out"
@@ -145,11 +146,11 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
         raise KeyboardInterrupt
 
     monkeypatch.setattr(task, "run_task", stopped)
-    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", stopped)
+    monkeypatch.setattr("wbcgrade.batch.run.run_task", stopped)
     result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert result.exit_code == 130, result.output
     assert (out / SETTINGS_FILE).is_file()
-    monkeypatch.setattr("wbcgrade.color.batch.run.run_task", run_task)
+    monkeypatch.setattr("wbcgrade.batch.run.run_task", run_task)
     (out / SETTINGS_FILE).write_text("[" * 200_000 + "]" * 200_000)
     result = cli("batch", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert result.exit_code == 0 and "Traceback" not in result.output, result.output
@@ -158,24 +159,25 @@ def test_settings_are_recorded_before_the_first_photo_and_a_deep_record_heals(
     assert result.exit_code == 0, result.output
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_a_stopped_report_is_finished_by_a_rerun_without_overwrite(tmp_path, folders,
                                                                    monkeypatch, cli):
     """A report stopped after its sheets (before index.html) is finished by the next run
     without --overwrite; a finished report is still never replaced without it."""
-    import wbcgrade.color.report as report
+    import wbcgrade.batch.workflow as workflow  # the report command's own workflow
 
     photos, styles = folders
     out = tmp_path / "rep"
-    write_report = report.write_report
+    write_report = workflow.write_report
 
     def stopped(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(report, "write_report", stopped)
+    monkeypatch.setattr(workflow, "write_report", stopped)
     args = ("report", str(photos), "-o", str(out), "--preset", "warm", *FAST)
     assert cli(*args).exit_code == 130
     assert list((out / "sheets").glob("*.png")) and not (out / "index.html").exists()
-    monkeypatch.setattr(report, "write_report", write_report)
+    monkeypatch.setattr(workflow, "write_report", write_report)
     result = cli(*args)
     assert result.exit_code == 0, result.output
     assert (out / "index.html").is_file()
@@ -190,11 +192,11 @@ def test_a_batch_report_reads_jpegs_small_and_makes_each_picture_once(tmp_path, 
     shows it: the sheet pastes it as it is, resized once (a quick report, issue 47)."""
     from PIL import Image
 
-    import wbcgrade.color.imageio as imageio
-    import wbcgrade.color.sheet as sheet
-    from wbcgrade.color.batch.results import FileResult
+    import wbcgrade.photos.report as report
+    import wbcgrade.photos.sheet as sheet
     from wbcgrade.color.presets import StyleSet
-    from wbcgrade.color.report import sheet_from_files, style_pictures
+    from wbcgrade.photos.report import sheet_from_files, style_pictures
+    from wbcgrade.photos.results import FileResult
 
     rng = np.random.default_rng(0)
     for name in ("photo", "graded", "style"):  # wide: the sheet's half width decides its size
@@ -204,7 +206,7 @@ def test_a_batch_report_reads_jpegs_small_and_makes_each_picture_once(tmp_path, 
     def full_size_read(*args, **kwargs):
         raise AssertionError("a JPEG read at full size")
 
-    monkeypatch.setattr(imageio, "read_image", full_size_read)
+    monkeypatch.setattr(report, "read_image", full_size_read)  # (what the report reads with)
     pictures = style_pictures(StyleSet(["style"], np.ones((1, 4, 4, 4)) / 64, str(tmp_path)))
     assert pictures["style"].shape == (32, 128, 3)  # the photo itself, fitting 96 x 128
     result = FileResult("photo.jpg", str(tmp_path / "photo.jpg"), str(tmp_path / "graded.jpg"),

@@ -206,7 +206,7 @@ def test_relative_paths_work_with_a_scheduler(shoot, tmp_path):
 
 
 def test_outputs_are_checked_before_any_work(shoot, tmp_path, monkeypatch):
-    import wbcgrade.color.batch.task as batch
+    import wbcgrade.batch.task as batch
 
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")
@@ -250,7 +250,11 @@ def test_a_second_batch_into_the_same_folder_is_refused(shoot, tmp_path):
     assert "graded 2" in result.output
 
 
-def test_a_gif_or_null_file_fails_alone_and_the_batch_goes_on(shoot, tmp_path):
+@pytest.mark.parametrize("extra", [
+    (),
+    pytest.param(("-j", "2", "--consistent"), marks=pytest.mark.slow),  # worker processes
+], ids=["serial", "workers-consistent"])
+def test_a_gif_or_null_file_fails_alone_and_the_batch_goes_on(shoot, tmp_path, extra):
     """One GIF (alpha as OpenImageIO's channel 4 of 4) and a zero-byte ``.null`` among the
     photos: the GIF is graded, the ``.null`` fails alone, every JPEG is graded."""
     from PIL import Image as PILImage
@@ -260,11 +264,10 @@ def test_a_gif_or_null_file_fails_alone_and_the_batch_goes_on(shoot, tmp_path):
         small_copy(SAMPLES / f"{name}.jpg", photos / f"{name}.jpg", 32)
     PILImage.open(photos / "coffee.jpg").convert("RGB").save(photos / "anim.gif")
     (photos / "x.null").write_bytes(b"")
-    for extra in ((), ("-j", "2", "--consistent")):
-        out = tmp_path / f"out{len(extra)}"
-        result = _batch(photos, shoot[1], out, *extra)
-        assert "Traceback" not in result.output and result.exception is None \
-            or isinstance(result.exception, SystemExit), result.output
-        assert sorted(p.name for p in out.glob("[!.]*.*")) == [
-            "anim.gif", "chelsea.jpg", "coffee.jpg", "flower.jpg"], result.output
-        assert "x.null" in result.output and "failed 1" in result.output
+    out = tmp_path / "out"
+    result = _batch(photos, shoot[1], out, *extra)
+    assert "Traceback" not in result.output and result.exception is None \
+        or isinstance(result.exception, SystemExit), result.output
+    assert sorted(p.name for p in out.glob("[!.]*.*")) == [
+        "anim.gif", "chelsea.jpg", "coffee.jpg", "flower.jpg"], result.output
+    assert "x.null" in result.output and "failed 1" in result.output

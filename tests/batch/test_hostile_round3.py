@@ -19,7 +19,7 @@ import pytest
 
 from tests.batch.test_batch import FAST, SAMPLES, small_copy
 from tests.conftest import run_cli as run
-from wbcgrade.color.batch.records import RESULTS_FOLDER
+from wbcgrade.batch.records import RESULTS_FOLDER
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]
 

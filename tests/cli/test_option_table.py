@@ -6,8 +6,7 @@ import pytest
 from click.testing import CliRunner
 
 from wbcgrade.cli import USAGE_ERROR, main
-from wbcgrade.cli.grading_options import flag_error
-from wbcgrade.cli.option_table import OPTIONS, flag_of
+from wbcgrade.cli.option_table import OPTIONS, flag_error, flag_of
 from wbcgrade.color.options import FLAT_FIELDS, GradeOptions, flat_defaults
 from wbcgrade.errors import OptionError
 
@@ -58,19 +57,21 @@ def test_video_has_the_tables_video_settings():
 
 
 @pytest.mark.parametrize("field, message, shown", [
-    ("transfer.bins", "transfer.bins must be between 4 and 256",
+    ("transfer.bins", "{transfer.bins} must be between 4 and 256",
      "--bins must be between 4 and 256"),
-    ("map.strength", "map.strength must be in [0, 4]", "--strength must be in [0, 4]"),
-    ("lut_format", "out.cube: LUT file name must end in .clf (lut_format clf)",
+    ("map.strength", "{map.strength} must be in [0, 4]", "--strength must be in [0, 4]"),
+    ("lut_format", "out.cube: LUT file name must end in .clf ({lut_format} clf)",
      "out.cube: LUT file name must end in .clf (--lut-format clf)"),
 ])
 def test_library_errors_name_fields_and_the_cli_their_flags(field, message, shown):
-    error = flag_error(OptionError(message, field))
+    library = OptionError(message, field)
+    assert str(library) == message.replace("{", "").replace("}", "")  # the field, in words
+    error = flag_error(library)
     assert str(error) == shown and error.option == flag_of[field]
 
 
 def test_other_settings_a_message_names_become_flags_too():
-    error = flag_error(OptionError("lut needs consistent (one grade); `apply --lut` writes "
+    error = flag_error(OptionError("{lut} needs {consistent} (one grade); `apply --lut` writes "
                                    "per-photo LUTs", "lut", also=("consistent",)))
     assert str(error) == ("--lut needs --consistent (one grade); `apply --lut` writes "
                           "per-photo LUTs")
@@ -117,12 +118,12 @@ def test_the_other_commands_options_are_table_rows(command):
 
 @pytest.mark.parametrize("error, shown", [
     # the path the message starts with is never rewritten, even when it holds the field's name
-    (OptionError("codec/out.mp4: codec prores needs one of .mov, .mkv", "codec",
+    (OptionError("codec/out.mp4: {codec} prores needs one of .mov, .mkv", "codec",
                  path="codec/out.mp4"), "codec/out.mp4: --codec prores needs one of .mov, .mkv"),
-    (OptionError("codec: codec prores needs .mov", "codec", path="codec"),
+    (OptionError("codec: {codec} prores needs .mov", "codec", path="codec"),
      "codec: --codec prores needs .mov"),
-    # without a path, a name inside a path is not a whole word
-    (OptionError("out/codec/x.mp4 and codec prores", "codec"),
+    # without a path, only the setting written in braces is the setting
+    (OptionError("out/codec/x.mp4 and {codec} prores", "codec"),
      "out/codec/x.mp4 and --codec prores"),
 ])
 def test_a_path_in_a_message_keeps_its_names(error, shown):

@@ -71,6 +71,6 @@ FAST_ARGS = ["--mode", "palette", "--bins", "16", "--fit-bins", "8", "--max-iter
 def grade_of(rgb, styles, options):
     """The grade of sRGB-encoded pixels (H, W, 3) in the default working space."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grading import grade_encoded
+    from wbcgrade.color.grade.grading import grade_encoded
 
     return grade_encoded(np.asarray(rgb, np.float32), styles, options, ColorEncoding.of())[0]

@@ -12,8 +12,8 @@ import pytest
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 from tests.conftest import run_cli as run
-from wbcgrade.color.imageio import read_image
-from wbcgrade.color.lut import read_cube
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping.lut import read_cube
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ from tests.color.conftest import FAST_ARGS, SAMPLES, THREE_STYLES, small_copy, w
 from wbcgrade.color import colorspace as cs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import HistogramCache, image_histogram
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.io.images import read_image
 from wbcgrade.color.presets import (
     load_preset,
     load_style_folder,
@@ -357,7 +357,7 @@ def test_clf_lut_or_a_clear_message(tmp_path, photo, monkeypatch, cli):
 
 
 def test_grade_array_in_a_working_space():
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.options import GradeOptions
 
     rgb = np.random.default_rng(3).random((24, 32, 3)).astype(np.float32)
@@ -453,7 +453,7 @@ def test_preserve_luminance_keeps_lightness_in_any_working_space(tmp_path, worki
 def test_monotone_maps_are_monotone_in_the_working_spaces_luma():
     """--monotone orders the map by the working encoding's own luma: sYCC's BT.601
     weights for sRGB, the AP1 primaries' luminance for ACEScct."""
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.options import GradeOptions
 
     srgb, cct = ColorEncoding.of(), ColorEncoding.of(None, "acescct")

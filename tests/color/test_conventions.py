@@ -14,8 +14,13 @@ from PIL import Image as PILImage
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
 from tests.conftest import run_cli as run
-from wbcgrade.color.imageio import DEFAULT_JPEG_QUALITY, jpeg_quality, read_image, write_image
-from wbcgrade.color.presets import load_style_folder, resolve_preset
+from wbcgrade.color.io.images import DEFAULT_JPEG_QUALITY, jpeg_quality, read_image, write_image
+from wbcgrade.color.presets import (
+    StyleSource,
+    load_style_folder,
+    one_style_warning,
+    resolve_preset,
+)
 from wbcgrade.errors import InputError
 
 
@@ -27,7 +32,8 @@ def test_preset_names_ignore_case():
 
 def test_a_photo_given_as_the_style_folder_is_named_as_such(tmp_path):
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
-    with pytest.raises(InputError, match=r"coffee\.jpg: is a file; --style takes a folder"):
+    # the library names its setting (style_dir), the command line its flag (--style)
+    with pytest.raises(InputError, match=r"coffee\.jpg: is a file; style_dir takes a folder"):
         load_style_folder(photo, 16)
     result = run("apply", photo, "--style", photo, "-o", tmp_path / "out.jpg")
     assert result.exit_code == 1 and "is a file; --style takes a folder" in result.stderr
@@ -63,6 +69,10 @@ def test_a_one_photo_style_set_gets_a_one_line_warning(photo, one_style, tmp_pat
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if line.startswith("Warning:")]
     assert len(warnings) == 1 and "one style photo" in warnings[0], result.stderr
+    assert "use --mode palette to move" in warnings[0]  # the flag on the command line
+    source = StyleSource(style_dir=str(one_style))
+    said = one_style_warning(source, load_style_folder(one_style, 16), "look")
+    assert "use map.builder palette to move" in said  # the setting in the library
     result = run("apply", photo, "--style", one_style, "-o", tmp_path / "p.jpg", *FAST_ARGS)
     assert "one style photo" not in result.stderr  # a palette transfer from one photo is fine
 
@@ -80,7 +90,7 @@ def test_a_jpeg_keeps_the_input_quality_and_about_its_size(tmp_path, quality):
     # asked for: as asked; a PNG's pixels into a JPEG: the default quality
     png = tmp_path / "in.png"
     PILImage.open(source).save(png)
-    from wbcgrade.color.imageio import WriteOptions
+    from wbcgrade.color.io.images import WriteOptions
 
     assert jpeg_quality(write_image(tmp_path / "q.jpg", image.pixels, image,
                                     options=WriteOptions(quality=70))) == 70
@@ -123,8 +133,8 @@ def test_a_batch_run_again_with_its_report_folder_resumes_it(tmp_path):
 def test_a_look_grade_gets_a_look_report(tmp_path):
     """A preset's look: the report shows the look (a colour chart before and after), its
     source, strength and each photo's change; no empty weight table, no preset photos."""
-    from wbcgrade.color.batch.records import read_record
-    from wbcgrade.color.report import look_chart, sheet_from_files
+    from wbcgrade.batch.records import read_record
+    from wbcgrade.photos.report import look_chart, sheet_from_files
 
     photos = tmp_path / "photos"
     photos.mkdir()

@@ -20,7 +20,7 @@ import pytest
 
 from tests.color.conftest import FAST_ARGS, write_array
 from wbcgrade import _publish
-from wbcgrade.color.imageio import (
+from wbcgrade.color.io.images import (
     Image,
     check_output_path,
     read_image,
@@ -165,7 +165,7 @@ def test_a_rerun_removes_the_temporary_of_a_killed_run_only(tmp_path, photo, cli
 @pytest.fixture
 def no_grading(monkeypatch):
     """Fail the test if a photo is graded."""
-    import wbcgrade.color.workflow as workflow
+    import wbcgrade.photos.workflow as workflow
 
     def forbidden(*args, **kwargs):
         raise AssertionError("graded before checking the outputs")
@@ -182,7 +182,7 @@ def test_unknown_output_format_is_refused_before_any_work(photo, tmp_path, no_gr
 
 @pytest.mark.slow
 def test_a_failing_lut_publishes_no_photo(photo, tmp_path, monkeypatch, cli):
-    import wbcgrade.color.lut as lut_module
+    import wbcgrade.color.mapping.lut as lut_module
 
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
@@ -271,6 +271,7 @@ def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading, cli):
     assert fifo.is_fifo() and hidden_files(tmp_path) == []
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_a_report_under_a_file_size_limit_fails_and_publishes_no_truncated_sheet(tmp_path):
     """``report`` under a file size limit exited 0 ("failed 0") with a PNG cut at the limit:
     each sheet is encoded in memory and checked, so the photo fails and no sheet is

@@ -7,21 +7,21 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from wbcgrade.color import regrain as regrain_module
 from wbcgrade.color.colorspace import SYCC_LUMA, ColorEncoding
 from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.imageio import read_image
-from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.regrain import regrain
-from wbcgrade.color.remap import (
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping import regrain as regrain_module
+from wbcgrade.color.mapping.regrain import regrain
+from wbcgrade.color.mapping.remap import (
     apply_color_map,
     identity_map,
     keep_lightness,
     monotone_lightness,
 )
-from wbcgrade.color.smooth_map import fit_smooth_map
-from wbcgrade.color.transfer import color_transfer_map
+from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.smooth_map import fit_smooth_map
+from wbcgrade.color.palette.transfer import color_transfer_map
+from wbcgrade.color.presets import StyleSet
 
 from .conftest import SAMPLES, grade_of, small_copy
 
@@ -79,7 +79,7 @@ def test_smooth_map_solves_its_least_squares_problem(size):
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    from wbcgrade.color import smooth_map
+    from wbcgrade.color.palette import smooth_map
 
     raw, density = _split_map(20)
     raw = 0.3 + 0.4 * raw  # inside the cube: no clipping of the result
@@ -109,7 +109,7 @@ def test_smooth_map_solves_its_least_squares_problem(size):
 
 @pytest.mark.slow
 def test_smooth_map_validates_its_input():
-    from wbcgrade.color.smooth_map import SmoothMapFitter
+    from wbcgrade.color.palette.smooth_map import SmoothMapFitter
 
     raw, density = _split_map(8)
     with pytest.raises(ValueError, match=r"raw_map must be \(n, n, n, 3\) and density"):

@@ -15,8 +15,8 @@ from wbcgrade.color.histogram import (
     resample_histogram,
     soft_histogram,
 )
-from wbcgrade.color.lut import color_map_to_lut, read_cube, write_cube
-from wbcgrade.color.remap import apply_color_map, blend_map, identity_map
+from wbcgrade.color.mapping.lut import color_map_to_lut, read_cube, write_cube
+from wbcgrade.color.mapping.remap import apply_color_map, blend_map, identity_map
 from wbcgrade.errors import InputError
 
 

@@ -31,10 +31,10 @@ import pytest
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy
 from tests.conftest import run_cli as run
+from wbcgrade.color.grade.saved_grade import load_look
+from wbcgrade.color.mapping.remap import apply_color_map
 from wbcgrade.color.options import FitOptions, RegrainOptions
 from wbcgrade.color.presets import load_preset
-from wbcgrade.color.remap import apply_color_map
-from wbcgrade.color.saved_grade import load_look
 from wbcgrade.errors import InputError, OptionError
 
 REPO = Path(__file__).resolve().parents[2]
@@ -100,7 +100,7 @@ def test_a_huge_regrain_radius_is_refused_and_the_library_bounds_its_window(tmp_
     # hang fails the test instead of holding the suite
     code = """
         import numpy as np
-        from wbcgrade.color.regrain import regrain
+        from wbcgrade.color.mapping.regrain import regrain
         rng = np.random.default_rng(0)
         src = rng.random((40, 60, 3)).astype(np.float32)
         graded = np.clip(src * 0.8 + 0.1, 0, 1).astype(np.float32)
@@ -265,7 +265,7 @@ def test_a_compressed_huge_map_in_a_grade_json_is_refused_before_it_is_inflated(
     path = _write_look(tmp_path / "bomb.json", entry)
     assert path.stat().st_size < 2 * 2 ** 20
     done = in_small_memory(f"""
-        from wbcgrade.color.saved_grade import load_look
+        from wbcgrade.color.grade.saved_grade import load_look
         from wbcgrade.errors import InputError
         try:
             load_look({str(path)!r})
@@ -281,7 +281,7 @@ def test_a_spi3d_declaring_500_cubed_is_refused_before_its_table_is_made(tmp_pat
     path = tmp_path / "big.spi3d"
     path.write_text("SPILUT 1.0\n3 3\n500 500 500\n0 0 0 0.5 0.5 0.5\n")
     done = in_small_memory(f"""
-        from wbcgrade.color.saved_grade import load_look
+        from wbcgrade.color.grade.saved_grade import load_look
         from wbcgrade.errors import InputError
         try:
             load_look({str(path)!r})

@@ -12,9 +12,9 @@ import pytest
 from tests.color.conftest import FAST_ARGS, write_array
 from tests.conftest import run_cli as run
 from wbcgrade.color.presets import load_preset, load_style_folder, save_preset
-from wbcgrade.color.report import _csv_text, csv_cell
 from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError
+from wbcgrade.photos.report import _csv_text, csv_cell
 
 
 def _one_error_line(result) -> str:

@@ -224,7 +224,7 @@ def test_look_mode_and_look_extract_through_the_commands(tmp_path, cli):
     import json
 
     from tests.color.conftest import small_copy
-    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.mapping.lut import read_cube
 
     # a preset of palettes only (no look of its own): the look is extracted
     palettes = str(Path(__file__).resolve().parents[1] / "data" / "three_samples.npz")
@@ -263,9 +263,9 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path, cli):
     import OpenImageIO as oiio
 
     from tests.color.conftest import small_copy
-    from wbcgrade.color.lut import read_cube
+    from wbcgrade.color.mapping.lut import read_cube
+    from wbcgrade.color.mapping.remap import interpolate_lattice, resample_lattice
     from wbcgrade.color.presets import load_preset, resolve_preset, save_preset
-    from wbcgrade.color.remap import interpolate_lattice, resample_lattice
     from wbcgrade.errors import InputError
 
     styles = load_preset(resolve_preset("warm"))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from tests.color.test_look import LUMA, sample, warm_look
+from wbcgrade.color.grade.saved_grade import load_look
 from wbcgrade.color.histogram import grid_points
 from wbcgrade.color.look.learn import learn_look, learn_look_file, pair_files
-from wbcgrade.color.saved_grade import load_look
 
 STYLE = ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")
 WIDTH = 240
@@ -55,7 +55,7 @@ def lattice_error(grade, look, size=9):
     the sample photos (the colours a look is learned on)."""
     points = grid_points(size)
     table = np.asarray(grade.color_map)
-    from wbcgrade.color.remap import resample_lattice
+    from wbcgrade.color.mapping.remap import resample_lattice
 
     mapped = resample_lattice(table, size).reshape(-1, 3)
     return float(np.mean(np.linalg.norm(mapped - look(points), axis=1)))
@@ -160,7 +160,7 @@ def test_toned_afters_give_a_toned_look(tmp_path, photos, toner):
     """Sepia or selenium afters (every colour its luma plus a tint of that luma) learn a
     look whose every output is so: a colourful photo comes out toned, its chroma no more
     than the afters hold, in the toning's hue at each lightness."""
-    from wbcgrade.color.remap import TONE_LUMA
+    from wbcgrade.color.mapping.remap import TONE_LUMA
 
     before, after = make_pairs(tmp_path, photos, look=toner)
     (after / "coffee.png").unlink()
@@ -362,9 +362,9 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
 
 @pytest.mark.slow
 def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):
-    from tests.color.test_raw import write_dng
+    from tests.color.io.test_raw import write_dng
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     before, after = tmp_path / "before", tmp_path / "after"
     before.mkdir()

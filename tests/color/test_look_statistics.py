@@ -11,7 +11,7 @@ from wbcgrade.color.look.statistics import (
     statistics_look,
     tinted_statistics,
 )
-from wbcgrade.color.remap import monochrome_map, monochrome_toning, to_monochrome
+from wbcgrade.color.mapping.remap import monochrome_map, monochrome_toning, to_monochrome
 
 
 def natural_photo(seed, size=40):

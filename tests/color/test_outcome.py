@@ -12,13 +12,13 @@ import pytest
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 from tests.conftest import run_cli as run
 from wbcgrade.cli.grading_options import PALETTE_ONLY
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade, grade_array, grade_outcome
-from wbcgrade.color.imageio import read_image
+from wbcgrade.color.grade.grading import Grade, grade_array, grade_outcome
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.outcome import GradeOutcome, GradeSource, map_change
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import load_preset, look_in_space, resolve_preset
-from wbcgrade.color.remap import identity_map
 
 
 def _look_grade(color_map, set_strength, n=3, strength=1.0):
@@ -268,7 +268,7 @@ def test_preset_look_converted_keeps_the_look():
     """The converted lattice, read back through the conversion, is the preset's own look
     on the colours of its own cube."""
     from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
-    from wbcgrade.color.remap import apply_color_map
+    from wbcgrade.color.mapping.remap import apply_color_map
 
     styles = load_preset(resolve_preset("kodak-2383"))
     srgb, cct = default_working_space(), resolve_space("acescct")
@@ -317,7 +317,7 @@ def test_preset_on_a_raw_photo_is_the_jpeg_look(tmp_path):
     """A raw photo (graded in ACEScct) gets the preset's own look: the same as its sRGB
     rendering graded in sRGB, not a look re-extracted from the preset's palettes."""
     pytest.importorskip("tifffile")
-    from tests.color.test_raw import WHITE, write_dng
+    from tests.color.io.test_raw import WHITE, write_dng
     from wbcgrade.color.colorspace import ColorEncoding
 
     rng = np.random.default_rng(3)

@@ -11,9 +11,9 @@ import pytest
 
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 from tests.conftest import run_cli as run
-from wbcgrade.color.imageio import WriteOptions, read_image
-from wbcgrade.color.lut import write_cube
-from wbcgrade.color.remap import identity_map
+from wbcgrade.color.io.images import WriteOptions, read_image
+from wbcgrade.color.mapping.lut import write_cube
+from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.errors import OptionError
 
 

@@ -169,7 +169,7 @@ def test_style_folder_skips_non_images_and_rejects_empty(tmp_path, style_dir):
 def test_own_style_is_found_only_for_the_photo_itself_at_a_large_weight(tmp_path):
     from tests.color.conftest import small_copy
     from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.color.presets import own_style
 
     def hist(rgb):

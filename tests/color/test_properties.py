@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from wbcgrade.color.colorspace import ColorEncoding, convert, resolve_space
-from wbcgrade.color.lut import read_cube, write_cube
+from wbcgrade.color.grade.saved_grade import load_look, look_dict, look_from_dict
+from wbcgrade.color.mapping.lut import read_cube, write_cube
 from wbcgrade.color.options import FitOptions, MapOptions, RegrainOptions
-from wbcgrade.color.saved_grade import load_look, look_dict, look_from_dict
 from wbcgrade.color.weights import parse_weights
 from wbcgrade.errors import InputError, OptionError
 

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-import wbcgrade.color.regrain as regrain_module
-from wbcgrade.color.regrain import map_gain_prior, regrain_map
-from wbcgrade.color.remap import apply_color_map, identity_map
+import wbcgrade.color.mapping.regrain as regrain_module
+from wbcgrade.color.mapping.regrain import map_gain_prior, regrain_map
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 
 EPS = 0.04  # the default regulariser: grain (sd 0.01) is far under it
 
@@ -100,8 +100,8 @@ def test_compiled_and_numpy_solves_agree_with_a_prior(rng):
 
 
 def test_look_grades_follow_the_palette_mode_does_not_and_saved_grades_keep_it(tmp_path):
-    from wbcgrade.color.grading import Grade
-    from wbcgrade.color.saved_grade import look_dict, look_from_dict
+    from wbcgrade.color.grade.grading import Grade
+    from wbcgrade.color.grade.saved_grade import look_dict, look_from_dict
 
     grade = Grade(("warm",), np.ones(1), _linear_map(0.5, 5), working="w",
                   regrain=(0.01, EPS), regrain_follow=0.75)
@@ -120,7 +120,7 @@ def test_look_grades_follow_the_palette_mode_does_not_and_saved_grades_keep_it(t
 def test_known_looks_follow_set_looks_and_the_palette_mode_do_not():
     from pathlib import Path
 
-    from wbcgrade.color.grading import grade_array
+    from wbcgrade.color.grade.grading import grade_array
     from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import load_preset
 

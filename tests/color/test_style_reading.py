@@ -13,7 +13,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-import wbcgrade.color.imageio as imageio
+import wbcgrade.color.io.images as imageio
 import wbcgrade.color.look.scene as scene
 import wbcgrade.color.presets as presets
 from tests.color.conftest import SAMPLES, STYLE_PHOTOS, small_copy, write_array
@@ -101,6 +101,7 @@ def test_a_folder_read_for_a_look_is_decoded_once_and_its_scene_images_are_the_s
         assert np.array_equal(first.descriptors, later.descriptors)
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_apply_decodes_each_style_photo_once(tmp_path, monkeypatch, cli):
     """Through the command line, with style photos larger than the matching size (their
     scene images shrunk from the decode the histograms are read from)."""
@@ -146,8 +147,7 @@ def test_big_photos_are_not_decoded_together(folder, monkeypatch):
     """At most READ_MEGAPIXELS in flight; a photo bigger than that alone."""
     monkeypatch.setattr(presets, "READ_THREADS", 4)
     monkeypatch.setattr(presets, "_megapixels", lambda path: 30.0)
-    import wbcgrade._executor as executor
-    monkeypatch.setattr(executor, "cpu_count", lambda: 4)
+    monkeypatch.setattr(presets, "cpu_count", lambda: 4)  # (the executor's, as presets has it)
     in_flight, most = [0], [0]
     lock = threading.Lock()
     real = presets._photo_histogram
@@ -215,7 +215,7 @@ def test_a_thumbnail_of_a_big_picture_is_the_filtered_resize_of_it():
     """Block-averaged first (a big photo's filtered resize took seconds), the thumbnail
     still matches OpenImageIO's filtered resize of the whole picture: a smooth gradient
     within 1/255, a fine stripe pattern averaged to its mean grey, not aliased."""
-    from wbcgrade.color.sheet import PRESHRINK, thumbnail
+    from wbcgrade.photos.sheet import PRESHRINK, thumbnail
 
     height, width = 1203, 1807  # not multiples of the blocks
     y, x = np.mgrid[0:height, 0:width].astype(np.float32)

@@ -16,13 +16,13 @@ import resource
 resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
 import numpy as np
 from wbcgrade.core._jit import compiled
-from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.mapping.remap import apply_color_map
 
 @compiled(nogil=True)
 def twice(x):
     return 2.0 * x
 
-from wbcgrade.color.remap import identity_map
+from wbcgrade.color.mapping.remap import identity_map
 identity = identity_map(5, np.float64)
 colors = np.random.default_rng(0).random((7, 3))
 print(twice(21.0), float(np.abs(apply_color_map(colors, identity) - colors).max()) < 1e-6)

@@ -19,7 +19,7 @@ import pytest
 from threadpoolctl import threadpool_info
 
 from tests.core.helpers import blobs
-from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.core import (
     GridGeometry,
     barycenter,
@@ -197,7 +197,7 @@ _WORKQUEUE = """
 import threading
 import numpy as np
 import numba
-from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 table = identity_map(9, np.float32) ** 1.3
 colors = np.random.default_rng(0).random((500_000, 3)).astype(np.float32)  # the kernel, not numpy
 expected = apply_color_map(colors, table)

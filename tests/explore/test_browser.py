@@ -28,10 +28,10 @@ import pytest
 
 from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import WBCGRADE, command_env
-from wbcgrade.color.imageio import read_image
-from wbcgrade.color.lut import read_cube
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping.lut import read_cube
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.color.outcome import GradeOutcome, change_words
-from wbcgrade.color.remap import apply_color_map, identity_map
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install "
                                 "'wbcgrade[test]')")

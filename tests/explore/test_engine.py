@@ -9,7 +9,7 @@ import pytest
 
 from tests.color.conftest import SAMPLES, small_copy
 from tests.explore.conftest import PRESET
-from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.mapping.remap import apply_color_map
 from wbcgrade.explore.engine import ExactGrader, load_session
 from wbcgrade.explore.settings import settings_from_json
 
@@ -60,11 +60,12 @@ def test_command_line_quotes_paths_and_names_every_setting(tmp_path):
                                                              "--no-regrain"]
 
 
+@pytest.mark.slow  # over 4 s of the fast tier: the whole suite runs it
 def test_a_session_on_a_style_folder_decodes_each_style_photo_for_its_look_once(
         tmp_path, monkeypatch):
     """The explorer opens on apply's look grade: its scene matching reads the style photos
     prepared from the decode their histograms came from (as ``apply`` does), not again."""
-    import wbcgrade.color.imageio as imageio
+    import wbcgrade.color.io.images as imageio
     import wbcgrade.color.look.scene as scene
     import wbcgrade.color.presets as presets
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from tests.explore.test_server import api, error_of, request
-from wbcgrade.color.imageio import read_image
-from wbcgrade.color.lut import read_cube
-from wbcgrade.color.remap import apply_color_map, identity_map
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.mapping.lut import read_cube
+from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 
 LUT_BYTES = 33 ** 3 * 3 * 4
 
@@ -146,7 +146,7 @@ def test_a_blend_of_two_looks_is_their_mix_and_its_save_carries_its_grade(server
     grade_file = save_dir / saved["grade_file"]
     assert grade_file.name == saved["file"].rsplit(".", 1)[0] + ".grade.json"
     assert saved["command"].endswith(f"--look {grade_file} --no-regrain")
-    from wbcgrade.color.saved_grade import load_look
+    from wbcgrade.color.grade.saved_grade import load_look
 
     look = load_look(grade_file)
     assert look.strength == 0.5 and np.abs(look.color_map - lut).max() < 1e-4

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.explore.conftest import PRESET
-from wbcgrade.color.lut import color_map_to_lut, read_cube
+from wbcgrade.color.mapping.lut import color_map_to_lut, read_cube
 from wbcgrade.color.presets import resolve_preset
 from wbcgrade.explore.jobs import Superseded
 

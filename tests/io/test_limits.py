@@ -81,6 +81,7 @@ def test_a_volume_npy_claiming_terabytes_is_one_line_under_2_gb(tmp_path):
     assert done.stdout.startswith(str(path)) and "more than" in done.stdout
 
 
+@pytest.mark.slow  # over 5 s of the fast tier: the whole suite runs it
 def test_one_memory_budget_for_archives_pixels_luts_and_style_sets(tmp_path, monkeypatch):
     """Archives in total (members of 255 MB each) and unknown preset members, a small PNG
     declaring a huge image, a second size line of a ``.spi3d``, a style set past the
@@ -88,9 +89,9 @@ def test_one_memory_budget_for_archives_pixels_luts_and_style_sets(tmp_path, mon
     import OpenImageIO as oiio
 
     from wbcgrade import limits
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.grade.saved_grade import load_look
+    from wbcgrade.color.io.images import read_image
     from wbcgrade.color.presets import load_preset, load_style_folder, shipped_presets_dir
-    from wbcgrade.color.saved_grade import load_look
 
     bomb = io.BytesIO()
     with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as archive:

@@ -22,7 +22,7 @@ import pytest
 
 from tests.color.conftest import THREE_STYLES
 from tests.conftest import run_cli
-from wbcgrade.color.lut import read_cube
+from wbcgrade.color.mapping.lut import read_cube
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 
 CLI = [sys.executable, "-c", "from wbcgrade.cli import main; main()"]

@@ -32,8 +32,8 @@ import pytest
 from tests.color.conftest import THREE_STYLES
 from tests.conftest import run_cli
 from wbcgrade.color.colorspace import convert
-from wbcgrade.color.lut import read_cube
-from wbcgrade.color.remap import apply_color_map
+from wbcgrade.color.mapping.lut import read_cube
+from wbcgrade.color.mapping.remap import apply_color_map
 from wbcgrade.video.ffmpeg import decode_frames, ffmpeg_exe, probe
 from wbcgrade.video.shots import frame_tables, lut_schedule
 
@@ -242,9 +242,9 @@ def test_a_clip_takes_the_photos_grade_path(clips, tmp_path):
     """A shot's grade is the one grade path of photos on its frames' pooled palette, and its
     LUT the map sampled at the LUT's nodes (sRGB footage graded in sRGB)."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grading import PhotoHistograms, grade_histograms, photo_histograms
+    from wbcgrade.color.grade.grading import PhotoHistograms, grade_histograms, photo_histograms
     from wbcgrade.color.histogram import PaletteSum
-    from wbcgrade.color.lut import color_map_to_lut
+    from wbcgrade.color.mapping.lut import color_map_to_lut
     from wbcgrade.color.options import GradeOptions
     from wbcgrade.color.presets import load_preset, resolve_preset
     from wbcgrade.video.workflow import VideoSettings, grade_video
@@ -314,9 +314,9 @@ def test_acescct_working_space_bakes_the_lut_in_the_clips_encoding(clips, acescc
 
 
 def test_a_grades_lut_in_the_clips_encoding_goes_through_the_working_space_and_back():
-    from wbcgrade.color.grading import Grade
+    from wbcgrade.color.grade.grading import Grade
+    from wbcgrade.color.mapping.remap import identity_map
     from wbcgrade.color.options import SpaceOptions
-    from wbcgrade.color.remap import identity_map
     from wbcgrade.video.ffmpeg import VideoInfo
     from wbcgrade.video.spaces import clip_encoding
 

@@ -221,7 +221,7 @@ def material_by_name(name: str) -> Material:
         if material.name == name:
             return material
     known = ", ".join(m.name for m in (*_CATALOGUE, *_HELD_OUT))
-    raise OptionError(f"material {name!r} is unknown; known: {known}", "material")
+    raise OptionError(f"{{material}} {name!r} is unknown; known: {known}", "material")
 
 
 def all_material_names() -> list[str]:

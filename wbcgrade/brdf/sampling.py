@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from wbcgrade.brdf.defaults import DEFAULT_DIRECTIONS, DEFAULT_WIDTH
+from wbcgrade.core import DenseGeometry
 from wbcgrade.errors import InputError
 
 __all__ = ["DEFAULT_DIRECTIONS", "DEFAULT_WIDTH", "hemisphere_directions", "sample_spacing",
@@ -138,8 +139,6 @@ def hemisphere_geometry(
     geometry : wbcgrade.core.DenseGeometry
         Cost = squared geodesic distances, ``points`` = the directions.
     """
-    from wbcgrade.core import DenseGeometry
-
     if directions is None:
         directions = hemisphere_directions(n)
     directions = np.asarray(directions, dtype=np.float64)

@@ -30,6 +30,7 @@ from wbcgrade.brdf.defaults import (
     DEFAULT_TOL,
     DEFAULT_WIDTH,
 )
+from wbcgrade.brdf.fit import fit_brdf
 from wbcgrade.errors import NumericalError, OptionError
 
 __all__ = ["FitRun", "MeasurementFit", "write_database", "default_fit_output", "fit_outputs",
@@ -107,9 +108,9 @@ def fit_outputs(measured: str | os.PathLike, database: str | os.PathLike,
     inputs = {measured.resolve(), *(p.resolve() for p in io.database_files(database))}
     for target, name in ((out, "output"), (png_path, "png")):
         if target is not None and target.resolve() in inputs:
-            raise OptionError(f"{target}: an input; choose another {name}", name, path=target)
+            raise OptionError(f"{target}: an input; choose another {{{name}}}", name, path=target)
     if out.suffix.lower() not in io.BRDF_SUFFIXES:
-        raise OptionError(f"{out}: output needs a .binary or .npz suffix", "output", path=out)
+        raise OptionError(f"{out}: {{output}} needs a .binary or .npz suffix", "output", path=out)
     for target in (out, png_path):
         if target is not None:
             check_output_path(target, overwrite=True)
@@ -255,8 +256,6 @@ def fit_measurement(
     NumericalError
         A fit whose PSNR is not defined (NaN).
     """
-    from wbcgrade.brdf.fit import fit_brdf  # the core: imported only when fitting
-
     measured = Path(measured)
     out, png_path = fit_outputs(measured, database, keeps, output, png, no_png)
     dirs = sampling.hemisphere_directions(directions)

@@ -90,17 +90,17 @@ class _Group(click.Group):
         except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
             status = 1
             if isinstance(exc, OptionError):  # a library field -> the flag that sets it
-                from wbcgrade.cli.grading_options import flag_error
+                from wbcgrade.cli.option_table import flag_error
 
                 exc, status = flag_error(exc), USAGE_ERROR
             elif getattr(exc, "fields", ()):  # an input error whose hint names a setting
-                from wbcgrade.cli.grading_options import flag_text
+                from wbcgrade.cli.option_table import flag_text
 
                 exc = InputError(flag_text(exc))
             click.echo(f"Error: {_message(exc)}", err=True)
             sys.exit(status)
         finally:  # the command's --cache-dir/--no-cache end with it (in-process runs too)
-            cache = sys.modules.get("wbcgrade.color.cache")
+            cache = sys.modules.get("wbcgrade.color.io.cache")
             if cache is not None:
                 cache.set_command_cache()
 

@@ -7,6 +7,8 @@ import sys
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
+from wbcgrade.cli.option_table import flag_text
+
 if TYPE_CHECKING:
     from tqdm import tqdm
 
@@ -69,7 +71,7 @@ def learn_progress(desc: str) -> Iterator[tuple[Callable[[int, int, str], None],
 
         def warn(message: str) -> None:
             bar.clear()
-            click.echo(f"Warning: {message}", err=True)
+            click.echo(f"Warning: {flag_text(message)}", err=True)
 
         yield progress, warn
 

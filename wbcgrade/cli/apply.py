@@ -21,10 +21,11 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
+from wbcgrade.cli.option_table import flag_text
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 def _wall_timings(report, started: float, graded_from: float, learned: float = 0.0) -> None:
@@ -127,7 +128,7 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     options, source = take_grading_options(kwargs, photo=photo)
     encode = take_write_options(kwargs)
     from wbcgrade.cli._progress import bar_callbacks, progress_bar
-    from wbcgrade.color.workflow import Progress, apply_photo
+    from wbcgrade.photos.workflow import Progress, apply_photo
 
     learning = time.perf_counter() if kwargs.get("originals_dir") else None
     look = take_look(ctx, look_path, kwargs, options)

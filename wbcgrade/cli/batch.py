@@ -24,14 +24,15 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
+from wbcgrade.cli.option_table import flag_text
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
-    from wbcgrade.color.batch import BatchProgress, BatchResult, FileResult
+    from wbcgrade.batch import BatchProgress, BatchResult, FileResult
     from wbcgrade.color.options import GradeOptions
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 #: Weights shown on a photo's line (the largest ones).
@@ -81,7 +82,7 @@ def batch_progress(verb: str = "graded") -> Iterator[BatchProgress]:
 
     from wbcgrade.cli._progress import bar_callbacks
     from wbcgrade.color.presets import own_style_warning
-    from wbcgrade.color.progress import BatchProgress
+    from wbcgrade.photos.progress import BatchProgress
 
     with tqdm(desc="photos", unit="photo", disable=None, position=0) as files, \
             tqdm(desc="styles", disable=None, leave=False, position=1) as bar:
@@ -182,7 +183,7 @@ def batch(ctx, in_dir, out_dir, recursive, consistent, overwrite, force_alias, j
     or a LUT) to every photo with no fit.
     """
     check_photo(in_dir, "no such file or folder")  # (exit 1, before numpy loads)
-    from wbcgrade.color.batch import grade_folder
+    from wbcgrade.batch import grade_folder
 
     if force_alias:
         _warn("--force is deprecated; use --overwrite")

@@ -5,10 +5,11 @@ from __future__ import annotations
 import click
 
 from wbcgrade.cli.grading_options import table_options
+from wbcgrade.cli.option_table import flag_text
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 @click.command("explore")

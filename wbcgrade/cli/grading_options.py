@@ -21,6 +21,7 @@ from wbcgrade.cli.option_table import (
     LOOK,
     PALETTE,
     click_options,
+    flag_error,
     flag_of,
     names_in,
     option,
@@ -86,8 +87,8 @@ def check_photo(photo: str, missing: str = "no such file") -> None:
 
 
 def take_write_options(kwargs: dict):
-    """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.imageio.WriteOptions`."""
-    from wbcgrade.color.imageio import WriteOptions
+    """Pop ``--quality`` and ``--bit-depth`` -> :class:`wbcgrade.color.io.images.WriteOptions`."""
+    from wbcgrade.color.io.images import WriteOptions
 
     return WriteOptions(quality=kwargs.pop("quality", None),
                         bit_depth=kwargs.pop("bit_depth", None))
@@ -128,7 +129,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
                               "--originals")
         look = _learned_look(style_dir, originals, options)
     else:
-        from wbcgrade.color.saved_grade import load_look
+        from wbcgrade.color.grade.saved_grade import load_look
 
         for name, flag in (("style_dir", "--style"), ("preset", "--preset")):
             if given(name):
@@ -140,7 +141,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     if regrain_given or not is_json:
         changes["regrain"] = options.regrain.settings
     if given("strength"):
-        from wbcgrade.color.grading import strengthened
+        from wbcgrade.color.grade.grading import strengthened
 
         changes["color_map"], changes["strength"] = strengthened(look.color_map,
                                                                  options.map.strength)
@@ -162,9 +163,9 @@ def _learned_look(style_dir: str, originals: str, options):
 def set_max_image_pixels(ctx: click.Context, param: click.Parameter, value: int | None):
     import sys
 
-    if value is None and "wbcgrade.color.imageio" not in sys.modules:
+    if value is None and "wbcgrade.color.io.images" not in sys.modules:
         return value  # not given, and no limit set yet: nothing to undo (and no numpy loaded)
-    from wbcgrade.color.imageio import set_max_image_pixels
+    from wbcgrade.color.io.images import set_max_image_pixels
 
     set_max_image_pixels(value)  # None: back to $WBCGRADE_MAX_IMAGE_PIXELS or the default
     return value
@@ -183,40 +184,6 @@ LOOK_ONLY = {name: option(name).flag for name in names_in(LOOK)}
 
 #: Option field (``group.field``) or library setting -> the flag that sets it.
 FLAGS = flag_of
-
-
-def flag_error(error):
-    """An OptionError naming library settings -> the same error naming their flags.
-
-    The first mention of ``error.option`` (and of each of ``error.also``), as a
-    whole word (not part of a path: no ``/``, ``\\``, ``.``, ``-`` or ``_`` beside it),
-    becomes the flag that sets it (:data:`FLAGS`); names with no flag are left as
-    they are. The file the message starts with (``error.path``) is never rewritten.
-    """
-    from wbcgrade.errors import OptionError
-
-    flag = FLAGS.get(getattr(error, "option", None))
-    if flag is None:
-        return error
-    return OptionError(flag_text(error), flag, path=getattr(error, "path", None))
-
-
-def flag_text(error) -> str:
-    """The message of a library error with the settings it names (``error.option``,
-    ``.also``, ``.fields``) written as their flags (see :func:`flag_error`)."""
-    import re
-
-    text = str(error)
-    path = getattr(error, "path", None)
-    head = path if path is not None and text.startswith(path) else ""
-    text = text[len(head):]
-    names = (getattr(error, "option", None), *getattr(error, "also", ()),
-             *getattr(error, "fields", ()))
-    for name in names:
-        if name in FLAGS:
-            text = re.sub(rf"(?<![\w./\\-]){re.escape(name)}(?![\w/\\-])", FLAGS[name],
-                          text, count=1)
-    return head + text
 
 
 class _Deferred:
@@ -476,12 +443,12 @@ def take_grading_options(kwargs: dict, photo: str | None = None) -> tuple:
     if photo is not None:
         check_photo(photo)
     if values["preset"] is not None and values["style_dir"] is None and not saved_look:
-        from wbcgrade.color.preset_names import resolve_preset
+        from wbcgrade.color.io.preset_names import resolve_preset
 
         resolve_preset(values["preset"])  # an unknown name, answered before numpy loads
     # numpy and OpenImageIO load here, once the options and PHOTO are known to be valid
-    from wbcgrade.color.cache import set_command_cache
     from wbcgrade.color.histogram import HistogramCache
+    from wbcgrade.color.io.cache import set_command_cache
     from wbcgrade.color.presets import StyleSource
 
     set_command_cache(values["cache_dir"], not values["no_cache"])  # --natural DIR's too

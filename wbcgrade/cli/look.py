@@ -52,7 +52,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     from wbcgrade.errors import OptionError
 
     if (style_dir is None) == (preset is None):
-        raise OptionError("give either STYLE_DIR or preset", "preset")
+        raise OptionError("give either STYLE_DIR or {preset}", "preset")
     if style_dir is not None:  # answered before numpy loads
         check_photo(style_dir, "style folder does not exist")
     from tqdm import tqdm

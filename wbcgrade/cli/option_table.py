@@ -27,8 +27,10 @@ from pathlib import Path
 
 import click
 
+from wbcgrade.errors import OptionError
+
 __all__ = ["Option", "OPTIONS", "FIELD_DEFAULT", "option", "click_options", "flag_of",
-           "names_in", "json_keys"]
+           "flag_error", "flag_text", "names_in", "json_keys"]
 
 
 #: The largest magnitude a number option takes (each is checked to its own range later).
@@ -47,8 +49,7 @@ class FiniteFloat(click.ParamType):
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number", param, ctx)
         if not abs(number) <= MAX_OPTION_MAGNITUDE:  # (NaN fails this too)
-            from wbcgrade.errors import OptionError  # one line, exit 2, as the library's
-
+            # one line, exit 2, as the library's
             flag = max(getattr(param, "opts", None) or [str(value)], key=len)
             raise OptionError(f"{flag}: {value} is not a finite number (at most "
                               f"{MAX_OPTION_MAGNITUDE:g} in size)", flag)
@@ -505,6 +506,24 @@ def click_options(*names: str, **changes) -> list:
 
 #: Library field (``group.field``, or a library setting's name) -> the flag that sets it.
 flag_of: dict[str, str] = {row.field: row.flag for row in OPTIONS if row.field is not None}
+
+
+def flag_error(error):
+    """An OptionError naming library settings -> the same error naming their flags
+    (:meth:`wbcgrade.errors.InputError.worded` through :data:`flag_of`); an error whose
+    setting has no flag is left as it is."""
+    flag = flag_of.get(getattr(error, "option", None))
+    if flag is None:
+        return error
+    return OptionError(flag_text(error), flag, path=getattr(error, "path", None))
+
+
+def flag_text(error) -> str:
+    """The message of a library error with the settings it names (``error.option``,
+    ``.also``, ``.fields``) written as their flags (:data:`flag_of`); a warning's text
+    (:class:`wbcgrade.errors.Worded`) the same way."""
+    worded = getattr(error, "worded", None)
+    return str(error) if worded is None else worded(flag_of)
 
 
 def names_in(section: str) -> tuple[str, ...]:

@@ -38,9 +38,9 @@ def build(folder, output, preset_bins, preset_width, description, overwrite, no_
 
     bins = preset_bins
     if not 4 <= bins <= 256:
-        raise OptionError("bins must be between 4 and 256", "bins")
+        raise OptionError("{bins} must be between 4 and 256", "bins")
     if not output.lower().endswith(".npz"):
-        raise OptionError(f"{output}: output file name must end in .npz", "output", path=output)
+        raise OptionError(f"{output}: {{output}} file name must end in .npz", "output", path=output)
     if os.path.exists(output) and not overwrite:
         raise InputError(f"{output}: file exists (use --overwrite to replace it)")
     check_photo(folder, "style folder does not exist")  # answered before numpy loads

@@ -41,7 +41,7 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
     photo in sheets/ and index.html.
     """
     check_photo(target, "no such file or folder")  # (exit 1, before numpy loads)
-    from wbcgrade.color.batch.recorded import report_recorded
+    from wbcgrade.batch.recorded import report_recorded
 
     options, source = take_grading_options(kwargs)
     warn_fit_bins(options)
@@ -50,7 +50,7 @@ def report(ctx, target, out_dir, recursive, consistent, jobs, scheduler, overwri
         result = report_recorded(target, out_dir, source, options, recursive=recursive,
                                  overwrite=overwrite, jobs=jobs, progress=progress)
         if result is None:
-            from wbcgrade.color.batch import report_folder
+            from wbcgrade.batch import report_folder
 
             result = report_folder(target, out_dir, source, options, recursive=recursive,
                                    consistent=consistent, overwrite=overwrite, jobs=jobs,

@@ -16,13 +16,14 @@ from wbcgrade.cli.grading_options import (
     take_grading_options,
     take_look,
 )
+from wbcgrade.cli.option_table import flag_text
 
 #: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
 _NOT_FOR_VIDEO = ("regrain", "regrain_radius", "regrain_eps")
 
 
 def _warn(message: str) -> None:
-    click.echo(f"Warning: {message}", err=True)
+    click.echo(f"Warning: {flag_text(message)}", err=True)
 
 
 def _print_result(result, as_json: bool) -> None:

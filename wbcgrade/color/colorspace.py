@@ -63,6 +63,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbcgrade.color._colour import colour_science
+from wbcgrade.color.io.cache import default_cache_dir
+from wbcgrade.color.io.raw import RAW_WORKING_SPACE
 from wbcgrade.errors import InputError, OptionError, first_line
 
 __all__ = [
@@ -214,20 +217,24 @@ def canonical(short: str) -> str | None:
     return _lookup(config_path()).get(_squash(short))
 
 
-def resolve_space(name: str, option: str = "spaces.working") -> str:
+def resolve_space(name: str, option: str = "spaces.working",
+                  path: str | os.PathLike | None = None) -> str:
     """A colour space name, alias or role -> the config's colour space name.
 
     Case, spaces and punctuation do not matter (``ACEScct``, ``acescct``,
     ``display-p3``, ``Display P3``, ``lin_rec709``). Raises OptionError
-    (one line, naming the setting ``option`` and listing the valid names) otherwise.
+    (one line, naming the setting ``option``, after ``path`` when the name was read
+    from a file, and listing the valid names) otherwise.
     """
     text = str(name).strip()
     found = _lookup(config_path()).get(_squash(text)) if text else None
     if found is None:
         shorts = ", ".join(s for s in SHORT_ALIASES if canonical(s))
+        head = "" if path is None else f"{path}: "
         raise OptionError(
-            f"{option}: unknown colour space {name!r} in OpenColorIO config {config_path()} "
-            f"(valid: {', '.join(space_names())}; or {shorts})", option)
+            f"{head}{{{option}}}: unknown colour space {name!r} in OpenColorIO config "
+            f"{config_path()} (valid: {', '.join(space_names())}; or {shorts})", option,
+            path=path)
     return found
 
 
@@ -243,7 +250,7 @@ def default_working_space() -> str:
     found = canonical("srgb")
     if found is None:
         raise InputError(f"OpenColorIO config {config_path()} has no sRGB-encoded Rec.709 "
-                         "space; name one with spaces.working", fields=("spaces.working",))
+                         "space; name one with {spaces.working}", fields=("spaces.working",))
     return found
 
 
@@ -328,8 +335,6 @@ def _peak_key(linear: str, working: str, path: str) -> str:
 
 
 def _peaks_file():
-    from wbcgrade.color.cache import default_cache_dir
-
     return default_cache_dir() / "peaks.json"
 
 
@@ -520,8 +525,6 @@ class ColorEncoding:
         """The encoding of a decoded photo (``input_space`` None: what the file says;
         ``working_space`` None: ACEScct for a raw photo, else sRGB-encoded Rec.709)."""
         if working_space is None and image.format_name == "raw":
-            from wbcgrade.color.raw import RAW_WORKING_SPACE
-
             working_space = RAW_WORKING_SPACE
         if input_space:
             return cls.of(input_space, working_space)
@@ -629,7 +632,7 @@ class ColorEncoding:
         Decoded into the linear partner, then to CIE XYZ (D65) through Linear
         Rec.709 (OpenColorIO's chromatic adaptation for other white points).
         """
-        from wbcgrade.color._colour import colour
+        colour = colour_science()
 
         linear = convert(np.clip(colors, 0.0, 1.0), self.working, self.linear)
         xyz = np.asarray(linear, dtype=np.float64) @ _to_xyz(self.linear, self.config).T
@@ -637,7 +640,7 @@ class ColorEncoding:
 
     def from_oklab(self, lab: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`to_oklab`, clipped to the working space's unit cube (float32)."""
-        from wbcgrade.color._colour import colour
+        colour = colour_science()
 
         xyz = colour.Oklab_to_XYZ(np.asarray(lab, dtype=np.float64))
         linear = xyz @ np.linalg.inv(_to_xyz(self.linear, self.config)).T
@@ -654,7 +657,7 @@ class ColorEncoding:
 @functools.lru_cache(maxsize=16)
 def _to_xyz(linear: str, config: str) -> np.ndarray:
     """(3, 3) matrix: colours of the linear space ``linear`` -> CIE XYZ (D65)."""
-    from wbcgrade.color._colour import colour
+    colour = colour_science()
 
     rec709 = canonical("linear-rec709")
     if rec709 is None:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.cache import (
+from wbcgrade.color.io.cache import (
     command_cache,
     default_cache_dir,
     entry_path,
@@ -22,6 +22,7 @@ from wbcgrade.color.cache import (
     write_entry,
 )
 from wbcgrade.color.options import DEFAULT_FLOOR, DEFAULT_MAX_PIXELS
+from wbcgrade.core import resample_grid
 from wbcgrade.errors import InputError
 
 __all__ = [
@@ -120,11 +121,7 @@ def resample_histogram(hist: np.ndarray, bins: int) -> np.ndarray:
     interpolation: mass and mean colour kept) to a coarser grid, the density
     interpolated to a finer one. The histogram itself when ``bins == n``.
     """
-    if hist.shape[0] == bins:
-        return hist
-    from wbcgrade.core import resample_grid  # (only then: the core's start-up is not small)
-
-    return resample_grid(hist, (bins,) * 3, mass=1.0)
+    return hist if hist.shape[0] == bins else resample_grid(hist, (bins,) * 3, mass=1.0)
 
 
 def add_floor(hist: np.ndarray, floor: float = DEFAULT_FLOOR) -> np.ndarray:
@@ -159,15 +156,15 @@ class HistogramCache:
     bins, the subsampling limit and the colour spaces (``space``: the
     OpenColorIO config and the working space the colours were converted into),
     so an edited photo is re-read. Entries are small sparse ``.npz`` files at the
-    top of the cache folder (:mod:`wbcgrade.color.cache`: a damaged entry is
+    top of the cache folder (:mod:`wbcgrade.color.io.cache`: a damaged entry is
     rebuilt, one that cannot be written is one warning; caching never makes a run fail).
     """
 
     VERSION = 1
 
     def __init__(self, folder: str | os.PathLike | None = None, enabled: bool = True):
-        """``folder`` None: the command's (``cache.command_cache``: ``--cache-dir``, else
-        the default), and off when the command said ``--no-cache``."""
+        """``folder`` None: the command's (``cache.command_cache``: its cache folder, else
+        the default), and off when the command turned caching off."""
         if folder is None:
             folder, on = command_cache()
             enabled = enabled and on
@@ -212,7 +209,7 @@ class HistogramCache:
 class PaletteSum:
     """Running sum of normalised histograms whose result does not depend on their order.
 
-    The palette of a series (``batch --consistent``, a video shot): every
+    The palette of a series (a batch's ``consistent`` grade, a video shot): every
     photo counts once whatever its size. Each histogram is rounded to fixed
     point (2^-40 of its mass) and summed in int64, so photos may arrive in
     any order (process pool, Dask) and the pooled palette, hence the series

@@ -53,7 +53,7 @@ __all__ = ["LOSSES", "MODES", "FitOptions", "TransferOptions", "MapOptions", "Re
 
 #: Losses the weight fit may use (``wbcgrade.core.get_loss`` names).
 LOSSES = ("quadratic", "l1", "kl", "wasserstein")
-#: The shipped map builders (``map.builder``, ``--mode``): "palette", the paper's
+#: The shipped map builders (``map.builder``): "palette", the paper's
 #: colour transfer onto the closest barycenter of the style palettes; "look", the
 #: look the style set shares, corrected towards the photo's own scene.
 MODES = ("look", "palette")
@@ -74,11 +74,11 @@ DEFAULT_STIFFNESS = 1e-4
 DEFAULT_REGRAIN_RADIUS = 1.0 / 200.0
 #: Regrain regulariser in squared encoded units: input variations well below
 #: sqrt(eps) = 0.2 (grain, JPEG blocks, gentle gradients) keep their amplitude.
-DEFAULT_REGRAIN_EPS = 0.04  # (0.2 squared, written as typed: --help shows it)
+DEFAULT_REGRAIN_EPS = 0.04  # (0.2 squared, written as typed: the help shows it)
 
 
 def _fail(name: str, why: str) -> OptionError:
-    return OptionError(f"{name} {why}", name)
+    return OptionError(f"{{{name}}} {why}", name)
 
 
 def _int_in(group: str, name: str, value, low: int, high: int) -> None:
@@ -113,7 +113,7 @@ class FitOptions:
     ----------
     bins : bins per axis of the fit grid (the kernel's sigma is fixed in colour
         units, so the same energy on a 128^3 grid has the same minimiser:
-        ``benchmarks/apply.py --verify``).
+        the apply benchmark's verification).
     loss : loss between the barycenter and the photo's histogram (:data:`LOSSES`).
     width : kernel width in bins of the fit grid (gamma = 2 (width / (bins - 1))^2).
     gamma : entropic regularisation; overrides ``width`` when given.
@@ -219,7 +219,7 @@ class MapOptions:
     Attributes
     ----------
     builder : how the map is built (a name registered with
-        :func:`wbcgrade.color.grading.register_map_builder`; :data:`MODES`:
+        :func:`wbcgrade.color.grade.grading.register_map_builder`; :data:`MODES`:
         "look" (the default): the look the style set shares, or the look read
         off the style photos that show the photo's own scene
         (:mod:`wbcgrade.color.look.scene`); "palette": the fitted barycenter
@@ -227,9 +227,9 @@ class MapOptions:
     natural : preset file (.npz) of ungraded photos, or a folder of the user's own
         ungraded photos, the content model of the "look" builder; None: the shipped one.
     size : nodes per axis of the smooth colour map (the grade is this lattice
-        LUT; ``--lut`` at the same size writes it exactly).
+        LUT; a LUT written at the same size holds it exactly).
     smoothness, stiffness : curvature and first-difference penalties of the
-        smooth map fit (:mod:`wbcgrade.color.smooth_map`); both 0: the raw
+        smooth map fit (:mod:`wbcgrade.color.palette.smooth_map`); both 0: the raw
         barycentric projection on the transfer grid is the map (the paper's).
     monotone : make the map's output luma non-decreasing in each input
         channel (the working space's luma, :attr:`ColorEncoding.luma_weights`).
@@ -270,7 +270,7 @@ class MapOptions:
 
 @dataclass(frozen=True)
 class RegrainOptions:
-    """The regrain step (:func:`wbcgrade.color.remap.regrain`).
+    """The regrain step (:func:`wbcgrade.color.mapping.remap.regrain`).
 
     Attributes
     ----------
@@ -388,7 +388,7 @@ class GradeOptions:
         for name, kind in _GROUPS.items():
             group = given[name]
             if group is not None and not isinstance(group, kind):
-                raise OptionError(f"{name} must be a {kind.__name__}", name)
+                raise OptionError(f"{{{name}}} must be a {kind.__name__}", name)
             if changes[name]:
                 base = {f.name: getattr(group, f.name) for f in fields(kind)} if group else {}
                 group = kind(**{**base, **changes[name]})
@@ -407,7 +407,7 @@ class GradeOptions:
         """OptionError when fixed weights do not give one number per style."""
         weights = self.fit.weights
         if weights is not None and len(weights) != n_styles:
-            raise OptionError(f"fit.weights gives {len(weights)} numbers for {n_styles} styles",
+            raise OptionError(f"{{fit.weights}} gives {len(weights)} numbers for {n_styles} styles",
                               "fit.weights")
 
 
@@ -415,7 +415,7 @@ def as_options(options: GradeOptions | None = None, **flat) -> GradeOptions:
     """``options`` (default :class:`GradeOptions()`), with flat names changed if given."""
     options = options if options is not None else GradeOptions()
     if not isinstance(options, GradeOptions):
-        raise OptionError(f"options must be GradeOptions, got {type(options).__name__}",
+        raise OptionError(f"{{options}} must be GradeOptions, got {type(options).__name__}",
                           "options")
     if not flat:
         return options

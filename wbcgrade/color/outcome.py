@@ -25,6 +25,11 @@ from enum import Enum
 
 import numpy as np
 
+from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
+from wbcgrade.color.defaults import MIN_OWN_PHOTOS
+from wbcgrade.color.histogram import grid_points
+from wbcgrade.color.mapping.remap import apply_color_map
+
 __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
@@ -342,8 +347,6 @@ OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
 def _unused_own_photos(count: int) -> str:
     """The start of the words for own photos given but not used (the caller closes the
     parenthesis)."""
-    from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-
     return (f"your {count} own photo{'s were' if count != 1 else ' was'} not used "
             f"({MIN_OWN_PHOTOS} or more in colour are needed")
 
@@ -356,8 +359,6 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
     if blend < UNCHANGED_STRENGTH:
         return "raise --strength (1 applies the grade in full)"
     if source is GradeSource.SET_LOOK:
-        from wbcgrade.color.look.statistics import MIN_OWN_PHOTOS
-
         look = look or {}
         own, unused = int(look.get("own_photos") or 0), int(look.get("own_photos_unused") or 0)
         if own:
@@ -436,9 +437,6 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
         per-channel change of its colours; None: the mean length |T(x) - x| of
         the displacement over the cube's colours (a 17^3 lattice).
     """
-    from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.remap import apply_color_map
-
     if hist is None:
         colors, mass = grid_points(17), None
     else:
@@ -452,8 +450,6 @@ def map_change(color_map: np.ndarray, strength: float, working: str,
                                        float(strength)), dtype=np.float64)
     before = np.asarray(colors, dtype=np.float64)
     if working:
-        from wbcgrade.color.colorspace import convert, default_working_space, resolve_space
-
         srgb = default_working_space()
         space = working if working == srgb else resolve_space(working)
         if space != srgb:

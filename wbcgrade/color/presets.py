@@ -14,7 +14,7 @@ Preset file format (version 1): a NumPy ``.npz`` archive read with
   were made (the shipped presets: the look and the photos it was applied to);
 - ``index`` (int32) and ``values`` (float32): the non-zero bins of all styles,
   concatenated, with flat C-order indices into the (n, n, n) grid; a compact
-  file (``save_preset(compact=True)``, ``preset build --compact``) stores
+  file (``save_preset(compact=True)``, the preset builder's ``compact``) stores
   uint16 indices (n <= 40) and float16 values scaled by 2**15, which the
   reader takes as they are (each style is renormalised on load);
 - ``offsets`` (int64, S + 1): style s owns ``index[offsets[s]:offsets[s+1]]``;
@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._executor import cpu_count
 from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.color.colorspace import (
     ColorEncoding,
@@ -54,22 +55,27 @@ from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
     HistogramCache,
     from_sparse,
+    grid_points,
     image_histogram,
     resample_histogram,
+    soft_histogram,
     to_sparse,
 )
-from wbcgrade.color.imageio import header_pixels, read_image
-from wbcgrade.color.preset_names import (
+from wbcgrade.color.io.images import header_pixels, read_image
+from wbcgrade.color.io.preset_names import (
     RETIRED_PRESETS,
     list_presets,
     resolve_preset,
     shipped_presets_dir,
 )
-from wbcgrade.errors import InputError, OptionError
+from wbcgrade.color.io.raw import is_raw
+from wbcgrade.color.mapping.remap import apply_color_map
+from wbcgrade.errors import InputError, OptionError, Worded
 from wbcgrade.limits import (
     MAX_MAP_SIZE,
     check_histogram_cells,
     check_input_file,
+    check_memory,
     parse_json,
     read_npz,
 )
@@ -234,8 +240,6 @@ class _Budget:
 def _megapixels(path: Path) -> float:
     """A photo's size from its header; a raw file (demosaiced in full) counts as the whole
     :data:`READ_MEGAPIXELS`."""
-    from wbcgrade.color.raw import is_raw
-
     return READ_MEGAPIXELS if is_raw(path) else header_pixels(path) / 1e6
 
 
@@ -252,12 +256,10 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
     (``limits.check_memory``: InputError naming ``where``), and filled in place."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from wbcgrade._executor import cpu_count
-    from wbcgrade.limits import check_memory
 
     check_memory(f"the histograms of {len(files)} style photos at {bins}^3 bins",
                  len(files) * bins ** 3 * 8 * 2, where,  # (x2: what the grade makes of them)
-                 "use fewer style photos or fewer --bins")
+                 "use fewer style photos or fewer {transfer.bins}", ("transfer.bins",))
     stack = np.empty((len(files), bins, bins, bins))
 
     space = f"{config_path()}|{working}"
@@ -343,11 +345,12 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     """
     folder = Path(folder)
     if folder.is_file():
-        raise InputError(f"{folder}: is a file; --style takes a folder of style photos (put "
-                         "the photo in a folder of its own, or use --preset)")
+        raise InputError(f"{folder}: is a file; {{style_dir}} takes a folder of style photos "
+                         "(put the photo in a folder of its own, or use {preset})",
+                         fields=("style_dir", "preset"))
     if folder.exists() and not folder.is_dir():
-        raise InputError(f"{folder}: is not a folder (a FIFO or device?); --style takes a "
-                         "folder of style photos")
+        raise InputError(f"{folder}: is not a folder (a FIFO or device?); {{style_dir}} takes "
+                         "a folder of style photos", fields=("style_dir",))
     if not folder.is_dir():
         raise InputError(f"{folder}: style folder does not exist")
     warn = warn or log.warning
@@ -381,9 +384,9 @@ def check_preset_width(width: float) -> float:
     try:
         value = float(width)
     except (TypeError, ValueError):
-        raise OptionError(f"width must be a number of bins, got {width!r}", "width") from None
+        raise OptionError(f"{{width}} must be a number of bins, got {width!r}", "width") from None
     if not (np.isfinite(value) and 0 < value <= MAX_KERNEL_WIDTH):
-        raise OptionError(f"width must be a positive, finite number of bins (at most "
+        raise OptionError(f"{{width}} must be a positive, finite number of bins (at most "
                           f"{MAX_KERNEL_WIDTH:g}), got {width}", "width")
     return value
 
@@ -478,7 +481,10 @@ def _bad(path: Path, why: str) -> InputError:
 
 
 def load_preset(path: str | os.PathLike) -> StyleSet:
-    """Read and validate a preset file -> StyleSet (raises InputError with the reason)."""
+    """Read and validate a preset file, or a shipped preset by name (``"warm"``) -> StyleSet
+    (raises InputError with the reason)."""
+    if isinstance(path, str) and not Path(path).exists():
+        path = resolve_preset(path)  # a shipped name; else "no such preset file"
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such preset file")
@@ -576,8 +582,6 @@ def styles_in_space(styles: StyleSet, working_space: str) -> StyleSet:
     space such as ACEScct holds every sRGB colour. The converted set is
     kept on ``styles`` (converted once per working space).
     """
-    from wbcgrade.color.histogram import grid_points, soft_histogram
-
 
     source = styles.working_space
     if working_space == source:  # a config name already (the encoding's, a set's)
@@ -625,9 +629,6 @@ def look_in_space(look: np.ndarray, source: str, working: str,
     -------
     (size, size, size, 3) float32 lattice in ``working``.
     """
-    from wbcgrade.color.histogram import grid_points
-    from wbcgrade.color.remap import apply_color_map
-
     size = int(size or look.shape[0])
     nodes = grid_points(size).astype(np.float32)
     there = convert(nodes, working, source)
@@ -665,7 +666,7 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
     (:func:`styles_in_space`).
     """
     if (source.style_dir is None) == (source.preset is None):
-        raise OptionError("give exactly one of style_dir DIR or preset NAME_OR_FILE",
+        raise OptionError("give exactly one of {style_dir} DIR or {preset} NAME_OR_FILE",
                           "style_dir", also=("preset",))
     if source.preset is not None:
         styles = load_preset(resolve_preset(source.preset))
@@ -677,18 +678,19 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
                              on_image=on_image)
 
 
-def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> str | None:
+def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> Worded | None:
     """The one-line warning for a look (``mode`` "look") taken from a folder of a single
     style photo, or None: one photo cannot show which of its colours are the look."""
     if source.style_dir is None or mode != "look" or len(styles.names) != 1:
         return None
-    return (f"{source.style_dir}: one style photo; its look is told from what it shows by "
-            "that photo alone (add photos that share the look for a surer one, or use "
-            "--mode palette to move the colours towards this photo's)")
+    return Worded(f"{source.style_dir}: one style photo; its look is told from what it shows "
+                  "by that photo alone (add photos that share the look for a surer one, or "
+                  "use {map.builder} palette to move the colours towards this photo's)",
+                  ("map.builder",))
 
 
-#: ``--natural`` naming the shipped natural palettes alone (a batch otherwise also reads
-#: its own photos: :func:`wbcgrade.color.batch.workflow.own_photos_content`).
+#: ``map.natural`` naming the shipped natural palettes alone (a batch otherwise also reads
+#: its own photos: :func:`wbcgrade.batch.workflow.own_photos_content`).
 SHIPPED_NATURALS = "shipped"
 
 
@@ -698,7 +700,7 @@ def source_files(source: StyleSource | None = None, natural: str | os.PathLike |
     the natural palettes (``natural``: a preset file or a folder of photos; else, or
     :data:`SHIPPED_NATURALS`, the shipped ones) and a saved ``look``'s file.
 
-    They are inputs: an output naming one of them is refused, ``--overwrite`` or not
+    They are inputs: an output naming one of them is refused, ``overwrite`` or not
     (:func:`wbcgrade._publish.plan_outputs`). A preset name that resolves to no file
     adds nothing (loading it reports that).
     """

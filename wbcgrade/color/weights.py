@@ -1,4 +1,4 @@
-"""``--weights A,B,C``: user-given barycentric weights."""
+"""``fit.weights`` written as text ("A,B,C"): user-given barycentric weights."""
 
 from __future__ import annotations
 
@@ -19,10 +19,10 @@ def parse_weights(text: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise OptionError(f"fit.weights {text!r}: expected comma-separated numbers",
+        raise OptionError(f"{{fit.weights}} {text!r}: expected comma-separated numbers",
                           "fit.weights") from None
     if not values or any(not math.isfinite(v) or v < 0 for v in values) or max(values) <= 0:
-        raise OptionError(f"fit.weights {text!r}: need non-negative finite numbers, not all "
+        raise OptionError(f"{{fit.weights}} {text!r}: need non-negative finite numbers, not all "
                           "zero", "fit.weights")
     largest = max(values)
     scaled = [v / largest for v in values]

@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 import signal
 
+from wbcgrade.explore.engine import serve_jobs
+
 #: How much lower the worker's priority is than the server's (Unix ``nice``).
 NICENESS = 10
 
@@ -23,7 +25,6 @@ def main(fd: int) -> None:
         pass
     from multiprocessing.connection import Connection
 
-    from wbcgrade.explore.engine import serve_jobs
 
     serve_jobs(Connection(fd))
 

@@ -9,7 +9,10 @@ import webbrowser
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from wbcgrade.errors import OptionError
+from wbcgrade.explore.engine import load_session
 from wbcgrade.explore.server import ExploreServer, Studio, make_server
+from wbcgrade.explore.studio import Explorer, style_choices
 
 __all__ = ["start_studio", "open_browser", "serve"]
 
@@ -33,21 +36,17 @@ def start_studio(photo: str, style_dir: str | None = None,
     folder), which must be a folder that exists; nothing else is written.
     ``prefetch``: the other sources are loaded in the background at once.
     """
-    from wbcgrade.errors import OptionError
-    from wbcgrade.explore.engine import load_session
-    from wbcgrade.explore.studio import Explorer, style_choices
-
     say = stage or (lambda name: None)
     presets = [preset] if isinstance(preset, str) else list(preset or [])
     if (style_dir is None) == (not presets):
-        raise OptionError("give exactly one of style_dir DIR or preset NAME_OR_FILE",
+        raise OptionError("give exactly one of {style_dir} DIR or {preset} NAME_OR_FILE",
                           "style_dir", also=("preset",))
     folder = Path(save_dir) if save_dir is not None else Path(photo).resolve().parent
     if not folder.is_dir():
-        raise OptionError(f"{folder}: the save folder does not exist (save_dir)", "save_dir",
+        raise OptionError(f"{folder}: the save folder does not exist ({{save_dir}})", "save_dir",
                           path=folder)
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise OptionError(f"{folder}: the save folder is not writable (save_dir)",
+        raise OptionError(f"{folder}: the save folder is not writable ({{save_dir}})",
                           "save_dir", path=folder)
     server = make_server(port, token)
     studio = None

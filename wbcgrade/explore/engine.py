@@ -54,7 +54,35 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import publish_bytes, write_png
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grade.grading import (
+    Grade,
+    PhotoHistograms,
+    finish_map,
+    grade_encoded,
+    grade_histograms,
+    grade_outcome,
+    strengthened,
+)
+from wbcgrade.color.grade.saved_grade import look_dict
+from wbcgrade.color.histogram import HistogramCache, image_histogram
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.look.scene import matching_hook
+from wbcgrade.color.mapping.lut import LUT_FORMATS, check_clf_support, write_grade_lut
+from wbcgrade.color.mapping.remap import resample_lattice
+from wbcgrade.color.options import GradeOptions, as_options
+from wbcgrade.color.outcome import map_change
+from wbcgrade.color.palette.fit import FitSummary, fit_problem, fit_weights, loss_at
+from wbcgrade.color.palette.smooth_map import SmoothMapFitter
+from wbcgrade.color.palette.transfer import transport_map
+from wbcgrade.color.presets import StyleSet, StyleSource, list_presets, load_styles, styles_in_space
+from wbcgrade.color.weights import parse_weights
+from wbcgrade.errors import InputError
 from wbcgrade.explore.settings import MAX_STRENGTH, Settings, format_number, weights_text
+from wbcgrade.photos.report import style_pictures
+from wbcgrade.photos.sheet import thumbnail
+from wbcgrade.photos.workflow import default_output_path, grade_file, plan_photo
 
 __all__ = ["Session", "FitResult", "ExactGrader", "LoadedPhoto", "load_photo", "load_session",
            "describe_outcome", "shipped_presets", "blend_looks", "grade_file_of", "serve_jobs",
@@ -89,16 +117,12 @@ THUMBNAIL_SIDE = 96
 def _base_options():
     """``apply --mode palette --no-regrain``'s settings: the palette transfer (the grade
     the weights steer, whose fast map the preview follows) and what a LUT can hold."""
-    from wbcgrade.color.options import GradeOptions
-
     return GradeOptions(regrain=False, mode="palette")
 
 
 def _options(base, settings: Settings, **changes):
     """The grade options of ``settings`` (its map: the strength is applied afterwards),
     with other settings ``changes`` by their flat names."""
-    from wbcgrade.color.options import as_options
-
     return as_options(base, relaxation=settings.relaxation,
                       preserve_luminance=settings.keep_lightness, **changes)
 
@@ -106,15 +130,11 @@ def _options(base, settings: Settings, **changes):
 def _look_options():
     """``apply --no-regrain``'s settings (the default "look" grade): what the page opens on,
     the grade of ``apply`` with the same styles, and what a LUT can hold."""
-    from wbcgrade.color.options import GradeOptions
-
     return GradeOptions(regrain=False)
 
 
 def _apply_weights(settings: Settings) -> tuple[float, ...]:
     """The weights ``apply --weights TEXT`` grades with: the text read as it reads it."""
-    from wbcgrade.color.weights import parse_weights
-
     return tuple(parse_weights(weights_text(settings.weights)))
 
 
@@ -154,14 +174,11 @@ class _FastGrader:
     """Colour maps on small grids for the live preview (module docstring).
 
     Holds what every move shares: the styles re-binned to the preview grid and
-    the smooth map's factored system (:class:`wbcgrade.color.smooth_map.SmoothMapFitter`:
+    the smooth map's factored system (:class:`wbcgrade.color.palette.smooth_map.SmoothMapFitter`:
     the photo's histogram and the lattice do not change while exploring).
     """
 
     def __init__(self, styles, photo_hist: np.ndarray, base, encoding) -> None:
-        from wbcgrade.color.options import as_options
-        from wbcgrade.color.smooth_map import SmoothMapFitter
-
         self.styles = styles
         self.photo_hist = photo_hist
         self.encoding = encoding
@@ -181,9 +198,6 @@ class _FastGrader:
         """(9, 9, 9, 3) map at ``weights`` (S,) with ``settings``' other options: the
         palette, the plan (solved cold, so the same weights give the same map) to
         ``tol`` (default :data:`PREVIEW_SINKHORN_TOL`), the smooth map, the finish."""
-        from wbcgrade.color.grading import finish_map
-        from wbcgrade.color.transfer import transport_map
-
         options = _options(self.base, settings,
                            **({} if tol is None else {"sinkhorn_tol": tol}))
         weights = np.asarray(weights, dtype=np.float64)
@@ -254,8 +268,6 @@ class Session:
         return self._look_and_fit()[0]
 
     def _look_and_fit(self):
-        from wbcgrade.color.grading import grade_encoded
-
         with self._look_lock:
             if self._look is None:
                 if self.loaded is None:
@@ -269,7 +281,6 @@ class Session:
         map's change scaled, as ``apply`` does), its outcome judged at that strength."""
         from dataclasses import replace
 
-        from wbcgrade.color.grading import grade_outcome, strengthened
 
         grade, fit = self._look_and_fit()
         if strength == 1.0:
@@ -285,8 +296,6 @@ class Session:
         its outcome judged on this photo as ``apply --weights`` judges it)."""
         from dataclasses import replace
 
-        from wbcgrade.color.fit import FitSummary
-        from wbcgrade.color.grading import Grade, grade_outcome, strengthened
 
         weights = np.asarray(settings.weights, dtype=np.float64)
         color_map, blend = strengthened(np.asarray(color_map, dtype=np.float32),
@@ -318,9 +327,6 @@ class Session:
         beside it too, ``<stem>_explore_<n>.grade.json`` (what ``apply --look`` reads;
         :func:`grade_file_of` names it).
         """
-        from wbcgrade.color.workflow import default_output_path, grade_file, plan_photo
-        from wbcgrade.errors import InputError
-
         folder = Path(folder)
         suffix = default_output_path(self.photo).suffix
         stem = Path(self.photo).stem
@@ -348,8 +354,6 @@ class Session:
     def fit(self, callback: Callable[[int, np.ndarray, float], None] | None = None
             ) -> FitResult:
         """Fit the weights as ``apply`` does (never worse than one style alone)."""
-        from wbcgrade.color.fit import fit_weights
-
         fit = self.base.fit
         summary = fit_weights(self.hists[fit.bins], self.styles.at_bins(fit.bins), fit,
                               callback)
@@ -367,8 +371,6 @@ class Session:
     def preview_lut(self, fast_map: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
         """The LUT the browser applies: the fast map on the exact map's lattice plus
         ``offset`` (exact minus fast map at the nearest known weights), clipped."""
-        from wbcgrade.color.remap import resample_lattice
-
         lut = resample_lattice(fast_map, self.lut_size)
         if offset is not None:
             lut = np.clip(lut + offset, 0.0, 1.0)
@@ -376,8 +378,6 @@ class Session:
 
     def grader_state(self) -> dict:
         """What the job worker needs to build an :class:`ExactGrader` (picklable)."""
-        from wbcgrade.color.presets import StyleSet
-
         styles = self.styles
         clean = StyleSet(list(styles.names), styles.histograms, styles.source, styles.width,
                          styles.description, dict(styles.meta))
@@ -413,8 +413,6 @@ class Session:
         ``what`` the grade is and the ``command`` that reproduces it) in a temporary
         folder; nothing is written beside the photo.
         """
-        from wbcgrade.color.lut import LUT_FORMATS, write_grade_lut
-
         stem = Path(self.photo).stem
         name = f"{stem}_explore_{size}{LUT_FORMATS[lut_format]}"
         with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
@@ -427,8 +425,6 @@ class Session:
 
     def png(self, pixels: np.ndarray) -> bytes:
         """An (h, w, 3) picture (uint8, or floats in [0, 1]) as PNG bytes."""
-        from wbcgrade._publish import write_png
-
         with tempfile.TemporaryDirectory(prefix="wbcgrade-explore-") as folder:
             path = Path(folder) / "picture.png"
             write_png(path, pixels)
@@ -444,8 +440,6 @@ def _publish_grade(path: Path, grade) -> None:
     """Write ``grade`` as the JSON ``apply --look`` reads, atomically, never replacing."""
     import json
 
-    from wbcgrade._publish import publish_bytes
-    from wbcgrade.color.saved_grade import look_dict
 
     publish_bytes(path, json.dumps(look_dict(grade), indent=1).encode("utf-8"),
                   overwrite=False)
@@ -461,9 +455,6 @@ def blend_looks(first, second, amount: float, strength: float, names: tuple[str,
     the map at blend 1 the page applies; the photo's mean change in /255, None without
     ``photo_hist``).
     """
-    from wbcgrade.color.grading import Grade, strengthened
-    from wbcgrade.color.outcome import map_change
-
     if first.working != second.working or first.color_map.shape != second.color_map.shape:
         raise ValueError("the looks to blend live in different spaces or lattices")
     mixed = ((1.0 - amount) * np.asarray(first.color_map, dtype=np.float64)
@@ -479,16 +470,11 @@ def blend_looks(first, second, amount: float, strength: float, names: tuple[str,
 
 def shipped_presets() -> list[str]:
     """The names of the presets shipped with the package, sorted."""
-    from wbcgrade.color.presets import list_presets
-
     return [name for name, _ in list_presets()]
 
 
 def clf_available() -> bool:
     """Whether CLF LUTs can be written (the ``opencolorio`` package is installed)."""
-    from wbcgrade.color.lut import check_clf_support
-    from wbcgrade.errors import InputError
-
     try:
         check_clf_support()
     except InputError:
@@ -518,12 +504,6 @@ class LoadedPhoto:
 
 def load_photo(photo: str, preview_side: int = PREVIEW_SIDE) -> LoadedPhoto:
     """Read the photo as ``apply`` does (colour spaces, histograms); nothing is written."""
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.histogram import image_histogram
-    from wbcgrade.color.imageio import read_image
-    from wbcgrade.color.sheet import thumbnail
-    from wbcgrade.errors import InputError
-
     if not Path(photo).is_file():
         raise InputError(f"{photo}: " + ("is a folder, not a photo" if Path(photo).is_dir()
                                          else "not a regular file" if Path(photo).exists()
@@ -556,11 +536,6 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
     cache, as with ``apply``. Raises InputError on a missing or unreadable
     photo or style source (one line).
     """
-    from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.look.scene import matching_hook
-    from wbcgrade.color.presets import StyleSource, load_styles, styles_in_space
-    from wbcgrade.color.report import style_pictures
-
     if loaded is None:
         loaded = load_photo(photo, preview_side)
     base = _base_options()
@@ -613,8 +588,6 @@ class ExactGrader:
         ``apply``'s own grade path (``color.grading.grade_histograms``) on the
         photo's histograms, with the weights read from the command line's text.
         """
-        from wbcgrade.color.grading import PhotoHistograms, grade_histograms
-
         options = _options(self.base, settings, weights=_apply_weights(settings))
         photo = PhotoHistograms(self.hists[options.fit.bins],
                                 self.hists[options.transfer.bins])
@@ -623,8 +596,6 @@ class ExactGrader:
 
     def reference(self, settings: Settings) -> dict:
         """The exact map of ``settings`` and its offset from the fast map there."""
-        from wbcgrade.color.remap import resample_lattice
-
         exact = self.color_map(settings)
         fast = self._fast.solve(settings, _apply_weights(settings))
         return {"exact": exact,
@@ -642,8 +613,6 @@ class ExactGrader:
         weights = np.asarray(_apply_weights(settings))
         weights = weights / weights.sum()
         tol = self.base.transfer.tol
-        from wbcgrade.color.remap import resample_lattice
-
         centre = resample_lattice(self._fast.solve(settings, weights, tol), self.lut_size)
         out = np.empty((len(weights), *centre.shape), dtype=np.float32)
         for s in range(len(weights)):
@@ -654,8 +623,6 @@ class ExactGrader:
 
     def losses(self, rows: list[tuple[float, ...]]) -> list[float]:
         """The fit's loss (fit grid, as ``apply`` fits) at each row of weights."""
-        from wbcgrade.color.fit import fit_problem, loss_at
-
         fit = self.base.fit
         if self._loss_problem is None:
             self._loss_problem = fit_problem(self.hists[fit.bins], self.styles.at_bins(fit.bins),

@@ -43,6 +43,7 @@ from urllib.parse import parse_qsl, quote, urlsplit
 
 import numpy as np
 
+from wbcgrade.explore.engine import EXPORT_FORMATS, EXPORT_SIZES, clf_available, describe_outcome
 from wbcgrade.explore.jobs import JobError, JobWorker, Superseded
 from wbcgrade.explore.settings import (
     RequestError,
@@ -100,8 +101,6 @@ class Studio:
     """
 
     def __init__(self, session, fit=None, worker: JobWorker | None = None) -> None:
-        from wbcgrade.explore.engine import EXPORT_FORMATS, EXPORT_SIZES, clf_available
-
         self.session = session
         self._fit = fit
         self._worker = worker
@@ -152,8 +151,6 @@ class Studio:
         """The look grade ``apply`` gives -> (its 33^3 map at ``--strength`` 1, meta: what
         it is at the page's ``strength`` and the ``apply`` command). The page applies the
         strength itself (above 1 on the map's lattice, as ``apply`` does)."""
-        from wbcgrade.explore.engine import describe_outcome
-
         started = time.perf_counter()
         grade = self.session.look_at(strength)
         lut = np.ascontiguousarray(self.session.look_grade().color_map, dtype=np.float32)
@@ -164,8 +161,6 @@ class Studio:
 
     def grade_of(self, mode: str, settings: Settings | None, strength: float):
         """(the Grade the page shows in ``mode``, what it is in words, its ``apply`` command)."""
-        from wbcgrade.explore.engine import describe_outcome
-
         session = self.session
         if mode == "look":
             grade = session.look_at(strength)

@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.outcome import change_words
+from wbcgrade.explore.engine import blend_looks, grade_file_of, load_session, shipped_presets
+from wbcgrade.explore.server import Studio
 from wbcgrade.explore.settings import RequestError
 
 __all__ = ["Explorer", "StyleChoice", "style_choices"]
@@ -38,8 +41,6 @@ class StyleChoice:
 def style_choices(style_dir: str | None, presets: list[str]) -> list[StyleChoice]:
     """The picker's entries: the folder (when given), the presets given, the shipped ones
     not given by name. The first is where the page opens."""
-    from wbcgrade.explore.engine import shipped_presets
-
     out = []
     if style_dir is not None:
         out.append(StyleChoice(f"style folder {Path(style_dir).name or style_dir}",
@@ -95,9 +96,6 @@ class Explorer:
         with self._loading[index]:  # one load per source; the others go on meanwhile
             studio = self._studios.get(index)
             if studio is None:
-                from wbcgrade.explore.engine import load_session
-                from wbcgrade.explore.server import Studio
-
                 first = self._studios[0].session
                 choice = self.choices[index]
                 session = load_session(first.photo, choice.style_dir, choice.preset,
@@ -156,8 +154,6 @@ class Explorer:
         """The look of entry ``index`` blended with entry ``blend[0]``'s (its share
         ``blend[1]``) at ``strength`` -> (Grade, the map at blend 1, what it is as the page's
         outcome dict)."""
-        from wbcgrade.explore.engine import blend_looks
-
         other, amount = blend
         first, second = self.source(index), self.source(other)
         names = (self.choices[index].label, self.choices[other].label)
@@ -165,8 +161,6 @@ class Explorer:
         grade, mixed, change = blend_looks(
             session.look_grade(), second.session.look_grade(), amount, strength, names,
             session.hists[session.base.fit.bins])
-        from wbcgrade.color.outcome import change_words
-
         words = (f"a blend of two looks: {100 * (1 - amount):.0f} % {names[0]} and "
                  f"{100 * amount:.0f} % {names[1]} (each the grade apply gives), strength "
                  f"{strength:.2f}; this photo's colours move {change_words(change)}")
@@ -203,7 +197,6 @@ class Explorer:
         (a blend with its grade file beside it, which the command applies)."""
         import shlex
 
-        from wbcgrade.explore.engine import grade_file_of
 
         studio = self.source(index)
         if mode == "look" and blend is not None:

@@ -28,6 +28,7 @@ import trimesh
 
 from wbcgrade._publish import publish_bytes
 from wbcgrade.errors import InputError
+from wbcgrade.shape.winding import winding_numbers
 
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 """File suffixes read and written as meshes."""
@@ -374,8 +375,6 @@ def voxelize(
 
 def _robust_inside(triangles: np.ndarray, samples: np.ndarray) -> np.ndarray:
     """Inside mask (m, m, m) of an open or non-manifold surface (see :func:`voxelize`)."""
-    from wbcgrade.shape.winding import winding_numbers
-
     m = samples.size
     inside_votes = np.zeros((m, m, m), dtype=np.uint8)
     reliable = np.zeros((m, m, m), dtype=np.uint8)

@@ -9,7 +9,9 @@ import scipy.ndimage as ndi
 import trimesh
 
 from wbcgrade.shape.complete import Completion
+from wbcgrade.shape.mesh import voxelize_together
 from wbcgrade.shape.projection import Projection
+from wbcgrade.shape.render import Panel, contact_sheet
 
 INPUT_COLOR = (0.95, 0.7, 0.35)
 """Colour of the input (and of the input's part of a completion) in pictures."""
@@ -39,9 +41,6 @@ def completion_sheet(
     -------
     (H, W, 3) float32 RGB image in [0, 1].
     """
-    from wbcgrade.shape.mesh import voxelize_together
-    from wbcgrade.shape.render import Panel, contact_sheet
-
     projection = completion.projection
     title = "Euclidean" if projection.method == "euclidean" else "completion"
     source = completion.partial.mesh
@@ -71,8 +70,6 @@ def projection_sheet(
     tile: int = 160,
 ) -> np.ndarray:
     """Maximum-intensity projections of the input, the fit and the heaviest database volumes."""
-    from wbcgrade.shape.render import Panel, contact_sheet
-
     title = "Euclidean" if projection.method == "euclidean" else "projection"
     panels = [Panel(volume, "input"), Panel(projection.barycenter, title)]
     for index in projection.order()[: max(0, top)]:

@@ -16,6 +16,7 @@ from wbcgrade.shape.complete import (
 )
 from wbcgrade.shape.database import voxelised_at
 from wbcgrade.shape.defaults import DEFAULT_N_ITER
+from wbcgrade.shape.mesh import surface_from_volume
 
 log = logging.getLogger(__name__)
 
@@ -81,8 +82,6 @@ def _is_volume(mesh: trimesh.Trimesh) -> bool:
 
 def _surface(volume: np.ndarray, transform: np.ndarray, smooth_iterations: int) -> trimesh.Trimesh:
     """Iso-surface at 1/2 of a unit-frame occupancy, in the input's frame, specks dropped."""
-    from wbcgrade.shape.mesh import surface_from_volume
-
     surface = surface_from_volume(volume, 0.5, transform=transform,
                                   smooth_iterations=smooth_iterations)
     parts = surface.split(only_watertight=True)

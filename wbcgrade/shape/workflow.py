@@ -204,7 +204,7 @@ def complete_mesh_file(
         raise InputError(f"{partial}: no such mesh file")
     output = Path(output) if output else Path(f"{partial.stem}_completed.obj")
     if output.suffix.lower() not in MESH_SUFFIXES:
-        raise OptionError(f"{output}: the output mesh must end in {', '.join(MESH_SUFFIXES)}",
+        raise OptionError(f"{output}: the {{output}} mesh must end in {', '.join(MESH_SUFFIXES)}",
                           "output", path=str(output))
     volume_path = Path(volume_path) if volume_path else output.with_suffix(".npy")
     png_path = Path(png_path) if png_path else output.with_suffix(".png")
@@ -302,7 +302,7 @@ def project_volume_file(
     output = (Path(output) if output
               else Path(volume.name[: -len(volume_suffix(volume))] + "_projected.npy"))
     if not volume_suffix(output):
-        raise OptionError(f"{output}: the output volume must end in .npy, .nii or .nii.gz",
+        raise OptionError(f"{output}: the {{output}} volume must end in .npy, .nii or .nii.gz",
                           "output", path=str(output))
     png_path = (Path(png_path) if png_path
                 else Path(str(output)[: -len(volume_suffix(output))] + ".png"))

@@ -11,6 +11,7 @@ import os
 import time
 from dataclasses import replace
 
+from wbcgrade.color.grade.saved_grade import look_batch_options, look_styles
 from wbcgrade.color.options import GradeOptions, RegrainOptions
 from wbcgrade.color.presets import StyleSource, load_styles, source_files
 from wbcgrade.video.report import plan_video_report, write_video_report
@@ -38,7 +39,7 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
     LUTs and the report are published together once all are written: a
     failure in any (a full disk under the LUT, a report folder that cannot be
     written) publishes none. ``look``: a saved grade
-    (:func:`wbcgrade.color.saved_grade.load_look`) applied to every frame
+    (:func:`wbcgrade.color.grade.saved_grade.load_look`) applied to every frame
     instead of a fit (``styles`` is not read).
     """
     settings = settings or VideoSettings()
@@ -54,8 +55,6 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
         loaded = load_styles(styles, options.transfer.bins, options.spaces.working,
                              progress.warn, progress.styles)
     else:
-        from wbcgrade.color.saved_grade import look_batch_options, look_styles
-
         options = look_batch_options(options, look, report_dir=report_dir)
         loaded = look_styles(look, str(None if look.saved is None else look.saved.file))
     with contextlib.ExitStack() as stack:  # every output published together, or none

@@ -11,7 +11,7 @@ Folder layout (REPORT_DIR)::
                        LUT (a grid each), what the grade did, the styles (with
                        their weights for a palette grade), palettes of the
                        frames, the barycenter and the graded frames (the photo
-                       sheet's layout, wbcgrade.color.sheet)
+                       sheet's layout, wbcgrade.photos.sheet)
 
 The "after" pictures are the sampled frames through the shot's LUT
 (trilinear, in the library), which is what ffmpeg's ``lut3d`` gives to
@@ -35,12 +35,12 @@ import numpy as np
 
 from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path, plan_outputs
-from wbcgrade.color.fit import NONZERO_THRESHOLD
 from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.mapping.remap import apply_color_map
+from wbcgrade.color.palette.fit import NONZERO_THRESHOLD
 from wbcgrade.color.presets import StyleSet
-from wbcgrade.color.remap import apply_color_map
-from wbcgrade.color.report import style_pictures
-from wbcgrade.color.sheet import SheetContent, StyleTile, histogram_palette, write_sheet
+from wbcgrade.photos.report import style_pictures
+from wbcgrade.photos.sheet import SheetContent, StyleTile, histogram_palette, write_sheet
 from wbcgrade.video.workflow import ShotGrade, VideoResult
 
 __all__ = ["contact_grid", "write_video_report"]

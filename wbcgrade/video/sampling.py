@@ -90,9 +90,9 @@ def scan(path: str | os.PathLike, info: VideoInfo, sample_every: float = DEFAULT
     progress : called with the number of frames decoded so far.
     """
     if not (np.isfinite(sample_every) and sample_every > 0):
-        raise OptionError("sample_every must be a positive number of seconds", "sample_every")
+        raise OptionError("{sample_every} must be a positive number of seconds", "sample_every")
     if not 0 < cut_threshold < 1:
-        raise OptionError("cut_threshold must be between 0 and 1", "cut_threshold")
+        raise OptionError("{cut_threshold} must be between 0 and 1", "cut_threshold")
     step = max(1, round(sample_every * info.fps))
     shortest = max(1, round(min_shot * info.fps))
     width, height = analysis_size(info, max_side)

@@ -22,7 +22,7 @@ values, whatever space the grade was fitted in:
   exactly as for photos (one :class:`~wbcgrade.color.colorspace.ColorEncoding`,
   :func:`clip_encoding`).
 - The LUT is *baked in the input encoding*
-  (:meth:`wbcgrade.color.grading.Grade.lut` with the clip's encoding):
+  (:meth:`wbcgrade.color.grade.grading.Grade.lut` with the clip's encoding):
   lattice point x (input code values in [0, 1]) -> working space (outside
   its unit cube: clipped for the map, the rest carried past it as a
   residual) -> the grade's colour map -> back into the input space -> x';
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import ColorEncoding, config_info, resolve_space
+from wbcgrade.color.colorspace import ColorEncoding, config_info, config_path, resolve_space
 from wbcgrade.color.options import SpaceOptions
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import VideoInfo
@@ -79,12 +79,10 @@ def tagged_space(info: VideoInfo) -> tuple[str | None, str]:
     candidates = _TAGGED.get((transfer, primaries)) or _TAGGED.get((transfer, None))
     found = _first_known(candidates) if candidates else None
     if found is None:
-        from wbcgrade.color.colorspace import config_path
-
         raise InputError(
             f"{info.path}: tagged {HDR_TRANSFERS[transfer]} ({tags}), but OpenColorIO config "
-            f"{config_path()} has no colour space for it; name one with spaces.input NAME "
-            f"(or spaces.input srgb to grade the code values as sRGB)",
+            f"{config_path()} has no colour space for it; name one with {{spaces.input}} NAME "
+            f"(or {{spaces.input}} srgb to grade the code values as sRGB)",
             fields=("spaces.input", "spaces.input"), path=info.path)
     return found, f"tags {tags}"
 

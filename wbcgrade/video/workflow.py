@@ -11,7 +11,7 @@
 3. Per shot (the whole clip by default), the sampled frames' palettes are
    pooled as ``batch --consistent`` pools photos (every frame counts once;
    :class:`~wbcgrade.color.histogram.PaletteSum`) and take the one grade
-   path of photos: :func:`~wbcgrade.color.grading.grade_histograms`
+   path of photos: :func:`~wbcgrade.color.grade.grading.grade_histograms`
    (vertex-checked fit, palette, smooth colour map). The grade is its LUT:
    there is no regrain (a LUT sees one pixel at a time; ffmpeg applies it).
 4. The LUTs are written as ``.cube`` files and scheduled over the frames
@@ -30,7 +30,7 @@ converted from the clip's input space (``opts.input_space``, else its tags)
 into the working space (``opts.working_space``) before their histograms are
 taken, the styles are converted into the working space, and each shot's LUT
 is baked in the input encoding (what ``lut3d`` sees:
-:meth:`wbcgrade.color.grading.Grade.lut`). The ``video`` command's
+:meth:`wbcgrade.color.grade.grading.Grade.lut`). The ``video`` command's
 workflow (outputs planned, styles loaded, the clip graded, the report
 written) is :func:`wbcgrade.video.command.grade_clip`.
 """
@@ -52,14 +52,21 @@ import numpy as np
 
 from wbcgrade._publish import atomic_path, is_unlocked, make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.fit import FitSummary
-from wbcgrade.color.grading import Grade, PhotoHistograms, grade_histograms, photo_histograms
+from wbcgrade.color.grade.grading import (
+    Grade,
+    PhotoHistograms,
+    grade_histograms,
+    grade_outcome,
+    photo_histograms,
+)
+from wbcgrade.color.grade.saved_grade import look_fit
 from wbcgrade.color.histogram import PaletteSum
-from wbcgrade.color.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
+from wbcgrade.color.mapping.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet, styles_in_space
-from wbcgrade.color.workflow import Progress
 from wbcgrade.errors import InputError, OptionError, WbcgradeError
+from wbcgrade.photos.workflow import Progress
 from wbcgrade.video.defaults import (
     ALPHA_CODECS,
     CODECS,
@@ -109,17 +116,17 @@ class VideoSettings:
     def __post_init__(self) -> None:
         """Validated once, when made (OptionError naming the field)."""
         if self.codec not in CODECS:
-            raise OptionError(f"codec must be one of {', '.join(CODECS)}", "codec")
+            raise OptionError(f"{{codec}} must be one of {', '.join(CODECS)}", "codec")
         if not 0 <= self.crf <= 51:
-            raise OptionError("crf must be between 0 and 51", "crf")
+            raise OptionError("{crf} must be between 0 and 51", "crf")
         check_lut_size(self.lut_size)
         if self.blend < 0:
-            raise OptionError("blend must be 0 or more", "blend")
+            raise OptionError("{blend} must be 0 or more", "blend")
         if not (np.isfinite(self.sample_every) and self.sample_every > 0):
-            raise OptionError("sample_every must be a positive number of seconds",
+            raise OptionError("{sample_every} must be a positive number of seconds",
                               "sample_every")
         if not 0 < self.cut_threshold < 1:
-            raise OptionError("cut_threshold must be between 0 and 1", "cut_threshold")
+            raise OptionError("{cut_threshold} must be between 0 and 1", "cut_threshold")
 
 
 @dataclass
@@ -223,11 +230,11 @@ def plan_video(source: str | os.PathLike, output: str | os.PathLike | None,
     output = Path(output) if output is not None else default_output(source, settings.codec)
     encoder, containers = CODECS[settings.codec]
     if output.suffix.lower() not in containers:
-        raise OptionError(f"{output}: codec {settings.codec} needs one of "
+        raise OptionError(f"{output}: {{codec}} {settings.codec} needs one of "
                           f"{', '.join(containers)} as the output's extension", "codec",
                           path=output)
     if lut is not None and Path(lut).suffix.lower() != ".cube":
-        raise OptionError(f"{lut}: lut file name must end in .cube", "lut", path=lut)
+        raise OptionError(f"{lut}: {{lut}} file name must end in .cube", "lut", path=lut)
     output, lut = plan_outputs([output, lut], [source, *reads], overwrite, make_folders=True)
     return source, output, lut
 
@@ -410,7 +417,7 @@ def _lut_chain(segments: list[Segment], names: list[str]) -> str:
 
 @dataclass(frozen=True)
 class VideoProgress(Progress):
-    """:class:`~wbcgrade.color.workflow.Progress` with ``frames(pass_name, done, total)``
+    """:class:`~wbcgrade.photos.workflow.Progress` with ``frames(pass_name, done, total)``
     during the decoding ("scan") and encoding ("encode") passes."""
 
     frames: Callable[[str, int, int], None] | None = None
@@ -567,9 +574,6 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
-            from wbcgrade.color.grading import grade_outcome
-            from wbcgrade.color.saved_grade import look_fit
-
             grade, fit = look, look_fit(look)
             grade = replace(grade, outcome=grade_outcome(grade, fit, None))
         else:

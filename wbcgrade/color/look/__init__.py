@@ -30,7 +30,7 @@ Submodules:
   from before/after pairs).
 
 A saved grade (``--look FILE``, ``--save-grade``) is
-:mod:`wbcgrade.color.saved_grade`. This package imports only what it needs
+:mod:`wbcgrade.color.grade.saved_grade`. This package imports only what it needs
 to fit looks; the builder and the two workflows are imported from their
 submodules.
 """

@@ -2,7 +2,7 @@
 moved towards the photo's own scene by how sure it is that a style shows it.
 
 :func:`look_map` is the builder the grade path calls
-(:data:`wbcgrade.color.grading.MAP_BUILDERS`); :func:`look_color_map` is the
+(:data:`wbcgrade.color.grade.grading.MAP_BUILDERS`); :func:`look_color_map` is the
 set's look with the palette test of the photo's scene (:func:`photo_look`).
 """
 
@@ -13,13 +13,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from wbcgrade.color.builders import BuiltMap, MapRequest, palette_map
-from wbcgrade.color.fit import FitSummary
+from wbcgrade.color.grade.builders import BuiltMap, MapRequest, palette_map
 from wbcgrade.color.look.family import LookMap
 from wbcgrade.color.look.scene_fit import PhotoLook, find_scene_look, photo_look
 from wbcgrade.color.look.set_extraction import MAP_BINS, load_naturals, set_look_base
+from wbcgrade.color.mapping.remap import monochrome_map
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.remap import monochrome_map
+from wbcgrade.color.palette.fit import FitSummary
 
 __all__ = ["look_map", "look_color_map"]
 
@@ -85,7 +85,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     if options.fit.weights is not None:
         return palette_map(request)
     if styles.look is not None:  # a preset made with a known look: that look
-        from wbcgrade.color.remap import resample_lattice
+        from wbcgrade.color.mapping.remap import resample_lattice
 
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",

@@ -18,9 +18,9 @@ import numpy as np
 
 from wbcgrade._publish import plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grading import Grade
+from wbcgrade.color.grade.grading import Grade
 from wbcgrade.color.look.set_extraction import load_naturals, set_look_map
-from wbcgrade.color.lut import check_lut_path, lut_format_of, write_grade_lut
+from wbcgrade.color.mapping.lut import check_lut_path, lut_format_of, write_grade_lut
 from wbcgrade.color.outcome import (
     FAINT_STRENGTH,
     OWN_PHOTO_KEYS,

@@ -18,7 +18,7 @@ import numpy as np
 from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
 from wbcgrade.color.look.statistics import LUMA
 from wbcgrade.color.look.statistics import hats as _hats
-from wbcgrade.color.remap import interpolate_lattice
+from wbcgrade.color.mapping.remap import interpolate_lattice
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "look_coordinates", "look_correspondences", "fit_geometry"]

@@ -93,7 +93,7 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
 
     Kept for the process and, with a ``cache`` folder, on disk (``looks/`` in it; an
     entry of the wrong shape or not finite is computed again)."""
-    from wbcgrade.color.cache import entry_path, read_entry, write_entry
+    from wbcgrade.color.io.cache import entry_path, read_entry, write_entry
 
     digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes())
     digest.update(np.ascontiguousarray(naturals.band_neutral).tobytes())

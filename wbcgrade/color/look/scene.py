@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.cache import cache_folder, entry_path, file_key, read_entry, write_entry
 from wbcgrade.color.colorspace import SYCC_LUMA
+from wbcgrade.color.io.cache import cache_folder, entry_path, file_key, read_entry, write_entry
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
@@ -351,7 +351,7 @@ def _write_cached(path: Path | None, image: SceneImage) -> None:
 def _read_style(path: Path, working_space: str) -> SceneImage:
     """A style photo from its file, in the working space, prepared for matching."""
     from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.imageio import read_image
+    from wbcgrade.color.io.images import read_image
 
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working_space)
@@ -432,7 +432,7 @@ def matching_hook(source, options, photos: Sequence[str | os.PathLike] = ()
     in another working space than the styles are read in (raw files, without
     ``--working-space``: ACEScct)."""
     from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.raw import is_raw
+    from wbcgrade.color.io.raw import is_raw
 
     if (source.style_dir is None or options.map.builder != "look"
             or options.fit.weights is not None):
@@ -465,7 +465,7 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     files (``styles.files``); one built from arrays may carry the images
     themselves (``styles.images``: (H, W, 3) working-space colours); a preset
     holds palettes only (all None). Images read from files are kept in ``scenes/``
-    in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`, beside
+    in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`, beside
     the histograms), keyed by the file and the working space.
     """
     images: Sequence = styles.images

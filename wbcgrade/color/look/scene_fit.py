@@ -25,7 +25,7 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
-from wbcgrade.color.remap import interpolate_lattice
+from wbcgrade.color.mapping.remap import interpolate_lattice
 
 __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_scene_look",
            "find_scene_look", "fit_correction", "fit_pairs_look"]
@@ -214,7 +214,7 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.smooth_map import interpolation_matrix
+    from wbcgrade.color.palette.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
     interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)

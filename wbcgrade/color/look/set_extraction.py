@@ -46,7 +46,7 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
-from wbcgrade.color.remap import resample_lattice
+from wbcgrade.color.mapping.remap import resample_lattice
 
 __all__ = ["LookResult", "extract_look", "set_look", "set_look_base", "set_look_halves",
            "look_reliability", "set_look_map", "natural_palettes", "load_naturals",
@@ -478,7 +478,7 @@ def natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
-    from wbcgrade.color.cache import read_entry, write_entry
+    from wbcgrade.color.io.cache import read_entry, write_entry
 
     found = None
     data = read_entry(path)
@@ -528,7 +528,7 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
                                     space_scale=scale)
     if SET_LOOK_RULE == "posterior" and not np.all(style_stats.spread
                                                    < MONOCHROME_SPREAD * scale):
-        from wbcgrade.color.cache import cache_folder
+        from wbcgrade.color.io.cache import cache_folder
 
         model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
                                           own_count, cache=cache_folder(styles))
@@ -626,9 +626,9 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
 
 def _look_cache_path(key: str, styles=None):
     """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
-    ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.cache.cache_folder`);
+    ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`);
     None when the command said ``--no-cache``."""
-    from wbcgrade.color.cache import cache_folder, entry_path
+    from wbcgrade.color.io.cache import cache_folder, entry_path
 
     return entry_path(cache_folder(styles), "looks", key)
 
@@ -636,7 +636,7 @@ def _look_cache_path(key: str, styles=None):
 def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
 
-    from wbcgrade.color.cache import read_entry
+    from wbcgrade.color.io.cache import read_entry
 
     data = read_entry(_look_cache_path(key, styles))  # damaged: removed, extracted again
     try:
@@ -654,7 +654,7 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
 
-    from wbcgrade.color.cache import write_entry
+    from wbcgrade.color.io.cache import write_entry
 
     write_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
                 knots=result.look.knots, weights=result.weights, losses=result.losses,
@@ -807,7 +807,7 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
             "content": content}
     lattice = look.lattice(map_size)
     if extracted.info.get("monochrome"):
-        from wbcgrade.color.remap import monochrome_map
+        from wbcgrade.color.mapping.remap import monochrome_map
 
         lattice = monochrome_map(lattice)
     return lattice, info

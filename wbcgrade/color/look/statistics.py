@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbcgrade.color.colorspace import REC709_LUMA
+from wbcgrade.color.defaults import MIN_OWN_PHOTOS
 from wbcgrade.color.histogram import grid_points
 
 __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "StatisticsLook",
@@ -46,7 +47,7 @@ __all__ = ["PaletteStatistics", "palette_statistics", "tinted_statistics", "Stat
            "QUANTILES", "BANDS", "MIN_OWN_PHOTOS"]
 
 #: Rec.709 luma weights on encoded values (the look family's lightness; toning is a
-#: function of it: :data:`wbcgrade.color.remap.TONE_LUMA`).
+#: function of it: :data:`wbcgrade.color.mapping.remap.TONE_LUMA`).
 LUMA = np.array(REC709_LUMA)
 #: Levels of the luma quantiles compared (black and white levels at the ends).
 QUANTILES = np.array([0.005, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95,
@@ -334,9 +335,6 @@ def _look_evidence(styles: PaletteStatistics, naturals: PaletteStatistics,
 #: 8 -> film looks +0.32 / +0.33 / +0.32 (worst -0.07 / -0.05 / -0.03); the own photos
 #: alone, as before, +0.28 (-0.16); the shipped palettes alone +0.27 (+0.00).
 OWN_PHOTO_NOISE = 5.0
-#: Fewer of the user's own photos than this say too little of their content and are not
-#: used (a median of four own photos: film looks' worst photo -0.32 in the harness above).
-MIN_OWN_PHOTOS = 6
 
 
 def own_photos_blend(count: int) -> float:

@@ -136,7 +136,7 @@
       const base = ((i * n + j) * n + k) * 3;
       for (let c = 0; c < 3; c++) {
         const q = base + c;
-        // the same order as wbcgrade.color.remap: blue, then green, then red
+        // the same order as wbcgrade.color.mapping.remap: blue, then green, then red
         const c00 = lut[q] * (1 - fb) + lut[q + 3] * fb;
         const c01 = lut[q + dj] * (1 - fb) + lut[q + dj + 3] * fb;
         const c10 = lut[q + di] * (1 - fb) + lut[q + di + 3] * fb;

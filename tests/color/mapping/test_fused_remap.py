@@ -1,0 +1,220 @@
+"""The fused remap of large photos (colour map and block means in one pass, no full-size
+graded image) gives the numbers of the two steps, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import wbcgrade.color.mapping.regrain as regrain_module
+from wbcgrade.color.mapping.regrain import regrain, regrain_map
+from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped, identity_map
+
+
+def _image_and_map(rng, h=61, w=47, size=9):
+    rgb = rng.random((h, w, 3)).astype(np.float32) * 1.2 - 0.1  # some values out of range
+    table = np.clip(identity_map(size) ** 1.7 + 0.05 * rng.standard_normal((size,) * 3 + (3,)),
+                    0.0, 1.0).astype(np.float32)
+    return rgb, table
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("step", [1, 2, 3, 5])
+@pytest.mark.parametrize("strength", [1.0, 0.6])
+def test_block_means_of_the_mapped_image(rng, step, strength):
+    rgb, table = _image_and_map(rng)
+    expected = regrain_module._downsample(apply_color_map(rgb, table, strength), step)
+    assert np.array_equal(block_means_mapped(rgb, table, strength, step), expected)
+    mapped, source = block_means_mapped(rgb, table, strength, step, with_source=True)
+    assert np.array_equal(mapped, expected)
+    assert np.array_equal(source, regrain_module._downsample(rgb, step))
+
+
+@pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled
+def test_regrain_map_is_regrain_of_the_mapped_image(rng, monkeypatch, max_pixels):
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    rgb, table = _image_and_map(rng)
+    rgb = np.clip(rgb, 0.0, 1.0)
+    assert (regrain_module._step(*rgb.shape[:2]) > 1) == (max_pixels < rgb.size)
+    expected = regrain(rgb, apply_color_map(rgb, table, 0.8), 0.05, 0.01)
+    assert np.array_equal(regrain_map(rgb, table, 0.8, 0.05, 0.01), expected)
+
+
+@pytest.mark.parametrize("shape, coarse, step", [((23, 31), (6, 8), 4.0), ((9, 7), (3, 2), 3.0),
+                                                 ((5, 6), (1, 2), 4.0)])
+def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse, step):
+    source = rng.random((*shape, 3)).astype(np.float32)
+    A = (rng.random((*coarse, 3, 3)).astype(np.float32) - 0.5) * 0.5
+    b = (rng.random((*coarse, 3)).astype(np.float32) - 0.5) * 0.2
+
+    def weights(n_out, n_in):  # (n_out, n_in) bilinear weights, pixel centres, edges clamped
+        pos = np.clip((np.arange(n_out) + 0.5) / step - 0.5, 0.0, n_in - 1.0)
+        lo = np.minimum(pos.astype(int), max(n_in - 2, 0))
+        frac = pos - lo
+        m = np.zeros((n_out, n_in))
+        m[np.arange(n_out), lo] += 1 - frac
+        m[np.arange(n_out), np.minimum(lo + 1, n_in - 1)] += frac
+        return m
+
+    wy, wx = weights(shape[0], coarse[0]), weights(shape[1], coarse[1])
+    A_full = np.einsum("yi,xj,ijac->yxac", wy, wx, A)
+    b_full = np.einsum("yi,xj,ijc->yxc", wy, wx, b)
+    expected = np.clip(source + np.einsum("yxac,yxa->yxc", A_full, source) + b_full, 0, 1)
+    out = np.empty_like(source)
+    coefficients = np.concatenate([A.reshape(*coarse, 9), b], axis=-1)
+    regrain_module._apply_upsampled(source, coefficients, step, out)
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape, radius", [((37, 53, 5), 3), ((7, 5, 2), 9), ((1, 6, 3), 2),
+                                           ((6, 1, 1), 4), ((70, 40, 12), 1)])
+def test_box_means_are_scipys_uniform_filter(rng, shape, radius):
+    """The compiled box filter (wider than the image too: mirrored again and again) gives
+    scipy.ndimage's reflect-mode uniform filter on every channel, to float32 rounding."""
+    from scipy import ndimage
+
+    x = rng.random(shape).astype(np.float32) * 2 - 0.5
+    expected = np.stack([ndimage.uniform_filter(x[..., k], size=2 * radius + 1, mode="reflect")
+                         for k in range(shape[2])], axis=-1)
+    np.testing.assert_allclose(regrain_module._box(x, radius), expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_window_models_solve_the_regularised_local_fit(rng):
+    """Each window's A, b are the ridge regression of the change on the guide over the
+    window (the covariances of every pixel in it, numpy's solver), at an inner pixel."""
+    guide = rng.random((15, 17, 3)).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1
+              + 0.02 * rng.standard_normal(guide.shape)).astype(np.float32)
+    radius, eps, y, x = 2, 0.01, 7, 9
+    models = regrain_module._window_models(guide, change, radius, eps)
+    window = np.s_[y - radius:y + radius + 1, x - radius:x + radius + 1]
+    g = guide[window].reshape(-1, 3).astype(np.float64)
+    d = change[window].reshape(-1, 3).astype(np.float64)
+    g_centred, d_centred = g - g.mean(0), d - d.mean(0)
+    A = np.linalg.solve(g_centred.T @ g_centred / len(g) + eps * np.eye(3),
+                        g_centred.T @ d_centred / len(g))
+    b = d.mean(0) - A.T @ g.mean(0)
+    np.testing.assert_allclose(models[y, x, :9].reshape(3, 3), A, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(models[y, x, 9:], b, rtol=0, atol=2e-5)
+
+
+@pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled
+def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixels):
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    rgb, table = _image_and_map(rng)
+    rgb = np.clip(rgb, 0.0, 1.0)
+    expected = regrain_map(rgb, table, 0.8, 0.05, 0.01)
+    out = np.full_like(rgb, np.nan)
+    assert regrain_map(rgb, table, 0.8, 0.05, 0.01, out=out) is out
+    assert np.array_equal(out, expected)
+    in_place = rgb.copy()
+    assert regrain_map(in_place, table, 0.8, 0.05, 0.01, out=in_place) is in_place
+    assert np.array_equal(in_place, expected)
+    graded = apply_color_map(rgb, table, 0.8)
+    source = rgb.copy()
+    assert np.array_equal(regrain(source, graded, 0.05, 0.01, out=source), expected)
+    with pytest.raises(ValueError, match="out must be"):
+        regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))
+
+
+@pytest.mark.parametrize("shape, radius", [((37, 53, 3), 3), ((7, 5, 3), 9), ((1, 6, 3), 2)])
+def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, radius):
+    """Below ``_NUMPY_SOLVE_PIXELS`` the window models and box means come from numpy and
+    scipy (nothing to compile on a first run): the same numbers as the kernels."""
+    guide = rng.random(shape).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1).astype(np.float32)
+    compiled = regrain_module._window_models(guide, change, radius, 0.01)
+    plain = regrain_module._window_models_numpy(guide, change, radius, 0.01)
+    np.testing.assert_allclose(plain, compiled, rtol=0, atol=5e-5)
+    np.testing.assert_allclose(regrain_module._box_numpy(compiled, radius),
+                               regrain_module._box(compiled, radius), rtol=0, atol=1e-5)
+
+
+# numpy twins: a small photo's first grade runs numpy instead of loading numba's compiler
+# (wbcgrade.core.numpy_first); both give the same float32 numbers, bit for bit.
+
+def _kernel_trilinear(colors, table, strength):
+    from wbcgrade.color.mapping.remap import _trilinear
+    from wbcgrade.core import in_bands
+
+    out = np.empty_like(colors)
+    in_bands(_trilinear, colors.shape[0], colors, table, np.float32(strength), out)
+    return out
+
+
+@pytest.mark.parametrize("size", [2, 9, 33])
+@pytest.mark.parametrize("strength", [1.0, 0.37, 0.0])
+def test_trilinear_numpy_twin_is_the_kernel_bit_for_bit(rng, size, strength):
+    from wbcgrade.color.mapping.remap import _trilinear_numpy
+
+    colors = (rng.random((20000, 3)) * 1.4 - 0.2).astype(np.float32)  # > 1 chunk, out of range
+    colors[:64] = np.round(colors[:64] * 4) / 4  # nodes, 0 and 1 exactly
+    colors[64] = -0.0
+    table = (rng.random((size,) * 3 + (3,)) * 1.2 - 0.1).astype(np.float32)
+    twin = _trilinear_numpy(colors, table, strength)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), _kernel_trilinear(colors, table, strength)
+                          .view(np.uint32))
+
+
+@pytest.mark.parametrize("shape, coarse, step", [((40, 57), (40, 57), 1.0),
+                                                 ((97, 130), (33, 44), 3.0),
+                                                 ((50, 80), (2, 3), 27.0),
+                                                 ((16, 16), (1, 1), 16.0)])
+def test_upsampled_apply_numpy_twin_is_the_kernel_bit_for_bit(rng, shape, coarse, step):
+    from wbcgrade.core import in_bands
+
+    source = rng.random((*shape, 3)).astype(np.float32)
+    source[0, 0] = 0.0
+    coefficients = (rng.standard_normal((*coarse, 12)) * 0.3).astype(np.float32)
+    lw = coarse[1]
+    fx = np.minimum(np.maximum((np.arange(shape[1]) + 0.5) / step - 0.5, 0.0), lw - 1.0)
+    left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(shape[1], np.int64)
+    right = np.minimum(left + 1, lw - 1)
+    weight = (fx - left).astype(np.float32)
+    kernel = np.empty_like(source)
+    in_bands(regrain_module._apply_rows, shape[0], source, coefficients, step, left, right,
+             weight, kernel)
+    twin = np.empty_like(source)
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, twin)
+    assert np.array_equal(twin.view(np.uint32), kernel.view(np.uint32))
+    regrain_module._apply_rows_numpy(source, coefficients, step, left, right, weight, source)
+    assert np.array_equal(source.view(np.uint32), kernel.view(np.uint32))  # in place
+
+
+def test_numpy_first_only_for_small_work_before_the_kernel_ran(monkeypatch):
+    import wbcgrade.core._jit as jit
+    from wbcgrade.core import compiled, numpy_first
+
+    monkeypatch.setattr(jit, "_prefer_compiled", False)  # as in a fresh process
+
+    @compiled()
+    def kernel(x):  # pragma: no cover - compiled
+        return x + 1
+
+    assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
+    # a batch of small work: the twin takes up to 4 x the limit, then the kernel is loaded
+    assert [numpy_first(kernel, 100, 100) for _ in range(5)] == [True] * 3 + [False] * 2
+    other = compiled()(lambda x: x - 1)
+    assert numpy_first(other, 10, 100)  # each kernel its own budget
+    monkeypatch.setattr(jit, "_prefer_compiled", True)  # a batch: kernels from the start
+    assert not numpy_first(other, 10, 100)
+    monkeypatch.setattr(jit, "_prefer_compiled", False)
+    kernel(1)
+    assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now
+
+
+@pytest.mark.parametrize("shape", [(30, 45), (1, 1), (1, 7), (5, 3), (64, 9)])
+@pytest.mark.parametrize("radius", [1, 2, 7, 40])
+def test_uniform_filter_numpy_twin_is_scipys_bit_for_bit(rng, shape, radius):
+    """A small photo's regrain filters with numpy while scipy.ndimage is not loaded (its
+    import costs more than the filter): the numbers of scipy's reflect-mode filter."""
+    from scipy import ndimage
+
+    plane = (rng.random(shape) * rng.choice([1e-3, 1.0, 100.0])).astype(np.float32)
+    expected = np.empty_like(plane)
+    ndimage.uniform_filter(plane, size=2 * radius + 1, mode="reflect", output=expected)
+    twin = regrain_module._uniform_filter_numpy(plane, 2 * radius + 1)
+    assert twin.dtype == np.float32
+    assert np.array_equal(twin.view(np.uint32), expected.view(np.uint32))

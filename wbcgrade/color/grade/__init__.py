@@ -1,0 +1,1 @@
+"""The grade path: map builders, the frozen Grade, saved grades."""

@@ -1,0 +1,106 @@
+"""What a map builder gets and returns, and the "palette" builder.
+
+A builder (:data:`wbcgrade.color.grade.grading.MAP_BUILDERS`) takes a :class:`MapRequest`
+and returns a :class:`BuiltMap`; :func:`palette_map` is the "palette" one, the
+"look" one is :func:`wbcgrade.color.look.builder.look_map`. Apart from the grade
+path (:mod:`wbcgrade.color.grade.grading`) so that a builder can live in its own package
+without importing the path that calls it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.histogram import image_histogram, resample_histogram
+from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.palette.fit import FitSummary, fit_weights
+from wbcgrade.color.presets import StyleSet
+
+__all__ = ["FitCallback", "quiet", "PhotoHistograms", "MapRequest", "BuiltMap", "palette_map"]
+
+FitCallback = Callable[[int, np.ndarray, float], None]
+
+
+def quiet(name: str) -> None:
+    """A stage callback that says nothing."""
+
+
+@dataclass(frozen=True)
+class PhotoHistograms:
+    """A photo's (or a series') histograms: ``fit`` on the fit grid, ``transfer`` on the
+    transfer grid, both of working-space colours; :meth:`at` gives other grids."""
+
+    fit: np.ndarray
+    transfer: np.ndarray
+    pixels: tuple | None = field(default=None, repr=False, compare=False)
+
+    def at(self, bins: int) -> np.ndarray:
+        """The histogram on a ``bins``^3 grid: binned from the pixels when there are
+        some (a photo), else re-binned from the transfer grid's (a pooled series)."""
+        for hist in (self.transfer, self.fit):
+            if hist.shape[0] == bins:
+                return hist
+        if self.pixels is not None:
+            encoded, alpha, limit = self.pixels
+            return image_histogram(encoded, bins, alpha, limit)
+        return resample_histogram(self.transfer, bins)
+
+
+@dataclass(frozen=True)
+class MapRequest:
+    """What a map builder gets.
+
+    Attributes
+    ----------
+    photo : the photo's (or series') histograms.
+    styles : the style set, in the working space.
+    options : every setting of the grade.
+    encoding : the colour encoding (working space) of the grade.
+    callback : ``callback(n_evaluations, weights, loss)`` of a weight fit, or None.
+    stage : ``stage(name)`` as each stage starts (progress).
+    palette_grade : ``palette_grade(options, stage) -> (Grade, FitSummary)``, the whole
+        grade path (:func:`wbcgrade.color.grade.grading.grade_histograms`) on the same photo,
+        styles and encoding with other options (the "look" builder's palette grade of
+        the photo's scene), or None.
+    """
+
+    photo: PhotoHistograms
+    styles: StyleSet
+    options: GradeOptions
+    encoding: ColorEncoding
+    callback: FitCallback | None = None
+    stage: Callable[[str], None] = quiet
+    palette_grade: Callable[..., tuple] | None = None
+
+
+class BuiltMap(NamedTuple):
+    """What a map builder returns: the map before finishing, the palette it aimed at
+    (or None), diagnostics, seconds per stage, and the weights with how sure the
+    builder is of them (a :class:`~wbcgrade.color.palette.fit.FitSummary`)."""
+
+    color_map: np.ndarray
+    palette: np.ndarray | None
+    info: dict
+    timings: dict
+    fit: FitSummary
+
+
+def palette_map(request: MapRequest) -> BuiltMap:
+    """The "palette" builder: the weights (never worse than one style alone), then the
+    map onto their barycenter palette (:func:`wbcgrade.color.palette.transfer.transport_map`)."""
+    # imported here: the transport and its smooth map (scipy.sparse, ~0.1 s) are needed to
+    # build a palette grade, not to apply a saved one (nor a small photo's look grade)
+    from wbcgrade.color.palette.transfer import transport_map
+
+    options, styles = request.options, request.styles
+    request.stage("fit")
+    fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
+                      request.callback)
+    color_map, palette, info, timings = transport_map(request.photo.transfer, styles,
+                                                      fit.weights, options, request.stage)
+    return BuiltMap(color_map, palette, info, {"fit": fit.time_s, **timings}, fit)

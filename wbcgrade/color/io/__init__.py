@@ -1,0 +1,1 @@
+"""Files: photos (OpenImageIO), raw camera files, the disk cache, preset names."""

@@ -1,0 +1,671 @@
+"""Regrain: give the graded colours back the input's grain, edges and texture.
+
+A colour map moves every pixel of one colour the same way, so wherever it
+stretches a narrow range of colours (a sky, a dark forest) it multiplies the
+sensor noise and the JPEG block steps by its local gain. Pitié, Kokaram and
+Dahyot (2007) fix this in the image domain: keep the input's gradients while
+taking the graded colours. This module does it with an edge-aware local
+linear model (the guided filter of He, Sun and Tang 2010, with the input as
+guide): in every window of radius r the change ``graded - input`` is
+replaced by its best affine function of the input colour,
+
+    out = input + A(x) input + b(x)
+
+with ``A = (Cov(I) + eps Id)^-1 Cov(I, d)`` and ``b`` the matching offset,
+averaged over the windows that hold each pixel. Where the input only varies
+by noise (variance << eps), ``A -> 0`` and the window gets the mean change:
+the grain keeps its input amplitude and no block or speckle is amplified.
+Where the input has real structure, ``A`` reproduces the map's local
+contrast, so edges and the style's contrast survive without halos (the
+model follows the input's colour edges); across edges fainter than about
+sqrt(eps) the change is blended over one window. Large images are solved on a
+subsampled copy and ``A, b`` are interpolated back (the fast guided filter,
+He and Sun 2015), so 16 megapixels cost about one pass over the pixels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped
+from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
+from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
+
+__all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
+           "DEFAULT_REGRAIN_EPS"]
+
+#: Coefficients are solved on at most this many pixels and interpolated back.
+_MAX_SOLVE_PIXELS = 1_500_000
+
+
+@compiled(cache=True)
+def _reflect(i: int, n: int) -> int:  # pragma: no cover - compiled
+    """Index ``i`` of a line of ``n`` extended by mirroring (d c b a | a b c d | d c b a)."""
+    m = i % (2 * n)
+    return 2 * n - 1 - m if m >= n else m
+
+
+@compiled(cache=True)
+def _running_mean(line: np.ndarray, radius: int, out: np.ndarray) -> None:  # pragma: no cover
+    """``out[i] = mean(line[i - radius : i + radius + 1])`` over the (n, K) ``line`` mirrored
+    at its ends: a running sum in float64 (as ``scipy.ndimage.uniform_filter1d``)."""
+    n, k = line.shape
+    if n == 0:
+        return
+    inv = 1.0 / (2 * radius + 1)
+    acc = np.zeros(k, np.float64)
+    for i in range(-radius, radius + 1):
+        j = _reflect(i, n)
+        for c in range(k):
+            acc[c] += line[j, c]
+    for i in range(n):
+        for c in range(k):
+            out[i, c] = acc[c] * inv
+        enter = _reflect(i + radius + 1, n)
+        leave = _reflect(i - radius, n)
+        for c in range(k):
+            acc[c] += line[enter, c] - line[leave, c]
+
+
+#: Pixel columns of one task of the vertical pass (its running sums stay in the cache).
+_COLUMN_BLOCK = 32
+
+
+@compiled(cache=True)
+def _column_blocks(w: int) -> int:  # pragma: no cover - compiled
+    return (w + _COLUMN_BLOCK - 1) // _COLUMN_BLOCK
+
+
+@compiled(cache=True)
+def _column_sums(rows: np.ndarray, radius: int, lo: int, hi: int) -> np.ndarray:  # pragma: no cover
+    """(hi - lo, K) float64 sums of the columns lo:hi of (H, W, K) ``rows`` over the window
+    of output row 0 (mirrored at the top): the start of :func:`_column_means`."""
+    h, k = rows.shape[0], rows.shape[2]
+    acc = np.zeros((hi - lo, k), np.float64)
+    for i in range(-radius, radius + 1):
+        row = _reflect(i, h)
+        for col in range(lo, hi):
+            for c in range(k):
+                acc[col - lo, c] += rows[row, col, c]
+    return acc
+
+
+@compiled(cache=True)
+def _column_means(rows: np.ndarray, radius: int, y: int, lo: int, acc: np.ndarray,
+                  out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``out`` (n, K): the means over the window of output row ``y`` of the columns
+    lo:lo + n of (H, W, K) ``rows``, from their running sums ``acc`` (then moved to row
+    y + 1)."""
+    h, k = rows.shape[0], rows.shape[2]
+    inv = 1.0 / (2 * radius + 1)
+    enter = _reflect(y + radius + 1, h)
+    leave = _reflect(y - radius, h)
+    for i in range(acc.shape[0]):
+        for c in range(k):
+            out[i, c] = acc[i, c] * inv
+            acc[i, c] += rows[enter, lo + i, c] - rows[leave, lo + i, c]
+
+
+@compiled(nogil=True, cache=True)
+def _box_rows(x: np.ndarray, radius: int, rows: np.ndarray, lo: int,
+              hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of the horizontal pass of :func:`_box` into ``rows``."""
+    for y in range(lo, hi):
+        _running_mean(x[y], radius, rows[y])
+
+
+@compiled(nogil=True, cache=True)
+def _box_columns(rows: np.ndarray, radius: int, out: np.ndarray, lo: int,
+                 hi: int) -> None:  # pragma: no cover - compiled
+    """Column blocks lo:hi of the vertical pass of :func:`_box` into ``out``."""
+    h, w = rows.shape[:2]
+    for block in range(lo, hi):
+        start = block * _COLUMN_BLOCK
+        stop = min(start + _COLUMN_BLOCK, w)
+        acc = _column_sums(rows, radius, start, stop)
+        for y in range(h):
+            _column_means(rows, radius, y, start, acc, out[y, start:stop])
+
+
+def _box(x: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
+    the borders: ``scipy.ndimage.uniform_filter(mode="reflect")`` on each channel, to
+    float32 rounding (rows, then blocks of columns, in bands on every core; running sums
+    in float64)."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    h, w, k = x.shape
+    rows = np.empty((h, w, k), np.float32)
+    out = np.empty((h, w, k), np.float32)
+    if h == 0 or w == 0:
+        return out
+    in_bands(_box_rows, h, x, int(radius), rows, min_band=1)
+    in_bands(_box_columns, _column_blocks(w), rows, int(radius), out, min_band=1)
+    return out
+
+
+#: Per-pixel quantities whose window means give the local model: the guide I (3), the
+#: change d (3), the guide's products I_a I_c (a <= c: 6) and the cross products I_a d_c (9).
+_N_MOMENTS = 21
+
+
+@compiled(cache=True)
+def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndarray,
+                  out: np.ndarray, prior: np.ndarray) -> None:  # pragma: no cover - compiled
+    """One window's A (row-major, [a, c] at 3 a + c) and b into ``out`` (12,) from the
+    window means ``m`` (21,) of the moments: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
+    eps A0)``, ``b = mean(d) - A^T mean(I)``; ``A0`` the (9,) ``prior`` (empty: 0);
+    ``inverse``, ``cross``: (3, 3) scratch."""
+    # symmetric covariance of the guide (+ eps), inverted in closed form
+    s00 = m[6] - m[0] * m[0] + eps
+    s01 = m[7] - m[0] * m[1]
+    s02 = m[8] - m[0] * m[2]
+    s11 = m[9] - m[1] * m[1] + eps
+    s12 = m[10] - m[1] * m[2]
+    s22 = m[11] - m[2] * m[2] + eps
+    inverse[0, 0] = s11 * s22 - s12 * s12
+    inverse[0, 1] = s02 * s12 - s01 * s22
+    inverse[0, 2] = s01 * s12 - s02 * s11
+    inverse[1, 1] = s00 * s22 - s02 * s02
+    inverse[1, 2] = s01 * s02 - s00 * s12
+    inverse[2, 2] = s00 * s11 - s01 * s01
+    inverse[1, 0] = inverse[0, 1]
+    inverse[2, 0] = inverse[0, 2]
+    inverse[2, 1] = inverse[1, 2]
+    det = s00 * inverse[0, 0] + s01 * inverse[0, 1] + s02 * inverse[0, 2]
+    pulled = prior.shape[0] == 9
+    for a in range(3):
+        for c in range(3):
+            cross[a, c] = m[12 + 3 * a + c] - m[a] * m[3 + c]
+            if pulled:
+                cross[a, c] += eps * prior[3 * a + c]
+    for c in range(3):
+        offset = m[3 + c]
+        for a in range(3):
+            value = np.float32((inverse[a, 0] * cross[0, c] + inverse[a, 1] * cross[1, c]
+                                + inverse[a, 2] * cross[2, c]) / det)
+            out[3 * a + c] = value
+            offset -= value * m[a]
+        out[9 + c] = offset
+
+
+@compiled(nogil=True, cache=True)
+def _moment_rows(guide: np.ndarray, change: np.ndarray, radius: int, rows: np.ndarray,
+                 lo: int, hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of the moments' horizontal window means (:func:`_window_models`)."""
+    w = guide.shape[1]
+    moments = np.empty((w, _N_MOMENTS), np.float32)
+    for y in range(lo, hi):
+        for x in range(w):
+            for c in range(3):
+                moments[x, c] = guide[y, x, c]
+                moments[x, 3 + c] = change[y, x, c]
+            n = 6
+            for a in range(3):
+                for c in range(a, 3):
+                    moments[x, n] = guide[y, x, a] * guide[y, x, c]
+                    n += 1
+            for a in range(3):
+                for c in range(3):
+                    moments[x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
+        _running_mean(moments, radius, rows[y])
+
+
+@compiled(nogil=True, cache=True)
+def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray,
+                   prior: np.ndarray, lo: int, hi: int) -> None:  # pragma: no cover - compiled
+    """Column blocks lo:hi of :func:`_window_models`: the moments' window means (vertical
+    pass), solved as they come (``prior``: (H, W, 9) each window's ``A0``, or (0, 0, 9))."""
+    h, w = rows.shape[:2]
+    inverse = np.empty((3, 3))
+    cross = np.empty((3, 3))
+    pulled = prior.shape[0] == h and prior.shape[1] == w
+    none = np.empty(0, np.float32)
+    for block in range(lo, hi):
+        start = block * _COLUMN_BLOCK
+        stop = min(start + _COLUMN_BLOCK, w)
+        acc = _column_sums(rows, radius, start, stop)
+        means = np.empty((stop - start, _N_MOMENTS), np.float64)
+        for y in range(h):
+            _column_means(rows, radius, y, start, acc, means)
+            for x in range(start, stop):
+                _solve_window(means[x - start], eps, inverse, cross, out[y, x],
+                              prior[y, x] if pulled else none)
+
+
+def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
+                   eps: float, prior: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
+    window means (rows, then blocks of columns, as :func:`_box`), solved as they come;
+    in bands on every core (serial compiled kernels: a first run compiles them fast)."""
+    guide = np.ascontiguousarray(guide, dtype=np.float32)
+    change = np.ascontiguousarray(change, dtype=np.float32)
+    h, w = guide.shape[:2]
+    rows = np.empty((h, w, _N_MOMENTS), np.float32)
+    out = np.empty((h, w, 12), np.float32)
+    if h == 0 or w == 0:
+        return out
+    in_bands(_moment_rows, h, guide, change, int(radius), rows, min_band=1)
+    prior = (np.zeros((0, 0, 9), np.float32) if prior is None
+             else np.ascontiguousarray(prior, dtype=np.float32))
+    in_bands(_solve_columns, _column_blocks(w), rows, int(radius), float(eps), out, prior,
+             min_band=1)
+    return out
+
+
+#: Solve grids of fewer pixels than this are solved with numpy and scipy.ndimage
+#: (:func:`_window_models_numpy`), larger ones with the compiled kernels: on a small
+#: photo (the README's first command) both take a fraction of a second, but the kernels
+#: cost seconds to compile on a first run after install; on 1.5 megapixels (every
+#: photo above it is solved there) numpy takes about twice as long (1.7 s, 0.8 s).
+_NUMPY_SOLVE_PIXELS = 400_000
+
+
+def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float,
+                  prior: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 12) float32 box-averaged coefficients of the local model
+    ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``. ``prior``: (n, n,
+    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0)."""
+    guide = np.ascontiguousarray(guide, dtype=np.float32)
+    change = np.ascontiguousarray(change, dtype=np.float32)
+    numpy = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
+    box = _box_numpy if numpy else _box
+    pull = None
+    if prior is not None:  # each window's A0 at its mean colour (the moments' first three)
+        centre = box(guide, int(radius))
+        pull = np.concatenate([apply_color_map(centre, np.ascontiguousarray(
+            prior[..., 3 * a:3 * a + 3], dtype=np.float32)) for a in range(3)], axis=-1)
+    if numpy:
+        return _box_numpy(_window_models_numpy(guide, change, int(radius), float(eps), pull),
+                          int(radius))
+    return _box(_window_models(guide, change, int(radius), float(eps), pull), int(radius))
+
+
+def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
+    """:func:`_box` with scipy.ndimage's reflect-mode uniform filter (float64 running
+    sums), one channel a plane, on as many threads as numba uses."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    out = np.empty_like(x)
+    if x.size == 0:
+        return out
+    planes = np.ascontiguousarray(np.moveaxis(x, -1, 0))
+    means = np.empty_like(planes)
+
+    def window_mean(k: int) -> None:
+        _uniform_filter(planes[k], 2 * radius + 1, means[k])
+
+    _threaded(window_mean, x.shape[2])
+    out[...] = np.moveaxis(means, 0, -1)
+    return out
+
+
+def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
+                         eps: float, prior: np.ndarray | None = None) -> np.ndarray:
+    """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
+    moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
+    of rows. Nothing to compile."""
+    h, w = guide.shape[:2]
+    out = np.empty((h, w, 12), np.float32)
+    if h == 0 or w == 0:
+        return out
+    g = np.moveaxis(np.asarray(guide, dtype=np.float32), -1, 0)
+    d = np.moveaxis(np.asarray(change, dtype=np.float32), -1, 0)
+    first = (g[0], g[1], g[2], d[0], d[1], d[2])
+    pairs = [(a, c) for a in range(3) for c in range(a, 3)]
+    pairs += [(a, 3 + c) for a in range(3) for c in range(3)]
+    means = np.empty((_N_MOMENTS, h, w), np.float32)  # one plane a moment
+
+    def window_mean(k: int) -> None:
+        plane = first[k] if k < 6 else np.multiply(first[pairs[k - 6][0]],
+                                                   first[pairs[k - 6][1]])
+        _uniform_filter(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
+
+    _threaded(window_mean, _N_MOMENTS)
+    for start in range(0, h, 64):
+        _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64],
+                    None if prior is None else prior[start:start + 64])
+    return out
+
+
+#: Plane pixels the numpy twin of the box filter filters in a process before scipy.ndimage
+#: is imported (about four small photos' regrain: then a batch pays the import once).
+_TWIN_FILTER_PIXELS = 20_000_000
+_twin_filtered = 0
+
+
+def _uniform_filter(plane: np.ndarray, size: int, out: np.ndarray) -> None:
+    """``scipy.ndimage.uniform_filter(plane, size, mode="reflect", output=out)`` for a 2-D
+    float32 ``plane``: scipy's own when scipy.ndimage is loaded already (or the twin has
+    filtered :data:`_TWIN_FILTER_PIXELS`), else its numpy twin
+    (:func:`_uniform_filter_numpy`, the same numbers; importing scipy.ndimage costs a
+    small photo's grade more than its filters)."""
+    import sys
+
+    global _twin_filtered
+    if "scipy.ndimage" not in sys.modules and not compiled_preferred() \
+            and _twin_filtered + plane.size <= _TWIN_FILTER_PIXELS:
+        _twin_filtered += plane.size
+        out[...] = _uniform_filter_numpy(plane, size)
+        return
+    from scipy import ndimage
+
+    ndimage.uniform_filter(plane, size=size, mode="reflect", output=out)
+
+
+def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:
+    """scipy.ndimage's reflect-mode ``uniform_filter`` of a 2-D float32 plane, bit for bit:
+    along each axis in turn, each line extended by reflection (``d c b a | a b c d | d c
+    b a``), a running float64 sum (the first window's sum, then ``+ entering - leaving``)
+    divided by ``size``, rounded to float32 between the axes."""
+    x = plane
+    before = size // 2
+    after = size - before - 1
+    for axis in (0, 1):
+        lines = np.moveaxis(x, axis, -1).astype(np.float64)
+        n = lines.shape[-1]
+        padded = np.pad(lines, ((0, 0), (before, after)), mode="symmetric")
+        sums = np.empty(lines.shape, np.float64)
+        sums[:, 0] = np.add.accumulate(padded[:, :size], axis=1)[:, -1]  # in order
+        sums[:, 1:] = padded[:, size:size + n - 1] - padded[:, :n - 1]
+        np.add.accumulate(sums, axis=1, out=sums)
+        sums /= size
+        x = np.moveaxis(sums.astype(np.float32), -1, axis)
+    return x
+
+
+def _threaded(task, n: int) -> None:
+    """``task(k)`` for k in range(n), on as many threads as numba uses (numpy and
+    scipy.ndimage release the GIL in their loops)."""
+    threads = min(n, num_threads())
+    if threads <= 1:
+        for k in range(n):
+            task(k)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        for done in [pool.submit(task, k) for k in range(n)]:
+            done.result()
+
+
+def _solve_band(m: np.ndarray, eps: float, band: np.ndarray,
+                prior: np.ndarray | None = None) -> None:
+    """:func:`_solve_window` on a band of (21, rows, W) float64 window means, into the
+    (rows, W, 12) ``band`` of the output (``prior``: the band's (rows, W, 9) ``A0``)."""
+    mg, md = m[0:3], m[3:6]
+    s00 = m[6] - mg[0] * mg[0] + eps
+    s01 = m[7] - mg[0] * mg[1]
+    s02 = m[8] - mg[0] * mg[2]
+    s11 = m[9] - mg[1] * mg[1] + eps
+    s12 = m[10] - mg[1] * mg[2]
+    s22 = m[11] - mg[2] * mg[2] + eps
+    i00 = s11 * s22 - s12 * s12
+    i01 = s02 * s12 - s01 * s22
+    i02 = s01 * s12 - s02 * s11
+    i11 = s00 * s22 - s02 * s02
+    i12 = s01 * s02 - s00 * s12
+    i22 = s00 * s11 - s01 * s01
+    scale = 1.0 / (s00 * i00 + s01 * i01 + s02 * i02)
+    inverse = ((i00, i01, i02), (i01, i11, i12), (i02, i12, i22))
+    for c in range(3):
+        cross = [m[12 + 3 * b + c] - mg[b] * md[c] for b in range(3)]
+        if prior is not None:
+            cross = [cross[b] + eps * prior[..., 3 * b + c] for b in range(3)]
+        offset = md[c].copy()
+        for a in range(3):
+            row = inverse[a]
+            value = ((row[0] * cross[0] + row[1] * cross[1] + row[2] * cross[2])
+                     * scale).astype(np.float32)
+            band[:, :, 3 * a + c] = value
+            offset -= value * mg[a]
+        band[:, :, 9 + c] = offset
+
+
+@compiled(nogil=True, cache=True)
+def _apply_rows(source: np.ndarray, coefficients: np.ndarray, step: float, left: np.ndarray,
+                right: np.ndarray, weight: np.ndarray, out: np.ndarray, lo: int,
+                hi: int) -> None:  # pragma: no cover - compiled
+    """Rows lo:hi of :func:`_apply_upsampled` (the columns' nodes and weights given)."""
+    lh, lw = coefficients.shape[:2]
+    w = source.shape[1]
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    row = np.empty((lw, 12), np.float32)  # this output row's coefficients, coarse columns
+    for y in range(lo, hi):
+        fy = min(max((y + 0.5) / step - 0.5, 0.0), lh - 1.0)
+        y0 = min(int(fy), lh - 2) if lh > 1 else 0
+        ty = np.float32(fy - y0)
+        y1 = min(y0 + 1, lh - 1)
+        for x in range(lw):
+            for k in range(12):
+                row[x, k] = (one - ty) * coefficients[y0, x, k] + ty * coefficients[y1, x, k]
+        for x in range(w):
+            x0 = left[x]
+            x1 = right[x]
+            tx = weight[x]
+            s0 = source[y, x, 0]
+            s1 = source[y, x, 1]
+            s2 = source[y, x, 2]
+            for c in range(3):
+                value = (one - tx) * (row[x0, 9 + c] + row[x0, c] * s0 + row[x0, 3 + c] * s1
+                                      + row[x0, 6 + c] * s2) \
+                    + tx * (row[x1, 9 + c] + row[x1, c] * s0 + row[x1, 3 + c] * s1
+                            + row[x1, 6 + c] * s2)
+                out[y, x, c] = min(max(source[y, x, c] + value, zero), one)
+
+
+def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
+                     out: np.ndarray) -> None:
+    """``out = clip(source + A(x)^T source + b(x))`` with the (lh, lw, 12) ``A, b`` of
+    :func:`_coefficients` bilinearly interpolated from the coarse grid (pixel centres,
+    edges clamped): each output row first blends its two coarse rows, then each pixel
+    blends two nodes of that row (the column weights are the same for every row)."""
+    w = source.shape[1]
+    lw = coefficients.shape[1]
+    fx = np.minimum(np.maximum((np.arange(w) + 0.5) / step - 0.5, 0.0), lw - 1.0)
+    left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
+    right = np.minimum(left + 1, lw - 1)
+    weight = (fx - left).astype(np.float32)
+    if numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
+        _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
+        return
+    in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
+             weight, out)
+
+
+#: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
+#: has not run in the process (see :func:`wbcgrade.core.numpy_first`).
+_NUMPY_APPLY_PIXELS = 400_000
+
+
+def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
+                      left: np.ndarray, right: np.ndarray, weight: np.ndarray,
+                      out: np.ndarray) -> None:
+    """``_apply_rows`` over every row with numpy, bit for bit (float32 arithmetic in the
+    kernel's order); ``out`` may be ``source``."""
+    h = source.shape[0]
+    lh = coefficients.shape[0]
+    fy = np.minimum(np.maximum((np.arange(h) + 0.5) / step - 0.5, 0.0), lh - 1.0)
+    y0 = np.minimum(fy.astype(np.int64), lh - 2) if lh > 1 else np.zeros(h, np.int64)
+    ty = (fy - y0).astype(np.float32)[:, None, None]
+    y1 = np.minimum(y0 + 1, lh - 1)
+    one = np.float32(1.0)
+    rows = (one - ty) * coefficients[y0] + ty * coefficients[y1]  # (h, lw, 12)
+    tx = weight[None, :]
+    s0, s1, s2 = source[..., 0], source[..., 1], source[..., 2]
+    at0, at1 = rows[:, left], rows[:, right]  # (h, w, 12)
+    graded = np.empty(source.shape, np.float32)
+    for c in range(3):
+        value = (one - tx) * (at0[..., 9 + c] + at0[..., c] * s0 + at0[..., 3 + c] * s1
+                              + at0[..., 6 + c] * s2) \
+            + tx * (at1[..., 9 + c] + at1[..., c] * s0 + at1[..., 3 + c] * s1
+                    + at1[..., 6 + c] * s2)
+        graded[..., c] = source[..., c] + value
+    np.clip(graded, np.float32(0.0), one, out=out)
+
+
+@compiled(nogil=True, cache=True)
+def _downsample_rows(x: np.ndarray, step: int, out: np.ndarray, lo: int,
+                     hi: int) -> None:  # pragma: no cover - compiled
+    """Block rows lo:hi of :func:`_downsample` into ``out`` (zeros on entry)."""
+    w, c = out.shape[1], out.shape[2]
+    scale = 1.0 / (step * step)
+    for i in range(lo, hi):
+        for di in range(step):
+            row = i * step + di
+            for j in range(w):
+                for dj in range(step):
+                    for k in range(c):
+                        out[i, j, k] += x[row, j * step + dj, k]
+        for j in range(w):
+            for k in range(c):
+                out[i, j, k] *= scale
+
+
+def _downsample(x: np.ndarray, step: int) -> np.ndarray:
+    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    out = np.zeros((x.shape[0] // step, x.shape[1] // step, x.shape[2]), np.float32)
+    in_bands(_downsample_rows, out.shape[0], x, int(step), out, min_band=1)
+    return out
+
+
+def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGRAIN_RADIUS,
+            eps: float = DEFAULT_REGRAIN_EPS, out: np.ndarray | None = None) -> np.ndarray:
+    """Graded colours with the input's grain and edges (edge-aware local linear model).
+
+    Parameters
+    ----------
+    source : (H, W, 3) input colours, encoded, in [0, 1].
+    graded : (H, W, 3) the same pixels through the colour map.
+    radius : window radius as a fraction of the long side (>= 1 pixel is used).
+    eps : regulariser, squared encoded units (larger: more of the input's
+        detail kept as is, less of the map's local contrast).
+    out : optional (H, W, 3) float32 C-contiguous array the result is written
+        into (it may be ``source`` itself: every pixel is read before it is
+        written), instead of a new one.
+
+    Returns
+    -------
+    (H, W, 3) float32 in [0, 1] (``out`` when given).
+    """
+    if source.shape != graded.shape or source.ndim != 3 or source.shape[2] != 3:
+        raise ValueError("source and graded must be the same (H, W, 3) shape")
+    if not (radius > 0 and eps > 0):
+        raise ValueError("radius and eps must be positive")
+    h, w = source.shape[:2]
+    out = _output(source, out)
+    source = np.ascontiguousarray(source, dtype=np.float32)
+    graded = np.ascontiguousarray(graded, dtype=np.float32)
+    step = _step(h, w)
+    if step == 1:
+        pixels = _window(radius, max(h, w))
+        _apply_upsampled(source, _coefficients(source, graded - source, pixels, eps), 1.0, out)
+        return out
+    small = _downsample(source, step)
+    change = _downsample(graded, step) - small
+    return _regrain_upsampled(source, small, change, step, radius, eps, out)
+
+
+def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0,
+                radius: float = DEFAULT_REGRAIN_RADIUS, eps: float = DEFAULT_REGRAIN_EPS,
+                out: np.ndarray | None = None, follow: float = 0.0) -> np.ndarray:
+    """``regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)``.
+
+    The same numbers (``follow`` 0); on large images (solved on a subsampled copy) the
+    graded image is only needed block-averaged, so the colour map and the
+    block means (of the input too) are one pass
+    (:func:`wbcgrade.color.mapping.remap.block_means_mapped`) and the full-size graded
+    image is never made (two passes and ~12 bytes a pixel saved).
+
+    ``follow``: in [0, 1], how far the input's grain (variations under sqrt(eps)) follows
+    the map's local gain where the map lowers contrast or saturation (a flat, faded or
+    lifted-black look flattens the texture too; :func:`map_gain_prior` scaled by it);
+    where the map raises them it keeps the input's amplitude. 0: always the input's.
+    """
+    if source.ndim != 3 or source.shape[2] != 3:
+        raise ValueError("source must be an (H, W, 3) image")
+    if not (radius > 0 and eps > 0):
+        raise ValueError("radius and eps must be positive")
+    h, w = source.shape[:2]
+    step = _step(h, w)
+    if not 0.0 <= follow <= 1.0:
+        raise ValueError("follow must be in [0, 1]")
+    if step == 1 and not follow:
+        return regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)
+    out = _output(source, out)
+    source = np.ascontiguousarray(source, dtype=np.float32)
+    if step == 1:
+        small, change = source, apply_color_map(source, color_map, strength) - source
+    else:
+        mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
+        change = mapped - small
+    prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
+    return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
+
+
+#: The last few maps' priors (:func:`map_gain_prior`), by a digest of the map and strength.
+_PRIORS: dict[tuple, np.ndarray] = {}
+
+
+def map_gain_prior(color_map: np.ndarray, strength: float = 1.0) -> np.ndarray:
+    """(n, n, n, 9) float32: at every node of an (n, n, n, 3) colour map (blended with the
+    identity at ``strength``), the local model a window of pure noise falls back to, laid
+    out as the regrain's ``A`` (``A[a, c]`` at ``3 a + c``): the map's Jacobian with every
+    gain above 1 cut to 1 (its singular values; the directions kept), minus the identity.
+    Where the map lowers contrast or saturation, detail follows it; where it raises them,
+    detail keeps the input's amplitude (no grain or block step amplified)."""
+    table = np.asarray(color_map, dtype=np.float64)
+    if not np.isfinite(table).all():
+        raise ValueError("the colour map holds NaN or infinite values")
+    key = (hashlib.sha1(np.ascontiguousarray(table).tobytes()).hexdigest(), table.shape,
+           float(strength))
+    if key in _PRIORS:
+        return _PRIORS[key]
+    n = table.shape[0]
+    axis = np.linspace(0.0, 1.0, n)
+    identity = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1)
+    mapped = (1.0 - strength) * identity + strength * table
+    jacobian = np.stack(np.gradient(mapped, axis, axis, axis, axis=(0, 1, 2)), axis=-1)
+    u, s, vt = np.linalg.svd(jacobian)  # jacobian[..., out, in]
+    capped = np.einsum("...ij,...j,...jk->...ik", u, np.minimum(s, 1.0), vt)
+    prior = np.swapaxes(capped, -1, -2) - np.eye(3)  # [in a, out c]
+    prior = np.ascontiguousarray(prior.reshape(n, n, n, 9), dtype=np.float32)
+    prior.setflags(write=False)
+    if len(_PRIORS) >= 8:  # (a batch grades many photos with one preset's map)
+        _PRIORS.pop(next(iter(_PRIORS)))
+    _PRIORS[key] = prior
+    return prior
+
+
+def _window(radius: float, side: float) -> int:
+    """The window radius in pixels of a line of ``side`` pixels: at least 1, at most the
+    line itself (a larger window is the whole, mirrored photo; its summing loops would
+    only run longer: ``radius=1e9`` ran for hours in compiled code, deaf to Ctrl-C)."""
+    return max(1, min(int(round(min(radius, 1.0) * side)), int(np.ceil(side))))
+
+
+def _step(h: int, w: int) -> int:
+    """Subsampling step of the coefficients' solve (1: full resolution)."""
+    return max(1, int(np.ceil(np.sqrt(h * w / _MAX_SOLVE_PIXELS))))
+
+
+def _output(source: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    """The array a regrain writes into: ``out`` checked, or a new one like ``source``."""
+    if out is None:
+        return np.empty(source.shape, np.float32)
+    if out.shape != source.shape or out.dtype != np.float32 or not out.flags.c_contiguous \
+            or not out.flags.writeable:
+        raise ValueError("out must be a writeable C-contiguous float32 array of the "
+                         "source's shape")
+    return out
+
+
+def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray, step: int,
+                       radius: float, eps: float, out: np.ndarray,
+                       prior: np.ndarray | None = None) -> np.ndarray:
+    h, w = source.shape[:2]
+    pixels = _window(radius, max(h, w) / step)
+    _apply_upsampled(source, _coefficients(small, change, pixels, eps, prior), float(step), out)
+    return out

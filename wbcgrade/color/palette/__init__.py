@@ -1,0 +1,1 @@
+"""The paper's palette mode: the weight fit, the transport map, the smooth map."""
