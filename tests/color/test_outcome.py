@@ -75,9 +75,10 @@ def test_a_set_look_says_how_sure_it_is_and_what_settles_it():
 
     sure = lines(0.999, 0.9)
     assert "the photos show it clearly; 90 % of it applied" in sure[0]
-    assert "strength 1.00" in sure[0] and not any("--originals" in line for line in sure)
+    # the share applied is said; the strength only when it was asked for
+    assert "strength" not in sure[0] and not any("--originals" in line for line in sure)
     unsure = lines(0.6, 0.3, blend=2.0)
-    assert "unsure it is a look; 30 % of it applied" in unsure[0]
+    assert "unsure it is a look; 60 % of it applied" in unsure[0]  # 30 % at strength 2
     assert "strength 2.00" in unsure[0]
     assert any(line.startswith("the style photos may share this look") and "--originals DIR"
                in line for line in unsure)

@@ -56,8 +56,8 @@ def photo_line(result: FileResult, verb: str = "graded") -> str:
         from wbcgrade.color.outcome import change_words
 
         what, strength = outcome.source_words()
-        said = (f"{what}, strength {strength:.2f}, "
-                f"colours move {change_words(outcome.mean_change)}")
+        strength_words = "" if strength is None else f", strength {strength:.2f}"
+        said = f"{what}{strength_words}, colours move {change_words(outcome.mean_change)}"
         if outcome.unchanged:
             said += f" (essentially unchanged: {outcome.reason})"
         return f"{verb:<8} {result.relative}: {said}  {took}"

@@ -81,9 +81,13 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     outcome = found.outcome
     what = ("the preset's own look" if outcome.source.value == "preset-look"
             else f"the look {len(found.styles)} style photos share")
+    strength = found.strength
+    if "probability" in outcome.extra:  # judged jointly: the same words as apply's
+        what, strength = outcome.source_words()
     from wbcgrade.color.outcome import change_words
 
-    click.echo(f"wrote {found.lut}: {what}, strength {found.strength:.2f}; across every "
+    strength_words = "" if strength is None else f", strength {strength:.2f}"
+    click.echo(f"wrote {found.lut}: {what}{strength_words}; across every "
                f"colour it moves colours {change_words(outcome.look_size)}")
     if outcome.unchanged or outcome.faint:
         state = ("it leaves colours essentially unchanged" if outcome.unchanged

@@ -211,11 +211,14 @@ class GradeOutcome:
         """One line: the source, the strength and how much ``subject``'s colours move
         (in percent of the tonal range, and how visible that is: :func:`change_words`)."""
         what, strength = self.source_words()
-        return (f"grade: {what}, strength {strength:.2f}; {subject}'s colours move "
+        strength_words = "" if strength is None else f", strength {strength:.2f}"
+        return (f"grade: {what}{strength_words}; {subject}'s colours move "
                 f"{change_words(self.mean_change)}")
 
-    def source_words(self) -> tuple[str, float]:
-        """(where the grade came from, in words; the strength to print with it)."""
+    def source_words(self) -> tuple[str, float | None]:
+        """(where the grade came from, in words; the strength to print with it, None where
+        the words say it: a set look judged jointly says how much of it is applied, and its
+        strength is worth printing only when it was asked for)."""
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
             learned = self.extra.get("learned") or self.file.startswith(LEARNED_PREFIX)
@@ -228,9 +231,10 @@ class GradeOutcome:
             what += (f", nudged {100 * self.confidence:.0f} % towards the colours of "
                      f"{self.match}, the closest style")
         if self.source is GradeSource.SET_LOOK and "probability" in self.extra:
-            what += f" ({sureness_words(self.extra['probability'], self.look_strength)})"
-        # a set look judged jointly says how much of it is applied: the strength is --strength's
-        return what, (self.blend if "probability" in self.extra else self.strength)
+            what += f" ({sureness_words(self.extra['probability'], self.strength)})"
+        if "probability" in self.extra:  # the share applied is said; the strength asked for
+            return what, (None if self.blend == 1.0 else self.blend)
+        return what, self.strength
 
     def lines(self, subject: str = "this photo") -> list[str]:
         """The outcome in words, one line each (the headline, then why and what to do)."""

@@ -101,6 +101,7 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
     styles = load_styles(source, STYLE_BINS, working_space, warn, on_style)
     naturals = load_naturals(natural, styles.working_space)
     # strength None: a preset's own look in full, an extracted one at its reliability
+    asked = strength
     lattice, info = set_look_map(styles, naturals, strength, lut_size, on_look)
     strength = info["strength"]
     grade = Grade(tuple(styles.names), np.full(len(styles.names), 1.0 / len(styles.names)),
@@ -116,7 +117,12 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
         how = "no" if strength < UNCHANGED_STRENGTH else "little"
         why = (f"these {n_styles} style photos share {how} look that can be told apart "
                "from their content")
+    extra = {k: int(info.get(k) or 0) for k in OWN_PHOTO_KEYS}
+    look_strength, blend = float(strength), 1.0
+    if info.get("rule") == "posterior" and info.get("probability") is not None:
+        # judged jointly, as apply says it: the share the photos show and the strength asked
+        extra["probability"] = float(info["probability"])
+        look_strength, blend = float(info["share"]), 1.0 if asked is None else float(asked)
     outcome = GradeOutcome.judge(GradeSource.PRESET_LOOK if preset else GradeSource.SET_LOOK,
-                                 n_styles, float(strength), 1.0, size, size, why,
-                                 extra={k: int(info.get(k) or 0) for k in OWN_PHOTO_KEYS})
+                                 n_styles, look_strength, blend, size, size, why, extra=extra)
     return ExtractedLook(path, list(styles.names), float(strength), dict(info), outcome)
