@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.histogram import grid_points
+from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
 from wbcgrade.color.look.edits import fit_edit
 from wbcgrade.color.look.family import fit_look_map
 from wbcgrade.errors import InputError, OptionError, first_line
@@ -91,9 +91,8 @@ LEARN_FOLDS = 4
 #: Below this many pairs the look is pulled, where the pairs' colours say little, towards
 #: the photographer's edit that best explains them (:func:`~wbcgrade.color.look.edits.fit_edit`)
 #: rather than towards no look: one photo's colours leave most of the cube to
-#: extrapolation, and an edit extrapolates as edits do. Measured on ``benchmarks/learn.py
-#: --originals 1`` (16 film looks, 384 px): held-out looks +0.575 to +0.625 (worst photo
-#: -0.169 to -0.076), tuned looks +0.735 to +0.743.
+#: extrapolation, and an edit extrapolates as edits do (``benchmarks/learn.py
+#: --originals 1``: docs/benchmarks.md).
 EDIT_PRIOR_PAIRS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
@@ -558,8 +557,6 @@ class LearnedLook:
 
     def lattice(self, size: int = 33) -> np.ndarray:
         """The map sampled as a (size, size, size, 3) float32 lattice LUT (R slowest)."""
-        from wbcgrade.color.histogram import grid_points
-
         return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
 
 
@@ -1070,8 +1067,6 @@ def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
     [0, 1]."""
     from scipy.ndimage import gaussian_filter
 
-    from wbcgrade.color.histogram import soft_histogram
-
     density = soft_histogram(sources, _SUPPORT_SIZE, weights)
     density = gaussian_filter(density, 1.0, mode="constant") * density.size
     return np.clip(density / PAIR_SUPPORT, 0.0, 1.0)
@@ -1096,7 +1091,6 @@ def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> d
     natural photos hold of each region (:data:`COLOUR_REGIONS`) that the pairs' original
     colours ``sources`` (N, 3, working space) cover (:func:`_support`), in [0, 1]."""
     from wbcgrade.color.colorspace import convert, default_working_space
-    from wbcgrade.color.histogram import grid_points
     from wbcgrade.color.look.set_extraction import natural_palettes
     from wbcgrade.color.presets import styles_in_space
 
@@ -1136,9 +1130,7 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
 
     Returns a :class:`CorrectedLook`, or ``look`` itself when nothing is left to correct.
     """
-    from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
     from wbcgrade.color.io.cache import default_cache_dir
-    from wbcgrade.color.look.family import fit_look_map
     from wbcgrade.color.look.prior import posterior_statistics_look
     from wbcgrade.color.look.set_extraction import (
         MAP_BINS,
