@@ -40,9 +40,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT / "shared" / "data"
-if not SHARED.is_dir():  # a worktree beside the shared folder
-    SHARED = ROOT.parent / "shared" / "data"
+#: the development data: ``shared/data`` in the checkout or in a folder above it (a
+#: worktree beside or below the shared folder)
+SHARED = next((folder / "shared" / "data" for folder in (ROOT, *ROOT.parents)
+               if (folder / "shared" / "data").is_dir()), ROOT / "shared" / "data")
 PHOTOS = SHARED / "photos"
 SAMPLES = ROOT / "samples"
 _RUN = "import sys; from wbcgrade.cli import main; sys.argv[0] = 'wbcgrade'; main()"

@@ -437,6 +437,9 @@ class BarycenterSolver:
                 r = state.pop("r")
                 g = backend.sum_histograms(r)
             grad, r_next = backend.adjoint(it, b_prev, g, r, need_r=l > 0)
+            release = getattr(backend, "release", None)
+            if release is not None:  # its stacks may serve a later recorded step
+                release(it)
             del r, it
             state["grad"] += grad
             if l > 0:
