@@ -24,7 +24,7 @@ __all__ = ["GridGeometry"]
 
 #: Largest scratch array (bytes) a thread keeps between kernel products; larger
 #: products allocate theirs each time (a 64^3 stack of ten histograms is 21 MB).
-_SCRATCH_BYTES = 64 << 20
+_SCRATCH_BYTES = 32 << 20
 _scratch_arrays = threading.local()
 
 
