@@ -113,8 +113,17 @@ class ScalingBackend:
     def release(self, it: Iterate) -> None:
         """The reverse pass is done with ``it``: its ``K b`` and ``phi`` may be reused."""
         for stack in (it.Kb, it.phi):
-            if stack is not None and not any(stack is b for b in self._buffers.values()):
-                self._spare.append(stack)
+            self.recycle(stack)
+
+    def recycle(self, stack: NDArray | None) -> None:
+        """``stack`` (an iterate's array or scalings this backend made) is no longer used
+        by its caller: a later step may write into it. Buffers and arrays already spare
+        are left alone."""
+        if stack is None or stack.shape != self.H.shape or stack.dtype != self.H.dtype \
+                or any(stack is b for b in self._buffers.values()) \
+                or any(stack is b for b in self._spare):
+            return
+        self._spare.append(stack)
 
     def _over_items(self, work) -> None:
         if self.items >= 2 and self.N >= _PARALLEL_BINS:
@@ -145,7 +154,7 @@ class ScalingBackend:
 
     def scalings(self, P: NDArray, phi: NDArray) -> NDArray:
         """``b = P / phi`` (0 where phi vanished), raising Unsafe on overflow."""
-        b = np.empty_like(phi)
+        b = self._fresh()
         P_flat = P.reshape(-1).astype(self.dtype)
         phi_flat, b_flat = phi.reshape(self.S, self.M), b.reshape(self.S, -1)
         overflow = np.zeros(1, dtype=np.int64)
