@@ -34,7 +34,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbcgrade.color.histogram import add_floor, grid_points
+from wbcgrade.color.colorspace import default_working_space
+from wbcgrade.color.histogram import HistogramCache, add_floor, grid_points, resample_histogram
+from wbcgrade.color.io.cache import cache_folder, entry_path, read_entry, write_entry
+from wbcgrade.color.look import prior
+from wbcgrade.color.look import statistics as stats
 from wbcgrade.color.look.family import (
     DEFAULT_KNOTS,
     DEFAULT_SMOOTHNESS,
@@ -46,7 +50,25 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
-from wbcgrade.color.mapping.remap import resample_lattice
+from wbcgrade.color.look.prior import posterior_statistics_look
+from wbcgrade.color.look.statistics import (
+    MONOCHROME_SPREAD,
+    QUANTILES,
+    PaletteStatistics,
+    holds_colour,
+    palette_statistics,
+    statistics_look,
+    tinted_statistics,
+)
+from wbcgrade.color.mapping.remap import monochrome_map, resample_lattice
+from wbcgrade.color.presets import (
+    SHIPPED_NATURALS,
+    StyleSet,
+    load_preset,
+    load_style_folder,
+    styles_in_space,
+)
+from wbcgrade.core import barycenter
 
 __all__ = ["LookResult", "extract_look", "set_look", "set_look_base", "set_look_halves",
            "look_reliability", "set_look_map", "natural_palettes", "load_naturals",
@@ -88,7 +110,6 @@ class LookResult:
     losses : (M,) KL loss of each style's fit at the last round.
     info : diagnostics (JSON-friendly).
     """
-
     look: LookMap
     weights: np.ndarray
     losses: np.ndarray
@@ -120,8 +141,6 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
         (every style's content is the natural palettes' barycenter; ``losses`` NaN).
     progress : called as ``progress(done, total)`` after each style of each round.
     """
-    from wbcgrade.core import barycenter
-
     look = initial or LookMap.identity(knots)
     n_styles = len(styles[fit_bins])
     natural_map = naturals[map_bins]
@@ -178,8 +197,6 @@ _AVERAGE_CONTENTS: dict[str, np.ndarray] = {}
 def _average_content(natural_map: np.ndarray, geometry) -> np.ndarray:
     """The uniform Wasserstein barycenter of the natural palettes (n, b, b, b), computed once."""
     import hashlib
-
-    from wbcgrade.core import barycenter
 
     digest = hashlib.sha1(np.ascontiguousarray(natural_map, dtype=np.float64).tobytes())
     digest.update(repr(natural_map.shape).encode())
@@ -243,9 +260,6 @@ def colour_photos(styles, working_space: str | None = None):
     """The photos of ``styles`` that hold colour (a black-and-white or toned photo says
     nothing of how colourful ungraded content is: a batch of them taken for content made
     a colour look saturate colour photos 2-9 times), or None when none does."""
-    from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.look.statistics import holds_colour, palette_statistics
-
     space = working_space or styles.meta.get("working_space") or default_working_space()
     spread = palette_statistics(styles.at_bins(MAP_BINS), source_bins=styles.bins).spread
     keep = np.flatnonzero(holds_colour(spread, space_scale(space)))
@@ -257,8 +271,6 @@ def colour_photos(styles, working_space: str | None = None):
 def _beside_shipped(own, working_space: str):
     """The shipped palettes in ``working_space`` with ``own`` photos' palettes (those in
     colour: :func:`colour_photos`) beside them."""
-    from wbcgrade.color.presets import styles_in_space
-
     given = len(own.names)  # (black-and-white ones too: the advice counts them as unused)
     own = colour_photos(own, working_space)
     naturals = styles_in_space(natural_palettes(), working_space)
@@ -282,17 +294,9 @@ def load_naturals(natural: str | None, working_space: str):
     ``working_space``."""
     from pathlib import Path
 
-    from wbcgrade.color.presets import (
-        SHIPPED_NATURALS,
-        load_preset,
-        load_style_folder,
-        styles_in_space,
-    )
-
     if natural == SHIPPED_NATURALS:
         natural = None
     if natural is not None and Path(natural).is_dir():
-        from wbcgrade.color.histogram import HistogramCache
 
         # once per process and state of the folder (a batch grades each photo against it)
         try:
@@ -336,8 +340,6 @@ def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     allow it (``wbcgrade/color/data/NATURAL.md`` names them); ``exclude``
     leaves photos out by name (a benchmark holds out the photos it grades).
     """
-    from wbcgrade.color.presets import StyleSet, load_preset
-
     styles = load_preset(_natural_path())
     keep = [i for i, name in enumerate(styles.names) if name not in exclude]
     if len(keep) == len(styles.names):
@@ -426,8 +428,6 @@ _NATURAL_STATISTICS: dict[str, object] = {}
 
 def _prior_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.prior` a set's look depends on."""
-    from wbcgrade.color.look import prior
-
     return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.UNUSUAL_CONTENT,
             prior.DIAGONAL_SHRINK,
             prior.NOISE_DRAWS, prior.JACKKNIFE_GROUPS, prior.PARTS, JACKKNIFE_BINS,
@@ -436,8 +436,6 @@ def _prior_settings() -> tuple:
 
 def statistics_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.statistics` a set's look depends on."""
-    from wbcgrade.color.look import statistics as stats
-
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
             stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
@@ -470,8 +468,6 @@ def natural_statistics(naturals, cache_from=None):
     """:func:`~wbcgrade.color.look.statistics.palette_statistics` of the natural palettes,
     once per process and set of palettes, and kept on disk in the looks' cache folder
     (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
-    from wbcgrade.color.look.statistics import QUANTILES, PaletteStatistics, palette_statistics
-
     key = _palettes_digest(naturals) + repr(statistics_settings())
     if key in _NATURAL_STATISTICS:
         return _NATURAL_STATISTICS[key]
@@ -479,7 +475,6 @@ def natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
-    from wbcgrade.color.io.cache import read_entry, write_entry
 
     found = None
     data = read_entry(path)
@@ -507,15 +502,6 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     ----------
     styles, naturals : StyleSets in one working space.
     """
-    from wbcgrade.color.histogram import resample_histogram
-    from wbcgrade.color.look.prior import posterior_statistics_look
-    from wbcgrade.color.look.statistics import (
-        MONOCHROME_SPREAD,
-        palette_statistics,
-        statistics_look,
-        tinted_statistics,
-    )
-
     natural_stats = natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
     own_count = naturals.meta.get("own_count")  # a half's: the whole own set's number
@@ -529,7 +515,6 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
                                     space_scale=scale)
     if SET_LOOK_RULE == "posterior" and not np.all(style_stats.spread
                                                    < MONOCHROME_SPREAD * scale):
-        from wbcgrade.color.io.cache import cache_folder
 
         average = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), JACKKNIFE_BINS)
         model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
@@ -556,8 +541,6 @@ JACKKNIFE_BINS = 16
 
 def _styles_subset(styles, indices):
     """The styles at ``indices`` as a StyleSet of their own (histograms, space, cache)."""
-    from wbcgrade.color.presets import StyleSet
-
     indices = list(indices)
     meta = {k: v for k, v in styles.meta.items() if k in ("working_space", "cache_dir")}
     return StyleSet([styles.names[i] for i in indices], styles.histograms[indices],
@@ -589,8 +572,6 @@ _OWN_HALVES: dict[tuple, object] = {}
 def _own_half(naturals, own, half: int):
     """``naturals`` with half ``half`` (0, 1) of its own photos, weighed as the whole set
     (``meta["own_count"]``); made once per own set (its digest names the half's)."""
-    from wbcgrade.color.presets import StyleSet
-
     digest = _palettes_digest(own)
     key = (id(naturals), digest, half)
     if key not in _OWN_HALVES or _OWN_HALVES[key][0] is not naturals:
@@ -636,15 +617,11 @@ def _look_cache_path(key: str, styles=None):
     """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
     ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`);
     None when the command said ``--no-cache``."""
-    from wbcgrade.color.io.cache import cache_folder, entry_path
-
     return entry_path(cache_folder(styles), "looks", key)
 
 
 def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
-
-    from wbcgrade.color.io.cache import read_entry
 
     data = read_entry(_look_cache_path(key, styles))  # damaged: removed, extracted again
     try:
@@ -661,8 +638,6 @@ def _read_cached_look(key: str, styles=None) -> LookResult | None:
 def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
-
-    from wbcgrade.color.io.cache import write_entry
 
     write_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
                 knots=result.look.knots, weights=result.weights, losses=result.losses,
@@ -764,8 +739,6 @@ def space_scale(working_space: str) -> float:
     sRGB-encoded one (where :data:`NULL_LOOK_SIZE` was measured): the rms spread of
     the shipped natural palettes' colours there over their spread in sRGB (1 in the
     default space; about 0.5 in ACEScct, which packs sRGB into 0.07-0.55)."""
-    from wbcgrade.color.presets import styles_in_space
-
     def spread(hist: np.ndarray) -> float:
         colors, weights = _histogram_colors(hist)
         mean = weights @ colors / weights.sum()
@@ -815,7 +788,6 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
             "content": content}
     lattice = look.lattice(map_size)
     if extracted.info.get("monochrome"):
-        from wbcgrade.color.mapping.remap import monochrome_map
 
         lattice = monochrome_map(lattice)
     return lattice, info
