@@ -151,7 +151,6 @@ KNOWN_IMPORTS_INSIDE_FUNCTIONS = {
     "wbcgrade.color.grade.builders": 1,
     # the look package (its owner's to move)
     "wbcgrade.color.look.builder": 3, "wbcgrade.color.look.family": 3,
-    "wbcgrade.color.look.learn": 37,
     "wbcgrade.color.look.scene": 4, "wbcgrade.color.look.scene_fit": 4,
     # the core (a contract; its compiled kernels load on first use)
     "wbcgrade.core._cpu": 1, "wbcgrade.core.losses": 3,

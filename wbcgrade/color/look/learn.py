@@ -54,9 +54,45 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade._publish import plan_outputs, publish_bytes
+from wbcgrade.color._colour import colour
+from wbcgrade.color.colorspace import (
+    SYCC_LUMA,
+    ColorEncoding,
+    convert,
+    default_working_space,
+    resolve_space,
+)
+from wbcgrade.color.grade.grading import Grade
+from wbcgrade.color.grade.saved_grade import look_dict
 from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
+from wbcgrade.color.io.cache import default_cache_dir
+from wbcgrade.color.io.images import image_extensions, read_image
+from wbcgrade.color.io.raw import RAW_SUFFIXES, RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.edits import fit_edit
 from wbcgrade.color.look.family import fit_look_map
+from wbcgrade.color.look.prior import posterior_statistics_look
+from wbcgrade.color.look.scene import (
+    SceneImage,
+    SceneMatch,
+    colour_pairs,
+    match_scene,
+    scene_image,
+    shrink_colors,
+)
+from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look, interpolate_lattice
+from wbcgrade.color.look.set_extraction import (
+    MAP_BINS,
+    natural_palettes,
+    natural_statistics,
+    space_scale,
+)
+from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
+from wbcgrade.color.mapping.lut import check_lut_size, write_grade_lut
+from wbcgrade.color.mapping.remap import TONE_LUMA, to_monochrome
+from wbcgrade.color.outcome import SavedFrom
+from wbcgrade.color.presets import styles_in_space
+from wbcgrade.core import fast_cpu
 from wbcgrade.errors import InputError, OptionError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
@@ -143,15 +179,12 @@ _FLAT = 0.7
 @dataclass(frozen=True)
 class PairFiles:
     """A photo and its edited version: ``name`` (the stem), ``before``, ``after``."""
-
     name: str
     before: Path
     after: Path
 
 
 def _image_files(folder: Path) -> list[Path]:
-    from wbcgrade.color.io.images import image_extensions
-    from wbcgrade.color.io.raw import RAW_SUFFIXES
 
     exts = image_extensions() | RAW_SUFFIXES
     return sorted(p for p in folder.iterdir()
@@ -167,7 +200,6 @@ def _pair_key(path: Path, edited: bool) -> str:
 
 #: Which of several files sharing a stem is taken: raw first, then lossless, then the rest.
 def _preference(path: Path) -> tuple[int, str]:
-    from wbcgrade.color.io.raw import is_raw
 
     suffix = path.suffix.lower()
     rank = 0 if is_raw(path) else 1 if suffix in (".tif", ".tiff", ".exr", ".png", ".dng") \
@@ -195,7 +227,6 @@ class FileMatch:
     edits_alone : edited photos whose original is not there (evidence of the look too).
     problems : (name, reason) of originals without an edit and of stems several files share.
     """
-
     pairs: list[PairFiles]
     edits_alone: list[Path]
     problems: list[tuple[str, str]]
@@ -265,9 +296,6 @@ def match_files(before: str | os.PathLike, after: str | os.PathLike) -> FileMatc
 def learn_space(pairs: Sequence[PairFiles], working_space: str | None = None) -> str:
     """The working space the look is learned in: ``working_space``, else ACEScct when an
     original is a raw file (the space a raw photo is graded in), else sRGB-encoded Rec.709."""
-    from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
-
     if working_space:
         return resolve_space(working_space, "spaces.working")
     if any(is_raw(p.before) for p in pairs):
@@ -288,7 +316,6 @@ class PairImages:
     toned : whether the after is toned, not black and white (:data:`TONED_SPREAD`);
         None when the original holds too little colour to tell.
     """
-
     name: str
     before: np.ndarray
     after: np.ndarray
@@ -298,10 +325,6 @@ class PairImages:
 
 def _read_small(path: Path, working: str) -> np.ndarray:
     """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.io.images import read_image
-    from wbcgrade.color.look.scene import shrink_colors
-
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working)
     small = shrink_colors(image.rgb(), LEARN_SIZE)
@@ -333,8 +356,6 @@ def _tint_spread(image: np.ndarray) -> float:
     another lightness's tint); all pixels when under a tenth are flat. (h, w, 3) image."""
     import cv2
 
-    from wbcgrade.color.mapping.remap import TONE_LUMA
-
     image = np.asarray(image, dtype=np.float32)
     luma = image @ TONE_LUMA.astype(np.float32)
     kernel = np.ones((3, 3), np.uint8)
@@ -354,8 +375,6 @@ def _band_tints(colours: np.ndarray, weights: np.ndarray
 
     Returns (each colour's band (N,), each band's mean luma (B,), each band's mean tint
     (B, 3)); a band with no weight has luma NaN and tint 0."""
-    from wbcgrade.color.mapping.remap import TONE_LUMA
-
     luma = colours @ TONE_LUMA
     band = np.clip((luma * _TONE_BANDS).astype(np.intp), 0, _TONE_BANDS - 1)
     mass = np.bincount(band, weights, minlength=_TONE_BANDS)
@@ -383,14 +402,12 @@ class Registration:
         or "keypoints (N agree)".
     coverage : share of the original the after covers.
     """
-
     homography: np.ndarray
     how: str
     coverage: float
 
 
 def _luma(colors: np.ndarray) -> np.ndarray:
-    from wbcgrade.color.colorspace import SYCC_LUMA
 
     return np.asarray(colors, np.float32) @ np.float32(SYCC_LUMA)
 
@@ -426,8 +443,6 @@ def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
     (at :data:`_CHECK_SIZE`), phase correlation finds no shift on most textured ones."""
     import cv2
 
-    from wbcgrade.color.look.scene import shrink_colors
-
     a = shrink_colors(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     b = shrink_colors(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     h, w = a.shape
@@ -457,8 +472,6 @@ def register_pair(images: PairImages) -> Registration | None:
     and a homography (:func:`wbcgrade.color.look.scene.match_scene`: crops,
     resized crops, turns).
     """
-    from wbcgrade.color.look.scene import match_scene, scene_image
-
     before, after = images.before, images.after
     aspect = before.shape[1] / before.shape[0]
     for turns in range(4):
@@ -500,8 +513,6 @@ def pair_colours(images: PairImages, registration: Registration,
     original, shrunk to the after's sharpness, is resampled onto them instead (Ektar 100
     learned from resized and cropped afters, ``benchmarks/learn.py``: +0.780 the other
     way, +0.798 so, against +0.841 from the afters as they were)."""
-    from wbcgrade.color.look.scene import SceneImage, SceneMatch, colour_pairs, shrink_colors
-
     before, homography = images.before, registration.homography
     h = homography / homography[2, 2]
     magnified = float(np.sqrt(abs(np.linalg.det(h[:2, :2]))))
@@ -534,7 +545,6 @@ class LearnedLook:
         output's luma plus the afters' mean tint at that luma
         (:func:`wbcgrade.color.mapping.remap.to_monochrome`); None otherwise.
     """
-
     look: object
     monochrome: bool = False
     toning: tuple[np.ndarray, np.ndarray] | None = None
@@ -546,8 +556,6 @@ class LearnedLook:
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
-        from wbcgrade.color.mapping.remap import to_monochrome
-
         out = self.look(rgb)
         if self.monochrome:
             out = np.repeat(out.mean(axis=-1, keepdims=True), 3, axis=-1)
@@ -587,9 +595,6 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
     say little (default no look; :func:`_edit_prior`).
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
-    from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look
-    from wbcgrade.core import fast_cpu
-
     sources, targets, weights = _pooled(parts)
     start = None if robust is None else np.concatenate(list(robust))
     look, final = fit_pairs_look(sources, targets, weights, prior, rounds=rounds,
@@ -609,8 +614,6 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
 
 def _delta_e(colors: np.ndarray, truth: np.ndarray, encoding) -> np.ndarray:
     """(N,) CIEDE2000 between two lists of working-space colours (shown as sRGB, D65)."""
-    from wbcgrade.color._colour import colour
-
     d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
 
     def lab(rgb: np.ndarray) -> np.ndarray:
@@ -641,7 +644,6 @@ class PairReport:
     edited_share : share of the pair's pixels the robust fit left out (local edits).
     warning : why the pair disagrees with the others, or None.
     """
-
     name: str
     before: str
     after: str
@@ -677,7 +679,6 @@ class LearnResult:
     folds : folds of the held-out check (0: one pair, none).
     seconds : time taken.
     """
-
     look: LearnedLook | None
     pairs: list[PairReport]
     problems: list[tuple[str, str]]
@@ -758,8 +759,6 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     :class:`LearnResult`; its ``look`` is None when no pair was usable.
     """
     import time
-
-    from wbcgrade.color.colorspace import ColorEncoding
 
     start = time.perf_counter()
     warn = warn or (lambda message: None)
@@ -868,8 +867,6 @@ def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray)
     median distance. Pixels on edges and texture (``weights`` below :data:`_FLAT`, as
     :func:`wbcgrade.color.look.scene.colour_pairs` gives them) are not counted: a look applied
     before or after resizing differs there."""
-    from wbcgrade.color.look.scene_fit import fit_pairs_look
-
     own, _ = fit_pairs_look(sources, targets, weights, rounds=2, correct=False)
     distance = np.linalg.norm(own(sources) - targets, axis=1)
     flat = weights >= _FLAT
@@ -935,11 +932,6 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
         The paths do not pair, or no pair is usable (each pair's reason went to
         ``warn`` first).
     """
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grade.grading import Grade
-    from wbcgrade.color.mapping.lut import check_lut_size
-    from wbcgrade.color.outcome import SavedFrom
-
     check_lut_size(lut_size)
     matched = match_files(before, after)
     pairs, problems = matched.pairs, matched.problems
@@ -989,11 +981,6 @@ def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
         usable (each pair's reason went to ``warn`` first).
     """
     from dataclasses import replace as replaced
-
-    from wbcgrade._publish import plan_outputs, publish_bytes
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grade.saved_grade import look_dict
-    from wbcgrade.color.mapping.lut import check_lut_size, write_grade_lut
 
     output = Path(output)
     kind = _output_kind(output)
@@ -1047,13 +1034,11 @@ class CorrectedLook:
     ``y + (1 - support(y)) * (residual(y) - y)`` with ``y = look(x)``: ``residual`` a
     smooth map, ``support`` in [0, 1] how well the pairs' edited colours cover ``y``.
     """
-
     look: object
     residual: object
     support: np.ndarray
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
-        from wbcgrade.color.look.scene_fit import interpolate_lattice
 
         rgb = np.asarray(rgb, dtype=np.float64)
         mapped = np.asarray(self.look(rgb.reshape(-1, 3)), dtype=np.float64)
@@ -1090,10 +1075,6 @@ def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> d
     """How sure the pairs make the look, region by region of colour: the share of what
     natural photos hold of each region (:data:`COLOUR_REGIONS`) that the pairs' original
     colours ``sources`` (N, 3, working space) cover (:func:`_support`), in [0, 1]."""
-    from wbcgrade.color.colorspace import convert, default_working_space
-    from wbcgrade.color.look.set_extraction import natural_palettes
-    from wbcgrade.color.presets import styles_in_space
-
     support = _support(sources, weights).ravel()
     natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
     density = natural.mean(axis=0).ravel()
@@ -1130,17 +1111,6 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
 
     Returns a :class:`CorrectedLook`, or ``look`` itself when nothing is left to correct.
     """
-    from wbcgrade.color.io.cache import default_cache_dir
-    from wbcgrade.color.look.prior import posterior_statistics_look
-    from wbcgrade.color.look.set_extraction import (
-        MAP_BINS,
-        natural_palettes,
-        natural_statistics,
-        space_scale,
-    )
-    from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
-    from wbcgrade.color.presets import styles_in_space
-
     bins = MAP_BINS
     naturals = styles_in_space(natural_palettes(), working)
     points = grid_points(bins)
