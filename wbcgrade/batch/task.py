@@ -61,6 +61,8 @@ class BatchContext:
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
     encode : JPEG/WebP quality and bit depth of the outputs.
+    setting_names : how the command names the library's settings (setting -> flag) in what the
+        records say (:attr:`wbcgrade.photos.progress.Progress.setting_names`); None: as the library.
     """
 
     styles: StyleSet
@@ -76,6 +78,7 @@ class BatchContext:
     #: the command's cache (``cache.command_cache``), for the workers' own caches
     cache: tuple[Path, bool] = field(default_factory=command_cache)
     encode: WriteOptions = WriteOptions()
+    setting_names: dict[str, str] | None = None
 
 
 def run_task(task: BatchTask, context: BatchContext,
@@ -87,6 +90,8 @@ def run_task(task: BatchTask, context: BatchContext,
     KeyboardInterrupt (and SystemExit) propagate.
     """
     start = time.perf_counter()
+    if progress is None and context.setting_names is not None:  # a worker: the command's words
+        progress = Progress(setting_names=context.setting_names)
     starting = getattr(progress, "photo", None)  # a batch's progress names the photo
     if starting is not None:
         starting(task.relative)
@@ -124,13 +129,19 @@ def run_task(task: BatchTask, context: BatchContext,
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
-        result.error = first_line(exc)
+        result.error = first_line(_in_words(exc, context.setting_names))
         result.status = "failed"
     except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
         result.error = f"internal error ({type(exc).__name__}: {first_line(exc)})"
         result.status = "failed"
     result.timings["total"] = time.perf_counter() - start
     return result
+
+
+def _in_words(exc: BaseException, names: dict[str, str] | None) -> object:
+    """An error's message with the settings it names written as ``names`` says."""
+    worded = getattr(exc, "worded", None)
+    return exc if worded is None or names is None else worded(names)
 
 
 def lost_task(task: BatchTask, reason: str) -> FileResult:
@@ -150,7 +161,7 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
         encoded, _ = encoding.encode(image.rgb(), image.is_float)
         return photo_histograms(encoded, options, image.alpha())
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
-        return first_line(exc)
+        return first_line(_in_words(exc, context.setting_names))
     except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
         return f"internal error ({type(exc).__name__}: {first_line(exc)})"
 

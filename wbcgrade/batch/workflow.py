@@ -121,7 +121,9 @@ def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: b
          encode=None) -> BatchResult:
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite,
-                           replace_sheets=write_outputs and own_report(report_dir))
+                           replace_sheets=write_outputs and own_report(report_dir),
+                           setting_names=None if progress.setting_names is None
+                           else dict(progress.setting_names))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
         context.shared, context.shared_fit = look, look_fit(look)
     if encode is not None:
@@ -288,7 +290,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
             # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
-            encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+            encoding = ColorEncoding.of(options.spaces.input,
+                                        options.spaces.working).named(progress.setting_names)
             result.lut = write_checked_lut(lut, lut_format, grade, encoding, lut_size,
                                            title=f"wbcgrade series {Path(in_dir).name}",
                                            comments=[f"wbcgrade series grade of {in_dir}: "

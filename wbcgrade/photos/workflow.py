@@ -24,7 +24,7 @@ import contextlib
 import os
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -199,14 +199,12 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     start = time.perf_counter()
     image = read_image(photo)
     rgb = image.rgb()
-    encoding = ColorEncoding.for_image(image, options.spaces.input, options.spaces.working)
+    encoding = ColorEncoding.for_image(image, options.spaces.input,
+                                       options.spaces.working).named(progress.setting_names)
     encoded = encoding.encode(rgb, image.is_float)
     timings["read"] = time.perf_counter() - start
     fit = None
     if shared is not None:  # what the shared (series or saved) grade does to this photo
-        from dataclasses import replace
-
-
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
@@ -217,6 +215,8 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
         # what the grade's own stages leave out: the histograms, the look, the outcome
         timings["grade"] = max(0.0, time.perf_counter() - start
                                - sum(v for k, v in grade.timings.items() if k != "total"))
+    if grade.outcome is not None and progress.setting_names is not None:  # the command's words
+        grade = replace(grade, outcome=grade.outcome.named(progress.setting_names))
     progress.say("remap")
     start = time.perf_counter()
     owned = not np.shares_memory(encoded[0], image.pixels)  # converted: a copy of ours
@@ -321,8 +321,6 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     if saved:
         spaces = options.spaces
         if spaces.working != source.working:
-            from dataclasses import replace
-
             options = replace(options, spaces=replace(spaces, working=source.working))
         report = grade_file(plan, look_styles(source), options, shared=source,
                             progress=progress, keep_input=False)

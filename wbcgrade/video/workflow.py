@@ -551,7 +551,7 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     timings = dict(timings or {})
     start = time.perf_counter()
     info = probe(source)
-    encoding = clip_encoding(info, options.spaces)
+    encoding = clip_encoding(info, options.spaces).named(progress.setting_names)
     styles = styles_in_space(styles, encoding.working)
     options.check_styles(len(styles.names))
     frames = progress.frames
@@ -579,6 +579,8 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
         else:
             grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options,
                                     encoding, progress.fit, progress.stage)
+        if grade.outcome is not None:  # in the command's words
+            grade = replace(grade, outcome=grade.outcome.named(progress.setting_names))
         table = grade.lut(settings.lut_size, encoding)
         shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
     timings["grade"] = time.perf_counter() - t0

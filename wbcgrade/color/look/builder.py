@@ -1,4 +1,4 @@
-"""The "look" map builder (``--mode look``, the default grade): the set's look,
+"""The "look" map builder (``map.builder`` "look", the default grade): the set's look,
 moved towards the photo's own scene by how sure it is that a style shows it.
 
 :func:`look_map` is the builder the grade path calls

@@ -430,7 +430,7 @@ def matching_hook(source, options, photos: Sequence[str | os.PathLike] = ()
     GradeOptions: look mode, no fixed weights); else None (nothing to prepare): a preset,
     a palette grade, no folder of at most ``_IN_MEMORY_MAX`` photos, or photos all graded
     in another working space than the styles are read in (raw files, without
-    ``--working-space``: ACEScct)."""
+    ``spaces.working``: ACEScct)."""
     from wbcgrade.color.colorspace import default_working_space, resolve_space
     from wbcgrade.color.io.raw import is_raw
 
