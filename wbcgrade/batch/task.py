@@ -48,10 +48,10 @@ class BatchContext:
 
     Attributes
     ----------
-    styles : the style set.
+    styles : the style set (None with a saved grade: ``shared`` is it).
     options : grading options.
-    shared : the series grade (``--consistent``), or None for one fit per photo.
-    shared_fit : its weights and single-style losses.
+    shared : the series grade or a saved grade, or None for one fit per photo.
+    shared_fit : the series grade's weights and single-style losses (None for a saved one).
     sheet_dir : write a PNG sheet per photo here (None: no sheets).
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
@@ -65,7 +65,7 @@ class BatchContext:
         records say (:attr:`wbcgrade.photos.progress.Progress.setting_names`); None: as the library.
     """
 
-    styles: StyleSet
+    styles: StyleSet | None
     options: GradeOptions
     shared: Grade | None = None
     shared_fit: FitSummary | None = None
@@ -79,6 +79,11 @@ class BatchContext:
     cache: tuple[Path, bool] = field(default_factory=command_cache)
     encode: WriteOptions = WriteOptions()
     setting_names: dict[str, str] | None = None
+
+    @property
+    def style_names(self) -> list[str]:
+        """The styles' names (a saved grade's own names)."""
+        return list(self.styles.names if self.styles is not None else self.shared.names)
 
 
 def run_task(task: BatchTask, context: BatchContext,
@@ -109,11 +114,16 @@ def run_task(task: BatchTask, context: BatchContext,
         report = grade_file(plan, context.styles, context.options, shared=context.shared,
                             progress=progress)
         fit = report.fit if report.fit is not None else context.shared_fit
-        result.names = list(context.styles.names)
-        result.weights = [float(w) for w in fit.weights]
-        result.loss = float(fit.loss)
-        result.vertex_losses = [float(v) for v in fit.vertex_losses]
-        result.start = fit.start
+        result.names = context.style_names
+        if fit is None:  # a saved grade: its own weights, nothing fitted
+            result.weights = [float(w) for w in report.grade.weights]
+            result.loss = float(report.grade.loss or 0.0)
+            result.start = report.fit_start.value
+        else:
+            result.weights = [float(w) for w in fit.weights]
+            result.loss = float(fit.loss)
+            result.vertex_losses = [float(v) for v in fit.vertex_losses]
+            result.start = fit.start
         result.timings = dict(report.timings)
         result.color = report.color
         result.own_style = report.grade.own_style

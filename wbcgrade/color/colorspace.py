@@ -74,6 +74,7 @@ __all__ = [
     "SHORT_ALIASES",
     "config_path",
     "config_info",
+    "config_line",
     "space_names",
     "resolve_space",
     "canonical",
@@ -442,6 +443,14 @@ def config_info() -> dict:
             "ocio_config_name": _config_name(config_path(), version),
             "ocio_version": version,
             "openimageio_version": getattr(oiio, "VERSION_STRING", "")}
+
+
+def config_line() -> str:
+    """The config in use and OpenColorIO's version, as a LUT's header names them."""
+    import OpenImageIO as oiio
+
+    return (f"OpenColorIO config: {config_path()} "
+            f"(OpenColorIO {oiio.get_string_attribute('opencolorio_version')})")
 
 
 @functools.lru_cache(maxsize=4)

@@ -371,7 +371,7 @@ def _text(words: str | None) -> str | None:
     return None if words is None else str(words)
 
 
-#: The set look's counts of the user's own photos (``grade.info["look"]``) that the advice
+#: The set look's counts of the user's own photos (``LookFound``) that the advice
 #: for a faint grade reads from ``GradeOutcome.extra``.
 OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
 

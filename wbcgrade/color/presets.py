@@ -61,6 +61,7 @@ from wbcgrade.color.histogram import (
     soft_histogram,
     to_sparse,
 )
+from wbcgrade.color.io.cache import command_cache
 from wbcgrade.color.io.images import header_pixels, read_image
 from wbcgrade.color.io.preset_names import (
     RETIRED_PRESETS,
@@ -152,6 +153,16 @@ class StyleSet:
     def look(self) -> np.ndarray | None:
         """(m, m, m, 3) the look a preset was made with (its own lattice), or None."""
         return self.meta.get("look")
+
+    def cache_folder(self) -> Path | None:
+        """Where what is computed from the set is cached: the folder it was read with (None:
+        the command turned caching off), else the command's
+        (:func:`wbcgrade.color.io.cache.command_cache`; None when caching is off)."""
+        if "cache_dir" not in self.meta:
+            folder, enabled = command_cache()
+            return folder if enabled else None
+        folder = self.meta["cache_dir"]
+        return None if folder is None else Path(folder)
 
     @property
     def converted_from(self) -> str | None:

@@ -291,7 +291,7 @@ class Session:
         color_map, blend = strengthened(grade.color_map, strength)
         grade = replace(grade, color_map=np.asarray(color_map, dtype=np.float32),
                         strength=blend)
-        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "look", strength)
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], strength)
         return replace(grade, outcome=outcome.named(self.setting_names))
 
     def palette_grade(self, color_map: np.ndarray, settings: Settings):
@@ -304,7 +304,7 @@ class Session:
                       color_map=np.asarray(color_map, dtype=np.float32),
                       working=self.encoding.working, strength=blend)
         fit = FitSummary(grade.weights, 0.0, np.zeros(0), "given")
-        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "palette",
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins],
                                 settings.strength)
         return replace(grade, outcome=outcome.named(self.setting_names))
 

@@ -16,7 +16,7 @@ import numpy as np
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grade.grading import Grade
 from wbcgrade.color.io.images import Image
-from wbcgrade.color.outcome import FitStart
+from wbcgrade.color.outcome import FitStart, GradeSource
 from wbcgrade.color.palette.fit import FitSummary
 
 __all__ = ["PhotoGrade", "GradeReport"]
@@ -55,7 +55,7 @@ class GradeReport:
     output: Path | None
     lut: Path | None
     grade: Grade
-    styles_source: str
+    styles_source: str  # the style folder or preset, or a saved grade's file
     graded: PhotoGrade
     timings: dict[str, float] = field(default_factory=dict)
     fit: FitSummary | None = None
@@ -67,7 +67,9 @@ class GradeReport:
         fit's UNIFORM, VERTEX_REFIT, VERTEX or GIVEN; the look builder's PRESET, SCENE or
         LOOK; SAVED for a saved grade; SHARED for a series' grade whose fit
         the caller holds)."""
-        return self.fit.fit_start if self.fit is not None else FitStart.SHARED
+        if self.fit is not None:
+            return self.fit.fit_start
+        return FitStart.SAVED if self.grade.source is GradeSource.SAVED else FitStart.SHARED
 
     @property
     def color(self) -> dict:

@@ -13,15 +13,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from wbcgrade.color.grade.builders import BuiltMap, MapRequest, palette_map
+from wbcgrade.color.grade.builders import BuiltMap, LookFound, MapRequest, palette_map
+from wbcgrade.color.histogram import resample_histogram
 from wbcgrade.color.look.family import LookMap
+from wbcgrade.color.look.scene import has_style_images
 from wbcgrade.color.look.scene_fit import PhotoLook, find_scene_look, photo_look
 from wbcgrade.color.look.set_extraction import MAP_BINS, load_naturals, set_look_base
-from wbcgrade.color.mapping.remap import monochrome_map
+from wbcgrade.color.mapping.remap import monochrome_map, resample_lattice
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import GradeSource
 from wbcgrade.color.palette.fit import FitSummary
 
-__all__ = ["look_map", "look_color_map"]
+__all__ = ["look_map", "look_color_map", "look_found"]
 
 #: The per-photo correction towards the photo's own scene (when a style shows
 #: it): the palette grade with this loss and relaxation (benchmarks/look.py,
@@ -32,7 +35,8 @@ SCENE_RELAXATION = 0.01
 
 
 def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
-                   set_strength: float | None = None) -> tuple[LookMap, PhotoLook, dict]:
+                   set_strength: float | None = None
+                   ) -> tuple[LookMap, PhotoLook, dict, LookFound, bool]:
     """The set's look and how sure it is that a style shows the photo's own scene.
 
     Parameters
@@ -47,9 +51,9 @@ def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
         None: its reliability on the photo's colours, :func:`set_look_base`).
     photo : the :class:`PhotoLook` (match, confidence, residuals).
     info : JSON-friendly diagnostics.
+    found : what the grade's outcome needs of it (:class:`LookFound`).
+    monochrome : every style photo is black and white (or toned).
     """
-    from wbcgrade.color.histogram import resample_histogram
-
     base, extracted, set_strength = set_look_base(styles, naturals, set_strength, photo_hist)
     photo = photo_look(resample_histogram(photo_hist, MAP_BINS), styles.at_bins(MAP_BINS), base)
     info = {"look": {"set_amplitude": extracted.look.amplitude(),
@@ -59,7 +63,21 @@ def look_color_map(photo_hist: np.ndarray, styles, naturals=None,
                      "overlap": photo.overlap,
                      "residuals": [float(r) for r in photo.residuals],
                      **extracted.info}}
-    return base, photo, info
+    found = look_found(extracted, set_strength, styles.names[photo.match], photo.confidence)
+    return base, photo, info, found, bool(extracted.info.get("monochrome"))
+
+
+def look_found(extracted, set_strength: float, match: str | None,
+               confidence: float) -> LookFound:
+    """The typed findings of a set's look (``extracted``: its
+    :class:`~wbcgrade.color.look.set_extraction.LookResult`) for the grade's outcome."""
+    info = extracted.info
+    probability = info.get("probability") if info.get("rule") == "posterior" else None
+    return LookFound(float(set_strength), match, float(confidence or 0.0),
+                     shrunk=info.get("method") == "statistics",
+                     probability=None if probability is None else float(probability),
+                     own_photos=int(info.get("own_photos") or 0),
+                     own_photos_unused=int(info.get("own_photos_unused") or 0))
 
 
 #: Nodes per axis (at least) of a preset's look converted into another working space
@@ -79,14 +97,10 @@ def look_map(request: MapRequest) -> BuiltMap:
     sure it is that a style shows the photo's own scene. Fixed weights
     (``fit.weights``) give the palette grade.
     """
-    from wbcgrade.color.look.scene import has_style_images
-
     options, styles, say = request.options, request.styles, request.stage
     if options.fit.weights is not None:
         return palette_map(request)
     if styles.look is not None:  # a preset made with a known look: that look
-        from wbcgrade.color.mapping.remap import resample_lattice
-
         n_styles = len(styles.names)
         fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
                          {"start": "preset", "look": "the preset's own"}, 0.0)
@@ -94,7 +108,7 @@ def look_map(request: MapRequest) -> BuiltMap:
         if styles.converted_from:  # converted from the preset's own space: finer,
             size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
         return BuiltMap(resample_lattice(styles.look, size), None,
-                        {"look": {"source": "preset"}}, {}, fit)
+                        {"look": {"source": "preset"}}, {}, fit, GradeSource.PRESET_LOOK)
     timings: dict[str, float] = {}
     start = time.perf_counter()
     say("histograms")
@@ -133,7 +147,9 @@ def look_map(request: MapRequest) -> BuiltMap:
             fit = FitSummary(weights, scene.residual, alone, "scene",
                              {"start": "scene", "match": styles.names[best],
                               "confidence": scene.confidence}, sum(timings.values()))
-            return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit)
+            return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit,
+                            GradeSource.OWN_SCENE,
+                            look_found(extracted, strength, styles.names[best], scene.confidence))
         if has_style_images(styles):
             # the style photos were looked at and none shows this scene: the set's look
             # (a palette that merely resembles the photo's is no better sign of its scene)
@@ -145,15 +161,15 @@ def look_map(request: MapRequest) -> BuiltMap:
                              "look", {"start": "look", "match": None, "confidence": 0.0},
                              sum(timings.values()))
             return BuiltMap(_as_set_look(base.lattice(options.map.size), extracted), None, info,
-                            timings, fit)
+                            timings, fit, GradeSource.SET_LOOK,
+                            look_found(extracted, strength, None, 0.0))
         start = time.perf_counter()
-    base, photo, info = look_color_map(photo_hist, styles, naturals)
+    base, photo, info, found, monochrome = look_color_map(photo_hist, styles, naturals)
     timings["look"] = timings.get("look", 0.0) + time.perf_counter() - start
     confidence = photo.confidence
     weights = np.full(n_styles, 1.0 / n_styles)
     color_map = base.lattice(options.map.size)
-    fit_info: dict = {"start": "look", "match": info["look"]["match"],
-                      "confidence": confidence}
+    fit_info: dict = {"start": "look", "match": found.match, "confidence": confidence}
     if confidence > 0:
         scene_options = GradeOptions(
             replace(options.fit, loss=SCENE_LOSS),
@@ -175,9 +191,9 @@ def look_map(request: MapRequest) -> BuiltMap:
         info.update({k: v for k, v in scene.info.items() if k != "fit"})
     fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
                      fit_info, sum(timings.values()))
-    if info["look"].get("monochrome"):
+    if monochrome:
         color_map = monochrome_map(color_map)
-    return BuiltMap(color_map, None, info, timings, fit)
+    return BuiltMap(color_map, None, info, timings, fit, GradeSource.SET_LOOK, found)
 
 
 def _as_set_look(color_map: np.ndarray, extracted) -> np.ndarray:

@@ -38,8 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.colorspace import SYCC_LUMA
+from wbcgrade.color.colorspace import (
+    SYCC_LUMA,
+    ColorEncoding,
+    default_working_space,
+    resolve_space,
+)
 from wbcgrade.color.io.cache import cache_folder, entry_path, file_key, read_entry, write_entry
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.io.raw import is_raw
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
@@ -350,8 +357,6 @@ def _write_cached(path: Path | None, image: SceneImage) -> None:
 
 def _read_style(path: Path, working_space: str) -> SceneImage:
     """A style photo from its file, in the working space, prepared for matching."""
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.io.images import read_image
 
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working_space)
@@ -431,8 +436,6 @@ def matching_hook(source, options, photos: Sequence[str | os.PathLike] = ()
     a palette grade, no folder of at most ``_IN_MEMORY_MAX`` photos, or photos all graded
     in another working space than the styles are read in (raw files, without
     ``spaces.working``: ACEScct)."""
-    from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.io.raw import is_raw
 
     if (source.style_dir is None or options.map.builder != "look"
             or options.fit.weights is not None):

@@ -25,7 +25,17 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
+from wbcgrade.color.look.scene import (
+    colour_pairs,
+    match_scene,
+    mirrored,
+    scene_image,
+    style_scene_images,
+    unmirror,
+)
 from wbcgrade.color.mapping.remap import interpolate_lattice
+from wbcgrade.color.palette.smooth_map import interpolation_matrix
+from wbcgrade.core import fast_cpu
 
 __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_scene_look",
            "find_scene_look", "fit_correction", "fit_pairs_look"]
@@ -214,7 +224,6 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.palette.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
     interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
@@ -268,7 +277,6 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
 
     Returns None when no style shows the scene.
     """
-    from wbcgrade.color.look.scene import colour_pairs, match_scene, mirrored, unmirror
 
     prior = prior or LookMap.identity()
     matches = {}
@@ -330,7 +338,6 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     look : :class:`SceneLook` (no matches, confidence 1).
     robust : (N,) the final robust weights.
     """
-    from wbcgrade.core import fast_cpu
 
     prior = prior or LookMap.identity()
     look, robust = prior, (weights if robust is None else robust)
@@ -359,7 +366,6 @@ def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = No
         (:func:`~wbcgrade.color.look.scene.style_scene_images`); a preset has none.
     prior : what colours absent from every overlap get (default identity).
     """
-    from wbcgrade.color.look.scene import scene_image, style_scene_images
 
     style_images = style_scene_images(styles, progress)
     if not any(image is not None for image in style_images):
