@@ -220,8 +220,7 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
 
 
 #: Photos a folder's histograms are read from at once, at most (threads: decoding, colour
-#: conversion and binning release the GIL). Twelve 16-megapixel JPEGs on a 2-core machine:
-#: 4.6 s one at a time, 3.0 s two at once.
+#: conversion and binning release the GIL; docs/benchmarks.md).
 READ_THREADS = 4
 #: Megapixels of photos decoded at once, at most (a bigger photo is read alone): each holds
 #: its pixels and their working-space copy while it is read (16 MP: ~0.5 GB, in ACEScct

@@ -244,10 +244,10 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
     """A photo as a sheet shows it: display sRGB, fitting in ``max_h`` x ``max_w``.
 
     A JPEG without an ICC profile (sRGB) is decoded at a fraction of its size (the
-    decoder's DCT scaling: a 16-megapixel photo in 0.03 s instead of 0.3 s, and no
-    full-size arrays) and resized in 8 bits (the sheet is 8-bit); any other file is read as
-    ``apply`` reads it and made small before its colours are converted. Raises OSError or
-    ValueError (InputError) when the file cannot be read."""
+    decoder's DCT scaling: a tenth of the time, and no full-size arrays) and resized in 8
+    bits (the sheet is 8-bit); any other file is read as ``apply`` reads it and made small
+    before its colours are converted. Raises OSError or ValueError (InputError) when the
+    file cannot be read."""
     from PIL import ExifTags, ImageOps
     from PIL import Image as PILImage
 

@@ -27,9 +27,8 @@ from wbcgrade.color.palette.fit import FitSummary
 __all__ = ["look_map", "look_color_map", "look_found"]
 
 #: The per-photo correction towards the photo's own scene (when a style shows
-#: it): the palette grade with this loss and relaxation (benchmarks/look.py,
-#: shot matching: KL with rho = 0.01 recovers +0.33 against -0.05 for the
-#: quadratic, balanced fit).
+#: it): the palette grade with this loss and relaxation, which recover the scene's look
+#: where the quadratic, balanced fit does not (docs/benchmarks.md).
 SCENE_LOSS = "kl"
 SCENE_RELAXATION = 0.01
 
@@ -81,9 +80,8 @@ def look_found(extracted, set_strength: float, match: str | None,
 
 
 #: Nodes per axis (at least) of a preset's look converted into another working space
-#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills 0.07-0.55 of ACEScct's
-#: cube, where 33 nodes left a JPEG graded in ACEScct 1.2/255 from the sRGB grade on
-#: average (99th percentile 8.5), 65 nodes 0.36 (3.8) (kodak-2383 on samples/coffee.jpg).
+#: (:func:`wbcgrade.color.presets.look_in_space`): sRGB fills about half of ACEScct's
+#: cube, so the lattice needs more nodes there (docs/benchmarks.md).
 CONVERTED_LOOK_SIZE = 65
 
 

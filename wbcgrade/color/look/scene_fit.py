@@ -127,8 +127,8 @@ class PhotoLook:
 UNSURE_RATIO = 0.75
 SURE_RATIO = 0.35
 #: Overlap of the mapped photo's palette with the match's at or below which the
-#: match is not the photo's scene, and at or above which it surely is
-#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
+#: match is not the photo's scene, and at or above which it surely is (between what
+#: framings of one scene and other scenes give: docs/benchmarks.md).
 UNSURE_OVERLAP = 0.55
 SURE_OVERLAP = 0.65
 
@@ -270,8 +270,8 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
     rounds : robust refits (pairs far from the fit, e.g. content that moved
         between the shots, weigh less each round).
     correct : add the smooth lattice correction (:func:`fit_correction`, 9^3)
-        for what the map family cannot hold (measured on ``benchmarks/look.py``'s
-        shot matching: +0.05 to +0.2 recovered on film and bleach-bypass looks).
+        for what the map family cannot hold (film and bleach-bypass looks:
+        docs/benchmarks.md).
 
     why : filled with the reason each style (by index) does not show the scene.
 

@@ -177,10 +177,8 @@ class _HeldProgress:
                 callback(*call)
 
 
-#: Smallest fit grid (bins per axis) on which the refit runs ahead in a thread. On smaller
-#: grids an evaluation is mostly Python (tiny products), so two fits in threads share one
-#: interpreter lock: the fit from uniform weights ran 1.6x slower beside the refit
-#: (16³, six styles: 4.1 -> 6.5 s on 2 cores) and the refit is rarely needed.
+#: Smallest fit grid (bins per axis) on which the refit runs ahead in a thread: below it an
+#: evaluation is mostly Python and two fits share one interpreter lock (docs/benchmarks.md).
 SPECULATE_BINS = 32
 
 

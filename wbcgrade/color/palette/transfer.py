@@ -14,7 +14,7 @@ fitted (:func:`transport_map`):
    photo's colours (:mod:`wbcgrade.color.palette.smooth_map`).
 
 Everything lives in the working space's unit cube. Defaults and why
-(measured on 2 shared cores, ``benchmarks/apply.py``): the photo's
+(docs/benchmarks.md, the figures behind the code's settings): the photo's
 histogram, the plan and the map live on the paper's 128^3 grid; the
 palette and the plan use a kernel of sigma = 1/31 of the cube (about 4 bins
 at 128^3), ten times narrower than the fit's, which keeps graded photos
@@ -22,7 +22,7 @@ colourful (entropic blur pulls colours towards grey; tested in
 ``tests/color``). The palette is computed on 64^3 (2 bins wide: resolved)
 and interpolated to 128^3. The plan is solved coarse-to-fine (32^3 with
 epsilon scaling, then 64^3, then 128^3, each warm-starting the next), so the
-128^3 solve needs ~15-40 iterations instead of ~150.
+128^3 solve starts close to its answer.
 """
 
 from __future__ import annotations
@@ -68,14 +68,10 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     (to a loose tolerance); each solve warm-starts the next. Every level's
     histograms are mixed with ``floor`` of the uniform one. The coarser grids
     are solved to ``coarse_tol`` (default ``tol / 3``): what error they leave
-    is removed on the finest grid, where an iteration costs 8 times more (on
-    the 16 MP sample this takes the 128^3 solve from ~22 to ~6 iterations, and
-    the map closer to a converged solve). Iterations are over-relaxed
-    (``overrelaxation`` on the coarser grids, ``fine_overrelaxation`` on the
-    finest): measured on four sample photos, 2-4 times fewer coarse iterations
-    and a map 2-5 times closer to a converged solve (0.01-0.05/255 on average;
-    the transfer 10-30 % faster: the relaxed update costs an exp and a log per
-    bin).
+    is removed on the finest grid, where an iteration costs 8 times more. Iterations
+    are over-relaxed (``overrelaxation`` on the coarser grids, ``fine_overrelaxation``
+    on the finest): fewer iterations and a map closer to a converged solve
+    (docs/benchmarks.md).
 
     Returns
     -------
