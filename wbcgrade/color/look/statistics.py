@@ -193,12 +193,20 @@ def tinted_statistics(hists: np.ndarray, naturals: PaletteStatistics,
 
 
 def _nanmedian(values: np.ndarray, axis: int = 0, keepdims: bool = False) -> np.ndarray:
-    """``np.nanmedian`` that gives NaN for an all-NaN slice without a warning."""
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(values, axis=axis, keepdims=keepdims)
+    """``np.nanmedian``, bit for bit (the mean of the two middle values, or the middle one),
+    NaN for an all-NaN slice without a warning: one sort instead of numpy's masked median
+    per call (a set's look takes hundreds of these on small arrays)."""
+    ordered = np.sort(np.moveaxis(np.asarray(values), axis, -1), axis=-1)  # NaN last
+    count = np.count_nonzero(~np.isnan(ordered), axis=-1)
+    half = count // 2
+    last = max(ordered.shape[-1] - 1, 0)
+    low = np.take_along_axis(ordered, np.maximum(np.where(count % 2 == 1, half, half - 1),
+                                                 0)[..., None], -1)[..., 0]
+    high = np.take_along_axis(ordered, np.minimum(half, last)[..., None], -1)[..., 0]
+    median = np.where(count > 0, (low + high) / 2, np.nan)
+    if keepdims:
+        median = np.expand_dims(median, axis)
+    return median[()] if median.ndim == 0 else median
 
 
 def _robust_sd(values: np.ndarray, axis: int = 0) -> np.ndarray:
