@@ -84,7 +84,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     what = ("the preset's own look" if outcome.source.value == "preset-look"
             else f"the look {len(found.styles)} style photos share")
     strength = found.strength
-    if "probability" in outcome.extra:  # judged jointly: the same words as apply's
+    if outcome.probability is not None:  # judged jointly: the same words as apply's
         what, strength = outcome.source_words()
     from wbcgrade.color.outcome import change_words
 

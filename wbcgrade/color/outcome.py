@@ -224,6 +224,20 @@ class GradeOutcome:
         return self if names is None else replace(self, setting_names=names)
 
     @property
+    def probability(self) -> float | None:
+        """How sure it is that the style photos share a look (a set look judged jointly),
+        else None."""
+        value = self.extra.get("probability")
+        return None if value is None else float(value)
+
+    @property
+    def own_photos(self) -> tuple[int, int]:
+        """(the user's own photos a set look was measured against, those given for that but
+        too few to use)."""
+        used, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
+        return used, unused
+
+    @property
     def strength(self) -> float:
         """The fraction of the look applied: its own strength times ``map.strength``."""
         return (1.0 if self.look_strength is None else self.look_strength) * self.blend
@@ -251,9 +265,9 @@ class GradeOutcome:
         elif self.source is GradeSource.SET_LOOK and self.match and self.confidence > 0:
             what += (f", nudged {100 * self.confidence:.0f} % towards the colours of "
                      f"{self.match}, the closest style")
-        if self.source is GradeSource.SET_LOOK and "probability" in self.extra:
-            what += f" ({sureness_words(self.extra['probability'], self.strength)})"
-        if "probability" in self.extra:  # the share applied is said; the strength asked for
+        if self.source is GradeSource.SET_LOOK and self.probability is not None:
+            what += f" ({sureness_words(self.probability, self.strength)})"
+        if self.probability is not None:  # the share applied is said; the strength asked for
             return what, (None if self.blend == 1.0 else self.blend)
         return what, self.strength
 
@@ -267,11 +281,11 @@ class GradeOutcome:
             lines.append(f"a faint grade: {self.reason}")
         if (self.unchanged or self.faint) and self.advice:
             lines.append(self.advice)
-        if (self.source is GradeSource.SET_LOOK and "probability" in self.extra
-                and self.extra["probability"] < SURE_LOOK and not self.unchanged
+        if (self.source is GradeSource.SET_LOOK and self.probability is not None
+                and self.probability < SURE_LOOK and not self.unchanged
                 and not self.faint):
             lines.append(UNSURE_ADVICE.worded(self.setting_names or {}))
-        own, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
+        own, unused = self.own_photos
         if own:
             lines.append(f"content: the look was measured against {own} of your own photos "
                          "beside the shipped palettes")
@@ -292,8 +306,8 @@ class GradeOutcome:
                "confidence": round(self.confidence, 4)}
         if self.file is not None:
             out["file"] = self.file
-        if "probability" in self.extra:  # a set look judged jointly: how sure it is a look
-            out["look_probability"] = round(float(self.extra["probability"]), 4)
+        if self.probability is not None:  # a set look judged jointly: how sure it is a look
+            out["look_probability"] = round(self.probability, 4)
         if self.palette is not None:
             out["palette"] = self.palette.as_dict()
         return out
