@@ -170,6 +170,19 @@ class StyleSet:
         return self.meta.get("converted_from") or None
 
     @property
+    def file_digest(self) -> str | None:
+        """The SHA-1 of the preset file the set was read from, or None (a folder's set)."""
+        return self.meta.get("file_digest")
+
+    def subset(self, indices: Sequence[int]) -> StyleSet:
+        """The styles at ``indices`` as a set of their own (their histograms; the working
+        space and the cache folder kept)."""
+        indices = list(indices)
+        meta = {k: v for k, v in self.meta.items() if k in ("working_space", "cache_dir")}
+        return StyleSet([self.names[i] for i in indices], self.histograms[indices],
+                        self.source, self.width, self.description, meta)
+
+    @property
     def files(self) -> tuple[str, ...]:
         """The style photos' files (a folder's set), in the order of ``names``; () else."""
         return tuple(self.meta.get("files") or ())
