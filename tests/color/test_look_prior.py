@@ -103,3 +103,55 @@ def test_a_strong_look_lands_and_a_set_with_none_stays_put_from_3_to_12_photos(s
     plain, _, plain_strength = look.set_look_base(style_set(contents), naturals)
     assert np.mean(np.abs(plain(test) - test)) < 0.25 * before
     assert plain_strength < strength
+
+
+def test_the_jackknife_keeps_a_look_every_group_shows_and_drops_one_a_group_makes_up():
+    from wbcgrade.color.look.prior import jackknife_share
+
+    colors = grid_points(5)
+    masses = np.ones(len(colors))
+    shift = np.array([0.05, 0.0, -0.05])
+
+    def shifted(amount):
+        return lambda x: np.clip(x + amount * shift, 0.0, 1.0)
+
+    # every group of styles, left out, gives the same look: all of it kept
+    assert jackknife_share(shifted(1.0), lambda keep: shifted(1.0), 6, colors, masses) == 1.0
+    # the look appears only while one style is in: it is that style's, not the set's
+    one = jackknife_share(shifted(1.0 / 6.0), lambda keep: shifted(keep[:5].sum() / 30.0
+                                                                   if keep[5] else 0.0),
+                          6, colors, masses)
+    assert one < 0.6
+    # nearly alike groups: nearly all kept, and two styles give no groups to compare
+    near = jackknife_share(shifted(1.0), lambda keep: shifted(1.0 + 0.05 * keep.argmin()),
+                           6, colors, masses)
+    assert 0.9 < near < 1.0
+    assert jackknife_share(shifted(1.0), lambda keep: shifted(0.0), 2, colors, masses) == 1.0
+
+
+def test_one_odd_photo_in_a_set_without_a_look_moves_photos_less_than_without_the_jackknife():
+    from tests.color.test_look_statistics import natural_photo
+    from wbcgrade.color.look.prior import posterior_statistics_look
+    from wbcgrade.color.look.statistics import tinted_statistics
+
+    naturals = palette_statistics(np.stack([image_histogram(natural_photo(s), 32)
+                                            for s in range(100, 140)]))
+    odd = Edit(saturation=2.5, contrast=1.0)
+    photos = [natural_photo(s) for s in range(4)]
+    photos[0] = odd(photos[0])
+    styles = tinted_statistics(np.stack([image_histogram(p, 32) for p in photos]), naturals)
+    colors = grid_points(9)
+    masses = np.ones(len(colors))
+    plain = posterior_statistics_look(styles, naturals)
+    checked = posterior_statistics_look(styles, naturals, jackknife_colors=(colors, masses))
+
+    def size(look):
+        return float(np.sqrt(np.mean((look(colors) - colors) ** 2)))
+
+    assert checked.info["jackknife"] < 0.85 and plain.info["jackknife"] == 1.0
+    assert size(checked) < 0.85 * size(plain) and size(plain) > 0.01
+    # the same edit on every photo: a look all of them show, kept nearly whole
+    shown = tinted_statistics(np.stack([image_histogram(odd(natural_photo(s)), 32)
+                                        for s in range(4)]), naturals)
+    kept = posterior_statistics_look(shown, naturals, jackknife_colors=(colors, masses))
+    assert kept.info["jackknife"] > 0.85 and size(kept) > 2 * size(checked)

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import functools
 import hashlib
-from dataclasses import dataclass, fields
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from wbcgrade.color.look.statistics import (
 )
 
 __all__ = ["LookPosterior", "posterior_look", "content_noise", "load_prior", "build_prior",
-           "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE"]
+           "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE", "jackknife_share"]
 
 #: Prior probability that a style set has no look at all (the spike at zero).
 NO_LOOK = 0.3
@@ -67,20 +68,19 @@ class LookPosterior:
     probability : posterior probability that the set has a look.
     share : how much of the raw differences is applied (projection, whitened), in [0, 1].
     evidence : whitened size of the raw differences (rms z against the noise).
+    operator : (P, P) the posterior mean as a linear map of the raw differences, its
+        mixture's weights held (what other raw differences of the same set would give).
     """
 
     differences: LookDifferences
     probability: float
     share: float
     evidence: float
+    operator: np.ndarray | None = None
 
 
 def _shrunk_to_diagonal(cov: np.ndarray) -> np.ndarray:
     return (1.0 - DIAGONAL_SHRINK) * cov + DIAGONAL_SHRINK * np.diag(np.diag(cov))
-
-
-def _subset(stats: PaletteStatistics, index: np.ndarray) -> PaletteStatistics:
-    return PaletteStatistics(*(getattr(stats, f.name)[index] for f in fields(stats)))
 
 
 _NOISE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
@@ -104,7 +104,7 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
         data = read_entry(path)
         try:
             found = (np.asarray(data["sets"], np.float64), np.asarray(data["singles"], np.float64))
-            size = len(look_differences(_subset(naturals, np.array([0])), naturals).vector())
+            size = len(look_differences(naturals.take(np.array([0])), naturals).vector())
             if any(m.shape != (size, size) or not np.isfinite(m).all() for m in found):
                 found = None
         except Exception:  # noqa: BLE001 - a cache never fails a run: any damage is a miss
@@ -117,7 +117,7 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
         size = min(n_styles, max(k - 1, 1))
 
         def spread(draws, least: int = 2) -> np.ndarray:
-            vectors = np.stack([look_differences(_subset(naturals, idx), naturals,
+            vectors = np.stack([look_differences(naturals.take(idx), naturals,
                                                  min_styles=least).vector()
                                 for idx in draws])
             return _shrunk_to_diagonal(np.cov(vectors, rowvar=False))
@@ -162,18 +162,20 @@ def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarr
     ridge = 1e-10 * np.eye(len(v))
     mixture = [(noise, 1.0)] if isinstance(noise, np.ndarray) else list(noise)
     total = sum(w for _, w in mixture)
-    logs, means, spikes = [], [], []
+    logs, means, spikes, operators = [], [], [], []
     for cov_noise, weight in mixture:
         share = weight / total
         log, _ = _log_gaussian(v, cov_noise + ridge)
         logs.append(np.log(no_look * share) + log)
         means.append(np.zeros_like(v))
+        operators.append(np.zeros((len(v), len(v))))
         spikes.append(True)
         for scale in scales:
             cov = scale * prior
             log, inverse = _log_gaussian(v, cov + cov_noise + ridge)
             logs.append(np.log((1.0 - no_look) * share / len(scales)) + log)
             means.append(cov @ inverse)
+            operators.append(np.linalg.solve(cov + cov_noise + ridge, cov).T)
             spikes.append(False)
     logs = np.array(logs)
     weights = np.exp(logs - logs.max())
@@ -183,8 +185,42 @@ def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarr
     white_raw, white_mean = np.linalg.solve(chol, v), np.linalg.solve(chol, mean)
     power = float(white_raw @ white_raw)
     share = float(np.clip(white_mean @ white_raw / power, 0.0, 1.0)) if power > 0 else 0.0
+    operator = np.tensordot(weights, np.array(operators), axes=1)
     return LookPosterior(raw.with_vector(mean), float(1.0 - weights[np.array(spikes)].sum()),
-                         share, float(np.sqrt(power / len(v))))
+                         share, float(np.sqrt(power / len(v))), operator)
+
+
+#: Groups of style photos left out in turn to measure how much a set's look varies with
+#: its photos (:func:`jackknife_share`).
+JACKKNIFE_GROUPS = 10
+
+
+def jackknife_share(model, refit: Callable[[np.ndarray], object], n_styles: int,
+                    colors: np.ndarray, masses: np.ndarray,
+                    groups: int = JACKKNIFE_GROUPS) -> float:
+    """How much of a set's look to apply, given how much it changes with the photos shown.
+
+    The look is found again with each group of style photos left out (``refit``: a mask of
+    the styles kept -> a look, callable on (N, 3) colours); their spread on ``colors``
+    (weighted by ``masses``) is the look's own variance ``V`` (a delete-a-group
+    jackknife), and the share kept is ``max(0, 1 - V / P)``, ``P`` the look's mean square
+    displacement there: the least-squares shrinkage of a look measured with that error. A
+    look every photo shows keeps nearly all of itself; one that a photo or two make up is
+    dropped. Under three styles: 1 (nothing to leave out).
+    """
+    if n_styles < 3:
+        return 1.0
+    masses = np.asarray(masses, dtype=np.float64) / np.sum(masses)
+    moved = model(colors) - colors
+    power = float(masses @ np.sum(moved * moved, axis=1))
+    if not power > 0:
+        return 1.0
+    count = min(groups, n_styles)
+    member = np.arange(n_styles) % count
+    refits = np.stack([refit(member != g)(colors) - colors for g in range(count)])
+    spread = refits - refits.mean(axis=0)
+    variance = (count - 1) / count * float(np.sum(masses * np.sum(spread * spread, axis=2)))
+    return float(np.clip(1.0 - variance / power, 0.0, 1.0))
 
 
 # --------------------------------------------------------------------------- the shipped prior
@@ -227,7 +263,7 @@ def build_prior(naturals: np.ndarray, edits: int = 400, sample: int = 64,
         pushed = np.stack([push_edit(naturals[j], edit) for j in picked])
         styles = tinted_statistics(pushed, base)
         monochrome = False
-        vectors.append(look_differences(styles, _subset(base, picked), monochrome).vector())
+        vectors.append(look_differences(styles, base.take(picked), monochrome).vector())
         if progress is not None:
             progress(i + 1, edits)
     vectors = np.array(vectors)
@@ -256,7 +292,8 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
                               reference: PaletteStatistics | None = None,
                               own_count: int | None = None,
                               noise_from: PaletteStatistics | None = None,
-                              cache: Path | None = None, no_look: float = NO_LOOK):
+                              cache: Path | None = None, no_look: float = NO_LOOK,
+                              jackknife_colors: tuple[np.ndarray, np.ndarray] | None = None):
     """The look a style set's statistics support (:func:`posterior_look`), as a
     :class:`~wbcgrade.color.look.statistics.StatisticsLook` whose ``info`` holds the
     probability of a look, the share applied and the evidence.
@@ -274,6 +311,9 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     cache : the cache folder that keeps the noise on disk (None: kept in memory only).
     no_look : prior probability of no look (:data:`NO_LOOK`; higher where a look is
         already known and only a correction of it is sought).
+    jackknife_colors : (colours (N, 3), masses (N,)) on which to measure how much the look
+        changes with the photos shown (:func:`jackknife_share`, the posterior's mixture
+        held); the look is applied at the share that survives it. None: in full.
     """
     from wbcgrade.color.look.statistics import (
         MEDIAN_SE,
@@ -309,6 +349,16 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     units[len(raw.tone):len(raw.tone) + len(raw.saturation)] = 1.0
     prior = load_prior() * np.outer(units, units)
     found = posterior_look(raw, noise, prior, no_look)
+    kept = 1.0
+    if jackknife_colors is not None:
+        colors, masses = jackknife_colors
+        look = look_from_differences(found.differences)
+
+        def refit(keep: np.ndarray):
+            others = look_differences(styles.take(keep), centre_of).vector()
+            return look_from_differences(raw.with_vector(found.operator @ others))
+
+        kept = jackknife_share(look, refit, n_styles, colors, masses)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,
             "probability": round(found.probability, 3), "share": round(found.share, 3),
             "evidence": round(found.evidence, 3),
@@ -318,4 +368,6 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
             "tint": [[round(float(v), 4) for v in row] for row in found.differences.tint],
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
             "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
-    return look_from_differences(found.differences, False, info)
+    info["jackknife"] = round(kept, 3)
+    info["share"] = round(found.share * kept, 3)
+    return look_from_differences(found.differences, False, info).scaled(kept)

@@ -409,7 +409,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 14
+LOOK_VERSION = 15
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -530,8 +530,10 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
                                                    < MONOCHROME_SPREAD * scale):
         from wbcgrade.color.io.cache import cache_folder
 
+        average = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), JACKKNIFE_BINS)
         model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
-                                          own_count, cache=cache_folder(styles))
+                                          own_count, cache=cache_folder(styles),
+                                          jackknife_colors=_histogram_colors(average))
     else:
         model = statistics_look(style_stats, natural_stats, scale, reference=reference,
                                 own_count=own_count)
@@ -544,6 +546,11 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     info = {**model.info, "amplitude": look.amplitude()}
     return LookResult(look, np.full((n_styles, n_naturals), 1.0 / max(n_naturals, 1)),
                       np.full(n_styles, np.nan), info)
+
+
+#: The grid of the average natural palette on whose colours a set's look is checked
+#: against itself (:func:`wbcgrade.color.look.prior.jackknife_share`).
+JACKKNIFE_BINS = 16
 
 
 def _styles_subset(styles, indices):

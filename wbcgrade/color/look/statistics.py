@@ -34,7 +34,7 @@ Arrays in, arrays out: histograms are (K, n, n, n) on the colour grid of
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -93,6 +93,10 @@ class PaletteStatistics:
     band_spread: np.ndarray
     spread: np.ndarray
     band_neutral: np.ndarray
+
+    def take(self, index: np.ndarray) -> PaletteStatistics:
+        """The statistics of the palettes at ``index`` (an index array or a mask)."""
+        return PaletteStatistics(*(getattr(self, f.name)[index] for f in fields(self)))
 
 
 def hats(t: np.ndarray, knots: int) -> np.ndarray:
@@ -417,6 +421,14 @@ class StatisticsLook:
         shift = np.stack([np.interp(luma, centres, self.tint[:, c]) for c in range(3)], axis=1)
         out = new_luma[:, None] + scale[:, None] * chroma + shift
         return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
+
+    def scaled(self, share: float) -> StatisticsLook:
+        """This look at ``share`` of its size (tone and tint moves times ``share``, the
+        saturation scaled to that power)."""
+        share = float(share)
+        return StatisticsLook(self.tone_in, self.tone_in + share * (self.tone_out - self.tone_in),
+                              np.power(self.saturation, share), share * self.tint,
+                              self.monochrome, self.info)
 
 
 def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
