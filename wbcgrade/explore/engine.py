@@ -201,8 +201,8 @@ class _FastGrader:
         options = _options(self.base, settings,
                            **({} if tol is None else {"sinkhorn_tol": tol}))
         weights = np.asarray(weights, dtype=np.float64)
-        raw, _, _, _ = transport_map(self.photo_hist, self.styles, weights / weights.sum(),
-                                     options)
+        raw = transport_map(self.photo_hist, self.styles, weights / weights.sum(),
+                            options).color_map
         return finish_map(self.smooth.fit(raw), options, self.encoding)
 
 

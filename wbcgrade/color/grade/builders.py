@@ -20,7 +20,7 @@ import numpy as np
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.histogram import image_histogram, resample_histogram
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.outcome import GradeSource
+from wbcgrade.color.outcome import GradeSource, TransportCheck
 from wbcgrade.color.palette.fit import FitSummary, fit_weights
 from wbcgrade.color.palette.transfer import transport_map
 from wbcgrade.color.presets import StyleSet
@@ -113,7 +113,8 @@ class BuiltMap(NamedTuple):
     """What a map builder returns: the map before finishing, the palette it aimed at
     (or None), diagnostics (JSON-friendly), seconds per stage, the weights with how sure
     the builder is of them (a :class:`~wbcgrade.color.palette.fit.FitSummary`), where the
-    map came from, and for a look what it found."""
+    map came from, for a look what it found, and how the transport's Sinkhorn solve ended
+    (None: no transport)."""
 
     color_map: np.ndarray
     palette: np.ndarray | None
@@ -122,6 +123,7 @@ class BuiltMap(NamedTuple):
     fit: FitSummary
     source: GradeSource
     look: LookFound | None = None
+    transport: TransportCheck | None = None
 
 
 def palette_map(request: MapRequest) -> BuiltMap:
@@ -131,7 +133,7 @@ def palette_map(request: MapRequest) -> BuiltMap:
     request.stage("fit")
     fit = fit_weights(request.photo.fit, styles.at_bins(options.fit.bins), options.fit,
                       request.callback)
-    color_map, palette, info, timings = transport_map(request.photo.transfer, styles,
-                                                      fit.weights, options, request.stage)
-    return BuiltMap(color_map, palette, info, {"fit": fit.time_s, **timings}, fit,
-                    GradeSource.PALETTE)
+    found = transport_map(request.photo.transfer, styles, fit.weights, options, request.stage)
+    return BuiltMap(found.color_map, found.palette, found.info,
+                    {"fit": fit.time_s, **found.timings}, fit, GradeSource.PALETTE,
+                    transport=found.check)

@@ -302,15 +302,12 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     if found is not None:  # the photo is one of the styles (the CLI warns)
         info["own_style"] = found
     color_map, strength = strengthened(color_map, options.map.strength)
-    sink = info.get("sinkhorn")
-    transport = (None if not sink else
-                 TransportCheck(bool(sink.get("converged", True)), float(sink.get("error", 0.0))))
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
                   strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
-                  own_style=found, transport=transport,
+                  own_style=found, transport=built.transport,
                   regrain_follow=regrain_follow(built.source, built.look),
                   source=built.source, look=built.look)
     outcome = grade_outcome(grade, built.fit, photo.fit, options.map.strength)

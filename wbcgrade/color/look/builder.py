@@ -168,6 +168,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     weights = np.full(n_styles, 1.0 / n_styles)
     color_map = base.lattice(options.map.size)
     fit_info: dict = {"start": "look", "match": found.match, "confidence": confidence}
+    transport = None  # the scene's palette grade's Sinkhorn solve, when there is one
     if confidence > 0:
         scene_options = GradeOptions(
             replace(options.fit, loss=SCENE_LOSS),
@@ -187,11 +188,13 @@ def look_map(request: MapRequest) -> BuiltMap:
         fit_info["scene_fit"] = {**summary.info, "weights": [float(w) for w in summary.weights],
                                  "loss": summary.loss}
         info.update({k: v for k, v in scene.info.items() if k != "fit"})
+        transport = scene.transport
     fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
                      fit_info, sum(timings.values()))
     if monochrome:
         color_map = monochrome_map(color_map)
-    return BuiltMap(color_map, None, info, timings, fit, GradeSource.SET_LOOK, found)
+    return BuiltMap(color_map, None, info, timings, fit, GradeSource.SET_LOOK, found,
+                    transport)
 
 
 def _as_set_look(color_map: np.ndarray, extracted) -> np.ndarray:

@@ -29,11 +29,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from wbcgrade.color.histogram import DEFAULT_FLOOR, add_floor
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import TransportCheck
 from wbcgrade.color.palette.smooth_map import fit_smooth_map
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.core import (
@@ -45,7 +47,7 @@ from wbcgrade.core import (
 from wbcgrade.core.geometry import refine_grid
 from wbcgrade.errors import NumericalError
 
-__all__ = ["color_transfer_map", "palette_barycenter", "transport_map"]
+__all__ = ["color_transfer_map", "palette_barycenter", "TransportMap", "transport_map"]
 
 #: Weights below this share of the largest are left out of the palette's barycenter.
 NEGLIGIBLE_WEIGHT = 1e-6
@@ -133,10 +135,21 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
 
 
 
+class TransportMap(NamedTuple):
+    """What :func:`transport_map` returns: the map (m, m, m, 3) float32 in [0, 1], the
+    palette (n, n, n), diagnostics (JSON-friendly), seconds per stage, and how the plan's
+    Sinkhorn solve ended."""
+
+    color_map: np.ndarray
+    palette: np.ndarray
+    info: dict
+    timings: dict
+    check: TransportCheck
+
+
 def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
                   options: GradeOptions,
-                  stage: Callable[[str], None] | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, dict, dict]:
+                  stage: Callable[[str], None] | None = None) -> TransportMap:
     """The colour map moving a photo's colours onto the styles' palette at ``weights``.
 
     The palette, the plan and the smooth map (see the module docstring); the
@@ -151,8 +164,7 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
 
     Returns
     -------
-    ``(color_map (m, m, m, 3) float32 in [0, 1], palette (n, n, n), info,
-    timings)``; the raw projection on the transfer grid is the map when
+    :class:`TransportMap`; the raw projection on the transfer grid is the map when
     ``map.smoothness`` and ``map.stiffness`` are 0.
     """
     say = stage or (lambda name: None)
@@ -183,4 +195,5 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
         color_map = raw
         info["map"] = {"size": transfer.bins, "smoothness": 0.0, "stiffness": 0.0}
     timings["transfer"] = time.perf_counter() - start
-    return color_map, palette, info, timings
+    return TransportMap(color_map, palette, info, timings,
+                        TransportCheck(bool(result.converged), float(result.error)))
