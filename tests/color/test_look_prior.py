@@ -137,7 +137,7 @@ def test_one_odd_photo_in_a_set_without_a_look_moves_photos_less_than_without_th
     naturals = palette_statistics(np.stack([image_histogram(natural_photo(s), 32)
                                             for s in range(100, 140)]))
     odd = Edit(saturation=2.5, contrast=1.0)
-    photos = [natural_photo(s) for s in range(4)]
+    photos = [natural_photo(s) for s in range(6)]
     photos[0] = odd(photos[0])
     styles = tinted_statistics(np.stack([image_histogram(p, 32) for p in photos]), naturals)
     colors = grid_points(9)
@@ -148,10 +148,11 @@ def test_one_odd_photo_in_a_set_without_a_look_moves_photos_less_than_without_th
     def size(look):
         return float(np.sqrt(np.mean((look(colors) - colors) ** 2)))
 
-    assert checked.info["jackknife"] < 0.85 and plain.info["jackknife"] == 1.0
-    assert size(checked) < 0.85 * size(plain) and size(plain) > 0.01
+    assert checked.info["jackknife"]["saturation"] < 0.5
+    assert set(plain.info["jackknife"].values()) == {1.0}
+    assert size(checked) < 0.5 * size(plain) and size(plain) > 0.005
     # the same edit on every photo: a look all of them show, kept nearly whole
     shown = tinted_statistics(np.stack([image_histogram(odd(natural_photo(s)), 32)
-                                        for s in range(4)]), naturals)
+                                        for s in range(6)]), naturals)
     kept = posterior_statistics_look(shown, naturals, jackknife_colors=(colors, masses))
-    assert kept.info["jackknife"] > 0.85 and size(kept) > 2 * size(checked)
+    assert kept.info["jackknife"]["saturation"] > 0.9 and size(kept) > 10 * size(checked)

@@ -349,16 +349,22 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     units[len(raw.tone):len(raw.tone) + len(raw.saturation)] = 1.0
     prior = load_prior() * np.outer(units, units)
     found = posterior_look(raw, noise, prior, no_look)
-    kept = 1.0
+    mean = found.differences.vector()
+    parts = _parts(raw)
+    kept = np.ones(len(parts))
     if jackknife_colors is not None:
         colors, masses = jackknife_colors
-        look = look_from_differences(found.differences)
+        others = functools.lru_cache(maxsize=None)(
+            lambda keep: found.operator @ look_differences(
+                styles.take(np.frombuffer(keep, dtype=bool)), centre_of).vector())
 
-        def refit(keep: np.ndarray):
-            others = look_differences(styles.take(keep), centre_of).vector()
-            return look_from_differences(raw.with_vector(found.operator @ others))
+        def part_look(vector: np.ndarray, part: np.ndarray):
+            return look_from_differences(raw.with_vector(np.where(part, vector, 0.0)))
 
-        kept = jackknife_share(look, refit, n_styles, colors, masses)
+        kept = np.array([jackknife_share(
+            part_look(mean, part), lambda keep, part=part: part_look(others(keep.tobytes()), part),
+            n_styles, colors, masses) for part in parts])
+    applied = np.sum([k * np.where(part, mean, 0.0) for k, part in zip(kept, parts)], axis=0)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,
             "probability": round(found.probability, 3), "share": round(found.share, 3),
             "evidence": round(found.evidence, 3),
@@ -368,6 +374,25 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
             "tint": [[round(float(v), 4) for v in row] for row in found.differences.tint],
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
             "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
-    info["jackknife"] = round(kept, 3)
-    info["share"] = round(found.share * kept, 3)
-    return look_from_differences(found.differences, False, info).scaled(kept)
+    info["jackknife"] = {name: round(float(k), 3) for name, k in zip(PARTS, kept)}
+    info["share"] = round(found.share * _kept_share(found, raw, applied), 3)
+    return look_from_differences(raw.with_vector(applied), False, info)
+
+
+#: The parts of a look checked against themselves one by one (:func:`jackknife_share`):
+#: a set can show its tone curve clearly and its tint not at all.
+PARTS = ("tone", "saturation", "tint")
+
+
+def _parts(raw: LookDifferences) -> list[np.ndarray]:
+    """Masks of :data:`PARTS` in the differences' vector."""
+    q, b, size = len(raw.tone), len(raw.saturation), len(raw.vector())
+    index = np.arange(size)
+    return [index < q, (index >= q) & (index < q + b), index >= q + b]
+
+
+def _kept_share(found: LookPosterior, raw: LookDifferences, applied: np.ndarray) -> float:
+    """How much of the posterior mean survives its parts' checks (projection onto it)."""
+    mean = found.differences.vector()
+    power = float(mean @ mean)
+    return float(np.clip(applied @ mean / power, 0.0, 1.0)) if power > 0 else 0.0
