@@ -365,18 +365,22 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
             part_look(mean, part), lambda keep, part=part: part_look(others(keep.tobytes()), part),
             n_styles, colors, masses) for part in parts])
     applied = np.sum([k * np.where(part, mean, 0.0) for k, part in zip(kept, parts)], axis=0)
+    shown = raw.with_vector(applied)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,
             "probability": round(found.probability, 3), "share": round(found.share, 3),
             "evidence": round(found.evidence, 3),
-            "tone_shift": [round(float(v), 4) for v in found.differences.tone],
+            "tone_shift": [round(float(v), 4) for v in shown.tone],
             "tone_raw": [round(float(v), 4) for v in raw.tone],
-            "saturation": [round(float(np.exp(v)), 3) for v in found.differences.saturation],
-            "tint": [[round(float(v), 4) for v in row] for row in found.differences.tint],
+            "saturation": [round(float(np.exp(v)), 3) for v in shown.saturation],
+            "tint": [[round(float(v), 4) for v in row] for row in shown.tint],
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
             "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
     info["jackknife"] = {name: round(float(k), 3) for name, k in zip(PARTS, kept)}
-    info["share"] = round(found.share * _kept_share(found, raw, applied), 3)
-    return look_from_differences(raw.with_vector(applied), False, info)
+    look = look_from_differences(shown, False, info)
+    if jackknife_colors is not None:  # the posterior's share, times what of it is kept
+        info["share"] = round(found.share * _colour_share(
+            look, look_from_differences(found.differences), *jackknife_colors), 3)
+    return look
 
 
 #: The parts of a look checked against themselves one by one (:func:`jackknife_share`):
@@ -391,8 +395,12 @@ def _parts(raw: LookDifferences) -> list[np.ndarray]:
     return [index < q, (index >= q) & (index < q + b), index >= q + b]
 
 
-def _kept_share(found: LookPosterior, raw: LookDifferences, applied: np.ndarray) -> float:
-    """How much of the posterior mean survives its parts' checks (projection onto it)."""
-    mean = found.differences.vector()
-    power = float(mean @ mean)
-    return float(np.clip(applied @ mean / power, 0.0, 1.0)) if power > 0 else 0.0
+def _colour_share(applied, shown, colors: np.ndarray, masses: np.ndarray) -> float:
+    """How much of the ``shown`` look the ``applied`` one carries on ``colors`` (weighted by
+    ``masses``): the projection of its displacement onto the other's, in [0, 1]."""
+    masses = np.asarray(masses, dtype=np.float64) / np.sum(masses)
+    moved, wanted = applied(colors) - colors, shown(colors) - colors
+    power = float(masses @ np.sum(wanted * wanted, axis=1))
+    if not power > 0:
+        return 0.0
+    return float(np.clip(masses @ np.sum(moved * wanted, axis=1) / power, 0.0, 1.0))

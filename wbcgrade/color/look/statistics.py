@@ -422,14 +422,6 @@ class StatisticsLook:
         out = new_luma[:, None] + scale[:, None] * chroma + shift
         return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
 
-    def scaled(self, share: float) -> StatisticsLook:
-        """This look at ``share`` of its size (tone and tint moves times ``share``, the
-        saturation scaled to that power)."""
-        share = float(share)
-        return StatisticsLook(self.tone_in, self.tone_in + share * (self.tone_out - self.tone_in),
-                              np.power(self.saturation, share), share * self.tint,
-                              self.monochrome, self.info)
-
 
 def statistics_look(styles: PaletteStatistics, naturals: PaletteStatistics,
                     space_scale: float = 1.0, content_bias: float | None = None,
