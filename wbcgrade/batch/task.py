@@ -29,6 +29,7 @@ from wbcgrade.color.io.images import (
     set_max_image_pixels,
 )
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import fit_start_word
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.core import prefer_compiled
@@ -118,12 +119,12 @@ def run_task(task: BatchTask, context: BatchContext,
         if fit is None:  # a saved grade: its own weights, nothing fitted
             result.weights = [float(w) for w in report.grade.weights]
             result.loss = float(report.grade.loss or 0.0)
-            result.start = report.fit_start.value
+            result.start = report.fit_start
         else:
             result.weights = [float(w) for w in fit.weights]
             result.loss = float(fit.loss)
             result.vertex_losses = [float(v) for v in fit.vertex_losses]
-            result.start = fit.start
+            result.start = fit_start_word(report.grade.source, fit.start)
         result.timings = dict(report.timings)
         result.color = report.color
         result.own_style = report.grade.own_style

@@ -34,7 +34,7 @@ from wbcgrade.color.histogram import grid_points
 from wbcgrade.color.mapping.remap import apply_color_map
 from wbcgrade.errors import Worded
 
-__all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
+__all__ = ["GradeSource", "FitStart", "fit_start_word", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
            "change_words", "VISIBILITY",
@@ -73,23 +73,37 @@ class GradeSource(str, Enum):
 
 
 class FitStart(str, Enum):
-    """How a grade's weights were found (``FitSummary.start``, ``GradeReport.fit_start``,
-    ``PaletteFit.start``; the JSON writes the value)."""
+    """How a palette grade's weights were found (``FitSummary.start``, ``PaletteFit.start``;
+    the JSON writes the value). Where any grade came from is its :class:`GradeSource`."""
 
     UNIFORM = "uniform"            #: a palette fit from uniform weights, kept
     VERTEX_REFIT = "vertex-refit"  #: refitted from the best single style, which beat it
     VERTEX = "vertex"              #: the best single style: no fit beat it
     GIVEN = "given"                #: the weights were given (``fit.weights``): no fit
-    PRESET = "preset"              #: a preset's own look: nothing fitted
-    SCENE = "scene"                #: the look read off the style photo of the scene
-    LOOK = "look"                  #: the look the style set shares
-    SAVED = "saved"                #: a saved grade: nothing fitted
     SHARED = "shared"              #: a shared grade whose fit the caller holds (a series')
 
     @property
     def fitted(self) -> bool:
-        """Whether weights were fitted to the photo (not given, not a saved grade)."""
-        return self not in (FitStart.GIVEN, FitStart.SAVED)
+        """Whether weights were fitted to the photo (not given)."""
+        return self is not FitStart.GIVEN
+
+
+#: The JSON's ``fit_start`` of a grade no palette fit made: where its map came from.
+_SOURCE_START = {GradeSource.PRESET_LOOK: "preset", GradeSource.OWN_SCENE: "scene",
+                 GradeSource.SET_LOOK: "look", GradeSource.SAVED: "saved"}
+
+
+def fit_start_word(source: GradeSource, fit_start: str | None) -> str:
+    """What the JSON's ``fit_start`` says of a grade: how a palette fit found its weights
+    (``fit_start``, a :class:`FitStart` value; None: a shared grade whose fit the caller
+    holds), else where the map came from ("preset", "scene", "look", "saved").
+
+    >>> fit_start_word(GradeSource.PALETTE, "vertex"), fit_start_word(GradeSource.SET_LOOK, None)
+    ('vertex', 'look')
+    """
+    if source is not GradeSource.PALETTE:
+        return _SOURCE_START[source]
+    return FitStart.SHARED.value if fit_start is None else str(fit_start)
 
 
 @dataclass(frozen=True)

@@ -561,7 +561,8 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
                         names=list(styles.names),
                         weights=[float(w) for w in graded.grade.weights],
                         loss=float(fit.loss), vertex_losses=[float(v) for v in fit.vertex_losses],
-                        start=fit.start, timings=dict(graded.timings), color=graded.color,
+                        start=graded.fit_start, timings=dict(graded.timings),
+                        color=graded.color,
                         own_style=graded.grade.own_style,
                         outcome=None if graded.outcome is None else graded.outcome.as_dict())
     sheet = sheet_path(result.relative)

@@ -62,7 +62,7 @@ from wbcgrade.color.grade.grading import (
 from wbcgrade.color.histogram import PaletteSum
 from wbcgrade.color.mapping.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.outcome import FitStart
+from wbcgrade.color.outcome import fit_start_word
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.errors import InputError, OptionError, WbcgradeError
@@ -148,7 +148,8 @@ class ShotGrade:
                  "start_s": round(self.first / fps, 4), "end_s": round((self.last + 1) / fps, 4),
                  "sampled_frames": self.samples,
                  "outcome": None if outcome is None else outcome.as_dict(),
-                 "fit_start": FitStart.SAVED.value if self.fit is None else self.fit.start,
+                 "fit_start": fit_start_word(self.grade.source,
+                                             None if self.fit is None else self.fit.start),
                  "timings_s": {k: round(v, 3) for k, v in self.grade.timings.items()}}
         if outcome is None or outcome.palette is not None:
             entry.update({

@@ -100,8 +100,8 @@ def look_map(request: MapRequest) -> BuiltMap:
         return palette_map(request)
     if styles.look is not None:  # a preset made with a known look: that look
         n_styles = len(styles.names)
-        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), "preset",
-                         {"start": "preset", "look": "the preset's own"}, 0.0)
+        fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles), None,
+                         {"look": "the preset's own"}, 0.0)
         size = options.map.size
         if styles.converted_from:  # converted from the preset's own space: finer,
             size = max(size, CONVERTED_LOOK_SIZE)  # as its gamut fills part of this cube
@@ -142,9 +142,9 @@ def look_map(request: MapRequest) -> BuiltMap:
             # per style: the pair residual where it shows the scene, the cube's diagonal elsewhere
             alone = np.full(n_styles, float(np.sqrt(3.0)))
             alone[list(scene.matches)] = scene.residual
-            fit = FitSummary(weights, scene.residual, alone, "scene",
-                             {"start": "scene", "match": styles.names[best],
-                              "confidence": scene.confidence}, sum(timings.values()))
+            fit = FitSummary(weights, scene.residual, alone, None,
+                             {"match": styles.names[best], "confidence": scene.confidence},
+                             sum(timings.values()))
             return BuiltMap(_as_set_look(color_map, extracted), None, info, timings, fit,
                             GradeSource.OWN_SCENE,
                             look_found(extracted, strength, styles.names[best], scene.confidence))
@@ -156,8 +156,7 @@ def look_map(request: MapRequest) -> BuiltMap:
                              "confidence": 0.0, **extracted.info,
                              "no_scene": no_scene}}
             fit = FitSummary(np.full(n_styles, 1.0 / n_styles), 0.0, np.zeros(n_styles),
-                             "look", {"start": "look", "match": None, "confidence": 0.0},
-                             sum(timings.values()))
+                             None, {"match": None, "confidence": 0.0}, sum(timings.values()))
             return BuiltMap(_as_set_look(base.lattice(options.map.size), extracted), None, info,
                             timings, fit, GradeSource.SET_LOOK,
                             look_found(extracted, strength, None, 0.0))
@@ -167,7 +166,7 @@ def look_map(request: MapRequest) -> BuiltMap:
     confidence = photo.confidence
     weights = np.full(n_styles, 1.0 / n_styles)
     color_map = base.lattice(options.map.size)
-    fit_info: dict = {"start": "look", "match": found.match, "confidence": confidence}
+    fit_info: dict = {"match": found.match, "confidence": confidence}
     transport = None  # the scene's palette grade's Sinkhorn solve, when there is one
     if confidence > 0:
         scene_options = GradeOptions(
@@ -189,7 +188,7 @@ def look_map(request: MapRequest) -> BuiltMap:
                                  "loss": summary.loss}
         info.update({k: v for k, v in scene.info.items() if k != "fit"})
         transport = scene.transport
-    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, "look",
+    fit = FitSummary(weights, float(photo.residuals[photo.match]), photo.residuals, None,
                      fit_info, sum(timings.values()))
     if monochrome:
         color_map = monochrome_map(color_map)
