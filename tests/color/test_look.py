@@ -319,6 +319,37 @@ def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypa
     assert len(looks()) == 2  # a second look: not the first one read back under others
 
 
+def test_a_set_look_and_the_natural_statistics_are_read_back_from_disk(tmp_path, monkeypatch):
+    """A new process reads the set's look and the natural palettes' statistics from the
+    disk cache instead of computing them again (both hold NaN by design: a look's unknown
+    losses, an empty lightness band's statistics; they were rebuilt on every run)."""
+    from wbcgrade.color.look import set_extraction as look
+    from wbcgrade.color.look import statistics as look_statistics
+    from wbcgrade.color.presets import StyleSet
+
+    def style_set(images):
+        return StyleSet([f"s{i}" for i in range(len(images))],
+                        np.stack([image_histogram(i, 32) for i in images]),
+                        meta={"cache_dir": str(tmp_path)})
+
+    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)])
+    naturals = style_set([everyday_scene(s) for s in range(40, 44)])
+    monkeypatch.setattr(look, "_SET_LOOKS", {})  # a process that computes and writes them
+    monkeypatch.setattr(look, "_NATURAL_STATISTICS", {})
+    first = look.set_look(styles, naturals)
+    monkeypatch.setattr(look, "_SET_LOOKS", {})  # a new process: only the disk cache is left
+    monkeypatch.setattr(look, "_NATURAL_STATISTICS", {})
+
+    def computed(*args, **kwargs):
+        raise AssertionError("computed again instead of read from the cache")
+
+    monkeypatch.setattr(look, "statistics_set_look", computed)
+    monkeypatch.setattr(look_statistics, "palette_statistics", computed)
+    again = look.set_look(styles, naturals)
+    assert np.array_equal(again.look.coefficients, first.look.coefficients)
+    assert look.natural_statistics(naturals, styles) is not None
+
+
 @pytest.mark.slow
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""

@@ -247,3 +247,32 @@ def test_a_product_needed_on_a_subset_is_exact_there_and_repairs_less(shape, rng
         some_repairs += geom.log_apply_one(f, part, needed=needed)
         np.testing.assert_allclose(part[needed], full[needed], rtol=1e-14)  # to rounding
     assert all_repairs > 0 and some_repairs < all_repairs
+
+
+@pytest.mark.parametrize("shape,dtype", [((24, 20, 16), np.float64), ((64, 48), np.float32),
+                                         ((8, 7, 6, 5), np.float64)])
+def test_grid_products_reuse_one_scratch_array_and_give_the_same_numbers(shape, dtype, rng):
+    """``apply_into`` alternates between ``out`` and a scratch array the thread keeps: after
+    the first product it allocates no intermediate (it made one per axis), and its numbers
+    are those of the products with fresh intermediates, ``out`` overlapping the input too."""
+    import tracemalloc
+
+    geom = GridGeometry(shape, 0.05, dtype)
+    block = rng.random((3, *shape)).astype(dtype)
+    expected = np.empty_like(block)
+    geom._apply_into_allocating(block, expected)
+    out = np.empty_like(block)
+    geom.apply_into(block, out)
+    assert np.array_equal(out, expected)
+    tracemalloc.start()
+    try:
+        geom.apply_into(block[:2], out[:2])  # a smaller block: the same scratch
+        geom.apply_into(block, out)
+        allocated = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert allocated < block.nbytes / 3  # no intermediate (one histogram's worth at most)
+    assert np.array_equal(out, expected)
+    same = block.copy()
+    geom.apply_into(same, same)  # out is the input: fresh intermediates, the same numbers
+    assert np.array_equal(same, expected)

@@ -146,6 +146,12 @@ class LogBackend:
     def previous(self, it: Iterate) -> NDArray:
         return it.log_P - it.phi
 
+    def release(self, it: Iterate) -> None:
+        """The reverse pass is done with ``it`` (nothing is reused here)."""
+
+    def recycle(self, stack: NDArray | None) -> None:
+        """The caller is done with ``stack`` (nothing is reused here)."""
+
     def sum_histograms(self, r: NDArray) -> NDArray:
         return r.sum(axis=0)
 

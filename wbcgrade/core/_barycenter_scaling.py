@@ -82,6 +82,11 @@ class ScalingBackend:
             self.log_low, self.log_high = -np.inf, np.inf
             self.high = np.inf
         self.limit = self.dtype.type(np.inf)
+        #: stacks reused from step to step (what an iteration needs only while it runs)
+        self._buffers: dict[str, NDArray] = {}
+        #: stacks of iterations the reverse pass is done with (:meth:`release`), reused
+        #: by the next recorded step
+        self._spare: list[NDArray] = []
 
     # ------------------------------------------------------------ helpers
     def _rows(self, x: NDArray) -> NDArray:
@@ -92,6 +97,33 @@ class ScalingBackend:
 
     def _product(self, source: NDArray, target: NDArray, lo: int, hi: int) -> None:
         self.geometry.apply_into(self._blocks(source)[lo:hi], self._blocks(target)[lo:hi])
+
+    def _buffer(self, name: str) -> NDArray:
+        """A stack (the histograms' shape) this backend reuses: its contents last only
+        until the next step or adjoint writes it (no fresh pages each iteration)."""
+        buffer = self._buffers.get(name)
+        if buffer is None:
+            buffer = self._buffers[name] = np.empty_like(self.H)
+        return buffer
+
+    def _fresh(self) -> NDArray:
+        """A stack for an iteration that may be recorded: a released one, else new."""
+        return self._spare.pop() if self._spare else np.empty_like(self.H)
+
+    def release(self, it: Iterate) -> None:
+        """The reverse pass is done with ``it``: its ``K b`` and ``phi`` may be reused."""
+        for stack in (it.Kb, it.phi):
+            self.recycle(stack)
+
+    def recycle(self, stack: NDArray | None) -> None:
+        """``stack`` (an iterate's array or scalings this backend made) is no longer used
+        by its caller: a later step may write into it. Buffers and arrays already spare
+        are left alone."""
+        if stack is None or stack.shape != self.H.shape or stack.dtype != self.H.dtype \
+                or any(stack is b for b in self._buffers.values()) \
+                or any(stack is b for b in self._spare):
+            return
+        self._spare.append(stack)
 
     def _over_items(self, work) -> None:
         if self.items >= 2 and self.N >= _PARALLEL_BINS:
@@ -122,7 +154,7 @@ class ScalingBackend:
 
     def scalings(self, P: NDArray, phi: NDArray) -> NDArray:
         """``b = P / phi`` (0 where phi vanished), raising Unsafe on overflow."""
-        b = np.empty_like(phi)
+        b = self._fresh()
         P_flat = P.reshape(-1).astype(self.dtype)
         phi_flat, b_flat = phi.reshape(self.S, self.M), b.reshape(self.S, -1)
         overflow = np.zeros(1, dtype=np.int64)
@@ -143,11 +175,16 @@ class ScalingBackend:
              keep: bool = True) -> tuple[NDArray | None, Iterate]:
         """One iteration: next scalings (None unless ``need_next``) and what it computed.
 
-        ``keep`` is accepted for the log backend's interface; here the
-        arrays are needed for the next scalings anyway.
+        ``keep=False``: only ``P`` and the next scalings are wanted, so ``K b`` and
+        ``phi`` are written into stacks the next step reuses; ``a`` and ``log phi``
+        always are (the returned iterate's ``a`` and ``log_phi`` last until the next
+        step or adjoint; :meth:`compact` drops them).
         """
-        Kb, a, phi = np.empty_like(self.H), np.empty_like(self.H), np.empty_like(self.H)
-        log_phi = np.empty_like(self.H)
+        if keep:
+            Kb, phi = self._fresh(), self._fresh()
+        else:
+            Kb, phi = self._buffer("Kb"), self._buffer("phi")
+        a, log_phi = self._buffer("a"), self._buffer("log_phi")
         lost = np.zeros(self.items, dtype=np.int64)
         H_rows, Kb_rows, a_rows = self._rows(self.H), self._rows(Kb), self._rows(a)
 
@@ -237,8 +274,14 @@ class ScalingBackend:
         part of each ``w_s g`` not yet propagated (None at the last iteration).
         """
         g_rows = g.reshape(self.batch, self.N)
-        x = np.empty_like(self.H)
-        r_next = np.empty(self.shape) if need_r else None
+        x, y_all = self._buffer("x"), self._buffer("y")
+        # r and r_next alternate between two stacks: r is read here, r_next written
+        r_next = None
+        if need_r:
+            name = "r1" if r is not None and r is self._buffers.get("r0") else "r0"
+            r_next = self._buffers.get(name)
+            if r_next is None:
+                r_next = self._buffers[name] = np.empty(self.shape)
         grad = np.zeros(self.items)
         unsafe = np.zeros(self.items, dtype=np.int64)
         empty = np.empty(0)
@@ -262,7 +305,7 @@ class ScalingBackend:
                     _kernels.reverse_in(self.item_weights[j], gj, rj, phi_rows[j], x_rows[j])
             if not need_r:
                 return
-            y = np.empty((hi - lo, *self.geometry.shape), dtype=self.dtype)
+            y = self._blocks(y_all)[lo:hi]
             self.geometry.apply_into(self._blocks(x)[lo:hi], y)
             y_rows = y.reshape(hi - lo, self.N)
             for j in range(lo, hi):

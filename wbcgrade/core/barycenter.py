@@ -411,6 +411,11 @@ class BarycenterSolver:
             lo += plan
             save_at.add(lo)
             s -= 1
+        # scalings and iterates the reverse pass is done with go back to the backend
+        # (its next steps write into them instead of fresh arrays; fake backends in
+        # the tests have neither method)
+        recycle = getattr(backend, "recycle", lambda stack: None)
+        release = getattr(backend, "release", lambda it: None)
         b = b0
         for l in range(L):
             if l in save_at:
@@ -419,6 +424,8 @@ class BarycenterSolver:
             if l >= record_from:
                 records[l] = backend.compact(it)
             P, it = it.P, None  # drop this iteration's arrays unless recorded
+            if l > 0 and l not in save_at:
+                recycle(b)
             b = b_next
         del b, b_next
         value, dloss = loss.value_and_grad(P, q, self.geometry)
@@ -437,6 +444,7 @@ class BarycenterSolver:
                 r = state.pop("r")
                 g = backend.sum_histograms(r)
             grad, r_next = backend.adjoint(it, b_prev, g, r, need_r=l > 0)
+            release(it)
             del r, it
             state["grad"] += grad
             if l > 0:
@@ -447,12 +455,19 @@ class BarycenterSolver:
                 it = recs.pop(l)
                 b_prev = backend.previous(recs[l - 1]) if l > lo else b_lo
                 reverse_step(l, b_prev, it)
+                if l > lo:
+                    recycle(b_prev)
                 del it, b_prev
 
         def advance(b_from: NDArray, steps: int) -> NDArray:
+            """The scalings ``steps`` iterations after ``b_from`` (the caller's, kept)."""
+            b = b_from
             for _ in range(steps):
-                b_from, _ = backend.step(b_from, keep=False)
-            return b_from
+                b_next, _ = backend.step(b, keep=False)
+                if b is not b_from:
+                    recycle(b)
+                b = b_next
+            return b
 
         def reverse_segment(lo: int, hi: int, b_lo: NDArray, s: int, first: bool) -> None:
             """Reverse iterations lo..hi-1 from the held scalings ``b_lo`` with ``s`` free slots.
@@ -468,6 +483,8 @@ class BarycenterSolver:
                     for l in range(lo, hi):
                         b_next, it = backend.step(b, need_next=l < hi - 1)
                         records[l] = backend.compact(it)
+                        if b is not b_lo:
+                            recycle(b)
                         b, it = b_next, None
                     del b
                 reverse_recorded(lo, hi, b_lo, records)
@@ -475,11 +492,16 @@ class BarycenterSolver:
                 reverse_step(lo, b_lo)
             elif plan == SWEEP:
                 for l in range(hi - 1, lo - 1, -1):
-                    reverse_step(l, advance(b_lo, l - lo))
+                    b_l = advance(b_lo, l - lo)
+                    reverse_step(l, b_l)
+                    if b_l is not b_lo:
+                        recycle(b_l)
+                    del b_l
             else:
                 mid = lo + plan
                 b_mid = saved.pop(mid) if first else advance(b_lo, plan)
                 reverse_segment(mid, hi, b_mid, s - 1, first)
+                recycle(b_mid)
                 del b_mid
                 reverse_segment(lo, mid, b_lo, s, False)
 

@@ -89,6 +89,30 @@ def test_a_valid_archive_that_lies_is_a_miss_removed_then_rebuilt(tmp_path, dama
     assert np.array_equal(store.get(photos[1], 5), stored[1])
 
 
+def test_nan_its_writer_stored_is_read_back_but_nan_edited_in_is_a_miss(tmp_path):
+    """Statistics with NaN by design (an empty lightness band) are a hit, not rebuilt on
+    every run; NaN put into an entry afterwards, or inf anywhere, is still a miss."""
+    path = tmp_path / "looks" / cache.entry_name("natural statistics")
+    band_mean = np.array([[0.2, np.nan], [0.5, 0.7]])
+    assert cache.write_entry(path, band_mean=band_mean, count=np.int64(3))
+    read = cache.read_entry(path)
+    assert read is not None and set(read) == {"band_mean", "count"}
+    assert np.array_equal(read["band_mean"], band_mean, equal_nan=True)
+
+    clean = tmp_path / "looks" / cache.entry_name("clean")
+    assert cache.write_entry(clean, values=np.ones(3))
+    arrays = dict(np.load(clean))
+    arrays["values"] = np.array([1.0, np.nan, 1.0])
+    arrays[cache.DIGEST_MEMBER] = np.frombuffer(
+        cache._digest(clean.name, {"values": arrays["values"]}), np.uint8)
+    with open(clean, "wb") as handle:  # NaN with a matching digest, but not the writer's
+        np.savez(handle, **arrays)
+    assert cache.read_entry(clean) is None and not clean.exists()
+    infinite = tmp_path / "looks" / cache.entry_name("inf")
+    assert cache.write_entry(infinite, values=np.array([np.nan, np.inf]))
+    assert cache.read_entry(infinite) is None
+
+
 def _write_many(args: tuple[str, int]) -> int:
     path, seed = args
     bad = 0

@@ -131,6 +131,10 @@ def file_key(path: str | os.PathLike) -> str:
 
 #: The member of an entry holding :func:`_digest` of its name and arrays.
 DIGEST_MEMBER = "wbcgrade_digest"
+#: The member (inside the digest) marking an entry whose writer stored NaN itself: the
+#: statistics of an empty lightness band, a look's unknown losses. Such an entry is read
+#: back as written; NaN in an entry without it (or inf in any) still makes it unusable.
+NAN_MEMBER = "wbcgrade_holds_nan"
 
 
 def _digest(name: str, arrays: dict[str, np.ndarray]) -> bytes:
@@ -153,7 +157,7 @@ def read_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
 
     Unusable: not a readable archive, larger than the archive bounds, without the digest
     :func:`write_entry` records or not matching it (values changed, an entry copied
-    under another key), or holding NaN or infinite numbers."""
+    under another key), or holding infinite numbers, or NaN its writer did not store."""
     import numpy as np
 
     if path is None or not os.path.isfile(path):
@@ -164,8 +168,10 @@ def read_entry(path: str | os.PathLike | None) -> dict[str, np.ndarray] | None:
         if recorded is None or recorded.dtype != np.uint8 \
                 or recorded.tobytes() != _digest(Path(path).name, arrays):
             raise InputError(f"{path}: does not match its digest")
+        holds_nan = arrays.pop(NAN_MEMBER, None) is not None
         for array in arrays.values():
-            if array.dtype.kind in "fc" and not np.isfinite(array).all():
+            if array.dtype.kind in "fc" and not np.isfinite(array).all() \
+                    and not (holds_nan and not np.isinf(array).any()):
                 raise InputError(f"{path}: holds NaN or infinite values")
         return arrays
     except InputError:
@@ -190,7 +196,9 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
     without the flushes to disk: an entry a crash damages is found damaged and
     rebuilt. A failed write is logged once per process (the cache folder is one); temporaries a
     killed run left in it are removed the first time a process writes there.
-    ``compress``: deflate the arrays (histograms are sparse and shrink well).
+    ``compress``: deflate the arrays (histograms are sparse and shrink well). NaN in the
+    arrays is recorded as the writer's (:data:`NAN_MEMBER`): read back as it is, where an
+    entry holding NaN it was not written with is a miss.
     """
     if path is None:
         return False
@@ -201,6 +209,8 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
     folder = str(path.parent)
     try:
         data = io.BytesIO()
+        if any(np.asarray(a).dtype.kind in "fc" and np.isnan(a).any() for a in arrays.values()):
+            arrays = {**arrays, NAN_MEMBER: np.ones(1, np.uint8)}
         digest = np.frombuffer(_digest(path.name, arrays), dtype=np.uint8)
         (np.savez_compressed if compress else np.savez)(data, **arrays,
                                                          **{DIGEST_MEMBER: digest})

@@ -376,11 +376,9 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
             "styles": n_styles, "naturals": len(naturals.quantiles), "own_photos": n_reference,
             "own_photos_share": round(1.0 - blend, 3), "own_photos_unused": unused}
     info["jackknife"] = {name: round(float(k), 3) for name, k in zip(PARTS, kept)}
-    look = look_from_differences(shown, False, info)
     if jackknife_colors is not None:  # the posterior's share, times what of it is kept
-        info["share"] = round(found.share * _colour_share(
-            look, look_from_differences(found.differences), *jackknife_colors), 3)
-    return look
+        info["share"] = round(found.share * _kept_share(mean, applied, noise[0][0]), 3)
+    return look_from_differences(shown, False, info)
 
 
 #: The parts of a look checked against themselves one by one (:func:`jackknife_share`):
@@ -395,12 +393,10 @@ def _parts(raw: LookDifferences) -> list[np.ndarray]:
     return [index < q, (index >= q) & (index < q + b), index >= q + b]
 
 
-def _colour_share(applied, shown, colors: np.ndarray, masses: np.ndarray) -> float:
-    """How much of the ``shown`` look the ``applied`` one carries on ``colors`` (weighted by
-    ``masses``): the projection of its displacement onto the other's, in [0, 1]."""
-    masses = np.asarray(masses, dtype=np.float64) / np.sum(masses)
-    moved, wanted = applied(colors) - colors, shown(colors) - colors
-    power = float(masses @ np.sum(wanted * wanted, axis=1))
-    if not power > 0:
-        return 0.0
-    return float(np.clip(masses @ np.sum(moved * wanted, axis=1) / power, 0.0, 1.0))
+def _kept_share(mean: np.ndarray, applied: np.ndarray, noise: np.ndarray) -> float:
+    """How much of the posterior ``mean`` the ``applied`` differences keep, measured as the
+    posterior's share is (whitened by content's ``noise``): a projection in [0, 1]."""
+    chol = np.linalg.cholesky(noise + 1e-10 * np.eye(len(mean)))
+    white_mean, white_applied = np.linalg.solve(chol, mean), np.linalg.solve(chol, applied)
+    power = float(white_mean @ white_mean)
+    return float(np.clip(white_applied @ white_mean / power, 0.0, 1.0)) if power > 0 else 0.0
