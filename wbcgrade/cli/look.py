@@ -13,7 +13,7 @@ from wbcgrade.cli.grading_options import (
     table_options,
     table_rows,
 )
-from wbcgrade.cli.option_table import option
+from wbcgrade.cli.option_table import flag_of, option
 
 #: ``--lut-size`` of the look commands (at most 129 nodes a side).
 _LUT_SIZE = click.IntRange(2, 129)
@@ -75,6 +75,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
                                   working_space=working_space, overwrite=overwrite,
                                   warn=lambda m: click.echo(f"Warning: {m}", err=True),
                                   on_style=on_style, on_look=on_look)
+    if found.outcome is not None:  # its words name flags
+        found.outcome = found.outcome.named(flag_of)
     if as_json:
         click.echo(json.dumps(found.as_dict(), indent=2))
         return
@@ -82,7 +84,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     what = ("the preset's own look" if outcome.source.value == "preset-look"
             else f"the look {len(found.styles)} style photos share")
     strength = found.strength
-    if "probability" in outcome.extra:  # judged jointly: the same words as apply's
+    if outcome.probability is not None:  # judged jointly: the same words as apply's
         what, strength = outcome.source_words()
     from wbcgrade.color.outcome import change_words
 

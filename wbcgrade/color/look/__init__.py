@@ -1,7 +1,7 @@
 """The default grade's looks, in one package.
 
 A look is the global colour map a set of graded photos share, apart from
-their content; the default grade (``--mode look``) applies the style set's
+their content; the default grade (``map.builder`` "look") applies the style set's
 look, moved towards the photo's own scene where a style photo shows it.
 
 Submodules:
@@ -29,7 +29,7 @@ Submodules:
 - :mod:`~wbcgrade.color.look.learn`: ``wbcgrade look learn`` (a look learnt
   from before/after pairs).
 
-A saved grade (``--look FILE``, ``--save-grade``) is
+A saved grade is
 :mod:`wbcgrade.color.grade.saved_grade`. This package imports only what it needs
 to fit looks; the builder and the two workflows are imported from their
 submodules.

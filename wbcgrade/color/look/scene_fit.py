@@ -25,7 +25,17 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
+from wbcgrade.color.look.scene import (
+    colour_pairs,
+    match_scene,
+    mirrored,
+    scene_image,
+    style_scene_images,
+    unmirror,
+)
 from wbcgrade.color.mapping.remap import interpolate_lattice
+from wbcgrade.color.palette.smooth_map import interpolation_matrix
+from wbcgrade.core import fast_cpu
 
 __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_scene_look",
            "find_scene_look", "fit_correction", "fit_pairs_look"]
@@ -117,8 +127,8 @@ class PhotoLook:
 UNSURE_RATIO = 0.75
 SURE_RATIO = 0.35
 #: Overlap of the mapped photo's palette with the match's at or below which the
-#: match is not the photo's scene, and at or above which it surely is
-#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
+#: match is not the photo's scene, and at or above which it surely is (between what
+#: framings of one scene and other scenes give: docs/benchmarks.md).
 UNSURE_OVERLAP = 0.55
 SURE_OVERLAP = 0.65
 
@@ -214,7 +224,6 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.palette.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
     interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
@@ -261,14 +270,13 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
     rounds : robust refits (pairs far from the fit, e.g. content that moved
         between the shots, weigh less each round).
     correct : add the smooth lattice correction (:func:`fit_correction`, 9^3)
-        for what the map family cannot hold (measured on ``benchmarks/look.py``'s
-        shot matching: +0.05 to +0.2 recovered on film and bleach-bypass looks).
+        for what the map family cannot hold (film and bleach-bypass looks:
+        docs/benchmarks.md).
 
     why : filled with the reason each style (by index) does not show the scene.
 
     Returns None when no style shows the scene.
     """
-    from wbcgrade.color.look.scene import colour_pairs, match_scene, mirrored, unmirror
 
     prior = prior or LookMap.identity()
     matches = {}
@@ -330,7 +338,6 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     look : :class:`SceneLook` (no matches, confidence 1).
     robust : (N,) the final robust weights.
     """
-    from wbcgrade.core import fast_cpu
 
     prior = prior or LookMap.identity()
     look, robust = prior, (weights if robust is None else robust)
@@ -359,7 +366,6 @@ def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = No
         (:func:`~wbcgrade.color.look.scene.style_scene_images`); a preset has none.
     prior : what colours absent from every overlap get (default identity).
     """
-    from wbcgrade.color.look.scene import scene_image, style_scene_images
 
     style_images = style_scene_images(styles, progress)
     if not any(image is not None for image in style_images):
