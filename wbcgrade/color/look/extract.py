@@ -103,7 +103,7 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
     # strength None: a preset's own look in full, an extracted one at its reliability
     asked = strength
     lattice, info = set_look_map(styles, naturals, strength, lut_size, on_look)
-    strength = info["strength"]
+    strength = info.strength
     grade = Grade(tuple(styles.names), np.full(len(styles.names), 1.0 / len(styles.names)),
                   lattice, working=encoding.working)
     path = write_grade_lut(output, grade, encoding, lut_size, lut_format,
@@ -111,18 +111,18 @@ def extract_look_file(source: StyleSource, output: str | os.PathLike, *, lut_siz
                            comments=[f"look of {len(styles.names)} style photos"])
     size = map_change(lattice, 1.0, encoding.working)
     n_styles = len(styles.names)
-    preset = info.get("source") == "preset"
+    preset = info.from_preset
     why = None
     if not preset and strength < FAINT_STRENGTH:
         how = "no" if strength < UNCHANGED_STRENGTH else "little"
         why = (f"these {n_styles} style photos share {how} look that can be told apart "
                "from their content")
-    extra = {k: int(info.get(k) or 0) for k in OWN_PHOTO_KEYS}
+    extra = {k: info.count(k) for k in OWN_PHOTO_KEYS}
     look_strength, blend = float(strength), 1.0
-    if info.get("rule") == "posterior" and info.get("probability") is not None:
+    if info.probability is not None:
         # judged jointly, as apply says it: the share the photos show and the strength asked
-        extra["probability"] = float(info["probability"])
-        look_strength, blend = float(info["share"]), 1.0 if asked is None else float(asked)
+        extra["probability"] = info.probability
+        look_strength, blend = info.share, 1.0 if asked is None else float(asked)
     outcome = GradeOutcome.judge(GradeSource.PRESET_LOOK if preset else GradeSource.SET_LOOK,
                                  n_styles, look_strength, blend, size, size, why, extra=extra)
     return ExtractedLook(path, list(styles.names), float(strength), dict(info), outcome)

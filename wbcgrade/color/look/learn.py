@@ -40,7 +40,7 @@ colour after it. The steps:
 
 :func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
 saved grade (``.json``) that :func:`wbcgrade.color.grade.saved_grade.load_look`
-reads: ``apply --look``, ``batch --look`` and ``video --look`` use it.
+reads, as every command's saved look does.
 """
 
 from __future__ import annotations
@@ -127,8 +127,8 @@ LEARN_FOLDS = 4
 #: Below this many pairs the look is pulled, where the pairs' colours say little, towards
 #: the photographer's edit that best explains them (:func:`~wbcgrade.color.look.edits.fit_edit`)
 #: rather than towards no look: one photo's colours leave most of the cube to
-#: extrapolation, and an edit extrapolates as edits do (``benchmarks/learn.py
-#: --originals 1``: docs/benchmarks.md).
+#: extrapolation, and an edit extrapolates as edits do (the one-original figures in
+#: docs/benchmarks.md).
 EDIT_PRIOR_PAIRS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
@@ -715,7 +715,7 @@ class LearnResult:
         return self._mean("held_out")
 
     def as_dict(self) -> dict:
-        """JSON-friendly summary (what ``look learn --json`` prints)."""
+        """JSON-friendly summary (what the command prints as JSON)."""
         return {"output": None if self.output is None else str(self.output),
                 "working_space": self.working_space,
                 "pairs_used": len(self.used), "pairs_given": len(self.pairs),
@@ -915,8 +915,8 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
                   progress: Callable[[int, int, str], None] | None = None):
     """The look of before/after pairs (and of edits without originals) as a grade.
 
-    What ``look learn`` writes and ``apply --look`` reads back, and what ``apply
-    --style DIR --originals ODIR`` applies: the learned look sampled as a
+    What ``look learn`` writes and a saved look reads back, and what a style folder with
+    the originals of some of its photos applies: the learned look sampled as a
     ``lut_size``^3 lattice, in the look's working space, no regrain settings.
 
     Parameters

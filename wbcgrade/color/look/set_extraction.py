@@ -70,7 +70,7 @@ from wbcgrade.color.presets import (
 )
 from wbcgrade.core import barycenter
 
-__all__ = ["LookResult", "extract_look", "set_look", "set_look_base", "set_look_halves",
+__all__ = ["LookResult", "LookInfo", "extract_look", "set_look", "set_look_base", "set_look_halves",
            "look_reliability", "set_look_map", "natural_palettes", "load_naturals",
            "statistics_set_look"]
 
@@ -114,6 +114,17 @@ class LookResult:
     weights: np.ndarray
     losses: np.ndarray
     info: dict = field(default_factory=dict)
+
+    @property
+    def share(self) -> float:
+        """How much of what the styles show is applied (1 where the rule has no share)."""
+        return float(self.info.get("share", 1.0))
+
+    @property
+    def own_photos(self) -> int | None:
+        """How many of the user's own photos the look was measured against (None: unknown)."""
+        count = self.info.get("own_photos")
+        return None if count is None else int(count)
 
 
 def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
@@ -289,7 +300,7 @@ def load_naturals(natural: str | None, working_space: str):
     """The content model a command names: ``natural`` a preset file (.npz) of natural
     palettes, a folder of the user's own ungraded photos (their statistics say what
     content looks like in their collection; the shipped palettes how much it varies:
-    ``meta["own"]``; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
+    its ``own`` palettes; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
     or None or :data:`~wbcgrade.color.presets.SHIPPED_NATURALS` (the shipped palettes); in
     ``working_space``."""
     from pathlib import Path
@@ -404,9 +415,9 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
         _SET_LOOKS[key] = found
     found = _SET_LOOKS[key]
     given = naturals.meta.get("own_given")  # a folder of own photos, black-and-white ones too
-    if given is not None and "own_photos" in found.info:
+    if given is not None and found.own_photos is not None:
         found = LookResult(found.look, found.weights, found.losses,
-                           {**found.info, "own_photos_unused": given - found.info["own_photos"]})
+                           {**found.info, "own_photos_unused": given - found.own_photos})
     return found
 
 
@@ -453,8 +464,9 @@ def _palettes_digest(palettes) -> str:
 
     hists = palettes.histograms
     meta = getattr(palettes, "meta", {}) or {}
-    if "file_digest" in meta:  # a preset file, in a working space: no need to hash arrays
-        return (f"{meta['file_digest']}|{meta.get('working_space', '')}|"
+    file_digest = getattr(palettes, "file_digest", None)
+    if file_digest:  # a preset file, in a working space: no need to hash arrays
+        return (f"{file_digest}|{meta.get('working_space', '')}|"
                 f"{meta.get('converted_from', '')}|{hists.shape}")
     known = _DIGESTS.get(id(hists))
     if known is None or known[0] is not hists:
@@ -541,17 +553,14 @@ JACKKNIFE_BINS = 16
 
 def _styles_subset(styles, indices):
     """The styles at ``indices`` as a StyleSet of their own (histograms, space, cache)."""
-    indices = list(indices)
-    meta = {k: v for k, v in styles.meta.items() if k in ("working_space", "cache_dir")}
-    return StyleSet([styles.names[i] for i in indices], styles.histograms[indices],
-                    styles.source, styles.width, styles.description, meta)
+    return styles.subset(indices)
 
 
 def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
     """The looks of the two halves of a style set (styles 0, 2, 4, ... and 1, 3, 5, ...),
     each extracted as :func:`set_look` does (and cached the same way); None under 2 styles.
-    With the user's own photos (``naturals.meta["own"]``), each half is measured against
-    its half of them too (weighed as the whole), so the halves disagree by the own
+    With the user's own photos (the ``own`` palettes beside ``naturals``), each half is
+    measured against its half of them too (weighed as the whole), so the halves disagree by the own
     photos' sampling error as well as by the styles'."""
     n = len(styles.names)
     if n < 2:
@@ -571,7 +580,7 @@ _OWN_HALVES: dict[tuple, object] = {}
 
 def _own_half(naturals, own, half: int):
     """``naturals`` with half ``half`` (0, 1) of its own photos, weighed as the whole set
-    (``meta["own_count"]``); made once per own set (its digest names the half's)."""
+    (the whole own set's count); made once per own set (its digest names the half's)."""
     digest = _palettes_digest(own)
     key = (id(naturals), digest, half)
     if key not in _OWN_HALVES or _OWN_HALVES[key][0] is not naturals:
@@ -616,7 +625,7 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
 def _look_cache_path(key: str, styles=None):
     """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
     ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`);
-    None when the command said ``--no-cache``."""
+    None when caching is off."""
     return entry_path(cache_folder(styles), "looks", key)
 
 
@@ -652,7 +661,7 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
 #: +0.180 (-0.22): a little of the mean for no photo clearly worse than doing nothing.
 MIN_HALF_STYLES = 2
 
-#: A statistics look whose evidence (``info["evidence"]``, 1 where ungraded sets stop;
+#: A statistics look whose evidence (its ``evidence``, 1 where ungraded sets stop;
 #: :func:`wbcgrade.color.look.statistics._look_evidence`; weighed for sets of
 #: :data:`~wbcgrade.color.look.statistics.MIN_EASED_STYLES` styles or more against the
 #: shipped palettes, not against the user's own photos) reaches this is applied in full,
@@ -707,7 +716,7 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
         # the look is already the posterior's: as strong as the styles support it
         scale = 1.0 if strength is None else float(strength)
         look = LookMap(scale * extracted.look.coefficients, extracted.look.knots)
-        return look, extracted, scale * float(extracted.info["share"])
+        return look, extracted, scale * extracted.share
     if strength is None and statistics and (extracted.info.get("monochrome")
                                             or len(styles.names) < MIN_HALF_STYLES * 2
                                             or (extracted.info.get("evidence") or 0.0)
@@ -757,25 +766,56 @@ def _histogram_colors(hist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return grid_points(hist.shape[0])[used], flat[used]
 
 
+class LookInfo(dict):
+    """What :func:`set_look_map` found (JSON-friendly), with typed readings of it."""
+
+    @property
+    def strength(self) -> float:
+        """The strength the look was written at."""
+        return float(self["strength"])
+
+    @property
+    def from_preset(self) -> bool:
+        """A preset's own look (not one extracted from photos)."""
+        return self.get("source") == "preset"
+
+    @property
+    def probability(self) -> float | None:
+        """How sure it is that the set has a look, where the styles were judged jointly."""
+        if self.get("rule") != "posterior" or self.get("probability") is None:
+            return None
+        return float(self["probability"])
+
+    @property
+    def share(self) -> float:
+        """How much of what the styles show is applied."""
+        return float(self.get("share", self.strength))
+
+    def count(self, key: str) -> int:
+        """A count it holds (own photos used, unused...), 0 when absent."""
+        return int(self.get(key) or 0)
+
+
 def set_look_map(styles, naturals=None, strength: float | None = None,
                  map_size: int = 33,
-                 progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
+                 progress: Callable[[int, int], None] | None = None
+                 ) -> tuple[np.ndarray, LookInfo]:
     """The look a style set shares, as a lattice LUT (what ``wbcgrade look extract`` writes).
 
     ``strength`` scales the map's displacement; None: a preset's own look in
     full, an extracted one at its reliability on the average natural palette
     (:func:`set_look_base`; the grade takes it on the photo's own colours).
 
-    Returns ((map_size,) * 3 + (3,) float32 lattice, JSON-friendly info).
+    Returns ((map_size,) * 3 + (3,) float32 lattice, :class:`LookInfo`).
     """
-    if styles.meta.get("look") is not None:  # a preset made with a known look
+    if styles.look is not None:  # a preset made with a known look
         strength = 1.0 if strength is None else strength
         identity = grid_points(map_size).reshape((map_size,) * 3 + (3,))
-        known = resample_lattice(styles.meta["look"], map_size)
+        known = resample_lattice(styles.look, map_size)
         moved = strength * (known - identity)
         return ((identity + moved).astype(np.float32),
-                {"source": "preset", "strength": strength,
-                 "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))})
+                LookInfo({"source": "preset", "strength": strength,
+                 "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))}))
     look, extracted, strength = set_look_base(styles, naturals, strength, progress=progress)
     names = (naturals if naturals is not None else natural_palettes()).names
     if extracted.info.get("content_shrink", 0.0) >= 1.0:  # not fitted: the average of all
@@ -784,8 +824,8 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
         content = {style: {names[k]: round(float(w), 3) for k, w in enumerate(row)
                            if w >= 0.05}
                    for style, row in zip(styles.names, extracted.weights)}
-    info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
-            "content": content}
+    info = LookInfo({**extracted.info, "strength": strength,
+                     "amplitude_applied": look.amplitude(), "content": content})
     lattice = look.lattice(map_size)
     if extracted.info.get("monochrome"):
 
