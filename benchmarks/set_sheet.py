@@ -41,7 +41,7 @@ def one_original_grade(styles: list[np.ndarray], original: np.ndarray):
     """The grade ``look learn`` gives from the style photos, the first with its original."""
     import OpenImageIO as oiio
 
-    from wbcgrade.color.look.learn import learned_grade
+    from wbcgrade.color.grade.look_files import learned_grade
 
     with tempfile.TemporaryDirectory() as tmp:
         originals, edited = Path(tmp) / "originals", Path(tmp) / "edited"

@@ -58,8 +58,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.grade.look_files import extract_look_file
     from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.look.extract import extract_look_file
     from wbcgrade.color.presets import StyleSource
 
     source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
@@ -130,7 +130,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     for path, side in ((before, "BEFORE"), (after, "AFTER")):  # answered before numpy loads
         check_photo(path, f"no such file or folder ({side})")
     from wbcgrade.cli._progress import learn_progress
-    from wbcgrade.color.look.learn import learn_look_file
+    from wbcgrade.color.grade.look_files import learn_look_file
 
     with learn_progress("photos") as (on_pair, warn):
         found = learn_look_file(before, after, output, lut_size=lut_size,

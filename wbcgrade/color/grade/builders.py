@@ -4,7 +4,7 @@ A builder (:data:`wbcgrade.color.grade.grading.MAP_BUILDERS`) takes a :class:`Ma
 and returns a :class:`BuiltMap` (with where its map came from, a
 :class:`~wbcgrade.color.outcome.GradeSource`, and a look's typed findings,
 :class:`LookFound`); :func:`palette_map` is the "palette" one, the
-"look" one is :func:`wbcgrade.color.look.builder.look_map`. Apart from the grade
+"look" one is :func:`wbcgrade.color.grade.look_builder.look_map`. Apart from the grade
 path (:mod:`wbcgrade.color.grade.grading`) so that a builder can live in its own package
 without importing the path that calls it.
 """

@@ -11,7 +11,7 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
      (:func:`wbcgrade.color.palette.fit.fit_weights`: barycentric coordinates never
      worse than the best single style), then the fitted palette, Sinkhorn
      and the smooth map (:func:`wbcgrade.color.palette.transfer.transport_map`);
-   - "look" (:func:`wbcgrade.color.look.builder.look_map`): the look the style
+   - "look" (:func:`wbcgrade.color.grade.look_builder.look_map`): the look the style
      set shares (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
      photo by how sure it is that a style shows the photo's own scene;
 
@@ -63,8 +63,8 @@ from wbcgrade.color.grade.builders import (
     palette_map,
     quiet,
 )
+from wbcgrade.color.grade.look_builder import look_map
 from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.look.builder import look_map
 from wbcgrade.color.mapping.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.mapping.regrain import regrain_map
 from wbcgrade.color.mapping.remap import (

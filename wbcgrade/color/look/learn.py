@@ -38,14 +38,14 @@ colour after it. The steps:
    :data:`LEARN_FOLDS` folds, each fold's pairs predicted by a look fitted
    without them), and a warning for a pair that disagrees with the others.
 
-:func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
-saved grade (``.json``) that :func:`wbcgrade.color.grade.saved_grade.load_look`
-reads, as every command's saved look does.
+:func:`wbcgrade.color.grade.look_files.learn_look_file` writes the look as a
+``.cube``/``.clf`` LUT or a saved grade (``.json``) that
+:func:`wbcgrade.color.grade.saved_grade.load_look` reads, as every command's saved look
+does; :func:`wbcgrade.color.grade.look_files.learned_grade` gives it as a grade.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Callable, Sequence
@@ -54,7 +54,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade._publish import plan_outputs, publish_bytes
 from wbcgrade.color._colour import colour
 from wbcgrade.color.colorspace import (
     SYCC_LUMA,
@@ -63,8 +62,6 @@ from wbcgrade.color.colorspace import (
     default_working_space,
     resolve_space,
 )
-from wbcgrade.color.grade.grading import Grade
-from wbcgrade.color.grade.saved_grade import look_dict
 from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
 from wbcgrade.color.io.cache import default_cache_dir
 from wbcgrade.color.io.images import image_extensions, read_image
@@ -88,18 +85,15 @@ from wbcgrade.color.look.set_extraction import (
     space_scale,
 )
 from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
-from wbcgrade.color.mapping.lut import check_lut_size, write_grade_lut
 from wbcgrade.color.mapping.remap import TONE_LUMA, to_monochrome
-from wbcgrade.color.outcome import SavedFrom
 from wbcgrade.color.presets import styles_in_space
 from wbcgrade.core import fast_cpu
-from wbcgrade.errors import InputError, OptionError, first_line
+from wbcgrade.errors import InputError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
-           "learned_grade",
            "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
-           "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
+           "pair_colours", "learn_look", "LEARN_SIZE", "LEARN_FOLDS",
            "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
            "CORRECTION_NODES", "CORRECTION_SMOOTHNESS"]
 
@@ -898,121 +892,6 @@ def _flag_disagreements(used: list[PairReport], warn: Callable[[str], None]) -> 
 
 # --------------------------------------------------------------------------- the file
 
-
-def _output_kind(output: Path) -> str:
-    suffix = output.suffix.lower()
-    if suffix == ".json":
-        return "json"
-    if suffix in (".cube", ".clf"):
-        return suffix[1:]
-    raise OptionError(f"{output}: {{output}} must be written as .cube, .clf or .json "
-                      "(the ending names the format)", "output", path=output)
-
-
-def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
-                  lut_size: int = 33, working_space: str | None = None,
-                  warn: Callable[[str], None] | None = None,
-                  progress: Callable[[int, int, str], None] | None = None):
-    """The look of before/after pairs (and of edits without originals) as a grade.
-
-    What ``look learn`` writes and a saved look reads back, and what a style folder with
-    the originals of some of its photos applies: the learned look sampled as a
-    ``lut_size``^3 lattice, in the look's working space, no regrain settings.
-
-    Parameters
-    ----------
-    before, after : two photos, or two folders (:func:`match_files`): the originals,
-        and the edited photos (those without an original count too).
-
-    Returns (:class:`~wbcgrade.color.grade.grading.Grade`, :class:`LearnResult`).
-
-    Raises
-    ------
-    InputError
-        The paths do not pair, or no pair is usable (each pair's reason went to
-        ``warn`` first).
-    """
-    check_lut_size(lut_size)
-    matched = match_files(before, after)
-    pairs, problems = matched.pairs, matched.problems
-    warn = warn or (lambda message: None)
-    for name, why in problems:
-        warn(f"{name}: {why}")
-    if not pairs:
-        raise InputError(f"no before/after pairs: no photo in {after} has the name of one "
-                         f"in {before}")
-    result = learn_look(pairs, working_space, problems, warn, progress,
-                        edits_alone=matched.edits_alone)
-    if result.look is None:
-        raise InputError(f"no usable before/after pair (all {len(pairs)} left out: see "
-                         "the lines above)")
-    encoding = ColorEncoding.of(result.working_space, result.working_space)
-    described = result.describe()
-    grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
-                  working=encoding.working,  # no regrain: the look as the pairs show it
-                  info={"saved_look": {"file": described, "kind": "learned"}},
-                  saved=SavedFrom(described, "learned"))
-    return grade, result
-
-
-def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
-                    output: str | os.PathLike, *, lut_size: int = 33,
-                    working_space: str | None = None, overwrite: bool = False,
-                    warn: Callable[[str], None] | None = None,
-                    progress: Callable[[int, int, str], None] | None = None) -> LearnResult:
-    """Learn the look of before/after pairs and write it as a LUT or a saved grade.
-
-    Parameters
-    ----------
-    before, after : two photos or two folders (:func:`match_files`; edited photos
-        without an original are evidence too: :func:`unpaired_correction`).
-    output : ``.cube`` or ``.clf`` (a LUT whose header names its working
-        space) or ``.json`` (a saved grade: ``{"saved_grade": ..., "learned":
-        the report}``); checked before any work, never an input.
-    lut_size : nodes per axis of the written map.
-    working_space : None: :func:`learn_space`.
-    warn, progress : as :func:`learn_look`; every pair that cannot be paired
-        or used gets one ``warn`` line.
-
-    Raises
-    ------
-    InputError
-        The output may not be written, the paths do not pair, or no pair is
-        usable (each pair's reason went to ``warn`` first).
-    """
-    from dataclasses import replace as replaced
-
-    output = Path(output)
-    kind = _output_kind(output)
-    check_lut_size(lut_size)
-    matched = match_files(before, after)
-    inputs = ([p.before for p in matched.pairs] + [p.after for p in matched.pairs]
-              + matched.edits_alone)
-    output = plan_outputs([output], inputs, overwrite)[0]  # before any work
-    grade, result = learned_grade(before, after, lut_size=lut_size,
-                                  working_space=working_space, warn=warn, progress=progress)
-    grade = replaced(grade, info={}, saved=None)
-    encoding = ColorEncoding.of(result.working_space, result.working_space)
-    n = len(result.used)
-    if kind == "json":
-        result.output = output
-        data = {"saved_grade": look_dict(grade), "learned": result.as_dict()}
-        publish_bytes(output, (json.dumps(data, indent=1) + "\n").encode(), overwrite)
-    else:
-        comments = [f"look learned from {n} before/after pair{'s' if n != 1 else ''}"
-                    + (f" and {len(result.edits_alone)} edited photo"
-                       f"{'s' if len(result.edits_alone) != 1 else ''} without an original"
-                       if result.edits_alone else "")]
-        if result.held_out is not None:
-            comments.append(f"mean CIEDE2000 on the pairs {result.delta_e:.2f}, "
-                            f"held out {result.held_out:.2f}")
-        result.output = write_grade_lut(output, grade, encoding, lut_size, kind,
-                                        title="wbcgrade learned look", comments=comments,
-                                        overwrite=overwrite)
-    return result
-
-
-# ------------------------------------------------------------------- edits without originals
 
 #: Colours whose density in the pairs' edited colours (a 17^3 soft histogram, blurred by a
 #: node) reaches this multiple of the uniform density are pinned by the pairs: the edited
