@@ -353,7 +353,6 @@ def test_a_set_look_and_the_natural_statistics_are_read_back_from_disk(tmp_path,
 @pytest.mark.slow
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""
-    import wbcgrade.core
     from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.presets import StyleSet
 
@@ -363,13 +362,13 @@ def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monke
                         meta={"cache_dir": None})
 
     sizes = []
-    real = wbcgrade.core.barycenter
+    real = look.barycenter
 
     def counted(histograms, *args, **kwargs):
         sizes.append(len(histograms))
         return real(histograms, *args, **kwargs)
 
-    monkeypatch.setattr(wbcgrade.core, "barycenter", counted)
+    monkeypatch.setattr(look, "barycenter", counted)
     monkeypatch.setattr(look, "SET_LOOK_METHOD", "transport")  # the one that takes it
     monkeypatch.setattr(look, "_SET_LOOKS", {})
     monkeypatch.setattr(look, "_AVERAGE_CONTENTS", {}, raising=False)
