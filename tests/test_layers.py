@@ -152,7 +152,7 @@ KNOWN_IMPORTS_INSIDE_FUNCTIONS = {
     # the look package (its owner's to move)
     "wbcgrade.color.look.builder": 3, "wbcgrade.color.look.family": 3,
     "wbcgrade.color.look.learn": 37, "wbcgrade.color.look.prior": 6,
-    "wbcgrade.color.look.scene": 4, "wbcgrade.color.look.scene_fit": 4,
+    "wbcgrade.color.look.scene": 4, "wbcgrade.color.look.scene_fit": 3,
     "wbcgrade.color.look.set_extraction": 23,
     # the core (a contract; its compiled kernels load on first use)
     "wbcgrade.core._cpu": 1, "wbcgrade.core.losses": 3,

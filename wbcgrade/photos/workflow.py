@@ -41,6 +41,7 @@ from wbcgrade.color.io.images import (
     WriteOptions,
     check_image_output,
     check_write_options,
+    header_pixels,
     read_image,
     stage_image,
 )
@@ -54,6 +55,7 @@ from wbcgrade.color.mapping.lut import (
     lut_format_of,
     write_checked_lut,
 )
+from wbcgrade.color.mapping.regrain import load_kernels, solved_subsampled
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import (
     StyleSet,
@@ -191,26 +193,19 @@ _LOADER_LOCK = threading.Lock()
 
 
 def _load_kernels(pixels: int) -> None:
-    from wbcgrade.color.io._quantise import load_kernel
-    from wbcgrade.color.mapping.regrain import load_kernels
-
     try:
-        if load_kernels(pixels):
-            load_kernel()
+        load_kernels(pixels)
     except Exception as exc:  # noqa: BLE001 - the grade itself loads (and reports) them
         log.debug("compiled kernels not loaded ahead: %s", exc)
 
 
 def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
-    """Start loading, in a thread, the compiled kernels the regrain and the 8-bit
-    conversion run on ``photo`` when it is large enough for them (over 1.5 megapixels,
-    from its header; :func:`wbcgrade.color.mapping.regrain.load_kernels`), once per
-    process: importing numba and loading its first kernel (~0.7 s of Python) then runs
-    while the photo is decoded and its scene matched, which hold no interpreter lock
-    for most of their time. The thread, or None (nothing to load, or started before)."""
-    from wbcgrade.color.io.images import header_pixels
-    from wbcgrade.color.mapping.regrain import solved_subsampled
-
+    """Start loading, in a thread, the compiled kernels the regrain runs on ``photo`` when
+    it is large enough for them (over 1.5 megapixels, from its header;
+    :func:`wbcgrade.color.mapping.regrain.load_kernels`), once per process: importing
+    numba and loading its first kernel (~0.7 s of Python) then runs while the photo is
+    decoded and its scene matched, which hold no interpreter lock for most of their time.
+    The thread, or None (nothing to load, or started before)."""
     if _LOADER:
         return None
     pixels = header_pixels(photo)

@@ -223,26 +223,21 @@ def test_uniform_filter_numpy_twin_is_scipys_bit_for_bit(rng, shape, radius):
 _LOADED_AHEAD = """
 import sys
 import numpy as np
-import wbcgrade.color.io._quantise as quantise
 import wbcgrade.color.mapping.regrain as regrain
 import wbcgrade.color.mapping.remap as remap
 
 assert not regrain.load_kernels(1_000_000) and "numba" not in sys.modules
 assert regrain.load_kernels(16_000_000)
-quantise.load_kernel()
 kernels = {"block_means_mapped": remap, "moment_rows": regrain, "solve_columns": regrain,
-           "box_rows": regrain, "box_columns": regrain, "apply_rows": regrain,
-           "to_uint8": quantise}
+           "box_rows": regrain, "box_columns": regrain, "apply_rows": regrain}
 loaded = {name: list(getattr(module, "_" + name).signatures)
           for name, module in kernels.items()}
 assert all(len(signatures) == 1 for signatures in loaded.values()), loaded
 regrain._MAX_SOLVE_PIXELS, regrain._NUMPY_SOLVE_PIXELS = 700, 1  # the compiled solve
-quantise._NUMPY_VALUES = 0
 rng = np.random.default_rng(0)
 rgb = rng.random((61, 47, 3), dtype=np.float32)
 table = (np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1) ** 1.5)
-graded = regrain.regrain_map(rgb, table.astype(np.float32), 0.8, 0.05, 0.01)
-quantise.to_uint8(graded)
+regrain.regrain_map(rgb, table.astype(np.float32), 0.8, 0.05, 0.01)
 after = {name: list(getattr(module, "_" + name).signatures)
          for name, module in kernels.items()}
 assert after == loaded, (after, loaded)
@@ -252,9 +247,9 @@ assert after == loaded, (after, loaded)
 @pytest.mark.slow
 def test_kernels_loaded_ahead_are_the_ones_a_large_photo_runs():
     """``load_kernels`` (what ``apply`` starts in a thread before decoding a large photo)
-    loads each kernel of the subsampled regrain and the 8-bit conversion with the
-    argument types the grade then calls it with: the grade adds no signature (no second
-    compilation); a photo solved at full size loads nothing (numba not even imported)."""
+    loads each kernel of the subsampled regrain with the argument types the grade then
+    calls it with: the grade adds no signature (no second compilation); a photo solved
+    at full size loads nothing (numba not even imported)."""
     import subprocess
     import sys
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from wbcgrade.core import compiled, in_bands, numpy_first
 
-__all__ = ["to_uint8", "load_kernel", "HALVES_TO_EVEN"]
+__all__ = ["to_uint8", "HALVES_TO_EVEN"]
 
 
 def _halves_to_even() -> bool:
@@ -57,13 +57,6 @@ def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
     out = np.empty(flat.shape, np.uint8)
     in_bands(_to_uint8, flat.shape[0], flat, out, half_even, min_band=65536)
     return out.reshape(pixels.shape)
-
-
-def load_kernel() -> None:
-    """Load (or, on a first run, compile) the compiled conversion :func:`to_uint8` runs on
-    more than ``_NUMPY_VALUES`` values, by running it on one value with the argument types
-    it gets there."""
-    _to_uint8(np.zeros(1, np.float32), np.empty(1, np.uint8), HALVES_TO_EVEN, 0, 1)
 
 
 #: Values up to which :func:`to_uint8` runs its numpy twin while ``_to_uint8`` has not run
