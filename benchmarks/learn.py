@@ -119,8 +119,8 @@ def learn(folder: Path, photos: dict, names: list[str], table: np.ndarray, varia
 
     ``originals``: only the first so many edited photos have their original in BEFORE
     (the others are graded photos without one)."""
+    from wbcgrade.color.grade.look_files import learn_look_file
     from wbcgrade.color.grade.saved_grade import load_look
-    from wbcgrade.color.look.learn import learn_look_file
 
     before, after = folder / f"{variant}-before", folder / f"{variant}-after"
     before.mkdir()

@@ -493,3 +493,18 @@ def test_a_peak_is_searched_once_then_read_back(tmp_path, monkeypatch):
     monkeypatch.setenv("WBCGRADE_CACHE_DIR", str(tmp_path))
     assert cs.peak(linear, working) == searched
     cs._peak.cache_clear()
+
+
+def test_an_encodings_source_names_the_setting_and_a_caller_writes_its_flag():
+    """A space the caller named: the library says ``spaces.input``; the command line (its
+    flags through the option table) says ``--input-space``, in JSON and LUT headers too."""
+    from wbcgrade.cli.option_table import flag_of
+    from wbcgrade.color.mapping.lut import lut_header
+
+    given = cs.ColorEncoding.of("sRGB", "acescct")
+    assert given.source == "spaces.input" and given.as_dict()["input_space_from"] == "spaces.input"
+    named = given.named(flag_of)
+    assert named.as_dict()["input_space_from"] == "--input-space"
+    assert any(line.endswith("(--input-space)") for line in lut_header(named))
+    assert named.named(flag_of) == named and cs.ColorEncoding.of().named(flag_of).source == \
+        "default"

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from tests.color.test_look import LUMA, sample, warm_look
+from wbcgrade.color.grade.look_files import learn_look_file
 from wbcgrade.color.grade.saved_grade import load_look
 from wbcgrade.color.histogram import grid_points
-from wbcgrade.color.look.learn import learn_look, learn_look_file, pair_files
+from wbcgrade.color.look.learn import learn_look, pair_files
 
 STYLE = ("aitzgorri", "astronaut", "chelsea", "coffee", "flower")
 WIDTH = 240

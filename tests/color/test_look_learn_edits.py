@@ -7,7 +7,8 @@ from click.testing import CliRunner
 
 from tests.color.test_look import LUMA, sample
 from tests.color.test_look_learn import write
-from wbcgrade.color.look.learn import learned_grade, match_files, pair_files
+from wbcgrade.color.grade.look_files import learned_grade
+from wbcgrade.color.look.learn import match_files, pair_files
 
 NAMES = ("aitzgorri", "astronaut", "bridge", "chelsea", "coffee", "flower", "seeding",
          "sunset")

@@ -12,6 +12,8 @@ import pytest
 from tests.color.conftest import FAST_ARGS, SAMPLES, small_copy, write_array
 from tests.conftest import run_cli as run
 from wbcgrade.cli.grading_options import PALETTE_ONLY
+from wbcgrade.cli.option_table import flag_of
+from wbcgrade.color.grade.builders import LookFound
 from wbcgrade.color.grade.grading import Grade, grade_array, grade_outcome
 from wbcgrade.color.io.images import read_image
 from wbcgrade.color.mapping.remap import identity_map
@@ -21,10 +23,11 @@ from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import load_preset, look_in_space, resolve_preset
 
 
-def _look_grade(color_map, set_strength, n=3, strength=1.0):
-    info = {"look": {"set_strength": set_strength, "confidence": 0.0, "match": None}}
+def _look_grade(color_map, set_strength, n=3, strength=1.0, **found):
+    """A set look's grade, as the look builder makes it (``found``: :class:`LookFound`)."""
     return Grade(tuple(f"s{i}" for i in range(n)), np.full(n, 1.0 / n),
-                 np.asarray(color_map, np.float32), "", strength, info=info)
+                 np.asarray(color_map, np.float32), "", strength,
+                 source=GradeSource.SET_LOOK, look=LookFound(set_strength, **found))
 
 
 def _fit(n=3, start="look"):
@@ -40,18 +43,38 @@ def test_a_set_look_at_strength_zero_says_the_photo_is_unchanged_and_why():
     assert outcome.source is GradeSource.SET_LOOK and outcome.palette is None
     assert outcome.unchanged and outcome.mean_change == pytest.approx(0.0, abs=1e-3)
     assert "3 style photos share no look" in outcome.reason
-    assert "--mode palette" in outcome.advice
+    assert "map.builder palette" in outcome.advice
     text = "\n".join(outcome.lines())
-    assert "essentially unchanged" in text and "--mode palette" in text
+    assert "essentially unchanged" in text and "map.builder palette" in text
+
+
+def test_an_outcome_names_settings_as_the_library_does_and_as_a_caller_asks():
+    """The library's words name its settings (``map.strength``); named with the command
+    line's table they are its flags, in every word an outcome says, and stay so when the
+    outcome is judged on another photo."""
+    grade = _look_grade(identity_map(9), 0.0, probability=0.5)
+    outcome = grade_outcome(grade, _fit(), None)
+    library = [outcome.reason, outcome.advice, *outcome.lines(), json.dumps(outcome.as_dict())]
+    assert not any("--" in text for text in library)
+    assert "map.strength above 1" in outcome.advice and "originals DIR" in outcome.advice
+    named = outcome.named(flag_of)
+    assert "--strength above 1" in named.advice and "--originals DIR" in named.advice
+    assert "--mode palette" in named.as_dict()["advice"]
+    assert "--strength above 1" in "\n".join(named.lines())
+    again = named.on_photo(0.1)
+    assert "--mode palette" in again.advice and isinstance(again.as_dict()["advice"], str)
+    zero = grade_outcome(_look_grade(identity_map(9), 1.0), _fit(), None, blend=0.0)
+    assert zero.reason.startswith("map.strength 0 applies almost none")
+    assert zero.named(flag_of).reason.startswith("--strength 0 applies almost none")
+    assert zero.named(flag_of).advice == "raise --strength (1 applies the grade in full)"
 
 
 def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
-    """No own photos: --natural DIR is the lever; own photos used: it is not offered again;
-    too few given: says they were not used. One original (--originals) first, every time."""
+    """No own photos: natural photos are the lever; own photos used: it is not offered
+    again; too few given: says they were not used. One original first, every time."""
     def advice(**look):
-        grade = _look_grade(identity_map(9), 0.0)
-        grade.info["look"].update(look)
-        return grade_outcome(grade, _fit(), None).advice
+        grade = _look_grade(identity_map(9), 0.0, **look)
+        return grade_outcome(grade, _fit(), None).named(flag_of).advice
 
     plain, used, few = advice(), advice(own_photos=9), advice(own_photos_unused=4)
     assert "--natural DIR with 6 or more" in plain
@@ -64,14 +87,13 @@ def test_the_advice_for_a_faint_set_look_names_what_the_user_has_not_tried():
 
 def test_a_set_look_says_how_sure_it_is_and_what_settles_it():
     """A set look judged jointly: the line says how sure the look is and how much of it is
-    applied, the strength is --strength's, and an unsure look names --originals."""
+    applied, the strength is the one asked for, and an unsure look names the originals."""
     def lines(probability, share, blend=1.0):
         nodes = identity_map(9)
         moved = nodes.copy()
         moved[..., 2] = np.minimum(nodes[..., 2] + 0.2, 1.0)  # a clear look: not faint
-        grade = _look_grade(moved, share)
-        grade.info["look"].update(rule="posterior", probability=probability)
-        return grade_outcome(grade, _fit(), None, blend=blend).lines()
+        grade = _look_grade(moved, share, probability=probability)
+        return grade_outcome(grade, _fit(), None, blend=blend).named(flag_of).lines()
 
     sure = lines(0.999, 0.9)
     assert "the photos show it clearly; 90 % of it applied" in sure[0]
@@ -89,8 +111,7 @@ def test_the_terminal_says_whether_the_users_own_photos_were_used():
         nodes = identity_map(9)
         moved = nodes.copy()
         moved[..., 2] = np.minimum(nodes[..., 2] + 0.2, 1.0)  # a clear look: not faint
-        grade = _look_grade(moved if set_strength else nodes, set_strength)
-        grade.info["look"].update(look)
+        grade = _look_grade(moved if set_strength else nodes, set_strength, **look)
         return "\n".join(grade_outcome(grade, _fit(), None).lines())
 
     assert "measured against 9 of your own photos" in lines(1.0, own_photos=9)

@@ -108,4 +108,4 @@ def run_batch(plan: BatchPlan, context: BatchContext, *, consistent: bool = Fals
         raise
     results.sort(key=lambda r: r.relative)
     return BatchResult(results, list(plan.ignored), time.perf_counter() - start, series,
-                       list(context.styles.names), shared)
+                       context.style_names, shared)

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 from wbcgrade._publish import atomic_path
 from wbcgrade.color.options import GradeOptions
-from wbcgrade.color.presets import StyleSet
 
 __all__ = ["SETTINGS_FILE", "batch_settings", "settings_changed", "write_settings"]
 
@@ -20,10 +20,12 @@ __all__ = ["SETTINGS_FILE", "batch_settings", "settings_changed", "write_setting
 SETTINGS_FILE = ".wbcgrade-batch.json"
 
 
-def batch_settings(styles: StyleSet, options: GradeOptions, consistent: bool) -> dict:
+def batch_settings(source: str, names: Sequence[str], options: GradeOptions,
+                   consistent: bool) -> dict:
     """What determines the outputs of a batch (JSON-friendly; the options by their flat
-    names, as earlier runs recorded them)."""
-    return {"styles": styles.source, "style_names": list(styles.names),
+    names, as earlier runs recorded them); ``source`` and ``names``: the style set's
+    folder or preset and its style names, or a saved grade's file and names."""
+    return {"styles": source, "style_names": list(names),
             "options": options.flat(), "consistent": bool(consistent)}
 
 

@@ -29,6 +29,7 @@ from wbcgrade.color.io.images import (
     set_max_image_pixels,
 )
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import fit_start_word
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.core import prefer_compiled
@@ -48,10 +49,10 @@ class BatchContext:
 
     Attributes
     ----------
-    styles : the style set.
+    styles : the style set (None with a saved grade: ``shared`` is it).
     options : grading options.
-    shared : the series grade (``--consistent``), or None for one fit per photo.
-    shared_fit : its weights and single-style losses.
+    shared : the series grade or a saved grade, or None for one fit per photo.
+    shared_fit : the series grade's weights and single-style losses (None for a saved one).
     sheet_dir : write a PNG sheet per photo here (None: no sheets).
     style_pictures : (h, w, 3) display thumbnails per style name, for sheets.
     write_outputs : False to grade in memory only (``wbcgrade report``).
@@ -61,9 +62,11 @@ class BatchContext:
     max_image_pixels : decoding limit of every photo (the creating process's limit
         by default; sent to the workers with the rest).
     encode : JPEG/WebP quality and bit depth of the outputs.
+    setting_names : how the command names the library's settings (setting -> flag) in what the
+        records say (:attr:`wbcgrade.photos.progress.Progress.setting_names`); None: as the library.
     """
 
-    styles: StyleSet
+    styles: StyleSet | None
     options: GradeOptions
     shared: Grade | None = None
     shared_fit: FitSummary | None = None
@@ -76,6 +79,12 @@ class BatchContext:
     #: the command's cache (``cache.command_cache``), for the workers' own caches
     cache: tuple[Path, bool] = field(default_factory=command_cache)
     encode: WriteOptions = WriteOptions()
+    setting_names: dict[str, str] | None = None
+
+    @property
+    def style_names(self) -> list[str]:
+        """The styles' names (a saved grade's own names)."""
+        return list(self.styles.names if self.styles is not None else self.shared.names)
 
 
 def run_task(task: BatchTask, context: BatchContext,
@@ -87,6 +96,8 @@ def run_task(task: BatchTask, context: BatchContext,
     KeyboardInterrupt (and SystemExit) propagate.
     """
     start = time.perf_counter()
+    if progress is None and context.setting_names is not None:  # a worker: the command's words
+        progress = Progress(setting_names=context.setting_names)
     starting = getattr(progress, "photo", None)  # a batch's progress names the photo
     if starting is not None:
         starting(task.relative)
@@ -104,11 +115,16 @@ def run_task(task: BatchTask, context: BatchContext,
         report = grade_file(plan, context.styles, context.options, shared=context.shared,
                             progress=progress)
         fit = report.fit if report.fit is not None else context.shared_fit
-        result.names = list(context.styles.names)
-        result.weights = [float(w) for w in fit.weights]
-        result.loss = float(fit.loss)
-        result.vertex_losses = [float(v) for v in fit.vertex_losses]
-        result.start = fit.start
+        result.names = context.style_names
+        if fit is None:  # a saved grade: its own weights, nothing fitted
+            result.weights = [float(w) for w in report.grade.weights]
+            result.loss = float(report.grade.loss or 0.0)
+            result.start = report.fit_start
+        else:
+            result.weights = [float(w) for w in fit.weights]
+            result.loss = float(fit.loss)
+            result.vertex_losses = [float(v) for v in fit.vertex_losses]
+            result.start = fit_start_word(report.grade.source, fit.start)
         result.timings = dict(report.timings)
         result.color = report.color
         result.own_style = report.grade.own_style
@@ -124,13 +140,19 @@ def run_task(task: BatchTask, context: BatchContext,
             result.sheet = sheet.as_posix()
         result.status = "graded"
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
-        result.error = first_line(exc)
+        result.error = first_line(_in_words(exc, context.setting_names))
         result.status = "failed"
     except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
         result.error = f"internal error ({type(exc).__name__}: {first_line(exc)})"
         result.status = "failed"
     result.timings["total"] = time.perf_counter() - start
     return result
+
+
+def _in_words(exc: BaseException, names: dict[str, str] | None) -> object:
+    """An error's message with the settings it names written as ``names`` says."""
+    worded = getattr(exc, "worded", None)
+    return exc if worded is None or names is None else worded(names)
 
 
 def lost_task(task: BatchTask, reason: str) -> FileResult:
@@ -150,7 +172,7 @@ def read_histograms(task: BatchTask, context: BatchContext) -> PhotoHistograms |
         encoded, _ = encoding.encode(image.rgb(), image.is_float)
         return photo_histograms(encoded, options, image.alpha())
     except (WbcgradeError, ValueError, OSError, MemoryError) as exc:
-        return first_line(exc)
+        return first_line(_in_words(exc, context.setting_names))
     except Exception as exc:  # noqa: BLE001 - a fault on one photo never stops the batch
         return f"internal error ({type(exc).__name__}: {first_line(exc)})"
 

@@ -41,7 +41,7 @@ from wbcgrade.batch.settings import (
 )
 from wbcgrade.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grade.saved_grade import look_batch_options, look_fit, look_styles
+from wbcgrade.color.grade.saved_grade import look_batch_options, saved_name
 from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.scene import matching_hook
 from wbcgrade.color.look.set_extraction import MAP_BINS, OWN_PHOTOS_PROVENANCE, colour_photos
@@ -114,16 +114,18 @@ def _recorder(out_dir: Path, progress: BatchProgress) -> Callable[[FileResult], 
     return on_result
 
 
-def _run(plan: BatchPlan, styles: StyleSet, options: GradeOptions, consistent: bool,
+def _run(plan: BatchPlan, styles: StyleSet | None, options: GradeOptions, consistent: bool,
          jobs: int, scheduler: str | None, report_dir: Path | None, write_outputs: bool,
          overwrite: bool, progress: BatchProgress,
          on_result: Callable[[FileResult], None] | None = None, look=None,
          encode=None) -> BatchResult:
     context = BatchContext(styles=styles, options=options, sheet_dir=report_dir,
                            write_outputs=write_outputs, overwrite=overwrite,
-                           replace_sheets=write_outputs and own_report(report_dir))
+                           replace_sheets=write_outputs and own_report(report_dir),
+                           setting_names=None if progress.setting_names is None
+                           else dict(progress.setting_names))
     if look is not None:  # a saved grade (--look): every photo gets it, nothing is fitted
-        context.shared, context.shared_fit = look, look_fit(look)
+        context.shared = look
     if encode is not None:
         context.encode = encode
     if report_dir is not None:
@@ -257,11 +259,11 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
         start = time.perf_counter()
         options, own_photos = own_photos_content(options, in_dir, plan, out_dir, source, look,
                                                  progress)
-        if look is None:
-            styles = _load(source, options, progress, plan, consistent)
-        else:
-            styles = look_styles(look, str(None if look.saved is None else look.saved.file))
-        settings = batch_settings(styles, options, consistent)
+        styles = None if look is not None else _load(source, options, progress, plan,
+                                                        consistent)
+        settings = (batch_settings(styles.source, styles.names, options, consistent)
+                    if look is None else
+                    batch_settings(saved_name(look), look.names, options, consistent))
         changed = settings_changed(out_dir, settings)
         if changed and plan.done and progress.warn:
             progress.warn(Worded(f"{len(plan.done)} finished output(s) in {out_dir} were made "
@@ -288,7 +290,8 @@ def grade_folder(in_dir: str | os.PathLike, out_dir: str | os.PathLike, source: 
             grade = result.series_grade
             ranked = ", ".join(f"{n} {w:.3f}" for n, w in grade.ranked())
             # baked for the photos' space (--input-space, else sRGB), as video bakes its clips'
-            encoding = ColorEncoding.of(options.spaces.input, options.spaces.working)
+            encoding = ColorEncoding.of(options.spaces.input,
+                                        options.spaces.working).named(progress.setting_names)
             result.lut = write_checked_lut(lut, lut_format, grade, encoding, lut_size,
                                            title=f"wbcgrade series {Path(in_dir).name}",
                                            comments=[f"wbcgrade series grade of {in_dir}: "

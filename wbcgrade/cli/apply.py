@@ -21,7 +21,7 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
-from wbcgrade.cli.option_table import flag_text
+from wbcgrade.cli.option_table import flag_of, flag_text
 
 
 def _warn(message: str) -> None:
@@ -137,7 +137,7 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
         _warn(f"--fit-bins {options.fit.bins}: fits on large grids take minutes (default 16)")
     graded_from = time.perf_counter()
     with progress_bar(desc="styles" if look is None else "look", leave=False) as bar:
-        progress = Progress(warn=_warn, **bar_callbacks(bar))
+        progress = Progress(warn=_warn, setting_names=flag_of, **bar_callbacks(bar))
         report = apply_photo(photo, source if look is None else look, options, output=output,
                              lut=lut, lut_size=lut_size, lut_format=lut_format,
                              overwrite=overwrite, report_dir=report_dir, progress=progress,

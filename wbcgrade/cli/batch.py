@@ -24,7 +24,7 @@ from wbcgrade.cli.grading_options import (
     take_write_options,
     write_options,
 )
-from wbcgrade.cli.option_table import flag_text
+from wbcgrade.cli.option_table import flag_of, flag_text
 
 if TYPE_CHECKING:  # the colour library imports the core: only inside the commands
     from wbcgrade.batch import BatchProgress, BatchResult, FileResult
@@ -109,7 +109,8 @@ def batch_progress(verb: str = "graded") -> Iterator[BatchProgress]:
             bar.n = done
             bar.refresh()
 
-        yield BatchProgress(warn=_warn, planned=on_planned, result=on_result, read=on_read,
+        yield BatchProgress(warn=_warn, setting_names=flag_of, planned=on_planned,
+                            result=on_result, read=on_read,
                             **bar_callbacks(bar, photos=True))
 
 

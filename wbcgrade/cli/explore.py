@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from wbcgrade.cli.grading_options import table_options
-from wbcgrade.cli.option_table import flag_text
+from wbcgrade.cli.option_table import flag_of, flag_text
 
 
 def _warn(message: str) -> None:
@@ -38,7 +38,7 @@ def explore(photo, style_dir, presets, port, save_dir, no_browser):
             tqdm(desc="load", disable=None, leave=False) as bar:
         server = start_studio(photo, style_dir, list(presets) or None, port, warn=_warn,
                               progress=progress, stage=bar.set_description,
-                              save_dir=save_dir)
+                              save_dir=save_dir, setting_names=flag_of)
     studio = server.studio
     _, look = studio.look(0, 1.0)
     click.echo(f"grade: {look['grade']['words']} (as `wbcgrade apply` gives it)", err=True)

@@ -101,7 +101,7 @@ def take_look(ctx: click.Context, look_path: str | None, kwargs: dict, options):
     Called after :func:`take_grading_options` (``options`` its result); ``kwargs`` are the
     command's remaining parameters. ``--style``/``--preset`` with ``--look`` is an OptionError.
     ``--originals DIR`` (popped from ``kwargs``) learns the look of the ``--style`` photos
-    from the originals of some of them (:func:`wbcgrade.color.look.learn.learned_grade`),
+    from the originals of some of them (:func:`wbcgrade.color.grade.look_files.learned_grade`),
     applied as a LUT from ``look learn`` would be.
     """
     originals = kwargs.pop("originals_dir", None)
@@ -152,7 +152,7 @@ def _learned_look(style_dir: str, originals: str, options):
     """The look ``look learn ORIGINALS STYLE_DIR`` learns, as a grade (progress on the
     terminal, a warning per file left out)."""
     from wbcgrade.cli._progress import learn_progress
-    from wbcgrade.color.look.learn import learned_grade
+    from wbcgrade.color.grade.look_files import learned_grade
 
     with learn_progress("learning the look") as (progress, warn):
         grade, _ = learned_grade(originals, style_dir, working_space=options.spaces.working,

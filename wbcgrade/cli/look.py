@@ -13,7 +13,7 @@ from wbcgrade.cli.grading_options import (
     table_options,
     table_rows,
 )
-from wbcgrade.cli.option_table import option
+from wbcgrade.cli.option_table import flag_of, option
 
 #: ``--lut-size`` of the look commands (at most 129 nodes a side).
 _LUT_SIZE = click.IntRange(2, 129)
@@ -58,8 +58,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     from tqdm import tqdm
 
     from wbcgrade.cli._progress import style_progress
+    from wbcgrade.color.grade.look_files import extract_look_file
     from wbcgrade.color.histogram import HistogramCache
-    from wbcgrade.color.look.extract import extract_look_file
     from wbcgrade.color.presets import StyleSource
 
     source = StyleSource(style_dir, preset, HistogramCache(enabled=not no_cache))
@@ -75,6 +75,8 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
                                   working_space=working_space, overwrite=overwrite,
                                   warn=lambda m: click.echo(f"Warning: {m}", err=True),
                                   on_style=on_style, on_look=on_look)
+    if found.outcome is not None:  # its words name flags
+        found.outcome = found.outcome.named(flag_of)
     if as_json:
         click.echo(json.dumps(found.as_dict(), indent=2))
         return
@@ -82,7 +84,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
     what = ("the preset's own look" if outcome.source.value == "preset-look"
             else f"the look {len(found.styles)} style photos share")
     strength = found.strength
-    if "probability" in outcome.extra:  # judged jointly: the same words as apply's
+    if outcome.probability is not None:  # judged jointly: the same words as apply's
         what, strength = outcome.source_words()
     from wbcgrade.color.outcome import change_words
 
@@ -128,7 +130,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     for path, side in ((before, "BEFORE"), (after, "AFTER")):  # answered before numpy loads
         check_photo(path, f"no such file or folder ({side})")
     from wbcgrade.cli._progress import learn_progress
-    from wbcgrade.color.look.learn import learn_look_file
+    from wbcgrade.color.grade.look_files import learn_look_file
 
     with learn_progress("photos") as (on_pair, warn):
         found = learn_look_file(before, after, output, lut_size=lut_size,

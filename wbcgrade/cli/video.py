@@ -16,7 +16,7 @@ from wbcgrade.cli.grading_options import (
     take_grading_options,
     take_look,
 )
-from wbcgrade.cli.option_table import flag_text
+from wbcgrade.cli.option_table import flag_of, flag_text
 
 #: Grading options a LUT cannot carry (regrain looks at each pixel's neighbours).
 _NOT_FOR_VIDEO = ("regrain", "regrain_radius", "regrain_eps")
@@ -140,7 +140,8 @@ def video(ctx, clip, output, per_shot, sample_every, cut_threshold, blend_frames
             if name not in ("scan", "encode"):
                 stage(name)
 
-        progress = VideoProgress(warn=_warn, frames=on_frames, stage=on_stage, **callbacks)
+        progress = VideoProgress(warn=_warn, setting_names=flag_of, frames=on_frames,
+                                 stage=on_stage, **callbacks)
         result = grade_clip(clip, output, source, options, settings=settings, lut=lut,
                             overwrite=overwrite, report_dir=report_dir, progress=progress,
                             look=look)

@@ -59,20 +59,22 @@ from __future__ import annotations
 import functools
 import os
 import re
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from wbcgrade.color._colour import colour_science
 from wbcgrade.color.io.cache import default_cache_dir
 from wbcgrade.color.io.raw import RAW_WORKING_SPACE
-from wbcgrade.errors import InputError, OptionError, first_line
+from wbcgrade.errors import InputError, OptionError, Worded, first_line
 
 __all__ = [
     "DEFAULT_CONFIG",
     "SHORT_ALIASES",
     "config_path",
     "config_info",
+    "config_line",
     "space_names",
     "resolve_space",
     "canonical",
@@ -443,6 +445,14 @@ def config_info() -> dict:
             "openimageio_version": getattr(oiio, "VERSION_STRING", "")}
 
 
+def config_line() -> str:
+    """The config in use and OpenColorIO's version, as a LUT's header names them."""
+    import OpenImageIO as oiio
+
+    return (f"OpenColorIO config: {config_path()} "
+            f"(OpenColorIO {oiio.get_string_attribute('opencolorio_version')})")
+
+
 @functools.lru_cache(maxsize=4)
 def _config_name(path: str, version: str) -> str:
     try:
@@ -480,6 +490,10 @@ class WorkingState:
     residual: np.ndarray | None = None
 
 
+#: ``ColorEncoding.source`` of an input space the caller named: the setting that names it.
+GIVEN_INPUT = Worded("{spaces.input}", ("spaces.input",))
+
+
 @dataclass(frozen=True)
 class ColorEncoding:
     """Pixels of one colour space (``input``) graded in another's unit cube (``working``).
@@ -490,7 +504,8 @@ class ColorEncoding:
     working : config name of the working space.
     linear : the working space's linear partner (where the exposure rule divides).
     peak : the largest grey value of ``linear`` that ``working`` encodes at or below 1.
-    source : where ``input`` came from ("--input-space", "ICC profile ...", "default").
+    source : where ``input`` came from (the setting ``spaces.input``, "ICC profile ...",
+        "default"; :meth:`named` writes the setting as a caller names it).
     config : the OpenColorIO config.
     """
 
@@ -512,7 +527,7 @@ class ColorEncoding:
         ``working_space`` None: sRGB-encoded Rec.709.
         """
         if input_space:
-            space, where = resolve_space(input_space, "spaces.input"), "--input-space"
+            space, where = resolve_space(input_space, "spaces.input"), GIVEN_INPUT
         elif float_values:
             space, where = canonical("linear-rec709") or default_working_space(), "default"
         else:
@@ -537,6 +552,13 @@ class ColorEncoding:
                    else default_working_space())
         linear = linear_partner(working)
         return cls(input_space, working, linear, peak(linear, working), source, config_path())
+
+    def named(self, names: Mapping[str, str] | None) -> ColorEncoding:
+        """The same encoding with a setting its ``source`` names written as ``names`` says
+        (setting -> the caller's name: the command line passes its flags)."""
+        if names is None or not isinstance(self.source, Worded):
+            return self
+        return replace(self, source=self.source.worded(names))
 
     def within_working(self) -> ColorEncoding:
         """The encoding whose pixels are already working-space colours (a LUT's own domain)."""
@@ -649,7 +671,7 @@ class ColorEncoding:
 
     def as_dict(self) -> dict:
         """JSON-friendly description (config, OpenColorIO version, spaces)."""
-        return {**config_info(), "input_space": self.input, "input_space_from": self.source,
+        return {**config_info(), "input_space": self.input, "input_space_from": str(self.source),
                 "working_space": self.working, "linear_space": self.linear,
                 "peak": round(self.peak, 4)}
 

@@ -175,8 +175,8 @@ class TransferOptions:
     width : kernel width in bins of the transfer grid; None: sigma = 1/31 of
         the colour cube whatever the grid (``max(1, (bins - 1) / 31)`` bins).
     tol, max_iter : Sinkhorn stopping rule (L1 error on the photo's
-        marginal). 3e-3 gives the same smooth colour map as 1e-3 to 0.13/255
-        on average (0.37/255 at most) on the 16 MP sample, in half the time.
+        marginal). 3e-3 gives the same smooth colour map as 1e-3 within a fraction
+        of 1/255, in half the time (docs/benchmarks.md).
     relaxation : rho > 0 relaxes the palette side of the plan by ``rho KL``
         (unbalanced transport: palette colours the photo has no use for are
         left out); None: balanced.

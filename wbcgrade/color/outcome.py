@@ -6,8 +6,10 @@ colours actually moved; when they barely moved, it says so and why, and what
 the user can do. The barycentric weights and the fit's loss come with it only
 for a palette grade (:class:`PaletteFit`): in a look grade they mean nothing.
 
-The command line, ``--json``, batch lines, reports and ``explore`` read this
-object instead of diagnostics keyed by strings.
+The command line, its JSON, batch lines, reports and ``explore`` read this
+object instead of diagnostics keyed by strings. Its reason and advice name settings
+as the library does (``map.strength``); :meth:`GradeOutcome.named` writes them as a
+caller names them (the command line: as its flags).
 
 Sizes are in 1/255 of the sRGB-encoded cube (whatever the working space), so
 that "1.9" means the same on every photo:
@@ -20,7 +22,8 @@ that "1.9" means the same on every photo:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
@@ -29,8 +32,9 @@ from wbcgrade.color.colorspace import convert, default_working_space, resolve_sp
 from wbcgrade.color.defaults import MIN_OWN_PHOTOS
 from wbcgrade.color.histogram import grid_points
 from wbcgrade.color.mapping.remap import apply_color_map
+from wbcgrade.errors import Worded
 
-__all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit",
+__all__ = ["GradeSource", "FitStart", "fit_start_word", "SavedFrom", "TransportCheck", "PaletteFit",
            "GradeOutcome", "UNCHANGED_CHANGE",
            "UNCHANGED_STRENGTH", "FAINT_CHANGE", "FAINT_STRENGTH", "map_change", "unchanged_advice",
            "change_words", "VISIBILITY",
@@ -39,7 +43,7 @@ __all__ = ["GradeSource", "FitStart", "SavedFrom", "TransportCheck", "PaletteFit
 #: Below this mean change of the photo's colours (in 1/255 of the sRGB cube) the
 #: photo is "essentially unchanged".
 UNCHANGED_CHANGE = 1.0
-#: Below this strength (the look's own strength times ``--strength``) a look is not applied.
+#: Below this strength (the look's own strength times ``map.strength``) a look is not applied.
 UNCHANGED_STRENGTH = 0.05
 #: Below this mean change (1/255 of the sRGB cube), or this strength, a grade is "faint":
 #: it changed the photo, but hardly visibly; the terminal says so and what to do.
@@ -54,7 +58,7 @@ class GradeSource(str, Enum):
     OWN_SCENE = "own-scene"          #: read off a style photo that shows the photo's scene
     SET_LOOK = "set-look"            #: the look the style photos share
     PALETTE = "palette"              #: a palette fit: barycentric weights of the style palettes
-    SAVED = "saved"                  #: a saved grade (``--look``: a JSON grade or a LUT)
+    SAVED = "saved"                  #: a saved grade (a JSON grade or a LUT)
 
     def describe(self, n_styles: int = 0) -> str:
         """The source in words."""
@@ -69,33 +73,48 @@ class GradeSource(str, Enum):
 
 
 class FitStart(str, Enum):
-    """How a grade's weights were found (``FitSummary.start``, ``GradeReport.fit_start``,
-    ``PaletteFit.start``; the JSON writes the value)."""
+    """How a palette grade's weights were found (``FitSummary.start``, ``PaletteFit.start``;
+    the JSON writes the value). Where any grade came from is its :class:`GradeSource`."""
 
     UNIFORM = "uniform"            #: a palette fit from uniform weights, kept
     VERTEX_REFIT = "vertex-refit"  #: refitted from the best single style, which beat it
     VERTEX = "vertex"              #: the best single style: no fit beat it
     GIVEN = "given"                #: the weights were given (``fit.weights``): no fit
-    PRESET = "preset"              #: a preset's own look: nothing fitted
-    SCENE = "scene"                #: the look read off the style photo of the scene
-    LOOK = "look"                  #: the look the style set shares
-    SAVED = "saved"                #: a saved grade (``--look``): nothing fitted
     SHARED = "shared"              #: a shared grade whose fit the caller holds (a series')
 
     @property
     def fitted(self) -> bool:
-        """Whether weights were fitted to the photo (not given, not a saved grade)."""
-        return self not in (FitStart.GIVEN, FitStart.SAVED)
+        """Whether weights were fitted to the photo (not given)."""
+        return self is not FitStart.GIVEN
+
+
+#: The JSON's ``fit_start`` of a grade no palette fit made: where its map came from.
+_SOURCE_START = {GradeSource.PRESET_LOOK: "preset", GradeSource.OWN_SCENE: "scene",
+                 GradeSource.SET_LOOK: "look", GradeSource.SAVED: "saved"}
+
+
+def fit_start_word(source: GradeSource, fit_start: str | None) -> str:
+    """What the JSON's ``fit_start`` says of a grade: how a palette fit found its weights
+    (``fit_start``, a :class:`FitStart` value; None: a shared grade whose fit the caller
+    holds), else where the map came from ("preset", "scene", "look", "saved").
+
+    >>> fit_start_word(GradeSource.PALETTE, "vertex"), fit_start_word(GradeSource.SET_LOOK, None)
+    ('vertex', 'look')
+    """
+    if source is not GradeSource.PALETTE:
+        return _SOURCE_START[source]
+    return FitStart.SHARED.value if fit_start is None else str(fit_start)
 
 
 @dataclass(frozen=True)
 class SavedFrom:
-    """Where a saved grade (``--look FILE``) was read from.
+    """Where a saved grade was read from.
 
     Attributes
     ----------
     file : the file (a JSON grade or a LUT).
-    kind : "json" (a grade saved by ``--save-grade``, regrain as saved), or the LUT's
+    kind : "json" (a grade :func:`~wbcgrade.color.grade.saved_grade.save_grade` wrote,
+        regrain as saved), or the LUT's
         format ("cube", "clf", ...).
     """
 
@@ -169,7 +188,7 @@ class GradeOutcome:
     look_strength : the strength the grade chose for its look: 1 for a preset's
         look and a palette grade, the set look's reliability (0: no look to
         apply), a style photo's scene match's confidence; None for a saved grade.
-    blend : ``--strength``, the blend x -> (1-t) x + t T(x).
+    blend : ``map.strength``, the blend x -> (1-t) x + t T(x).
     look_size : mean displacement of the map as applied (look strength and blend)
         over the whole colour cube, in 1/255 of the sRGB cube.
     mean_change : mean per-channel change of the photo's colours, 1/255 (sRGB cube).
@@ -184,6 +203,9 @@ class GradeOutcome:
     file : the saved grade's file, for a saved grade.
     faint : changed, but hardly visibly (strength under :data:`FAINT_STRENGTH` or
         ``mean_change`` under :data:`FAINT_CHANGE`); ``reason`` says why.
+    setting_names : how the caller names the library's settings (the command line: setting ->
+        flag) in ``reason``, ``advice`` and :meth:`lines`; None: as the library does
+        (:meth:`named`).
     """
 
     source: GradeSource
@@ -201,10 +223,37 @@ class GradeOutcome:
     file: str | None = None
     faint: bool = False
     extra: dict = field(default_factory=dict, compare=False)
+    setting_names: Mapping[str, str] | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.setting_names is not None:  # the reason and advice in the caller's names
+            for key in ("reason", "advice"):
+                text = getattr(self, key)
+                if isinstance(text, Worded):
+                    object.__setattr__(self, key, text.worded(self.setting_names))
+
+    def named(self, names: Mapping[str, str] | None) -> GradeOutcome:
+        """The same outcome with the settings its words name written as ``names`` says
+        (setting -> the caller's name: the command line passes its flags)."""
+        return self if names is None else replace(self, setting_names=names)
+
+    @property
+    def probability(self) -> float | None:
+        """How sure it is that the style photos share a look (a set look judged jointly),
+        else None."""
+        value = self.extra.get("probability")
+        return None if value is None else float(value)
+
+    @property
+    def own_photos(self) -> tuple[int, int]:
+        """(the user's own photos a set look was measured against, those given for that but
+        too few to use)."""
+        used, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
+        return used, unused
 
     @property
     def strength(self) -> float:
-        """The fraction of the look applied: its own strength times ``--strength``."""
+        """The fraction of the look applied: its own strength times ``map.strength``."""
         return (1.0 if self.look_strength is None else self.look_strength) * self.blend
 
     def headline(self, subject: str = "this photo") -> str:
@@ -222,7 +271,7 @@ class GradeOutcome:
         what = self.source.describe(self.n_styles)
         if self.source is GradeSource.SAVED and self.file:
             learned = self.extra.get("learned") or self.file.startswith(LEARNED_PREFIX)
-            what = (self.file if learned  # a look learned for this run (--originals)
+            what = (self.file if learned  # a look learned for this run from originals
                     else f"the saved grade {self.file} (applied as saved, no fit)")
         if self.source is GradeSource.OWN_SCENE and self.match:
             what = f"the look of the style photo of this scene ({self.match}, " \
@@ -230,9 +279,9 @@ class GradeOutcome:
         elif self.source is GradeSource.SET_LOOK and self.match and self.confidence > 0:
             what += (f", nudged {100 * self.confidence:.0f} % towards the colours of "
                      f"{self.match}, the closest style")
-        if self.source is GradeSource.SET_LOOK and "probability" in self.extra:
-            what += f" ({sureness_words(self.extra['probability'], self.strength)})"
-        if "probability" in self.extra:  # the share applied is said; the strength asked for
+        if self.source is GradeSource.SET_LOOK and self.probability is not None:
+            what += f" ({sureness_words(self.probability, self.strength)})"
+        if self.probability is not None:  # the share applied is said; the strength asked for
             return what, (None if self.blend == 1.0 else self.blend)
         return what, self.strength
 
@@ -246,11 +295,11 @@ class GradeOutcome:
             lines.append(f"a faint grade: {self.reason}")
         if (self.unchanged or self.faint) and self.advice:
             lines.append(self.advice)
-        if (self.source is GradeSource.SET_LOOK and "probability" in self.extra
-                and self.extra["probability"] < SURE_LOOK and not self.unchanged
+        if (self.source is GradeSource.SET_LOOK and self.probability is not None
+                and self.probability < SURE_LOOK and not self.unchanged
                 and not self.faint):
-            lines.append(UNSURE_ADVICE)
-        own, unused = (int(self.extra.get(key) or 0) for key in OWN_PHOTO_KEYS)
+            lines.append(UNSURE_ADVICE.worded(self.setting_names or {}))
+        own, unused = self.own_photos
         if own:
             lines.append(f"content: the look was measured against {own} of your own photos "
                          "beside the shipped palettes")
@@ -267,12 +316,12 @@ class GradeOutcome:
                "blend": self.blend, "look_size_255": round(self.look_size, 3),
                "mean_change_255": round(self.mean_change, 3), "unchanged": self.unchanged,
                "faint": self.faint,
-               "reason": self.reason, "advice": self.advice, "match": self.match,
+               "reason": _text(self.reason), "advice": _text(self.advice), "match": self.match,
                "confidence": round(self.confidence, 4)}
         if self.file is not None:
             out["file"] = self.file
-        if "probability" in self.extra:  # a set look judged jointly: how sure it is a look
-            out["look_probability"] = round(float(self.extra["probability"]), 4)
+        if self.probability is not None:  # a set look judged jointly: how sure it is a look
+            out["look_probability"] = round(self.probability, 4)
         if self.palette is not None:
             out["palette"] = self.palette.as_dict()
         return out
@@ -320,7 +369,8 @@ class GradeOutcome:
             advice = unchanged_advice(source, blend, more.get("extra"))
         if unchanged:
             if blend < UNCHANGED_STRENGTH:
-                reason = f"--strength {blend:g} applies almost none of the grade"
+                reason = Worded(f"{{map.strength}} {blend:g} applies almost none of the grade",
+                                STRENGTH)
             elif why_weak is not None and strength < UNCHANGED_STRENGTH:
                 reason = why_weak
             elif look_size < UNCHANGED_CHANGE:
@@ -340,10 +390,16 @@ class GradeOutcome:
         return GradeOutcome.judge(self.source, self.n_styles, self.look_strength, self.blend,
                                   self.look_size, mean_change, self.extra.get("why_weak"),
                                   match=self.match, confidence=self.confidence,
-                                  palette=self.palette, file=self.file, extra=self.extra)
+                                  palette=self.palette, file=self.file, extra=self.extra,
+                                  setting_names=self.setting_names)
 
 
-#: The set look's counts of the user's own photos (``grade.info["look"]``) that the advice
+def _text(words: str | None) -> str | None:
+    """Plain text (a :class:`~wbcgrade.errors.Worded` as the library names its settings)."""
+    return None if words is None else str(words)
+
+
+#: The set look's counts of the user's own photos (``LookFound``) that the advice
 #: for a faint grade reads from ``GradeOutcome.extra``.
 OWN_PHOTO_KEYS = ("own_photos", "own_photos_unused")
 
@@ -355,13 +411,20 @@ def _unused_own_photos(count: int) -> str:
             f"({MIN_OWN_PHOTOS} or more in colour are needed")
 
 
-def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None) -> str | None:
-    """What the user can do about a grade that leaves the photo unchanged.
+#: The settings the words of an outcome name (:class:`~wbcgrade.errors.Worded`).
+STRENGTH = ("map.strength",)
+ADVICE_SETTINGS = ("map.strength", "map.builder", "map.natural", "originals")
+
+
+def unchanged_advice(source: GradeSource, blend: float,
+                     look: dict | None = None) -> Worded | None:
+    """What the user can do about a grade that leaves the photo unchanged (naming settings
+    as the library does: :class:`~wbcgrade.errors.Worded`).
 
     ``look``: the set look's own photos (``own_photos``: the user's photos it was
     measured against; ``own_photos_unused``: photos given for that but too few)."""
     if blend < UNCHANGED_STRENGTH:
-        return "raise --strength (1 applies the grade in full)"
+        return Worded("raise {map.strength} (1 applies the grade in full)", STRENGTH)
     if source is GradeSource.SET_LOOK:
         look = look or {}
         own, unused = int(look.get("own_photos") or 0), int(look.get("own_photos_unused") or 0)
@@ -370,33 +433,35 @@ def unchanged_advice(source: GradeSource, blend: float, look: dict | None = None
         elif unused:
             content = _unused_own_photos(unused) + " to tell a faint look from content); "
         else:
-            content = (f"--natural DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
+            content = (f"{{map.natural}} DIR with {MIN_OWN_PHOTOS} or more of your own ungraded "
                        "photos (what `batch` does with the photos it grades) helps tell a "
                        "faint look from what the photos show; ")
-        return ("the original of one style photo settles it: --originals DIR (a folder "
-                "with it, named as its edit) learns the look from that pair; " + content
-                + "--mode palette moves the photo's colours towards those of the style "
-                "photos; --strength above 1 forces what look there is")
+        return Worded("the original of one style photo settles it: {originals} DIR (a folder "
+                      "with it, named as its edit) learns the look from that pair; " + content
+                      + _PALETTE_OR_STRONGER, ADVICE_SETTINGS)
     if source is GradeSource.OWN_SCENE:
-        return ("--mode palette moves the photo's colours towards those of the style "
-                "photos; --strength above 1 forces what look there is")
+        return Worded(_PALETTE_OR_STRONGER, ADVICE_SETTINGS)
     if source is GradeSource.PRESET_LOOK:
-        return "--strength above 1 strengthens the preset's look"
+        return Worded("{map.strength} above 1 strengthens the preset's look", STRENGTH)
     if source is GradeSource.PALETTE:
-        return "the style palettes are close to the photo's own: choose styles further from it"
+        return Worded("the style palettes are close to the photo's own: choose styles further "
+                      "from it")
     return None
 
 
-#: How a look learned for the run (``--originals``) names itself (its ``SavedFrom.file``).
+_PALETTE_OR_STRONGER = ("{map.builder} palette moves the photo's colours towards those of the "
+                        "style photos; {map.strength} above 1 forces what look there is")
+
+#: How a look learned for the run from originals names itself (its ``SavedFrom.file``).
 LEARNED_PREFIX = "the look learned from "
 
 #: Posterior probability of a look (the set look's ``probability``) from which the terminal
 #: calls the style photos' look sure; under it, the set look's line says how unsure and
 #: names the evidence that settles it (:data:`UNSURE_ADVICE`).
 SURE_LOOK = 0.95
-UNSURE_ADVICE = ("the style photos may share this look or only similar subjects: the "
-                 "original of one of them settles it (--originals DIR: a folder with the "
-                 "unedited photo, named as its edit)")
+UNSURE_ADVICE = Worded("the style photos may share this look or only similar subjects: the "
+                       "original of one of them settles it ({originals} DIR: a folder with the "
+                       "unedited photo, named as its edit)", ("originals",))
 
 
 def sureness_words(probability: float, share: float) -> str:

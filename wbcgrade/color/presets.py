@@ -61,6 +61,7 @@ from wbcgrade.color.histogram import (
     soft_histogram,
     to_sparse,
 )
+from wbcgrade.color.io.cache import command_cache
 from wbcgrade.color.io.images import header_pixels, read_image
 from wbcgrade.color.io.preset_names import (
     RETIRED_PRESETS,
@@ -153,10 +154,33 @@ class StyleSet:
         """(m, m, m, 3) the look a preset was made with (its own lattice), or None."""
         return self.meta.get("look")
 
+    def cache_folder(self) -> Path | None:
+        """Where what is computed from the set is cached: the folder it was read with (None:
+        the command turned caching off), else the command's
+        (:func:`wbcgrade.color.io.cache.command_cache`; None when caching is off)."""
+        if "cache_dir" not in self.meta:
+            folder, enabled = command_cache()
+            return folder if enabled else None
+        folder = self.meta["cache_dir"]
+        return None if folder is None else Path(folder)
+
     @property
     def converted_from(self) -> str | None:
         """The working space the set was converted from (:func:`styles_in_space`), or None."""
         return self.meta.get("converted_from") or None
+
+    @property
+    def file_digest(self) -> str | None:
+        """The SHA-1 of the preset file the set was read from, or None (a folder's set)."""
+        return self.meta.get("file_digest")
+
+    def subset(self, indices: Sequence[int]) -> StyleSet:
+        """The styles at ``indices`` as a set of their own (their histograms; the working
+        space and the cache folder kept)."""
+        indices = list(indices)
+        meta = {k: v for k, v in self.meta.items() if k in ("working_space", "cache_dir")}
+        return StyleSet([self.names[i] for i in indices], self.histograms[indices],
+                        self.source, self.width, self.description, meta)
 
     @property
     def files(self) -> tuple[str, ...]:
@@ -209,8 +233,7 @@ def _photo_histogram(path: Path, bins: int, max_pixels: int,
 
 
 #: Photos a folder's histograms are read from at once, at most (threads: decoding, colour
-#: conversion and binning release the GIL). Twelve 16-megapixel JPEGs on a 2-core machine:
-#: 4.6 s one at a time, 3.0 s two at once.
+#: conversion and binning release the GIL; docs/benchmarks.md).
 READ_THREADS = 4
 #: Megapixels of photos decoded at once, at most (a bigger photo is read alone): each holds
 #: its pixels and their working-space copy while it is read (16 MP: ~0.5 GB, in ACEScct

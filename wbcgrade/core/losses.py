@@ -35,7 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wbcgrade.core._cpu import fast_cpu
 from wbcgrade.core.geometry import Geometry
+from wbcgrade.core.sinkhorn import sinkhorn
 
 __all__ = [
     "Loss",
@@ -132,9 +134,6 @@ def _symmetric_log_scaling(
     the core's two-sided solver (log domain if needed) when scalings under- or
     overflow; its ``(a, b)`` give ``u = sqrt(a b)``.
     """
-    from wbcgrade.core._cpu import fast_cpu
-    from wbcgrade.core.sinkhorn import sinkhorn
-
     axes = tuple(range(p.ndim - geometry.ndim, p.ndim))
     support = p > 0
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"), fast_cpu():
@@ -220,8 +219,6 @@ class EntropicTransportLoss:
         return value
 
     def __call__(self, P: NDArray, q: NDArray, geometry: Geometry) -> tuple[float, NDArray]:
-        from wbcgrade.core.sinkhorn import sinkhorn
-
         p_hat, mass, axes = _normalised(P, geometry)
         q_hat = q / q.sum(axis=axes, keepdims=True)
         init = self._warm(self._log_b, q_hat.shape)

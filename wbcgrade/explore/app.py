@@ -6,7 +6,7 @@ import os
 import sys
 import threading
 import webbrowser
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from wbcgrade.errors import OptionError
@@ -24,7 +24,8 @@ def start_studio(photo: str, style_dir: str | None = None,
                  stage: Callable[[str], None] | None = None,
                  token: str | None = None,
                  save_dir: str | os.PathLike | None = None,
-                 prefetch: bool = True) -> ExploreServer:
+                 prefetch: bool = True,
+                 setting_names: Mapping[str, str] | None = None) -> ExploreServer:
     """Bind the server, load the photo and styles, compute the grade ``apply`` gives;
     -> the server (its ``studio``: an :class:`~wbcgrade.explore.studio.Explorer`).
 
@@ -35,6 +36,8 @@ def start_studio(photo: str, style_dir: str | None = None,
     palette mode. Saved photos go into ``save_dir`` (default: the photo's
     folder), which must be a folder that exists; nothing else is written.
     ``prefetch``: the other sources are loaded in the background at once.
+    ``setting_names``: how the command names the library's settings (setting -> its flag)
+    in what the page says of a grade.
     """
     say = stage or (lambda name: None)
     presets = [preset] if isinstance(preset, str) else list(preset or [])
@@ -54,7 +57,7 @@ def start_studio(photo: str, style_dir: str | None = None,
         say("load")
         choices = style_choices(style_dir, presets)
         session = load_session(photo, choices[0].style_dir, choices[0].preset, warn=warn,
-                               progress=progress)
+                               progress=progress, setting_names=setting_names)
         studio = Studio(session)
         say("look")
         session.look_grade()

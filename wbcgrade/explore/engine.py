@@ -48,8 +48,8 @@ import os
 import shlex
 import tempfile
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -201,8 +201,8 @@ class _FastGrader:
         options = _options(self.base, settings,
                            **({} if tol is None else {"sinkhorn_tol": tol}))
         weights = np.asarray(weights, dtype=np.float64)
-        raw, _, _, _ = transport_map(self.photo_hist, self.styles, weights / weights.sum(),
-                                     options)
+        raw = transport_map(self.photo_hist, self.styles, weights / weights.sum(),
+                            options).color_map
         return finish_map(self.smooth.fit(raw), options, self.encoding)
 
 
@@ -222,6 +222,8 @@ class Session:
     preview : (h, w, 3) uint8 preview picture (working-space colours: the
         values the LUT takes).
     thumbnails : one (h, w, 3) float32 display picture per style.
+    setting_names : how the command names the library's settings (setting -> its flag) in
+        what the page says of a grade (:func:`describe_outcome`); None: as the library does.
     """
 
     photo: str
@@ -236,6 +238,7 @@ class Session:
     base: object
     lut_size: int
     loaded: LoadedPhoto | None = None
+    setting_names: Mapping[str, str] | None = None
 
     def __post_init__(self) -> None:
         import threading
@@ -272,31 +275,28 @@ class Session:
             if self._look is None:
                 if self.loaded is None:
                     raise ValueError("the session was loaded without its photo's pixels")
-                self._look = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
+                grade, fit = grade_encoded(self.loaded.encoded, self.styles, _look_options(),
                                            self.encoding, self.loaded.alpha)
+                if grade.outcome is not None:  # in the command's words
+                    grade = replace(grade, outcome=grade.outcome.named(self.setting_names))
+                self._look = grade, fit
             return self._look
 
     def look_at(self, strength: float):
         """The look grade at ``apply --strength`` (0 to :data:`MAX_STRENGTH`; above 1 the
         map's change scaled, as ``apply`` does), its outcome judged at that strength."""
-        from dataclasses import replace
-
-
         grade, fit = self._look_and_fit()
         if strength == 1.0:
             return grade
         color_map, blend = strengthened(grade.color_map, strength)
         grade = replace(grade, color_map=np.asarray(color_map, dtype=np.float32),
                         strength=blend)
-        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "look", strength)
-        return replace(grade, outcome=outcome)
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], strength)
+        return replace(grade, outcome=outcome.named(self.setting_names))
 
     def palette_grade(self, color_map: np.ndarray, settings: Settings):
         """The palette grade of ``settings`` whose exact map is ``color_map`` (a Grade,
         its outcome judged on this photo as ``apply --weights`` judges it)."""
-        from dataclasses import replace
-
-
         weights = np.asarray(settings.weights, dtype=np.float64)
         color_map, blend = strengthened(np.asarray(color_map, dtype=np.float32),
                                         settings.strength)
@@ -304,9 +304,9 @@ class Session:
                       color_map=np.asarray(color_map, dtype=np.float32),
                       working=self.encoding.working, strength=blend)
         fit = FitSummary(grade.weights, 0.0, np.zeros(0), "given")
-        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins], "palette",
+        outcome = grade_outcome(grade, fit, self.hists[self.base.fit.bins],
                                 settings.strength)
-        return replace(grade, outcome=outcome)
+        return replace(grade, outcome=outcome.named(self.setting_names))
 
     def look_command(self, strength: float) -> str:
         """The ``wbcgrade apply`` command that gives the look grade at ``strength``."""
@@ -528,13 +528,14 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
                  preview_side: int = PREVIEW_SIDE,
                  warn: Callable[[str], None] | None = None,
                  progress: Callable[[int, int, str], None] | None = None,
-                 loaded: LoadedPhoto | None = None) -> Session:
+                 loaded: LoadedPhoto | None = None,
+                 setting_names: Mapping[str, str] | None = None) -> Session:
     """Read the photo (unless ``loaded`` holds it) and the styles as ``apply`` does;
     nothing is written.
 
     ``style_dir`` photos' histograms come from (and go to) the histogram
     cache, as with ``apply``. Raises InputError on a missing or unreadable
-    photo or style source (one line).
+    photo or style source (one line). ``setting_names``: :attr:`Session.setting_names`.
     """
     if loaded is None:
         loaded = load_photo(photo, preview_side)
@@ -548,17 +549,19 @@ def load_session(photo: str, style_dir: str | None = None, preset: str | None = 
                    preset=preset, names=list(styles.names), styles=styles,
                    encoding=loaded.encoding, hists=loaded.hists, preview=loaded.preview,
                    thumbnails=[pictures[name] for name in styles.names], base=base,
-                   lut_size=base.map.size, loaded=loaded)
+                   lut_size=base.map.size, loaded=loaded, setting_names=setting_names)
 
 
-def describe_outcome(outcome) -> dict:
+def describe_outcome(outcome, setting_names: Mapping[str, str] | None = None) -> dict:
     """What a grade did (``color.outcome.GradeOutcome``), for the page (JSON-friendly).
 
     The outcome's own fields (``source``: "preset-look", "own-scene", "set-look",
     "palette"; ``strength``: the look's own strength times ``blend``, the
     ``--strength``; ``look_strength``; the photo's mean change, ...) and ``words``: its
-    lines (``outcome.lines()``) without their "grade: " lead.
+    lines (``outcome.lines()``) without their "grade: " lead, naming settings as
+    ``setting_names`` says (the command line: its flags).
     """
+    outcome = outcome.named(setting_names)
     lines = outcome.lines()
     head = lines[0].removeprefix("grade: ")
     return {**outcome.as_dict(), "words": " ".join([head, *lines[1:]])}

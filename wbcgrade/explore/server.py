@@ -156,7 +156,8 @@ class Studio:
         lut = np.ascontiguousarray(self.session.look_grade().color_map, dtype=np.float32)
         return lut, {"kind": "exact", "mode": "look",
                      "ms": round(1000 * (time.perf_counter() - started), 1),
-                     "strength": strength, "grade": describe_outcome(grade.outcome),
+                     "strength": strength,
+                     "grade": describe_outcome(grade.outcome, self.session.setting_names),
                      "command": self.session.look_command(strength)}
 
     def grade_of(self, mode: str, settings: Settings | None, strength: float):
@@ -170,9 +171,10 @@ class Studio:
             grade = session.palette_grade(color_map, settings)
             command = session.command_line(settings)
             ranked = ", ".join(f"{n} {w:.4f}" for n, w in grade.ranked())
-            return grade, f"{describe_outcome(grade.outcome)['words']}; weights {ranked}", \
+            words = describe_outcome(grade.outcome, session.setting_names)["words"]
+            return grade, f"{words}; weights {ranked}", \
                 command
-        return grade, describe_outcome(grade.outcome)["words"], command
+        return grade, describe_outcome(grade.outcome, session.setting_names)["words"], command
 
     def export_mode(self, mode: str, settings: Settings | None, strength: float,
                     lut_format: str, size: int) -> tuple[str, bytes]:

@@ -99,7 +99,7 @@ class Explorer:
                 first = self._studios[0].session
                 choice = self.choices[index]
                 session = load_session(first.photo, choice.style_dir, choice.preset,
-                                       loaded=first.loaded)
+                                       loaded=first.loaded, setting_names=first.setting_names)
                 studio = Studio(session)
                 with self._lock:
                     self._studios[index] = studio

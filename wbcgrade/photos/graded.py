@@ -16,7 +16,7 @@ import numpy as np
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grade.grading import Grade
 from wbcgrade.color.io.images import Image
-from wbcgrade.color.outcome import FitStart
+from wbcgrade.color.outcome import FitStart, fit_start_word
 from wbcgrade.color.palette.fit import FitSummary
 
 __all__ = ["PhotoGrade", "GradeReport"]
@@ -55,19 +55,18 @@ class GradeReport:
     output: Path | None
     lut: Path | None
     grade: Grade
-    styles_source: str
+    styles_source: str  # the style folder or preset, or a saved grade's file
     graded: PhotoGrade
     timings: dict[str, float] = field(default_factory=dict)
     fit: FitSummary | None = None
     report: Path | None = None
 
     @property
-    def fit_start(self) -> FitStart:
-        """How the weights were found (:class:`~wbcgrade.color.outcome.FitStart`: a palette
-        fit's UNIFORM, VERTEX_REFIT, VERTEX or GIVEN; the look builder's PRESET, SCENE or
-        LOOK; SAVED for a saved grade; SHARED for a series' grade whose fit
-        the caller holds)."""
-        return self.fit.fit_start if self.fit is not None else FitStart.SHARED
+    def fit_start(self) -> str:
+        """The JSON's ``fit_start`` (:func:`~wbcgrade.color.outcome.fit_start_word`): how a
+        palette fit found the weights ("shared" for a series' grade whose fit the caller
+        holds), else where the grade came from ("preset", "scene", "look", "saved")."""
+        return fit_start_word(self.grade.source, None if self.fit is None else self.fit.start)
 
     @property
     def color(self) -> dict:
@@ -94,7 +93,7 @@ class GradeReport:
             "lut": None if self.lut is None else str(self.lut),
             "styles": self.styles_source,
             "outcome": None if outcome is None else outcome.as_dict(),
-            "fit_start": self.fit_start.value,
+            "fit_start": self.fit_start,
             "regrain": self.grade.regrain is not None,
             "timings_s": {k: round(v, 3) for k, v in self.timings.items()},
             **info,  # diagnostics of the fit, the look, the transport and the map
@@ -105,5 +104,5 @@ class GradeReport:
             out.update({"weights": [{"style": name, "weight": round(w, 6)}
                                     for name, w in self.grade.ranked()],
                         "loss": self.grade.loss,
-                        "fitted": self.fit_start.fitted})
+                        "fitted": FitStart(self.fit_start).fitted})
         return out

@@ -4,7 +4,7 @@ before the grade's modules (``wbcgrade report`` on a batch's results never needs
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -26,12 +26,16 @@ class Progress:
     stage : ``stage(name)`` as each stage starts ("read", "fit", "barycenter", ...).
     styles : ``styles(done, total, name)`` while style photos are read.
     warn : ``warn(message)`` for what the user should know (skipped files, ...).
+    setting_names : how the command names the library's settings (setting -> its flag) in what
+        the results say (a grade's outcome, a colour encoding's source, a failed photo's
+        error); None: as the library does.
     """
 
     fit: Callable[[int, np.ndarray, float], None] | None = None
     stage: Callable[[str], None] | None = None
     styles: Callable[[int, int, str], None] | None = None
     warn: Callable[[str], None] | None = None
+    setting_names: Mapping[str, str] | None = None
 
     def say(self, name: str) -> None:
         if self.stage is not None:

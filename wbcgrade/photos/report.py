@@ -244,10 +244,10 @@ def sheet_picture(path: str | os.PathLike, max_h: int, max_w: int) -> np.ndarray
     """A photo as a sheet shows it: display sRGB, fitting in ``max_h`` x ``max_w``.
 
     A JPEG without an ICC profile (sRGB) is decoded at a fraction of its size (the
-    decoder's DCT scaling: a 16-megapixel photo in 0.03 s instead of 0.3 s, and no
-    full-size arrays) and resized in 8 bits (the sheet is 8-bit); any other file is read as
-    ``apply`` reads it and made small before its colours are converted. Raises OSError or
-    ValueError (InputError) when the file cannot be read."""
+    decoder's DCT scaling: a tenth of the time, and no full-size arrays) and resized in 8
+    bits (the sheet is 8-bit); any other file is read as ``apply`` reads it and made small
+    before its colours are converted. Raises OSError or ValueError (InputError) when the
+    file cannot be read."""
     from PIL import ExifTags, ImageOps
     from PIL import Image as PILImage
 
@@ -561,7 +561,8 @@ def report_from_grade(report_dir: str | os.PathLike, graded: GradeReport, styles
                         names=list(styles.names),
                         weights=[float(w) for w in graded.grade.weights],
                         loss=float(fit.loss), vertex_losses=[float(v) for v in fit.vertex_losses],
-                        start=fit.start, timings=dict(graded.timings), color=graded.color,
+                        start=graded.fit_start, timings=dict(graded.timings),
+                        color=graded.color,
                         own_style=graded.grade.own_style,
                         outcome=None if graded.outcome is None else graded.outcome.as_dict())
     sheet = sheet_path(result.relative)

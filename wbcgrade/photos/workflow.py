@@ -26,7 +26,7 @@ import os
 import threading
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,7 @@ import numpy as np
 from wbcgrade._publish import make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grade.grading import Grade, grade_encoded, outcome_on_photo
-from wbcgrade.color.grade.saved_grade import look_fit, look_styles, save_grade
+from wbcgrade.color.grade.saved_grade import save_grade, saved_name
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.io.images import (
     Image,
@@ -221,13 +221,13 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
     return thread
 
 
-def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOptions,
+def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: GradeOptions,
                 *, shared: Grade | None = None, progress: Progress | None = None,
                 keep_input: bool = True) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
-    With ``shared`` (a series grade, in the same working space), its colour
-    map is applied as it is; otherwise the photo gets its own grade
+    With ``shared`` (a series grade or a saved one, in the same working space), its colour
+    map is applied as it is (``styles`` may be None); otherwise the photo gets its own grade
     (:func:`wbcgrade.color.grade.grading.grade_encoded`). ``keep_input`` False:
     nothing will look at the ungraded pixels afterwards (no report sheet), so
     a photo graded in its own space is graded in place (the returned
@@ -242,14 +242,12 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
         load_kernels_beside(photo)
     image = read_image(photo)
     rgb = image.rgb()
-    encoding = ColorEncoding.for_image(image, options.spaces.input, options.spaces.working)
+    encoding = ColorEncoding.for_image(image, options.spaces.input,
+                                       options.spaces.working).named(progress.setting_names)
     encoded = encoding.encode(rgb, image.is_float)
     timings["read"] = time.perf_counter() - start
     fit = None
     if shared is not None:  # what the shared (series or saved) grade does to this photo
-        from dataclasses import replace
-
-
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
@@ -260,6 +258,8 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
         # what the grade's own stages leave out: the histograms, the look, the outcome
         timings["grade"] = max(0.0, time.perf_counter() - start
                                - sum(v for k, v in grade.timings.items() if k != "total"))
+    if grade.outcome is not None and progress.setting_names is not None:  # the command's words
+        grade = replace(grade, outcome=grade.outcome.named(progress.setting_names))
     progress.say("remap")
     start = time.perf_counter()
     owned = not np.shares_memory(encoded[0], image.pixels)  # converted: a copy of ours
@@ -269,7 +269,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet, options: GradeOption
     return PhotoGrade(image, pixels, alpha_channel, grade, fit, encoding, timings)
 
 
-def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
+def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
                *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
                keep_input: bool = True) -> GradeReport:
@@ -322,7 +322,8 @@ def grade_file(plan: PhotoPlan, styles: StyleSet, options: GradeOptions,
                     plan.lut.unlink()
             raise
     timings["total"] = sum(v for k, v in timings.items() if k != "total")
-    return GradeReport(plan.photo, plan.output, plan.lut, grade, styles.source, graded,
+    return GradeReport(plan.photo, plan.output, plan.lut, grade,
+                       styles.source if styles is not None else saved_name(shared), graded,
                        timings, graded.fit)
 
 
@@ -364,12 +365,9 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     if saved:
         spaces = options.spaces
         if spaces.working != source.working:
-            from dataclasses import replace
-
             options = replace(options, spaces=replace(spaces, working=source.working))
-        report = grade_file(plan, look_styles(source), options, shared=source,
-                            progress=progress, keep_input=False)
-        report.fit = look_fit(source)
+        report = grade_file(plan, None, options, shared=source, progress=progress,
+                            keep_input=False)
         _save_grade(plan, report.grade)
         return report
     start = time.perf_counter()

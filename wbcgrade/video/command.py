@@ -11,7 +11,7 @@ import os
 import time
 from dataclasses import replace
 
-from wbcgrade.color.grade.saved_grade import look_batch_options, look_styles
+from wbcgrade.color.grade.saved_grade import look_batch_options
 from wbcgrade.color.options import GradeOptions, RegrainOptions
 from wbcgrade.color.presets import StyleSource, load_styles, source_files
 from wbcgrade.video.report import plan_video_report, write_video_report
@@ -56,7 +56,7 @@ def grade_clip(source: str | os.PathLike, output: str | os.PathLike | None,
                              progress.warn, progress.styles)
     else:
         options = look_batch_options(options, look, report_dir=report_dir)
-        loaded = look_styles(look, str(None if look.saved is None else look.saved.file))
+        loaded = None
     with contextlib.ExitStack() as stack:  # every output published together, or none
         result = grade_planned(source, output, lut=lut, styles=loaded, options=options,
                                settings=settings, overwrite=overwrite, progress=progress,

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.color.colorspace import ColorEncoding, config_info, config_path, resolve_space
+from wbcgrade.color.colorspace import ColorEncoding, config_line, config_path, resolve_space
 from wbcgrade.color.options import SpaceOptions
 from wbcgrade.errors import InputError, OptionError
 from wbcgrade.video.ffmpeg import VideoInfo
@@ -110,8 +110,7 @@ def frame_to_working(frame: np.ndarray, encoding: ColorEncoding) -> np.ndarray:
 def lut_comments(encoding: ColorEncoding) -> list[str]:
     """``--lut`` header lines: the spaces the LUT expects and produces, the working space
     the grade was fitted in, and the config (as ``apply --lut`` names its spaces)."""
-    info = config_info()
     return [f"input space: {encoding.input} (the clip's code values; {encoding.source})",
             f"output space: {encoding.input}",
             f"working space: {encoding.working} (where the grade was fitted)",
-            f"OpenColorIO config: {info['ocio_config']} (OpenColorIO {info['ocio_version']})"]
+            config_line()]

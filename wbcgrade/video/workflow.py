@@ -59,10 +59,10 @@ from wbcgrade.color.grade.grading import (
     grade_outcome,
     photo_histograms,
 )
-from wbcgrade.color.grade.saved_grade import look_fit
 from wbcgrade.color.histogram import PaletteSum
 from wbcgrade.color.mapping.lut import DEFAULT_LUT_SIZE, check_lut_size, write_cube
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import fit_start_word
 from wbcgrade.color.palette.fit import FitSummary
 from wbcgrade.color.presets import StyleSet, styles_in_space
 from wbcgrade.errors import InputError, OptionError, WbcgradeError
@@ -137,7 +137,7 @@ class ShotGrade:
     last: int
     samples: list[int]
     grade: Grade
-    fit: FitSummary
+    fit: FitSummary | None  # None: a saved grade (nothing fitted)
     table: np.ndarray
 
     def as_dict(self, fps: float) -> dict:
@@ -148,7 +148,8 @@ class ShotGrade:
                  "start_s": round(self.first / fps, 4), "end_s": round((self.last + 1) / fps, 4),
                  "sampled_frames": self.samples,
                  "outcome": None if outcome is None else outcome.as_dict(),
-                 "fit_start": self.fit.start,
+                 "fit_start": fit_start_word(self.grade.source,
+                                             None if self.fit is None else self.fit.start),
                  "timings_s": {k: round(v, 3) for k, v in self.grade.timings.items()}}
         if outcome is None or outcome.palette is not None:
             entry.update({
@@ -536,12 +537,12 @@ def _writing_in(folder: Path) -> Iterator[None]:
                          "TMPDIR to a folder with space") from None
 
 
-def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: StyleSet,
+def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: StyleSet | None,
                    options: GradeOptions, settings: VideoSettings, overwrite: bool,
                    progress: VideoProgress, timings: dict[str, float] | None,
                    stack: contextlib.ExitStack, look: Grade | None = None) -> VideoResult:
     """:func:`grade_video` once :func:`plan_video` checked the outputs (the outputs as
-    it returned them); ``look``: a saved grade used for every shot (no fit).
+    it returned them); ``look``: a saved grade used for every shot (no fit, no ``styles``).
 
     The graded clip and its LUTs are written to temporary files entered on
     ``stack`` (:func:`wbcgrade._publish.atomic_path`): they are published when
@@ -551,9 +552,10 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     timings = dict(timings or {})
     start = time.perf_counter()
     info = probe(source)
-    encoding = clip_encoding(info, options.spaces)
-    styles = styles_in_space(styles, encoding.working)
-    options.check_styles(len(styles.names))
+    encoding = clip_encoding(info, options.spaces).named(progress.setting_names)
+    if look is None:
+        styles = styles_in_space(styles, encoding.working)
+        options.check_styles(len(styles.names))
     frames = progress.frames
     folder = stack.enter_context(work_folder())
     check_encoding(info, settings, output, folder, progress.warn)
@@ -574,11 +576,13 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
     for first, last in samples.shots():
         indices = [n for n in sorted(samples.frames) if first <= n <= last]
         if look is not None:
-            grade, fit = look, look_fit(look)
-            grade = replace(grade, outcome=grade_outcome(grade, fit, None))
+            grade, fit = look, None
+            grade = replace(grade, outcome=grade_outcome(grade, None, None))
         else:
             grade, fit = shot_grade([samples.frames[n] for n in indices], styles, options,
                                     encoding, progress.fit, progress.stage)
+        if grade.outcome is not None:  # in the command's words
+            grade = replace(grade, outcome=grade.outcome.named(progress.setting_names))
         table = grade.lut(settings.lut_size, encoding)
         shots.append(ShotGrade(first, last, indices, grade, fit, table.astype(np.float32)))
     timings["grade"] = time.perf_counter() - t0
@@ -616,4 +620,5 @@ def grade_planned(source: Path, output: Path, *, lut: Path | None, styles: Style
                    overwrite=True)
     timings["total"] = time.perf_counter() - start
     return VideoResult(Path(source), output, luts, info, settings, shots, segments, samples,
-                       timings, encoder, pix_fmt, encoding, styles.working_space)
+                       timings, encoder, pix_fmt, encoding,
+                       encoding.working if look is not None else styles.working_space)

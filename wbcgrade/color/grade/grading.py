@@ -11,7 +11,7 @@ One path for every caller (``apply``, ``batch``, ``video``, :func:`grade_array`)
      (:func:`wbcgrade.color.palette.fit.fit_weights`: barycentric coordinates never
      worse than the best single style), then the fitted palette, Sinkhorn
      and the smooth map (:func:`wbcgrade.color.palette.transfer.transport_map`);
-   - "look" (:func:`wbcgrade.color.look.builder.look_map`): the look the style
+   - "look" (:func:`wbcgrade.color.grade.look_builder.look_map`): the look the style
      set shares (:mod:`wbcgrade.color.look`), moved towards the palette grade of the
      photo by how sure it is that a style shows the photo's own scene;
 
@@ -57,13 +57,14 @@ from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.grade.builders import (
     BuiltMap,
     FitCallback,
+    LookFound,
     MapRequest,
     PhotoHistograms,
     palette_map,
     quiet,
 )
+from wbcgrade.color.grade.look_builder import look_map
 from wbcgrade.color.histogram import image_histogram
-from wbcgrade.color.look.builder import look_map
 from wbcgrade.color.mapping.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.mapping.regrain import regrain_map
 from wbcgrade.color.mapping.remap import (
@@ -129,6 +130,11 @@ class Grade:
         where it lowers contrast or saturation (:func:`wbcgrade.color.mapping.regrain.regrain_map`'s
         ``follow``): 1 for a preset's own look, a scene's look by the match's confidence
         (:func:`regrain_follow`); 0, the grain as it is, for the others.
+    source : where the map came from (:class:`~wbcgrade.color.outcome.GradeSource`), set
+        once: by the map builder on the grade path, SAVED for a saved grade (one with
+        ``saved``), else PALETTE (weights and a map made by hand).
+    look : what a look builder found (:class:`~wbcgrade.color.grade.builders.LookFound`),
+        or None.
     """
 
     names: tuple[str, ...]
@@ -146,6 +152,13 @@ class Grade:
     own_style: str | None = field(default=None, compare=False)
     transport: TransportCheck | None = field(default=None, compare=False)
     regrain_follow: float = 0.0
+    source: GradeSource | None = field(default=None, compare=False)
+    look: LookFound | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.source is None:
+            object.__setattr__(self, "source", GradeSource.SAVED if self.saved is not None
+                               else GradeSource.PALETTE)
 
     def apply(self, encoded: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Grade working-space colours in [0, 1] -> float32, same shape.
@@ -274,7 +287,7 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
                                           stage or quiet, palette_grade))
     start = time.perf_counter()
     finish = options
-    if built.fit.start == FitStart.PRESET and options.map.monotone:
+    if built.source is GradeSource.PRESET_LOOK and options.map.monotone:
         # a preset's look is applied as it was made (monotone in its own space already):
         # the lattice of its conversion into another space also covers colours outside
         # the preset's gamut, where a monotone pass would drag the look inside it
@@ -289,30 +302,28 @@ def grade_histograms(photo: PhotoHistograms, styles: StyleSet, options: GradeOpt
     if found is not None:  # the photo is one of the styles (the CLI warns)
         info["own_style"] = found
     color_map, strength = strengthened(color_map, options.map.strength)
-    sink = info.get("sinkhorn")
-    transport = (None if not sink else
-                 TransportCheck(bool(sink.get("converged", True)), float(sink.get("error", 0.0))))
     grade = Grade(names=tuple(styles.names),
                   weights=np.asarray(built.fit.weights, dtype=np.float64),
                   color_map=np.asarray(color_map, dtype=np.float32), working=encoding.working,
                   strength=strength, regrain=options.regrain.settings,
                   loss=built.fit.loss, barycenter=built.palette, info=info, timings=timings,
-                  own_style=found, transport=transport,
-                  regrain_follow=0.0 if name == "palette" else regrain_follow(built.fit))
-    outcome = grade_outcome(grade, built.fit, photo.fit, name, options.map.strength)
+                  own_style=found, transport=built.transport,
+                  regrain_follow=regrain_follow(built.source, built.look),
+                  source=built.source, look=built.look)
+    outcome = grade_outcome(grade, built.fit, photo.fit, options.map.strength)
     return replace(grade, outcome=outcome), built.fit
 
 
-def regrain_follow(fit: FitSummary) -> float:
+def regrain_follow(source: GradeSource, look: LookFound | None = None) -> float:
     """How far a look grade's regrain lets the grain follow its map
     (:attr:`Grade.regrain_follow`): fully for a preset's own look, for the look read off
     the style photo of the photo's scene as far as the match is sure (the map is that much
     the scene's; the rest is the set's look); not at all for a set's look read from
     statistics, whose slopes are a guess (docs/benchmarks.md, regrain of a set's look)."""
-    if fit.start == FitStart.PRESET:
+    if source is GradeSource.PRESET_LOOK:
         return 1.0
-    if fit.start == FitStart.SCENE:
-        return float(np.clip(fit.info.get("confidence", 0.0), 0.0, 1.0))
+    if source is GradeSource.OWN_SCENE and look is not None:
+        return float(np.clip(look.confidence, 0.0, 1.0))
     return 0.0
 
 
@@ -332,64 +343,58 @@ def outcome_on_photo(grade: Grade, photo_hist: np.ndarray) -> GradeOutcome:
     change = map_change(grade.color_map, grade.strength, grade.working, photo_hist)
     if grade.outcome is not None:
         return grade.outcome.on_photo(change)
-    if grade.saved is not None:
-        return grade_outcome(grade, FitSummary(np.asarray(grade.weights), 0.0, np.zeros(0),
-                                               FitStart.SAVED.value), photo_hist)
-    return grade_outcome(grade, FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0),
-                                           np.zeros(0), "given"), photo_hist, "palette")
+    return grade_outcome(grade, None, photo_hist)
 
 
-def grade_outcome(grade: Grade, fit: FitSummary, photo_hist: np.ndarray | None,
-                  builder: str = "look", blend: float | None = None) -> GradeOutcome:
+def grade_outcome(grade: Grade, fit: FitSummary | None, photo_hist: np.ndarray | None,
+                  blend: float | None = None) -> GradeOutcome:
     """What ``grade`` does to a photo whose histogram (any (n, n, n) grid of working-space
     colours) is ``photo_hist`` (None: judged on the whole colour cube).
 
-    The source follows how the builder found the map (``fit.start``: "preset",
-    "scene", "look", else a palette fit); the look's strength and match come
-    from the look builder's diagnostics (``grade.info["look"]``). ``blend``: the
-    ``map.strength`` asked for (default the grade's own blend; above 1 the map was scaled).
+    The source is the grade's own (:attr:`Grade.source`); a look's strength and match
+    are what its builder found (:attr:`Grade.look`); a palette grade's weights and loss
+    are ``fit``'s (None: the grade's own weights, given). ``blend``: the ``map.strength``
+    asked for (default the grade's own blend; above 1 the map was scaled).
     """
     blend = float(grade.strength if blend is None else blend)
-    look = dict(grade.info.get("look", {}) or {})
     n_styles = len(grade.names)
     look_size = map_change(grade.color_map, grade.strength, grade.working)
     mean_change = (look_size if photo_hist is None else
                    map_change(grade.color_map, grade.strength, grade.working, photo_hist))
-    start = fit.start  # a FitStart value (a registered builder may have its own)
-    if start == FitStart.SAVED:
+    source = grade.source
+    if source is GradeSource.SAVED:
         return GradeOutcome.judge(GradeSource.SAVED, n_styles, None, blend, look_size,
                                   mean_change,
                                   file=None if grade.saved is None else grade.saved.file,
                                   extra={"learned": grade.saved is not None
                                          and grade.saved.kind == "learned"})
-    if start == FitStart.PRESET:
+    if source is GradeSource.PRESET_LOOK:
         return GradeOutcome.judge(GradeSource.PRESET_LOOK, n_styles, 1.0,
                                   blend, look_size, mean_change)
-    if start in (FitStart.SCENE, FitStart.LOOK) or (
-            builder != "palette" and grade.barycenter is None
-            and start not in (FitStart.GIVEN, FitStart.UNIFORM, FitStart.VERTEX,
-                              FitStart.VERTEX_REFIT)):
-        set_strength = float(look.get("set_strength", 1.0))
-        confidence = float(look.get("confidence", 0.0) or 0.0)
+    if source in (GradeSource.OWN_SCENE, GradeSource.SET_LOOK):
+        look = grade.look or LookFound()
+        set_strength, confidence = look.set_strength, look.confidence
         strength = confidence + (1.0 - confidence) * set_strength
         why = None
         # the statistics look was shrunk by what content varies by: its size says how much
-        shared = (min(set_strength, look_size / 3.0) if look.get("method") == "statistics"
-                  else set_strength)
+        shared = min(set_strength, look_size / 3.0) if look.shrunk else set_strength
         if shared < FAINT_STRENGTH and confidence <= 0:
             how = "no" if shared < UNCHANGED_STRENGTH else "little"
             why = (f"these {n_styles} style photos share {how} look that can be told apart "
                    "from their content" if n_styles > 1 else
                    f"the style photo shows {how} look that can be told apart from its content")
-        source = GradeSource.OWN_SCENE if start == FitStart.SCENE else GradeSource.SET_LOOK
         return GradeOutcome.judge(source, n_styles, strength, blend,
-                                  look_size, mean_change, why, match=look.get("match"),
+                                  look_size, mean_change, why, match=look.match,
                                   confidence=confidence,
                                   extra={"set_strength": set_strength,
-                                         **({"probability": float(look["probability"])}
-                                            if look.get("rule") == "posterior"
-                                            and look.get("probability") is not None else {}),
-                                         **{k: int(look.get(k) or 0) for k in OWN_PHOTO_KEYS}})
+                                         **({"probability": look.probability}
+                                            if look.probability is not None else {}),
+                                         **dict(zip(OWN_PHOTO_KEYS, (look.own_photos,
+                                                                     look.own_photos_unused)))})
+    if fit is None:  # a grade's own weights, given
+        fit = FitSummary(np.asarray(grade.weights), float(grade.loss or 0.0), np.zeros(0),
+                         FitStart.GIVEN.value)
+    start = fit.fit_start
     order = np.argsort(-np.asarray(fit.weights), kind="stable")
     best = fit.best_vertex if len(fit.vertex_losses) else None
     palette = PaletteFit(tuple(grade.names[i] for i in order),

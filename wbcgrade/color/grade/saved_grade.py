@@ -49,9 +49,7 @@ from wbcgrade.color.colorspace import default_working_space, resolve_space
 from wbcgrade.color.grade.grading import Grade
 from wbcgrade.color.mapping.lut import check_clf_support
 from wbcgrade.color.mapping.remap import identity_map
-from wbcgrade.color.outcome import FitStart, SavedFrom
-from wbcgrade.color.palette.fit import FitSummary
-from wbcgrade.color.presets import StyleSet
+from wbcgrade.color.outcome import SavedFrom
 from wbcgrade.errors import InputError, OptionError, first_line
 from wbcgrade.limits import (
     MAX_LUT_DOMAIN,
@@ -67,7 +65,7 @@ from wbcgrade.limits import (
 )
 
 __all__ = ["LOOK_FORMAT", "LOOK_SUFFIXES", "look_dict", "look_from_dict", "load_look", "save_grade",
-           "look_styles", "look_fit", "look_batch_options", "SAMPLED_LUT_SIZE"]
+           "saved_name", "look_batch_options", "SAMPLED_LUT_SIZE"]
 
 #: The ``format`` tag of a saved grade.
 LOOK_FORMAT = "wbcgrade-look"
@@ -485,8 +483,8 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
     -------
     Grade whose ``color_map`` is the saved map (a LUT's table, strength 1 and
     no regrain settings: the caller decides), ``working`` the config's name
-    of its space, ``saved`` the file and its kind (also under ``info["saved_look"]``,
-    for the JSON).
+    of its space, ``saved`` the file and its kind (also in ``info``, for the JSON),
+    ``source`` SAVED.
     """
     path = check_input_file(path)  # a FIFO or device is refused unopened
     suffix = path.suffix.lower()
@@ -525,21 +523,10 @@ def load_look(path: str | os.PathLike, working_space: str | None = None) -> Grad
                  saved=SavedFrom(str(path), kind))
 
 
-def look_styles(grade: Grade, source: str | None = None) -> StyleSet:
-    """A stand-in style set for a saved grade (its names; no histograms: nothing is fitted).
-
-    ``source``: what the set is called (default: the saved grade's file)."""
-    if source is None:
-        source = str(grade.saved.file) if grade.saved is not None else "saved grade"
-    return StyleSet(names=list(grade.names),
-                    histograms=np.zeros((len(grade.names), 1, 1, 1)), source=source)
-
-
-def look_fit(grade: Grade) -> FitSummary:
-    """The weights of a saved grade, as a fit summary (start "saved": nothing was fitted)."""
-    return FitSummary(np.asarray(grade.weights, dtype=np.float64),
-                      float(grade.loss) if grade.loss is not None else 0.0,
-                      np.zeros(len(grade.names)), FitStart.SAVED.value, dict(grade.info), 0.0)
+def saved_name(grade: Grade | None) -> str:
+    """What a saved grade is called where a style set is called by its folder: its file."""
+    return str(grade.saved.file) if grade is not None and grade.saved is not None \
+        else "saved grade"
 
 
 def look_batch_options(options, look: Grade, consistent: bool = False, lut=None,

@@ -86,14 +86,13 @@ def command_cache() -> tuple[Path, bool]:
 
 
 def cache_folder(styles=None) -> Path | None:
-    """The cache folder of a StyleSet: its ``meta["cache_dir"]`` when it has one (None:
-    the command turned caching off), else the command's (:func:`command_cache`; None when
-    caching is off)."""
-    meta = getattr(styles, "meta", None) or {}
-    if "cache_dir" not in meta:
-        folder, enabled = command_cache()
-        return folder if enabled else None
-    return None if meta["cache_dir"] is None else Path(meta["cache_dir"])
+    """The cache folder of a StyleSet (its own, ``StyleSet.cache_folder``, when it was read
+    with one), else the command's (:func:`command_cache`); None when caching is off."""
+    own = getattr(styles, "cache_folder", None)
+    if own is not None:
+        return own()
+    folder, enabled = command_cache()
+    return folder if enabled else None
 
 
 def key_bytes(text: str) -> bytes:

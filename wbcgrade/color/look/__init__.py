@@ -1,7 +1,7 @@
 """The default grade's looks, in one package.
 
 A look is the global colour map a set of graded photos share, apart from
-their content; the default grade (``--mode look``) applies the style set's
+their content; the default grade (``map.builder`` "look") applies the style set's
 look, moved towards the photo's own scene where a style photo shows it.
 
 Submodules:
@@ -22,14 +22,16 @@ Submodules:
 - :mod:`~wbcgrade.color.look.scene_fit`: the look of one photo against its
   scene: the palette test (:func:`photo_look`) and the fit of matched pixels
   (:func:`fit_scene_look`, :func:`find_scene_look`, :func:`fit_pairs_look`);
-- :mod:`~wbcgrade.color.look.builder`: the "look" map builder the grade path
-  calls (``look_map``);
-- :mod:`~wbcgrade.color.look.extract`: ``wbcgrade look extract`` (a set's
-  look written as a LUT and a saved grade);
-- :mod:`~wbcgrade.color.look.learn`: ``wbcgrade look learn`` (a look learnt
-  from before/after pairs).
+- :mod:`~wbcgrade.color.look.learn`: the look of before/after pairs (and of edits
+  without their originals).
 
-A saved grade (``--look FILE``, ``--save-grade``) is
+The "look" map builder the grade path calls (``look_map``) is
+:mod:`wbcgrade.color.grade.look_builder`, and the looks written as grades (``wbcgrade look
+extract``, ``wbcgrade look learn``, ``--originals``) are
+:mod:`wbcgrade.color.grade.look_files`: the grade package imports this one, never the
+other way round.
+
+A saved grade is
 :mod:`wbcgrade.color.grade.saved_grade`. This package imports only what it needs
 to fit looks; the builder and the two workflows are imported from their
 submodules.

@@ -19,6 +19,7 @@ from wbcgrade.color.histogram import add_floor, grid_points, soft_histogram
 from wbcgrade.color.look.statistics import LUMA
 from wbcgrade.color.look.statistics import hats as _hats
 from wbcgrade.color.mapping.remap import interpolate_lattice
+from wbcgrade.core import GridGeometry, barycentric_coordinates
 
 __all__ = ["LookMap", "fit_look_map", "push_histogram", "relaxed_correspondences",
            "look_coordinates", "look_correspondences", "fit_geometry"]
@@ -160,8 +161,6 @@ def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float
     projection : (n, n, n, 3) barycentric projection ``(K (b x)) / (K b)`` of every bin.
     kept : (n, n, n) share of each source bin's mass the plan moves (0..~1).
     """
-    from wbcgrade.core import GridGeometry
-
     n = source.shape[0]
     geometry = GridGeometry.with_width((n,) * 3, width)
     tau = relaxation / (relaxation + geometry.gamma)
@@ -188,8 +187,6 @@ def relaxed_correspondences(source: np.ndarray, target: np.ndarray, width: float
 
 def fit_geometry(bins: int):
     """The core's grid geometry of a ``bins``^3 histogram as the look fits use it."""
-    from wbcgrade.core import GridGeometry
-
     return GridGeometry((bins,) * 3, 2.0 * (1.5 / (bins - 1)) ** 2)
 
 
@@ -199,8 +196,6 @@ def look_coordinates(target: np.ndarray, palettes: np.ndarray, floor: float = 1e
 
     Returns (weights (K,), loss).
     """
-    from wbcgrade.core import barycentric_coordinates
-
     bins = target.shape[0]
     result = barycentric_coordinates(
         add_floor(target, floor), np.stack([add_floor(h, floor) for h in palettes]),

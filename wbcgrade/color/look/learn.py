@@ -38,14 +38,14 @@ colour after it. The steps:
    :data:`LEARN_FOLDS` folds, each fold's pairs predicted by a look fitted
    without them), and a warning for a pair that disagrees with the others.
 
-:func:`learn_look_file` writes the look as a ``.cube``/``.clf`` LUT or a
-saved grade (``.json``) that :func:`wbcgrade.color.grade.saved_grade.load_look`
-reads: ``apply --look``, ``batch --look`` and ``video --look`` use it.
+:func:`wbcgrade.color.grade.look_files.learn_look_file` writes the look as a
+``.cube``/``.clf`` LUT or a saved grade (``.json``) that
+:func:`wbcgrade.color.grade.saved_grade.load_look` reads, as every command's saved look
+does; :func:`wbcgrade.color.grade.look_files.learned_grade` gives it as a grade.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Callable, Sequence
@@ -54,16 +54,46 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color._colour import colour
+from wbcgrade.color.colorspace import (
+    SYCC_LUMA,
+    ColorEncoding,
+    convert,
+    default_working_space,
+    resolve_space,
+)
 from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogram
+from wbcgrade.color.io.cache import default_cache_dir
+from wbcgrade.color.io.images import image_extensions, read_image
+from wbcgrade.color.io.raw import RAW_SUFFIXES, RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.edits import fit_edit
 from wbcgrade.color.look.family import fit_look_map
-from wbcgrade.errors import InputError, OptionError, first_line
+from wbcgrade.color.look.prior import posterior_statistics_look
+from wbcgrade.color.look.scene import (
+    SceneImage,
+    SceneMatch,
+    colour_pairs,
+    match_scene,
+    scene_image,
+    shrink_colors,
+)
+from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look, interpolate_lattice
+from wbcgrade.color.look.set_extraction import (
+    MAP_BINS,
+    natural_palettes,
+    natural_statistics,
+    space_scale,
+)
+from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
+from wbcgrade.color.mapping.remap import TONE_LUMA, to_monochrome
+from wbcgrade.color.presets import styles_in_space
+from wbcgrade.core import fast_cpu
+from wbcgrade.errors import InputError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
-           "learned_grade",
            "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
-           "pair_colours", "learn_look", "learn_look_file", "LEARN_SIZE", "LEARN_FOLDS",
+           "pair_colours", "learn_look", "LEARN_SIZE", "LEARN_FOLDS",
            "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
            "CORRECTION_NODES", "CORRECTION_SMOOTHNESS"]
 
@@ -91,8 +121,8 @@ LEARN_FOLDS = 4
 #: Below this many pairs the look is pulled, where the pairs' colours say little, towards
 #: the photographer's edit that best explains them (:func:`~wbcgrade.color.look.edits.fit_edit`)
 #: rather than towards no look: one photo's colours leave most of the cube to
-#: extrapolation, and an edit extrapolates as edits do (``benchmarks/learn.py
-#: --originals 1``: docs/benchmarks.md).
+#: extrapolation, and an edit extrapolates as edits do (the one-original figures in
+#: docs/benchmarks.md).
 EDIT_PRIOR_PAIRS = 4
 #: An after whose 99th percentile of chroma (largest minus smallest channel, working
 #: space) is below this is black and white (8-bit JPEG greys: 0 to 2/255).
@@ -143,15 +173,12 @@ _FLAT = 0.7
 @dataclass(frozen=True)
 class PairFiles:
     """A photo and its edited version: ``name`` (the stem), ``before``, ``after``."""
-
     name: str
     before: Path
     after: Path
 
 
 def _image_files(folder: Path) -> list[Path]:
-    from wbcgrade.color.io.images import image_extensions
-    from wbcgrade.color.io.raw import RAW_SUFFIXES
 
     exts = image_extensions() | RAW_SUFFIXES
     return sorted(p for p in folder.iterdir()
@@ -167,7 +194,6 @@ def _pair_key(path: Path, edited: bool) -> str:
 
 #: Which of several files sharing a stem is taken: raw first, then lossless, then the rest.
 def _preference(path: Path) -> tuple[int, str]:
-    from wbcgrade.color.io.raw import is_raw
 
     suffix = path.suffix.lower()
     rank = 0 if is_raw(path) else 1 if suffix in (".tif", ".tiff", ".exr", ".png", ".dng") \
@@ -195,7 +221,6 @@ class FileMatch:
     edits_alone : edited photos whose original is not there (evidence of the look too).
     problems : (name, reason) of originals without an edit and of stems several files share.
     """
-
     pairs: list[PairFiles]
     edits_alone: list[Path]
     problems: list[tuple[str, str]]
@@ -265,9 +290,6 @@ def match_files(before: str | os.PathLike, after: str | os.PathLike) -> FileMatc
 def learn_space(pairs: Sequence[PairFiles], working_space: str | None = None) -> str:
     """The working space the look is learned in: ``working_space``, else ACEScct when an
     original is a raw file (the space a raw photo is graded in), else sRGB-encoded Rec.709."""
-    from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
-
     if working_space:
         return resolve_space(working_space, "spaces.working")
     if any(is_raw(p.before) for p in pairs):
@@ -288,7 +310,6 @@ class PairImages:
     toned : whether the after is toned, not black and white (:data:`TONED_SPREAD`);
         None when the original holds too little colour to tell.
     """
-
     name: str
     before: np.ndarray
     after: np.ndarray
@@ -298,10 +319,6 @@ class PairImages:
 
 def _read_small(path: Path, working: str) -> np.ndarray:
     """A photo in ``working``, shrunk first (a 24 MP raw is not converted whole)."""
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.io.images import read_image
-    from wbcgrade.color.look.scene import shrink_colors
-
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working)
     small = shrink_colors(image.rgb(), LEARN_SIZE)
@@ -333,8 +350,6 @@ def _tint_spread(image: np.ndarray) -> float:
     another lightness's tint); all pixels when under a tenth are flat. (h, w, 3) image."""
     import cv2
 
-    from wbcgrade.color.mapping.remap import TONE_LUMA
-
     image = np.asarray(image, dtype=np.float32)
     luma = image @ TONE_LUMA.astype(np.float32)
     kernel = np.ones((3, 3), np.uint8)
@@ -354,8 +369,6 @@ def _band_tints(colours: np.ndarray, weights: np.ndarray
 
     Returns (each colour's band (N,), each band's mean luma (B,), each band's mean tint
     (B, 3)); a band with no weight has luma NaN and tint 0."""
-    from wbcgrade.color.mapping.remap import TONE_LUMA
-
     luma = colours @ TONE_LUMA
     band = np.clip((luma * _TONE_BANDS).astype(np.intp), 0, _TONE_BANDS - 1)
     mass = np.bincount(band, weights, minlength=_TONE_BANDS)
@@ -383,14 +396,12 @@ class Registration:
         or "keypoints (N agree)".
     coverage : share of the original the after covers.
     """
-
     homography: np.ndarray
     how: str
     coverage: float
 
 
 def _luma(colors: np.ndarray) -> np.ndarray:
-    from wbcgrade.color.colorspace import SYCC_LUMA
 
     return np.asarray(colors, np.float32) @ np.float32(SYCC_LUMA)
 
@@ -426,8 +437,6 @@ def _aligned(before: np.ndarray, warped: np.ndarray) -> bool:
     (at :data:`_CHECK_SIZE`), phase correlation finds no shift on most textured ones."""
     import cv2
 
-    from wbcgrade.color.look.scene import shrink_colors
-
     a = shrink_colors(np.repeat(_luma(before)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     b = shrink_colors(np.repeat(_luma(warped)[..., None], 3, axis=2), _CHECK_SIZE)[..., 0]
     h, w = a.shape
@@ -457,8 +466,6 @@ def register_pair(images: PairImages) -> Registration | None:
     and a homography (:func:`wbcgrade.color.look.scene.match_scene`: crops,
     resized crops, turns).
     """
-    from wbcgrade.color.look.scene import match_scene, scene_image
-
     before, after = images.before, images.after
     aspect = before.shape[1] / before.shape[0]
     for turns in range(4):
@@ -500,8 +507,6 @@ def pair_colours(images: PairImages, registration: Registration,
     original, shrunk to the after's sharpness, is resampled onto them instead (Ektar 100
     learned from resized and cropped afters, ``benchmarks/learn.py``: +0.780 the other
     way, +0.798 so, against +0.841 from the afters as they were)."""
-    from wbcgrade.color.look.scene import SceneImage, SceneMatch, colour_pairs, shrink_colors
-
     before, homography = images.before, registration.homography
     h = homography / homography[2, 2]
     magnified = float(np.sqrt(abs(np.linalg.det(h[:2, :2]))))
@@ -534,7 +539,6 @@ class LearnedLook:
         output's luma plus the afters' mean tint at that luma
         (:func:`wbcgrade.color.mapping.remap.to_monochrome`); None otherwise.
     """
-
     look: object
     monochrome: bool = False
     toning: tuple[np.ndarray, np.ndarray] | None = None
@@ -546,8 +550,6 @@ class LearnedLook:
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
-        from wbcgrade.color.mapping.remap import to_monochrome
-
         out = self.look(rgb)
         if self.monochrome:
             out = np.repeat(out.mean(axis=-1, keepdims=True), 3, axis=-1)
@@ -587,9 +589,6 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
     say little (default no look; :func:`_edit_prior`).
 
     Returns (the look, each part's robust weights, the pooled median distance)."""
-    from wbcgrade.color.look.scene_fit import fit_correction, fit_pairs_look
-    from wbcgrade.core import fast_cpu
-
     sources, targets, weights = _pooled(parts)
     start = None if robust is None else np.concatenate(list(robust))
     look, final = fit_pairs_look(sources, targets, weights, prior, rounds=rounds,
@@ -609,8 +608,6 @@ def _fit(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], monochrome:
 
 def _delta_e(colors: np.ndarray, truth: np.ndarray, encoding) -> np.ndarray:
     """(N,) CIEDE2000 between two lists of working-space colours (shown as sRGB, D65)."""
-    from wbcgrade.color._colour import colour
-
     d65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
 
     def lab(rgb: np.ndarray) -> np.ndarray:
@@ -641,7 +638,6 @@ class PairReport:
     edited_share : share of the pair's pixels the robust fit left out (local edits).
     warning : why the pair disagrees with the others, or None.
     """
-
     name: str
     before: str
     after: str
@@ -677,7 +673,6 @@ class LearnResult:
     folds : folds of the held-out check (0: one pair, none).
     seconds : time taken.
     """
-
     look: LearnedLook | None
     pairs: list[PairReport]
     problems: list[tuple[str, str]]
@@ -714,7 +709,7 @@ class LearnResult:
         return self._mean("held_out")
 
     def as_dict(self) -> dict:
-        """JSON-friendly summary (what ``look learn --json`` prints)."""
+        """JSON-friendly summary (what the command prints as JSON)."""
         return {"output": None if self.output is None else str(self.output),
                 "working_space": self.working_space,
                 "pairs_used": len(self.used), "pairs_given": len(self.pairs),
@@ -758,8 +753,6 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     :class:`LearnResult`; its ``look`` is None when no pair was usable.
     """
     import time
-
-    from wbcgrade.color.colorspace import ColorEncoding
 
     start = time.perf_counter()
     warn = warn or (lambda message: None)
@@ -868,8 +861,6 @@ def _edited_share(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray)
     median distance. Pixels on edges and texture (``weights`` below :data:`_FLAT`, as
     :func:`wbcgrade.color.look.scene.colour_pairs` gives them) are not counted: a look applied
     before or after resizing differs there."""
-    from wbcgrade.color.look.scene_fit import fit_pairs_look
-
     own, _ = fit_pairs_look(sources, targets, weights, rounds=2, correct=False)
     distance = np.linalg.norm(own(sources) - targets, axis=1)
     flat = weights >= _FLAT
@@ -902,131 +893,6 @@ def _flag_disagreements(used: list[PairReport], warn: Callable[[str], None]) -> 
 # --------------------------------------------------------------------------- the file
 
 
-def _output_kind(output: Path) -> str:
-    suffix = output.suffix.lower()
-    if suffix == ".json":
-        return "json"
-    if suffix in (".cube", ".clf"):
-        return suffix[1:]
-    raise OptionError(f"{output}: {{output}} must be written as .cube, .clf or .json "
-                      "(the ending names the format)", "output", path=output)
-
-
-def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
-                  lut_size: int = 33, working_space: str | None = None,
-                  warn: Callable[[str], None] | None = None,
-                  progress: Callable[[int, int, str], None] | None = None):
-    """The look of before/after pairs (and of edits without originals) as a grade.
-
-    What ``look learn`` writes and ``apply --look`` reads back, and what ``apply
-    --style DIR --originals ODIR`` applies: the learned look sampled as a
-    ``lut_size``^3 lattice, in the look's working space, no regrain settings.
-
-    Parameters
-    ----------
-    before, after : two photos, or two folders (:func:`match_files`): the originals,
-        and the edited photos (those without an original count too).
-
-    Returns (:class:`~wbcgrade.color.grade.grading.Grade`, :class:`LearnResult`).
-
-    Raises
-    ------
-    InputError
-        The paths do not pair, or no pair is usable (each pair's reason went to
-        ``warn`` first).
-    """
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grade.grading import Grade
-    from wbcgrade.color.mapping.lut import check_lut_size
-    from wbcgrade.color.outcome import SavedFrom
-
-    check_lut_size(lut_size)
-    matched = match_files(before, after)
-    pairs, problems = matched.pairs, matched.problems
-    warn = warn or (lambda message: None)
-    for name, why in problems:
-        warn(f"{name}: {why}")
-    if not pairs:
-        raise InputError(f"no before/after pairs: no photo in {after} has the name of one "
-                         f"in {before}")
-    result = learn_look(pairs, working_space, problems, warn, progress,
-                        edits_alone=matched.edits_alone)
-    if result.look is None:
-        raise InputError(f"no usable before/after pair (all {len(pairs)} left out: see "
-                         "the lines above)")
-    encoding = ColorEncoding.of(result.working_space, result.working_space)
-    described = result.describe()
-    grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
-                  working=encoding.working,  # no regrain: the look as the pairs show it
-                  info={"saved_look": {"file": described, "kind": "learned"}},
-                  saved=SavedFrom(described, "learned"))
-    return grade, result
-
-
-def learn_look_file(before: str | os.PathLike, after: str | os.PathLike,
-                    output: str | os.PathLike, *, lut_size: int = 33,
-                    working_space: str | None = None, overwrite: bool = False,
-                    warn: Callable[[str], None] | None = None,
-                    progress: Callable[[int, int, str], None] | None = None) -> LearnResult:
-    """Learn the look of before/after pairs and write it as a LUT or a saved grade.
-
-    Parameters
-    ----------
-    before, after : two photos or two folders (:func:`match_files`; edited photos
-        without an original are evidence too: :func:`unpaired_correction`).
-    output : ``.cube`` or ``.clf`` (a LUT whose header names its working
-        space) or ``.json`` (a saved grade: ``{"saved_grade": ..., "learned":
-        the report}``); checked before any work, never an input.
-    lut_size : nodes per axis of the written map.
-    working_space : None: :func:`learn_space`.
-    warn, progress : as :func:`learn_look`; every pair that cannot be paired
-        or used gets one ``warn`` line.
-
-    Raises
-    ------
-    InputError
-        The output may not be written, the paths do not pair, or no pair is
-        usable (each pair's reason went to ``warn`` first).
-    """
-    from dataclasses import replace as replaced
-
-    from wbcgrade._publish import plan_outputs, publish_bytes
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.grade.saved_grade import look_dict
-    from wbcgrade.color.mapping.lut import check_lut_size, write_grade_lut
-
-    output = Path(output)
-    kind = _output_kind(output)
-    check_lut_size(lut_size)
-    matched = match_files(before, after)
-    inputs = ([p.before for p in matched.pairs] + [p.after for p in matched.pairs]
-              + matched.edits_alone)
-    output = plan_outputs([output], inputs, overwrite)[0]  # before any work
-    grade, result = learned_grade(before, after, lut_size=lut_size,
-                                  working_space=working_space, warn=warn, progress=progress)
-    grade = replaced(grade, info={}, saved=None)
-    encoding = ColorEncoding.of(result.working_space, result.working_space)
-    n = len(result.used)
-    if kind == "json":
-        result.output = output
-        data = {"saved_grade": look_dict(grade), "learned": result.as_dict()}
-        publish_bytes(output, (json.dumps(data, indent=1) + "\n").encode(), overwrite)
-    else:
-        comments = [f"look learned from {n} before/after pair{'s' if n != 1 else ''}"
-                    + (f" and {len(result.edits_alone)} edited photo"
-                       f"{'s' if len(result.edits_alone) != 1 else ''} without an original"
-                       if result.edits_alone else "")]
-        if result.held_out is not None:
-            comments.append(f"mean CIEDE2000 on the pairs {result.delta_e:.2f}, "
-                            f"held out {result.held_out:.2f}")
-        result.output = write_grade_lut(output, grade, encoding, lut_size, kind,
-                                        title="wbcgrade learned look", comments=comments,
-                                        overwrite=overwrite)
-    return result
-
-
-# ------------------------------------------------------------------- edits without originals
-
 #: Colours whose density in the pairs' edited colours (a 17^3 soft histogram, blurred by a
 #: node) reaches this multiple of the uniform density are pinned by the pairs: the edited
 #: photos without originals correct the look only where the pairs show little
@@ -1047,13 +913,11 @@ class CorrectedLook:
     ``y + (1 - support(y)) * (residual(y) - y)`` with ``y = look(x)``: ``residual`` a
     smooth map, ``support`` in [0, 1] how well the pairs' edited colours cover ``y``.
     """
-
     look: object
     residual: object
     support: np.ndarray
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
-        from wbcgrade.color.look.scene_fit import interpolate_lattice
 
         rgb = np.asarray(rgb, dtype=np.float64)
         mapped = np.asarray(self.look(rgb.reshape(-1, 3)), dtype=np.float64)
@@ -1090,10 +954,6 @@ def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> d
     """How sure the pairs make the look, region by region of colour: the share of what
     natural photos hold of each region (:data:`COLOUR_REGIONS`) that the pairs' original
     colours ``sources`` (N, 3, working space) cover (:func:`_support`), in [0, 1]."""
-    from wbcgrade.color.colorspace import convert, default_working_space
-    from wbcgrade.color.look.set_extraction import natural_palettes
-    from wbcgrade.color.presets import styles_in_space
-
     support = _support(sources, weights).ravel()
     natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
     density = natural.mean(axis=0).ravel()
@@ -1130,17 +990,6 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
 
     Returns a :class:`CorrectedLook`, or ``look`` itself when nothing is left to correct.
     """
-    from wbcgrade.color.io.cache import default_cache_dir
-    from wbcgrade.color.look.prior import posterior_statistics_look
-    from wbcgrade.color.look.set_extraction import (
-        MAP_BINS,
-        natural_palettes,
-        natural_statistics,
-        space_scale,
-    )
-    from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
-    from wbcgrade.color.presets import styles_in_space
-
     bins = MAP_BINS
     naturals = styles_in_space(natural_palettes(), working)
     points = grid_points(bins)

@@ -28,11 +28,23 @@ from pathlib import Path
 
 import numpy as np
 
+from wbcgrade.color.histogram import grid_points, soft_histogram
+from wbcgrade.color.io.cache import entry_path, read_entry, write_entry
+from wbcgrade.color.look.edits import random_edit
 from wbcgrade.color.look.statistics import (
+    MEDIAN_SE,
+    MIN_OWN_PHOTOS,
     LookDifferences,
     PaletteStatistics,
+    content_centre,
+    in_colour,
     look_differences,
+    look_from_differences,
+    own_photos_blend,
+    palette_statistics,
+    tinted_statistics,
 )
+from wbcgrade.color.presets import load_preset
 
 __all__ = ["LookPosterior", "posterior_look", "content_noise", "load_prior", "build_prior",
            "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE", "jackknife_share"]
@@ -71,7 +83,6 @@ class LookPosterior:
     operator : (P, P) the posterior mean as a linear map of the raw differences, its
         mixture's weights held (what other raw differences of the same set would give).
     """
-
     differences: LookDifferences
     probability: float
     share: float
@@ -93,8 +104,6 @@ def content_noise(naturals: PaletteStatistics, n_styles: int,
 
     Kept for the process and, with a ``cache`` folder, on disk (``looks/`` in it; an
     entry of the wrong shape or not finite is computed again)."""
-    from wbcgrade.color.io.cache import entry_path, read_entry, write_entry
-
     digest = hashlib.sha1(np.ascontiguousarray(naturals.quantiles).tobytes())
     digest.update(np.ascontiguousarray(naturals.band_neutral).tobytes())
     digest.update(repr((NOISE_DRAWS, DIAGONAL_SHRINK, NOISE_VERSION)).encode())
@@ -238,8 +247,6 @@ def load_prior() -> np.ndarray:
 
 def push_edit(hist: np.ndarray, edit) -> np.ndarray:
     """The (n, n, n) histogram of ``hist``'s colours moved through ``edit`` (soft binning)."""
-    from wbcgrade.color.histogram import grid_points, soft_histogram
-
     n = hist.shape[0]
     flat = hist.ravel()
     keep = np.flatnonzero(flat > 0)
@@ -251,9 +258,6 @@ def build_prior(naturals: np.ndarray, edits: int = 400, sample: int = 64,
     """(P, P) second moment of the differences random edits
     (:func:`~wbcgrade.color.look.edits.random_edit`) make of ``sample`` natural palettes'
     median statistics (naturals: (K, n, n, n) histograms)."""
-    from wbcgrade.color.look.edits import random_edit
-    from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
-
     rng = np.random.default_rng(seed)
     base = palette_statistics(naturals)
     vectors = []
@@ -272,8 +276,6 @@ def build_prior(naturals: np.ndarray, edits: int = 400, sample: int = 64,
 
 def main() -> None:  # pragma: no cover - a build script
     from tqdm import tqdm
-
-    from wbcgrade.color.presets import load_preset
 
     naturals = load_preset(Path(__file__).parents[1] / "data" / "natural.npz").at_bins(32)
     bar = tqdm(total=400, desc="edits")
@@ -315,15 +317,6 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
         changes with the photos shown (:func:`jackknife_share`, the posterior's mixture
         held); the look is applied at the share that survives it. None: in full.
     """
-    from wbcgrade.color.look.statistics import (
-        MEDIAN_SE,
-        MIN_OWN_PHOTOS,
-        content_centre,
-        in_colour,
-        look_from_differences,
-        own_photos_blend,
-    )
-
     n_styles = len(styles.quantiles)
     given = 0 if reference is None else len(reference.quantiles)
     reference = in_colour(reference, space_scale)

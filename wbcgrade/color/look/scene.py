@@ -38,8 +38,15 @@ from pathlib import Path
 
 import numpy as np
 
-from wbcgrade.color.colorspace import SYCC_LUMA
+from wbcgrade.color.colorspace import (
+    SYCC_LUMA,
+    ColorEncoding,
+    default_working_space,
+    resolve_space,
+)
 from wbcgrade.color.io.cache import cache_folder, entry_path, file_key, read_entry, write_entry
+from wbcgrade.color.io.images import read_image
+from wbcgrade.color.io.raw import is_raw
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
@@ -50,10 +57,8 @@ __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored",
 #: Long side (pixels) of the images keypoints are found on and pairs are read from.
 MATCH_SIZE = 768
 #: Keypoints agreeing with one homography for a style to count as the photo's scene,
-#: and the count from which the match is sure. Measured on the look benchmark's
-#: photos (``benchmarks/look.py``) at 1024 px: two different scenes agree on at
-#: most 5 keypoints (all 210 pairs), two framings of one scene under a look on 79
-#: or more.
+#: and the count from which the match is sure: far above what two different scenes agree
+#: on, far below what two framings of one scene do (docs/benchmarks.md).
 MIN_INLIERS = 12
 SURE_INLIERS = 24
 #: Overlap (share of the photo's pixels) below which a match gives too few pairs.
@@ -62,8 +67,8 @@ MIN_COVERAGE = 0.05
 #: ``contrastThreshold``; half its default: hazy, low-contrast scenes keep keypoints).
 MAX_FEATURES = 4000
 CONTRAST = 0.02
-#: Keypoints of the mirrored photo (the check for a flipped framing, made on every photo:
-#: 0.3 s against twelve style photos at 768 px, a quarter of what all of them would take).
+#: Keypoints of the mirrored photo (the check for a flipped framing, made on every photo,
+#: so kept to a quarter of the photo's own).
 MIRROR_FEATURES = 1000
 #: Bumped when what is cached (size, features) changes.
 SCENE_VERSION = 3
@@ -71,10 +76,8 @@ SCENE_VERSION = 3
 STRETCH = 0.01
 #: Gaussian smoothing (pixels at the matching size) of the lightness before it is
 #: stretched, and the clip limit and tiles (per side) of its local equalisation
-#: (:func:`_stretched_lightness8`). Measured on the look benchmark's photos at 384 px
-#: (12 scenes x 2 looks, framings 2.5 stops under through the look, against an under-
-#: exposed other framing): own scene found 21 -> 24 of 24, agreeing keypoints 1958 -> 4122
-#: in all; at normal exposure 23 -> 24 of 24, 3817 -> 6477; other scenes never matched.
+#: (:func:`_stretched_lightness8`): dark and under-exposed framings keep keypoints that
+#: agree, and other scenes still never match (docs/benchmarks.md).
 SMOOTH = 0.8
 LOCAL_CONTRAST = 2.0
 LOCAL_TILES = 8
@@ -385,8 +388,6 @@ def _write_cached(path: Path | None, image: SceneImage) -> None:
 
 def _read_style(path: Path, working_space: str) -> SceneImage:
     """A style photo from its file, in the working space, prepared for matching."""
-    from wbcgrade.color.colorspace import ColorEncoding
-    from wbcgrade.color.io.images import read_image
 
     image = read_image(path)
     encoding = ColorEncoding.for_image(image, None, working_space)
@@ -465,9 +466,7 @@ def matching_hook(source, options, photos: Sequence[str | os.PathLike] = ()
     GradeOptions: look mode, no fixed weights); else None (nothing to prepare): a preset,
     a palette grade, no folder of at most ``_IN_MEMORY_MAX`` photos, or photos all graded
     in another working space than the styles are read in (raw files, without
-    ``--working-space``: ACEScct)."""
-    from wbcgrade.color.colorspace import default_working_space, resolve_space
-    from wbcgrade.color.io.raw import is_raw
+    ``spaces.working``: ACEScct)."""
 
     if (source.style_dir is None or options.map.builder != "look"
             or options.fit.weights is not None):

@@ -10,6 +10,7 @@ colour pairs and :func:`fit_correction` the smooth residual on top of the look.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,7 +26,17 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
+from wbcgrade.color.look.scene import (
+    SceneMatch,
+    colour_pairs,
+    match_scene,
+    mirrored,
+    scene_image,
+    style_scene_images,
+    unmirror,
+)
 from wbcgrade.color.mapping.remap import interpolate_lattice
+from wbcgrade.color.palette.smooth_map import interpolation_matrix
 from wbcgrade.core import fast_cpu, n_workers, single_threaded_blas
 
 __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_scene_look",
@@ -118,8 +129,8 @@ class PhotoLook:
 UNSURE_RATIO = 0.75
 SURE_RATIO = 0.35
 #: Overlap of the mapped photo's palette with the match's at or below which the
-#: match is not the photo's scene, and at or above which it surely is
-#: (``benchmarks/look.py``: framings of one scene 0.4-0.8, other scenes 0.0-0.57).
+#: match is not the photo's scene, and at or above which it surely is (between what
+#: framings of one scene and other scenes give: docs/benchmarks.md).
 UNSURE_OVERLAP = 0.55
 SURE_OVERLAP = 0.65
 
@@ -215,7 +226,6 @@ def fit_correction(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
 
-    from wbcgrade.color.palette.smooth_map import interpolation_matrix
 
     weights = np.asarray(weights, dtype=np.float64) / max(float(np.sum(weights)), 1e-300)
     interpolate = interpolation_matrix(np.asarray(sources, dtype=np.float64), nodes)
@@ -262,23 +272,13 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
     rounds : robust refits (pairs far from the fit, e.g. content that moved
         between the shots, weigh less each round).
     correct : add the smooth lattice correction (:func:`fit_correction`, 9^3)
-        for what the map family cannot hold (measured on ``benchmarks/look.py``'s
-        shot matching: +0.05 to +0.2 recovered on film and bleach-bypass looks).
+        for what the map family cannot hold (film and bleach-bypass looks:
+        docs/benchmarks.md).
 
     why : filled with the reason each style (by index) does not show the scene.
 
     Returns None when no style shows the scene.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
-    from wbcgrade.color.look.scene import (
-        SceneMatch,
-        colour_pairs,
-        match_scene,
-        mirrored,
-        unmirror,
-    )
-
     prior = prior or LookMap.identity()
     present = [index for index, style in enumerate(styles) if style is not None]
     # a flipped framing (or a symmetric scene matched the wrong way)?
@@ -377,7 +377,6 @@ def find_scene_look(photo_colors: np.ndarray, styles, prior: LookMap | None = No
         (:func:`~wbcgrade.color.look.scene.style_scene_images`); a preset has none.
     prior : what colours absent from every overlap get (default identity).
     """
-    from wbcgrade.color.look.scene import scene_image, style_scene_images
 
     style_images = style_scene_images(styles, progress)
     if not any(image is not None for image in style_images):

@@ -34,7 +34,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbcgrade.color.histogram import add_floor, grid_points
+from wbcgrade.color.colorspace import default_working_space
+from wbcgrade.color.histogram import HistogramCache, add_floor, grid_points, resample_histogram
+from wbcgrade.color.io.cache import cache_folder, entry_path, read_entry, write_entry
+from wbcgrade.color.look import prior
+from wbcgrade.color.look import statistics as stats
 from wbcgrade.color.look.family import (
     DEFAULT_KNOTS,
     DEFAULT_SMOOTHNESS,
@@ -46,9 +50,27 @@ from wbcgrade.color.look.family import (
     look_correspondences,
     push_histogram,
 )
-from wbcgrade.color.mapping.remap import resample_lattice
+from wbcgrade.color.look.prior import posterior_statistics_look
+from wbcgrade.color.look.statistics import (
+    MONOCHROME_SPREAD,
+    QUANTILES,
+    PaletteStatistics,
+    holds_colour,
+    palette_statistics,
+    statistics_look,
+    tinted_statistics,
+)
+from wbcgrade.color.mapping.remap import monochrome_map, resample_lattice
+from wbcgrade.color.presets import (
+    SHIPPED_NATURALS,
+    StyleSet,
+    load_preset,
+    load_style_folder,
+    styles_in_space,
+)
+from wbcgrade.core import barycenter
 
-__all__ = ["LookResult", "extract_look", "set_look", "set_look_base", "set_look_halves",
+__all__ = ["LookResult", "LookInfo", "extract_look", "set_look", "set_look_base", "set_look_halves",
            "look_reliability", "set_look_map", "natural_palettes", "load_naturals",
            "statistics_set_look"]
 
@@ -88,11 +110,21 @@ class LookResult:
     losses : (M,) KL loss of each style's fit at the last round.
     info : diagnostics (JSON-friendly).
     """
-
     look: LookMap
     weights: np.ndarray
     losses: np.ndarray
     info: dict = field(default_factory=dict)
+
+    @property
+    def share(self) -> float:
+        """How much of what the styles show is applied (1 where the rule has no share)."""
+        return float(self.info.get("share", 1.0))
+
+    @property
+    def own_photos(self) -> int | None:
+        """How many of the user's own photos the look was measured against (None: unknown)."""
+        count = self.info.get("own_photos")
+        return None if count is None else int(count)
 
 
 def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
@@ -120,8 +152,6 @@ def extract_look(styles: dict[int, np.ndarray], naturals: dict[int, np.ndarray],
         (every style's content is the natural palettes' barycenter; ``losses`` NaN).
     progress : called as ``progress(done, total)`` after each style of each round.
     """
-    from wbcgrade.core import barycenter
-
     look = initial or LookMap.identity(knots)
     n_styles = len(styles[fit_bins])
     natural_map = naturals[map_bins]
@@ -178,8 +208,6 @@ _AVERAGE_CONTENTS: dict[str, np.ndarray] = {}
 def _average_content(natural_map: np.ndarray, geometry) -> np.ndarray:
     """The uniform Wasserstein barycenter of the natural palettes (n, b, b, b), computed once."""
     import hashlib
-
-    from wbcgrade.core import barycenter
 
     digest = hashlib.sha1(np.ascontiguousarray(natural_map, dtype=np.float64).tobytes())
     digest.update(repr(natural_map.shape).encode())
@@ -243,9 +271,6 @@ def colour_photos(styles, working_space: str | None = None):
     """The photos of ``styles`` that hold colour (a black-and-white or toned photo says
     nothing of how colourful ungraded content is: a batch of them taken for content made
     a colour look saturate colour photos 2-9 times), or None when none does."""
-    from wbcgrade.color.colorspace import default_working_space
-    from wbcgrade.color.look.statistics import holds_colour, palette_statistics
-
     space = working_space or styles.meta.get("working_space") or default_working_space()
     spread = palette_statistics(styles.at_bins(MAP_BINS), source_bins=styles.bins).spread
     keep = np.flatnonzero(holds_colour(spread, space_scale(space)))
@@ -257,8 +282,6 @@ def colour_photos(styles, working_space: str | None = None):
 def _beside_shipped(own, working_space: str):
     """The shipped palettes in ``working_space`` with ``own`` photos' palettes (those in
     colour: :func:`colour_photos`) beside them."""
-    from wbcgrade.color.presets import styles_in_space
-
     given = len(own.names)  # (black-and-white ones too: the advice counts them as unused)
     own = colour_photos(own, working_space)
     naturals = styles_in_space(natural_palettes(), working_space)
@@ -277,22 +300,14 @@ def load_naturals(natural: str | None, working_space: str):
     """The content model a command names: ``natural`` a preset file (.npz) of natural
     palettes, a folder of the user's own ungraded photos (their statistics say what
     content looks like in their collection; the shipped palettes how much it varies:
-    ``meta["own"]``; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
+    its ``own`` palettes; a preset marked :data:`OWN_PHOTOS_PROVENANCE` is read the same way),
     or None or :data:`~wbcgrade.color.presets.SHIPPED_NATURALS` (the shipped palettes); in
     ``working_space``."""
     from pathlib import Path
 
-    from wbcgrade.color.presets import (
-        SHIPPED_NATURALS,
-        load_preset,
-        load_style_folder,
-        styles_in_space,
-    )
-
     if natural == SHIPPED_NATURALS:
         natural = None
     if natural is not None and Path(natural).is_dir():
-        from wbcgrade.color.histogram import HistogramCache
 
         # once per process and state of the folder (a batch grades each photo against it)
         try:
@@ -336,8 +351,6 @@ def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     allow it (``wbcgrade/color/data/NATURAL.md`` names them); ``exclude``
     leaves photos out by name (a benchmark holds out the photos it grades).
     """
-    from wbcgrade.color.presets import StyleSet, load_preset
-
     styles = load_preset(_natural_path())
     keep = [i for i, name in enumerate(styles.names) if name not in exclude]
     if len(keep) == len(styles.names):
@@ -402,9 +415,9 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
         _SET_LOOKS[key] = found
     found = _SET_LOOKS[key]
     given = naturals.meta.get("own_given")  # a folder of own photos, black-and-white ones too
-    if given is not None and "own_photos" in found.info:
+    if given is not None and found.own_photos is not None:
         found = LookResult(found.look, found.weights, found.losses,
-                           {**found.info, "own_photos_unused": given - found.info["own_photos"]})
+                           {**found.info, "own_photos_unused": given - found.own_photos})
     return found
 
 
@@ -426,8 +439,6 @@ _NATURAL_STATISTICS: dict[str, object] = {}
 
 def _prior_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.prior` a set's look depends on."""
-    from wbcgrade.color.look import prior
-
     return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.UNUSUAL_CONTENT,
             prior.DIAGONAL_SHRINK,
             prior.NOISE_DRAWS, prior.JACKKNIFE_GROUPS, prior.PARTS, JACKKNIFE_BINS,
@@ -436,8 +447,6 @@ def _prior_settings() -> tuple:
 
 def statistics_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.statistics` a set's look depends on."""
-    from wbcgrade.color.look import statistics as stats
-
     return (stats.CONTENT_BIAS, stats.TONE_BIAS, stats.NEUTRAL_SHARE, stats.MONOCHROME_SPREAD,
             stats.BANDS, tuple(stats.QUANTILES), stats.TINT_FROM, stats.MIN_BAND_MASS,
             stats.EVIDENCE_FLOOR, stats.EVIDENCE_SPAN, stats.EVIDENCE_CLIP,
@@ -455,8 +464,9 @@ def _palettes_digest(palettes) -> str:
 
     hists = palettes.histograms
     meta = getattr(palettes, "meta", {}) or {}
-    if "file_digest" in meta:  # a preset file, in a working space: no need to hash arrays
-        return (f"{meta['file_digest']}|{meta.get('working_space', '')}|"
+    file_digest = getattr(palettes, "file_digest", None)
+    if file_digest:  # a preset file, in a working space: no need to hash arrays
+        return (f"{file_digest}|{meta.get('working_space', '')}|"
                 f"{meta.get('converted_from', '')}|{hists.shape}")
     known = _DIGESTS.get(id(hists))
     if known is None or known[0] is not hists:
@@ -470,8 +480,6 @@ def natural_statistics(naturals, cache_from=None):
     """:func:`~wbcgrade.color.look.statistics.palette_statistics` of the natural palettes,
     once per process and set of palettes, and kept on disk in the looks' cache folder
     (``cache_from``: the StyleSet whose cache settings apply; a damaged entry is rebuilt)."""
-    from wbcgrade.color.look.statistics import QUANTILES, PaletteStatistics, palette_statistics
-
     key = _palettes_digest(naturals) + repr(statistics_settings())
     if key in _NATURAL_STATISTICS:
         return _NATURAL_STATISTICS[key]
@@ -479,7 +487,6 @@ def natural_statistics(naturals, cache_from=None):
 
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
-    from wbcgrade.color.io.cache import read_entry, write_entry
 
     found = None
     data = read_entry(path)
@@ -507,15 +514,6 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
     ----------
     styles, naturals : StyleSets in one working space.
     """
-    from wbcgrade.color.histogram import resample_histogram
-    from wbcgrade.color.look.prior import posterior_statistics_look
-    from wbcgrade.color.look.statistics import (
-        MONOCHROME_SPREAD,
-        palette_statistics,
-        statistics_look,
-        tinted_statistics,
-    )
-
     natural_stats = natural_statistics(naturals, styles)
     own = naturals.meta.get("own")
     own_count = naturals.meta.get("own_count")  # a half's: the whole own set's number
@@ -529,7 +527,6 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
                                     space_scale=scale)
     if SET_LOOK_RULE == "posterior" and not np.all(style_stats.spread
                                                    < MONOCHROME_SPREAD * scale):
-        from wbcgrade.color.io.cache import cache_folder
 
         average = resample_histogram(naturals.at_bins(MAP_BINS).mean(axis=0), JACKKNIFE_BINS)
         model = posterior_statistics_look(style_stats, natural_stats, scale, reference,
@@ -556,19 +553,14 @@ JACKKNIFE_BINS = 16
 
 def _styles_subset(styles, indices):
     """The styles at ``indices`` as a StyleSet of their own (histograms, space, cache)."""
-    from wbcgrade.color.presets import StyleSet
-
-    indices = list(indices)
-    meta = {k: v for k, v in styles.meta.items() if k in ("working_space", "cache_dir")}
-    return StyleSet([styles.names[i] for i in indices], styles.histograms[indices],
-                    styles.source, styles.width, styles.description, meta)
+    return styles.subset(indices)
 
 
 def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
     """The looks of the two halves of a style set (styles 0, 2, 4, ... and 1, 3, 5, ...),
     each extracted as :func:`set_look` does (and cached the same way); None under 2 styles.
-    With the user's own photos (``naturals.meta["own"]``), each half is measured against
-    its half of them too (weighed as the whole), so the halves disagree by the own
+    With the user's own photos (the ``own`` palettes beside ``naturals``), each half is
+    measured against its half of them too (weighed as the whole), so the halves disagree by the own
     photos' sampling error as well as by the styles'."""
     n = len(styles.names)
     if n < 2:
@@ -588,9 +580,7 @@ _OWN_HALVES: dict[tuple, object] = {}
 
 def _own_half(naturals, own, half: int):
     """``naturals`` with half ``half`` (0, 1) of its own photos, weighed as the whole set
-    (``meta["own_count"]``); made once per own set (its digest names the half's)."""
-    from wbcgrade.color.presets import StyleSet
-
+    (the whole own set's count); made once per own set (its digest names the half's)."""
     digest = _palettes_digest(own)
     key = (id(naturals), digest, half)
     if key not in _OWN_HALVES or _OWN_HALVES[key][0] is not naturals:
@@ -635,16 +625,12 @@ def look_reliability(first: LookMap, second: LookMap, colors: np.ndarray,
 def _look_cache_path(key: str, styles=None):
     """Where a set's look (or the natural palettes' statistics) keyed by ``key`` is kept:
     ``looks/`` in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`);
-    None when the command said ``--no-cache``."""
-    from wbcgrade.color.io.cache import cache_folder, entry_path
-
+    None when caching is off."""
     return entry_path(cache_folder(styles), "looks", key)
 
 
 def _read_cached_look(key: str, styles=None) -> LookResult | None:
     import json
-
-    from wbcgrade.color.io.cache import read_entry
 
     data = read_entry(_look_cache_path(key, styles))  # damaged: removed, extracted again
     try:
@@ -662,8 +648,6 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
     """Best effort: a cache that cannot be written is skipped."""
     import json
 
-    from wbcgrade.color.io.cache import write_entry
-
     write_entry(_look_cache_path(key, styles), coefficients=result.look.coefficients,
                 knots=result.look.knots, weights=result.weights, losses=result.losses,
                 info=json.dumps(result.info))
@@ -677,7 +661,7 @@ def _write_cached_look(key: str, result: LookResult, styles=None) -> None:
 #: +0.180 (-0.22): a little of the mean for no photo clearly worse than doing nothing.
 MIN_HALF_STYLES = 2
 
-#: A statistics look whose evidence (``info["evidence"]``, 1 where ungraded sets stop;
+#: A statistics look whose evidence (its ``evidence``, 1 where ungraded sets stop;
 #: :func:`wbcgrade.color.look.statistics._look_evidence`; weighed for sets of
 #: :data:`~wbcgrade.color.look.statistics.MIN_EASED_STYLES` styles or more against the
 #: shipped palettes, not against the user's own photos) reaches this is applied in full,
@@ -732,7 +716,7 @@ def set_look_base(styles, naturals=None, strength: float | None = None,
         # the look is already the posterior's: as strong as the styles support it
         scale = 1.0 if strength is None else float(strength)
         look = LookMap(scale * extracted.look.coefficients, extracted.look.knots)
-        return look, extracted, scale * float(extracted.info["share"])
+        return look, extracted, scale * extracted.share
     if strength is None and statistics and (extracted.info.get("monochrome")
                                             or len(styles.names) < MIN_HALF_STYLES * 2
                                             or (extracted.info.get("evidence") or 0.0)
@@ -764,8 +748,6 @@ def space_scale(working_space: str) -> float:
     sRGB-encoded one (where :data:`NULL_LOOK_SIZE` was measured): the rms spread of
     the shipped natural palettes' colours there over their spread in sRGB (1 in the
     default space; about 0.5 in ACEScct, which packs sRGB into 0.07-0.55)."""
-    from wbcgrade.color.presets import styles_in_space
-
     def spread(hist: np.ndarray) -> float:
         colors, weights = _histogram_colors(hist)
         mean = weights @ colors / weights.sum()
@@ -784,25 +766,56 @@ def _histogram_colors(hist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return grid_points(hist.shape[0])[used], flat[used]
 
 
+class LookInfo(dict):
+    """What :func:`set_look_map` found (JSON-friendly), with typed readings of it."""
+
+    @property
+    def strength(self) -> float:
+        """The strength the look was written at."""
+        return float(self["strength"])
+
+    @property
+    def from_preset(self) -> bool:
+        """A preset's own look (not one extracted from photos)."""
+        return self.get("source") == "preset"
+
+    @property
+    def probability(self) -> float | None:
+        """How sure it is that the set has a look, where the styles were judged jointly."""
+        if self.get("rule") != "posterior" or self.get("probability") is None:
+            return None
+        return float(self["probability"])
+
+    @property
+    def share(self) -> float:
+        """How much of what the styles show is applied."""
+        return float(self.get("share", self.strength))
+
+    def count(self, key: str) -> int:
+        """A count it holds (own photos used, unused...), 0 when absent."""
+        return int(self.get(key) or 0)
+
+
 def set_look_map(styles, naturals=None, strength: float | None = None,
                  map_size: int = 33,
-                 progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
+                 progress: Callable[[int, int], None] | None = None
+                 ) -> tuple[np.ndarray, LookInfo]:
     """The look a style set shares, as a lattice LUT (what ``wbcgrade look extract`` writes).
 
     ``strength`` scales the map's displacement; None: a preset's own look in
     full, an extracted one at its reliability on the average natural palette
     (:func:`set_look_base`; the grade takes it on the photo's own colours).
 
-    Returns ((map_size,) * 3 + (3,) float32 lattice, JSON-friendly info).
+    Returns ((map_size,) * 3 + (3,) float32 lattice, :class:`LookInfo`).
     """
-    if styles.meta.get("look") is not None:  # a preset made with a known look
+    if styles.look is not None:  # a preset made with a known look
         strength = 1.0 if strength is None else strength
         identity = grid_points(map_size).reshape((map_size,) * 3 + (3,))
-        known = resample_lattice(styles.meta["look"], map_size)
+        known = resample_lattice(styles.look, map_size)
         moved = strength * (known - identity)
         return ((identity + moved).astype(np.float32),
-                {"source": "preset", "strength": strength,
-                 "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))})
+                LookInfo({"source": "preset", "strength": strength,
+                 "amplitude_applied": float(np.mean(np.linalg.norm(moved, axis=-1)))}))
     look, extracted, strength = set_look_base(styles, naturals, strength, progress=progress)
     names = (naturals if naturals is not None else natural_palettes()).names
     if extracted.info.get("content_shrink", 0.0) >= 1.0:  # not fitted: the average of all
@@ -811,11 +824,10 @@ def set_look_map(styles, naturals=None, strength: float | None = None,
         content = {style: {names[k]: round(float(w), 3) for k, w in enumerate(row)
                            if w >= 0.05}
                    for style, row in zip(styles.names, extracted.weights)}
-    info = {**extracted.info, "strength": strength, "amplitude_applied": look.amplitude(),
-            "content": content}
+    info = LookInfo({**extracted.info, "strength": strength,
+                     "amplitude_applied": look.amplitude(), "content": content})
     lattice = look.lattice(map_size)
     if extracted.info.get("monochrome"):
-        from wbcgrade.color.mapping.remap import monochrome_map
 
         lattice = monochrome_map(lattice)
     return lattice, info

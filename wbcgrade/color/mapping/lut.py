@@ -42,7 +42,7 @@ import numpy as np
 from wbcgrade._names import safe_text
 from wbcgrade._publish import atomic_path
 from wbcgrade.color._colour import colour_science
-from wbcgrade.color.colorspace import ColorEncoding, config_info, convert
+from wbcgrade.color.colorspace import ColorEncoding, config_line, convert
 from wbcgrade.color.defaults import DEFAULT_LUT_SIZE
 from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.errors import InputError, OptionError
@@ -219,7 +219,6 @@ def shaper_table(encoding, size: int = SHAPER_SIZE) -> tuple[np.ndarray, tuple[f
 
 def lut_header(encoding, shaper: bool = False) -> list[str]:
     """Comment lines naming the spaces a LUT expects and produces, and the config."""
-    info = config_info()
     if encoding.input != encoding.working:  # baked in the input's code values
         lines = [f"input space: {encoding.input} ({encoding.source})",
                  f"output space: {encoding.input}",
@@ -228,8 +227,7 @@ def lut_header(encoding, shaper: bool = False) -> list[str]:
         expects = (f"{encoding.linear} (linear; the 1D shaper encodes it as {encoding.working})"
                    if shaper else f"{encoding.working} (values in [0, 1])")
         lines = [f"input space: {expects}", f"output space: {encoding.working}"]
-    return lines + [f"OpenColorIO config: {info['ocio_config']} "
-                    f"(OpenColorIO {info['ocio_version']})"]
+    return [*lines, config_line()]
 
 
 def write_grade_lut(path: str | os.PathLike, grade, encoding: ColorEncoding | None = None,

@@ -258,8 +258,7 @@ def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
 #: Solve grids of fewer pixels than this are solved with numpy and scipy.ndimage
 #: (:func:`_window_models_numpy`), larger ones with the compiled kernels: on a small
 #: photo (the README's first command) both take a fraction of a second, but the kernels
-#: cost seconds to compile on a first run after install; on 1.5 megapixels (every
-#: photo above it is solved there) numpy takes about twice as long (1.7 s, 0.8 s).
+#: cost seconds to compile on a first run after install (docs/benchmarks.md).
 _NUMPY_SOLVE_PIXELS = 400_000
 
 

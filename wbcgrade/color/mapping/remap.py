@@ -2,8 +2,8 @@
 
 A colour map is an (n, n, n, 3) array: entry [i, j, k] is the new colour of
 the bin at (i, j, k) / (n - 1). Pixels between bins are moved by trilinear
-interpolation of the map, in one fused numba pass on every core (about 0.6 s for
-12 megapixels on two cores, against ~11 s for scipy's map_coordinates).
+interpolation of the map, in one fused numba pass on every core (about twenty times
+scipy's map_coordinates: docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -199,8 +199,8 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
 
 
 #: Colours up to which :func:`apply_color_map` runs its numpy twin while ``_trilinear`` has
-#: not run in the process (the README's photo: 0.14 megapixels in 30 ms, against 0.5 s
-#: to load numba's compiler for the kernel, seconds to compile it after an install).
+#: not run in the process: a small photo is graded before numba's compiler would have
+#: loaded (docs/benchmarks.md).
 _NUMPY_PIXELS = 400_000
 
 

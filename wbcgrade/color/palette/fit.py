@@ -55,11 +55,11 @@ class FitSummary:
     weights : (S,) weights on the simplex.
     loss : loss of the barycenter at ``weights`` (fit grid, the fit's loss).
     vertex_losses : (S,) loss of each style alone (weight 1 on it).
-    start : how the weights were found, a :class:`~wbcgrade.color.outcome.FitStart`
+    start : how a palette fit found the weights, a :class:`~wbcgrade.color.outcome.FitStart`
         value: "uniform" (the fit from uniform weights was kept), "vertex-refit"
         (the refit from the best vertex won), "vertex" (the best single style
-        is the answer) or "given" (weights fixed by the user) from a palette fit;
-        "preset", "scene" or "look" from the look builder; "saved" for a saved grade.
+        is the answer) or "given" (weights fixed by the user); None when no palette
+        fit made them (a look: the grade's ``source`` says where it came from).
     info : fit diagnostics (JSON-friendly; :attr:`converged` and :attr:`evaluations`
         read it).
     time_s : wall time of the fit and the vertex checks.
@@ -68,14 +68,14 @@ class FitSummary:
     weights: np.ndarray
     loss: float
     vertex_losses: np.ndarray
-    start: str = "uniform"
+    start: str | None = "uniform"
     info: dict = field(default_factory=dict)
     time_s: float = 0.0
 
     @property
-    def fit_start(self) -> FitStart:
-        """``start`` as a :class:`~wbcgrade.color.outcome.FitStart`."""
-        return FitStart(self.start)
+    def fit_start(self) -> FitStart | None:
+        """``start`` as a :class:`~wbcgrade.color.outcome.FitStart` (None: no palette fit)."""
+        return None if self.start is None else FitStart(self.start)
 
     @property
     def converged(self) -> bool:
@@ -177,10 +177,8 @@ class _HeldProgress:
                 callback(*call)
 
 
-#: Smallest fit grid (bins per axis) on which the refit runs ahead in a thread. On smaller
-#: grids an evaluation is mostly Python (tiny products), so two fits in threads share one
-#: interpreter lock: the fit from uniform weights ran 1.6x slower beside the refit
-#: (16³, six styles: 4.1 -> 6.5 s on 2 cores) and the refit is rarely needed.
+#: Smallest fit grid (bins per axis) on which the refit runs ahead in a thread: below it an
+#: evaluation is mostly Python and two fits share one interpreter lock (docs/benchmarks.md).
 SPECULATE_BINS = 32
 
 

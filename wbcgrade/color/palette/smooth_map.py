@@ -27,9 +27,9 @@ channel, at once).
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import cg
 
 from wbcgrade.color.mapping.remap import identity_map
 from wbcgrade.color.options import DEFAULT_MAP_SIZE, DEFAULT_SMOOTHNESS, DEFAULT_STIFFNESS
@@ -37,6 +37,20 @@ from wbcgrade.core import fast_cpu
 
 __all__ = ["fit_smooth_map", "SmoothMapFitter", "interpolation_matrix", "DEFAULT_MAP_SIZE",
            "DEFAULT_SMOOTHNESS", "DEFAULT_STIFFNESS"]
+
+class _OnFirstUse:
+    """A module imported when first used: scipy.sparse takes ~0.4 s to import, which a
+    look grade that never smooths a map (and a saved grade) should not pay."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+
+    def __getattr__(self, attribute: str):
+        return getattr(importlib.import_module(self._name), attribute)
+
+
+sp = _OnFirstUse("scipy.sparse")
+_linalg = _OnFirstUse("scipy.sparse.linalg")
 
 #: Relative residual the coarser lattices are solved to (they give the next its start).
 _START_TOL = 1e-4
@@ -165,7 +179,7 @@ def _jacobi_cg(system: sp.csr_matrix, rhs: np.ndarray, start: np.ndarray, tol: f
     precond = sp.diags(1.0 / np.where(diag > 0, diag, 1.0))
     out = np.empty_like(rhs)
     for c in range(rhs.shape[1]):
-        out[:, c], _ = cg(system, rhs[:, c], x0=start[:, c], rtol=tol, maxiter=max_iter,
+        out[:, c], _ = _linalg.cg(system, rhs[:, c], x0=start[:, c], rtol=tol, maxiter=max_iter,
                           M=precond)
     return out
 

@@ -14,7 +14,7 @@ fitted (:func:`transport_map`):
    photo's colours (:mod:`wbcgrade.color.palette.smooth_map`).
 
 Everything lives in the working space's unit cube. Defaults and why
-(measured on 2 shared cores, ``benchmarks/apply.py``): the photo's
+(docs/benchmarks.md, the figures behind the code's settings): the photo's
 histogram, the plan and the map live on the paper's 128^3 grid; the
 palette and the plan use a kernel of sigma = 1/31 of the cube (about 4 bins
 at 128^3), ten times narrower than the fit's, which keeps graded photos
@@ -22,18 +22,20 @@ colourful (entropic blur pulls colours towards grey; tested in
 ``tests/color``). The palette is computed on 64^3 (2 bins wide: resolved)
 and interpolated to 128^3. The plan is solved coarse-to-fine (32^3 with
 epsilon scaling, then 64^3, then 128^3, each warm-starting the next), so the
-128^3 solve needs ~15-40 iterations instead of ~150.
+128^3 solve starts close to its answer.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from wbcgrade.color.histogram import DEFAULT_FLOOR, add_floor
 from wbcgrade.color.options import GradeOptions
+from wbcgrade.color.outcome import TransportCheck
 from wbcgrade.color.palette.smooth_map import fit_smooth_map
 from wbcgrade.color.presets import StyleSet
 from wbcgrade.core import (
@@ -45,7 +47,7 @@ from wbcgrade.core import (
 from wbcgrade.core.geometry import refine_grid
 from wbcgrade.errors import NumericalError
 
-__all__ = ["color_transfer_map", "palette_barycenter", "transport_map"]
+__all__ = ["color_transfer_map", "palette_barycenter", "TransportMap", "transport_map"]
 
 #: Weights below this share of the largest are left out of the palette's barycenter.
 NEGLIGIBLE_WEIGHT = 1e-6
@@ -68,14 +70,10 @@ def color_transfer_map(photo_hist: np.ndarray, target_hist: np.ndarray, width: f
     (to a loose tolerance); each solve warm-starts the next. Every level's
     histograms are mixed with ``floor`` of the uniform one. The coarser grids
     are solved to ``coarse_tol`` (default ``tol / 3``): what error they leave
-    is removed on the finest grid, where an iteration costs 8 times more (on
-    the 16 MP sample this takes the 128^3 solve from ~22 to ~6 iterations, and
-    the map closer to a converged solve). Iterations are over-relaxed
-    (``overrelaxation`` on the coarser grids, ``fine_overrelaxation`` on the
-    finest): measured on four sample photos, 2-4 times fewer coarse iterations
-    and a map 2-5 times closer to a converged solve (0.01-0.05/255 on average;
-    the transfer 10-30 % faster: the relaxed update costs an exp and a log per
-    bin).
+    is removed on the finest grid, where an iteration costs 8 times more. Iterations
+    are over-relaxed (``overrelaxation`` on the coarser grids, ``fine_overrelaxation``
+    on the finest): fewer iterations and a map closer to a converged solve
+    (docs/benchmarks.md).
 
     Returns
     -------
@@ -137,10 +135,21 @@ def palette_barycenter(style_hists: StyleSet | Callable[[int], np.ndarray], weig
 
 
 
+class TransportMap(NamedTuple):
+    """What :func:`transport_map` returns: the map (m, m, m, 3) float32 in [0, 1], the
+    palette (n, n, n), diagnostics (JSON-friendly), seconds per stage, and how the plan's
+    Sinkhorn solve ended."""
+
+    color_map: np.ndarray
+    palette: np.ndarray
+    info: dict
+    timings: dict
+    check: TransportCheck
+
+
 def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
                   options: GradeOptions,
-                  stage: Callable[[str], None] | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, dict, dict]:
+                  stage: Callable[[str], None] | None = None) -> TransportMap:
     """The colour map moving a photo's colours onto the styles' palette at ``weights``.
 
     The palette, the plan and the smooth map (see the module docstring); the
@@ -155,8 +164,7 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
 
     Returns
     -------
-    ``(color_map (m, m, m, 3) float32 in [0, 1], palette (n, n, n), info,
-    timings)``; the raw projection on the transfer grid is the map when
+    :class:`TransportMap`; the raw projection on the transfer grid is the map when
     ``map.smoothness`` and ``map.stiffness`` are 0.
     """
     say = stage or (lambda name: None)
@@ -187,4 +195,5 @@ def transport_map(photo: np.ndarray, styles: StyleSet, weights: np.ndarray,
         color_map = raw
         info["map"] = {"size": transfer.bins, "smoothness": 0.0, "stiffness": 0.0}
     timings["transfer"] = time.perf_counter() - start
-    return color_map, palette, info, timings
+    return TransportMap(color_map, palette, info, timings,
+                        TransportCheck(bool(result.converged), float(result.error)))
