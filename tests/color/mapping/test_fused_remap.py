@@ -256,3 +256,23 @@ def test_kernels_loaded_ahead_are_the_ones_a_large_photo_runs():
     done = subprocess.run([sys.executable, "-c", _LOADED_AHEAD], capture_output=True,
                           text=True)
     assert done.returncode == 0, done.stderr[-3000:]
+
+
+def test_apply_starts_one_kernel_loader_and_only_for_a_large_photo(monkeypatch, tmp_path):
+    """``grade_photo``'s loader: nothing for a photo solved at full size (its header says
+    1.4 megapixels), one thread for a larger one, handed the header's pixel count, and
+    none again in the same process."""
+    import wbcgrade.photos.workflow as workflow
+
+    sizes = {"small.jpg": 1_400_000, "large.jpg": 16_000_000, "next.jpg": 24_000_000}
+    loaded = []
+    monkeypatch.setattr(workflow, "_LOADER", [])
+    monkeypatch.setattr(workflow, "header_pixels", lambda path: sizes[path.name])
+    monkeypatch.setattr(workflow, "load_kernels", loaded.append)
+    assert workflow.load_kernels_beside(tmp_path / "small.jpg") is None
+    thread = workflow.load_kernels_beside(tmp_path / "large.jpg")
+    assert thread is not None
+    thread.join(timeout=30)
+    assert loaded == [16_000_000]
+    assert workflow.load_kernels_beside(tmp_path / "next.jpg") is None
+    assert loaded == [16_000_000]
