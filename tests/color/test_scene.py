@@ -192,7 +192,8 @@ def test_an_8bit_dark_framing_with_a_lifted_black_finds_its_scene(photos):
 def test_nearest_two_is_opencvs_brute_force_match_ties_included():
     """The matcher's two nearest descriptors and distances are OpenCV's ``knnMatch``'s,
     bit for bit: SIFT-like whole numbers (with exact ties, lower index first), and other
-    values through OpenCV."""
+    values through OpenCV; rows whose squared distances pass 2^21 (float32 roots of
+    neighbouring whole numbers may be equal there) mixed with nearer ones."""
     import cv2
 
     from wbcgrade.color.look.scene import nearest_two
@@ -201,7 +202,8 @@ def test_nearest_two_is_opencvs_brute_force_match_ties_included():
     query = rng.integers(0, 200, (90, 128)).astype(np.float32)
     train = np.concatenate([query[:20], rng.integers(0, 3, (70, 128)), query[:20]]
                            ).astype(np.float32)
-    for q in (query, query + 0.25, rng.integers(0, 3, (40, 128)).astype(np.float32)):
+    far = np.concatenate([np.full((5, 128), 255.0), query[:5]]).astype(np.float32)
+    for q in (query, query + 0.25, rng.integers(0, 3, (40, 128)).astype(np.float32), far):
         pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(q, train, k=2)
         distance, nearest = nearest_two(q, train)
         assert np.array_equal(nearest, [[p[0].trainIdx, p[1].trainIdx] for p in pairs])

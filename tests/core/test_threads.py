@@ -219,3 +219,31 @@ def test_workqueue_layer_is_serialised_not_aborted():
                          env=env, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.split() == ["workqueue", "40", "True"]
+
+
+_SINGLE_BLAS = """
+import sys
+import numpy as np
+import scipy.linalg
+from threadpoolctl import threadpool_info
+from wbcgrade.core import single_threaded_blas
+
+def blas():
+    return tuple(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
+
+before = blas()
+with single_threaded_blas():
+    inside = blas()
+print(inside == (1,) * len(before), blas() == before, max(before) > 1,
+      "numba" not in sys.modules)
+"""
+
+
+@pytest.mark.slow
+def test_single_threaded_blas_restores_the_count_and_leaves_numba_unloaded():
+    """What scene matching runs its products under: BLAS on one thread inside, the count
+    restored after, and no compiled code loaded for it (unlike ``fast_cpu``'s flags)."""
+    run = subprocess.run([sys.executable, "-c", _SINGLE_BLAS], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["True", "True", "True", "True"]

@@ -4,12 +4,13 @@ No files, no printing, no colours: geometry and grid resampling, barycenter
 (+ gradient; debiased), losses (masked ones too), Sinkhorn (single-grid and
 multiscale) and barycentric coordinates; and the tools the domains' own
 kernels use: ``compiled`` (numba with a cache that never fails a run),
-``in_bands`` (a kernel over bands of rows on every core), ``fast_cpu`` and
-``n_workers`` (the core's threads; docs/architecture.md, threads).
+``in_bands`` (a kernel over bands of rows on every core), ``fast_cpu``,
+``single_threaded_blas`` and ``n_workers`` (the core's threads; docs/architecture.md,
+threads).
 """
 
 from wbcgrade.core._barycenter_debiased import debiased_barycenter
-from wbcgrade.core._cpu import fast_cpu, n_workers
+from wbcgrade.core._cpu import fast_cpu, n_workers, single_threaded_blas
 from wbcgrade.core._jit import (
     compiled,
     compiled_preferred,
@@ -76,5 +77,6 @@ __all__ = [
     "numpy_first",
     "prefer_compiled",
     "fast_cpu",
+    "single_threaded_blas",
     "n_workers",
 ]

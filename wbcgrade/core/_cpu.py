@@ -25,7 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 import threadpoolctl
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["fast_cpu", "n_workers", "parallel_map"]
+__all__ = ["fast_cpu", "single_threaded_blas", "n_workers", "parallel_map"]
 
 _FLUSH_FLAGS = 0x8040  # MXCSR: flush-to-zero (bit 15) | denormals-are-zero (bit 6)
 
@@ -131,6 +131,20 @@ def _leave_single_threaded_blas() -> None:
             _take_blas_control()
             limiter.restore_original_limits()
             _take_blas_control()  # leave it free for the caller's own limits
+
+
+@contextlib.contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Single-threaded BLAS (process-wide, reference-counted with :func:`fast_cpu`'s),
+    restored when the last thread inside leaves; the CPU flags untouched (numba is not
+    loaded). For callers that spread independent products over their own threads:
+    OpenBLAS's threads busy-wait between products (scene matching on a shared 2-core
+    machine: 0.78 s of CPU on two threads against 0.40 s on one)."""
+    _enter_single_threaded_blas()
+    try:
+        yield
+    finally:
+        _leave_single_threaded_blas()
 
 
 @contextlib.contextmanager

@@ -21,7 +21,9 @@ data flow (docs/architecture.md):
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+import threading
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -39,6 +41,7 @@ from wbcgrade.color.io.images import (
     WriteOptions,
     check_image_output,
     check_write_options,
+    header_pixels,
     read_image,
     stage_image,
 )
@@ -52,6 +55,7 @@ from wbcgrade.color.mapping.lut import (
     lut_format_of,
     write_checked_lut,
 )
+from wbcgrade.color.mapping.regrain import load_kernels, solved_subsampled
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import (
     StyleSet,
@@ -181,6 +185,42 @@ def graded_pixels(image: Image, grade: Grade, encoding: ColorEncoding,
     return out, image.alpha_channel
 
 
+log = logging.getLogger(__name__)
+
+#: The thread :func:`load_kernels_beside` started in this process (one per process).
+_LOADER: list[threading.Thread] = []
+_LOADER_LOCK = threading.Lock()
+
+
+def _load_kernels(pixels: int) -> None:
+    try:
+        load_kernels(pixels)
+    except Exception as exc:  # noqa: BLE001 - the grade itself loads (and reports) them
+        log.debug("compiled kernels not loaded ahead: %s", exc)
+
+
+def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
+    """Start loading, in a thread, the compiled kernels the regrain runs on ``photo`` when
+    it is large enough for them (over 1.5 megapixels, from its header;
+    :func:`wbcgrade.color.mapping.regrain.load_kernels`), once per process: importing
+    numba and loading its first kernel (~0.7 s of Python) then runs while the photo is
+    decoded and its scene matched, which hold no interpreter lock for most of their time.
+    The thread, or None (nothing to load, or started before)."""
+    if _LOADER:
+        return None
+    pixels = header_pixels(photo)
+    if not solved_subsampled(pixels):
+        return None
+    with _LOADER_LOCK:
+        if _LOADER:
+            return None
+        thread = threading.Thread(target=_load_kernels, args=(pixels,),
+                                  name="wbcgrade-kernels")
+        _LOADER.append(thread)
+    thread.start()
+    return thread
+
+
 def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: GradeOptions,
                 *, shared: Grade | None = None, progress: Progress | None = None,
                 keep_input: bool = True) -> PhotoGrade:
@@ -197,6 +237,9 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     timings: dict[str, float] = {}
     progress.say("read")
     start = time.perf_counter()
+    regrained = (shared.regrain if shared is not None else options.regrain.settings) is not None
+    if regrained:
+        load_kernels_beside(photo)
     image = read_image(photo)
     rgb = image.rgb()
     encoding = ColorEncoding.for_image(image, options.spaces.input,

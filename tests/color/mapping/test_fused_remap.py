@@ -218,3 +218,61 @@ def test_uniform_filter_numpy_twin_is_scipys_bit_for_bit(rng, shape, radius):
     twin = regrain_module._uniform_filter_numpy(plane, 2 * radius + 1)
     assert twin.dtype == np.float32
     assert np.array_equal(twin.view(np.uint32), expected.view(np.uint32))
+
+
+_LOADED_AHEAD = """
+import sys
+import numpy as np
+import wbcgrade.color.mapping.regrain as regrain
+import wbcgrade.color.mapping.remap as remap
+
+assert not regrain.load_kernels(1_000_000) and "numba" not in sys.modules
+assert regrain.load_kernels(16_000_000)
+kernels = {"block_means_mapped": remap, "moment_rows": regrain, "solve_columns": regrain,
+           "box_rows": regrain, "box_columns": regrain, "apply_rows": regrain}
+loaded = {name: list(getattr(module, "_" + name).signatures)
+          for name, module in kernels.items()}
+assert all(len(signatures) == 1 for signatures in loaded.values()), loaded
+regrain._MAX_SOLVE_PIXELS, regrain._NUMPY_SOLVE_PIXELS = 700, 1  # the compiled solve
+rng = np.random.default_rng(0)
+rgb = rng.random((61, 47, 3), dtype=np.float32)
+table = (np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1) ** 1.5)
+regrain.regrain_map(rgb, table.astype(np.float32), 0.8, 0.05, 0.01)
+after = {name: list(getattr(module, "_" + name).signatures)
+         for name, module in kernels.items()}
+assert after == loaded, (after, loaded)
+"""
+
+
+@pytest.mark.slow
+def test_kernels_loaded_ahead_are_the_ones_a_large_photo_runs():
+    """``load_kernels`` (what ``apply`` starts in a thread before decoding a large photo)
+    loads each kernel of the subsampled regrain with the argument types the grade then
+    calls it with: the grade adds no signature (no second compilation); a photo solved
+    at full size loads nothing (numba not even imported)."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _LOADED_AHEAD], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+
+
+def test_apply_starts_one_kernel_loader_and_only_for_a_large_photo(monkeypatch, tmp_path):
+    """``grade_photo``'s loader: nothing for a photo solved at full size (its header says
+    1.4 megapixels), one thread for a larger one, handed the header's pixel count, and
+    none again in the same process."""
+    import wbcgrade.photos.workflow as workflow
+
+    sizes = {"small.jpg": 1_400_000, "large.jpg": 16_000_000, "next.jpg": 24_000_000}
+    loaded = []
+    monkeypatch.setattr(workflow, "_LOADER", [])
+    monkeypatch.setattr(workflow, "header_pixels", lambda path: sizes[path.name])
+    monkeypatch.setattr(workflow, "load_kernels", loaded.append)
+    assert workflow.load_kernels_beside(tmp_path / "small.jpg") is None
+    thread = workflow.load_kernels_beside(tmp_path / "large.jpg")
+    assert thread is not None
+    thread.join(timeout=30)
+    assert loaded == [16_000_000]
+    assert workflow.load_kernels_beside(tmp_path / "next.jpg") is None
+    assert loaded == [16_000_000]

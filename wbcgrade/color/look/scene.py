@@ -185,6 +185,27 @@ def scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
 
 #: Rows of the query descriptors whose distances to every train descriptor are held at once.
 _DISTANCE_ROWS = 1024
+#: Whole numbers below this have distinct float32 square roots (consecutive roots differ
+#: by more than a float32 step there).
+_DISTINCT_ROOTS = 2 ** 21
+
+
+def _nearest_two_roots(query: np.ndarray, train: np.ndarray, train_sq: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nearest_two` of a few whole-number query rows through the float32 distances
+    themselves (OpenCV's order where two distances' roots round to one float32)."""
+    sq = query @ train.T
+    sq *= -2.0
+    sq += train_sq[None, :]
+    sq += np.einsum("ij,ij->i", query, query)[:, None]
+    d = np.sqrt(np.maximum(sq, 0.0, out=sq), out=sq)
+    here = np.arange(len(query))
+    first = np.argmin(d, axis=1)
+    nearest_d = d[here, first]
+    d[here, first] = np.inf
+    second = np.argmin(d, axis=1)
+    return (np.stack([nearest_d, d[here, second]], axis=1),
+            np.stack([first, second], axis=1).astype(np.int32))
 
 
 def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -206,25 +227,39 @@ def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.nd
         distance, nearest = cv2.batchDistance(query, train, cv2.CV_32F,
                                               normType=cv2.NORM_L2, K=2)
         return distance, nearest
-    train_t = np.ascontiguousarray(train.T)
+    # one product per block gives |t|^2 - 2 q.t (the squared distance less |q|^2, a
+    # constant of the row): every partial sum is a whole number of magnitude under 2^24
+    # (|t|^2 <= 128 * 255^2, 2 q.t <= 2 |q| |t|), exact in any order of the sums
     train_sq = np.einsum("ij,ij->i", train, train)
+    train_aug = np.empty((train.shape[1] + 1, len(train)), np.float32)
+    train_aug[:-1] = train.T
+    train_aug[-1] = train_sq
+    query_aug = np.empty((len(query), query.shape[1] + 1), np.float32)
+    np.multiply(query, np.float32(-2.0), out=query_aug[:, :-1])
+    query_aug[:, -1] = 1.0
+    query_sq = np.einsum("ij,ij->i", query, query)
     distance = np.empty((len(query), 2), np.float32)
     nearest = np.empty((len(query), 2), np.int32)
-    rows = np.arange(len(query))
+    rows = np.arange(min(len(query), _DISTANCE_ROWS))
     for lo in range(0, len(query), _DISTANCE_ROWS):
-        block = query[lo:lo + _DISTANCE_ROWS]
-        sq = block @ train_t  # whole numbers: every step below is exact
-        sq *= -2.0
-        sq += train_sq[None, :]
-        sq += np.einsum("ij,ij->i", block, block)[:, None]
-        d = np.sqrt(np.maximum(sq, 0.0, out=sq), out=sq)
-        here = rows[: len(block)]
-        first = np.argmin(d, axis=1)  # the lowest index among equal distances
-        distance[lo:lo + len(block), 0] = d[here, first]
-        d[here, first] = np.inf
-        second = np.argmin(d, axis=1)
-        distance[lo:lo + len(block), 1] = d[here, second]
-        nearest[lo:lo + len(block), 0], nearest[lo:lo + len(block), 1] = first, second
+        hi = min(lo + _DISTANCE_ROWS, len(query))
+        partial = query_aug[lo:hi] @ train_aug
+        here = rows[: hi - lo]
+        first = np.argmin(partial, axis=1)  # the lowest index among equal distances
+        nearest_sq = partial[here, first] + query_sq[lo:hi]
+        partial[here, first] = np.inf
+        second = np.argmin(partial, axis=1)
+        second_sq = partial[here, second] + query_sq[lo:hi]
+        distance[lo:hi, 0] = np.sqrt(nearest_sq)
+        distance[lo:hi, 1] = np.sqrt(second_sq)
+        nearest[lo:hi, 0], nearest[lo:hi, 1] = first, second
+        # the float32 square roots of whole numbers under 2^21 are all distinct, so the
+        # order of squared distances is that of OpenCV's distances, ties included; rows
+        # whose two nearest lie further go through the distances themselves
+        far = np.flatnonzero(second_sq >= _DISTINCT_ROOTS)
+        if len(far):
+            distance[lo + far], nearest[lo + far] = _nearest_two_roots(
+                query[lo + far], train, train_sq)
     return distance, nearest
 
 

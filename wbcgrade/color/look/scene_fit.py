@@ -10,6 +10,7 @@ colour pairs and :func:`fit_correction` the smooth residual on top of the look.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -26,6 +27,7 @@ from wbcgrade.color.look.family import (
     push_histogram,
 )
 from wbcgrade.color.look.scene import (
+    SceneMatch,
     colour_pairs,
     match_scene,
     mirrored,
@@ -35,7 +37,7 @@ from wbcgrade.color.look.scene import (
 )
 from wbcgrade.color.mapping.remap import interpolate_lattice
 from wbcgrade.color.palette.smooth_map import interpolation_matrix
-from wbcgrade.core import fast_cpu
+from wbcgrade.core import fast_cpu, n_workers, single_threaded_blas
 
 __all__ = ["PairFit", "fit_pair", "PhotoLook", "photo_look", "SceneLook", "fit_scene_look",
            "find_scene_look", "fit_correction", "fit_pairs_look"]
@@ -277,27 +279,37 @@ def fit_scene_look(photo, styles: Sequence, prior: LookMap | None = None,
 
     Returns None when no style shows the scene.
     """
-
     prior = prior or LookMap.identity()
-    matches = {}
-    for index, style in enumerate(styles):
-        if style is None:
-            continue
+    present = [index for index, style in enumerate(styles) if style is not None]
+    # a flipped framing (or a symmetric scene matched the wrong way)?
+    flipped = mirrored(photo) if present else None
+    width = photo.colors.shape[1]
+
+    def matched(job: tuple[int, bool]) -> tuple[SceneMatch | None, list[str]]:
+        index, flip = job
         reasons: list[str] = []
-        match = match_scene(photo, style, why=reasons)
+        return match_scene(flipped if flip else photo, styles[index], why=reasons), reasons
+
+    # each match is one BLAS product and its row minima: single-threaded products side by
+    # side on the cores (OpenBLAS's own threads busy-wait between products); the matches
+    # are the same numbers in any order
+    jobs = [(index, False) for index in present] + [(index, True) for index in present]
+    with single_threaded_blas(), ThreadPoolExecutor(min(n_workers(), 4)) as pool:
+        found = dict(zip(jobs, pool.map(matched, jobs)))
+    matches = {}
+    for index in present:
+        match, reasons = found[index, False]
         if match is None:
             if why is not None and reasons:
                 why[index] = reasons[0]
             continue
         matches[index] = match
-    if any(style is not None for style in styles):  # a flipped framing (or a symmetric
-        flipped, width = mirrored(photo), photo.colors.shape[1]  # scene matched wrong way)?
-        for index, style in enumerate(styles):
-            match = match_scene(flipped, style) if style is not None else None
-            if match is not None and match.inliers > getattr(matches.get(index), "inliers", 0):
-                matches[index] = unmirror(match, width)
-                if why is not None:
-                    why.pop(index, None)
+    for index in present:
+        match, _ = found[index, True]
+        if match is not None and match.inliers > getattr(matches.get(index), "inliers", 0):
+            matches[index] = unmirror(match, width)
+            if why is not None:
+                why.pop(index, None)
     parts = []
     for index, match in matches.items():
         sources, targets, weights = colour_pairs(photo, styles[index], match)
@@ -338,7 +350,6 @@ def fit_pairs_look(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
     look : :class:`SceneLook` (no matches, confidence 1).
     robust : (N,) the final robust weights.
     """
-
     prior = prior or LookMap.identity()
     look, robust = prior, (weights if robust is None else robust)
     with fast_cpu():  # small products: OpenBLAS's threads cost 10-80x on a busy machine

@@ -33,7 +33,8 @@ from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
-__all__ = ["regrain", "regrain_map", "map_gain_prior", "DEFAULT_REGRAIN_RADIUS",
+__all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels",
+           "solved_subsampled", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
 
 #: Coefficients are solved on at most this many pixels and interpolated back.
@@ -455,7 +456,7 @@ def _apply_rows(source: np.ndarray, coefficients: np.ndarray, step: float, left:
 
 
 def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
-                     out: np.ndarray) -> None:
+                     out: np.ndarray, twin: bool = True) -> None:
     """``out = clip(source + A(x)^T source + b(x))`` with the (lh, lw, 12) ``A, b`` of
     :func:`_coefficients` bilinearly interpolated from the coarse grid (pixel centres,
     edges clamped): each output row first blends its two coarse rows, then each pixel
@@ -466,7 +467,7 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
     right = np.minimum(left + 1, lw - 1)
     weight = (fx - left).astype(np.float32)
-    if numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
+    if twin and numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
         _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
         return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
@@ -602,6 +603,37 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
         change = mapped - small
     prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
     return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
+
+
+def solved_subsampled(pixels: int) -> bool:
+    """Whether :func:`regrain_map` solves a photo of ``pixels`` pixels on a subsampled copy
+    (over 1.5 megapixels: its compiled kernels then run whatever ran before)."""
+    return _step(1, pixels) > 1
+
+
+def load_kernels(pixels: int) -> bool:
+    """Load the compiled kernels :func:`regrain_map` runs on a photo of ``pixels`` pixels
+    solved on a subsampled copy (over 1.5 megapixels), by running each on a few pixels
+    through the same wrappers (the same argument types: the signatures numba's cache
+    holds; a first run after install compiles them here). False, loading nothing, for a
+    smaller photo (its solve may run numpy's twins).
+
+    What a command grading a large photo starts in a thread before decoding it
+    (:func:`wbcgrade.photos.workflow.grade_photo`): importing numba and loading its
+    first kernel is about 0.7 s of Python, most of it while the decoder and the scene
+    matching hold no interpreter lock.
+    """
+    if not solved_subsampled(pixels):
+        return False
+    step = _step(1, pixels)
+    colors = np.full((4, 4, 3), 0.5, np.float32)
+    table = np.zeros((2, 2, 2, 3), np.float32)
+    mapped, small = block_means_mapped(colors, table, 1.0, 2, with_source=True)
+    if pixels / step ** 2 >= _NUMPY_SOLVE_PIXELS:  # (a smaller grid is solved with numpy)
+        _box(_window_models(small, mapped - small, 1, float(DEFAULT_REGRAIN_EPS)), 1)
+    _apply_upsampled(colors, np.zeros((2, 2, 12), np.float32), 2.0, np.empty_like(colors),
+                     twin=False)
+    return True
 
 
 #: The last few maps' priors (:func:`map_gain_prior`), by a digest of the map and strength.
