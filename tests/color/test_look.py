@@ -139,14 +139,8 @@ def test_a_look_every_style_shows_is_applied_and_one_the_styles_disagree_on_is_n
     """The transport extraction (the statistics one: tests/color/test_look_statistics.py,
     on photos with more colours than these four-band scenes)."""
     from wbcgrade.color.look import set_extraction as look
-    from wbcgrade.color.presets import StyleSet
 
     monkeypatch.setattr(look, "SET_LOOK_METHOD", "transport")
-
-    def style_set(images):
-        return StyleSet([f"s{i}" for i in range(len(images))],
-                        np.stack([image_histogram(i, 32) for i in images]),
-                        meta={"cache_dir": None})
 
     contents = [everyday_scene(s) for s in range(10, 14)]
     naturals = style_set([everyday_scene(s) for s in range(40, 50)])  # other scenes
@@ -291,18 +285,20 @@ def test_a_preset_made_with_a_known_look_grades_with_that_look(tmp_path, cli):
         save_preset(tmp_path / "bad.npz", styles, look=broken)
 
 
+def style_set(images, cache_dir=None):
+    """A StyleSet of the images' 32^3 histograms, cached in ``cache_dir`` (None: not)."""
+    from wbcgrade.color.presets import StyleSet
+
+    return StyleSet([f"s{i}" for i in range(len(images))],
+                    np.stack([image_histogram(i, 32) for i in images]),
+                    meta={"cache_dir": None if cache_dir is None else str(cache_dir)})
+
 def test_a_set_look_cached_under_other_settings_is_not_reused(tmp_path, monkeypatch):
     """The disk cache is keyed by the extraction's settings as well as the histograms."""
     from wbcgrade.color.look import set_extraction as look
-    from wbcgrade.color.presets import StyleSet
 
-    def style_set(images):
-        return StyleSet([f"s{i}" for i in range(len(images))],
-                        np.stack([image_histogram(i, 32) for i in images]),
-                        meta={"cache_dir": str(tmp_path)})
-
-    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)])
-    naturals = style_set([everyday_scene(s) for s in range(40, 44)])
+    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)], tmp_path)
+    naturals = style_set([everyday_scene(s) for s in range(40, 44)], tmp_path)
     def looks():  # the cached set looks (the natural palettes' statistics are kept there too)
         return [p for p in (tmp_path / "looks").glob("*.npz")
                 if "coefficients" in np.load(p).files]
@@ -325,15 +321,9 @@ def test_a_set_look_and_the_natural_statistics_are_read_back_from_disk(tmp_path,
     losses, an empty lightness band's statistics; they were rebuilt on every run)."""
     from wbcgrade.color.look import set_extraction as look
     from wbcgrade.color.look import statistics as look_statistics
-    from wbcgrade.color.presets import StyleSet
 
-    def style_set(images):
-        return StyleSet([f"s{i}" for i in range(len(images))],
-                        np.stack([image_histogram(i, 32) for i in images]),
-                        meta={"cache_dir": str(tmp_path)})
-
-    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)])
-    naturals = style_set([everyday_scene(s) for s in range(40, 44)])
+    styles = style_set([warm_look(everyday_scene(s)) for s in range(10, 12)], tmp_path)
+    naturals = style_set([everyday_scene(s) for s in range(40, 44)], tmp_path)
     monkeypatch.setattr(look, "_SET_LOOKS", {})  # a process that computes and writes them
     monkeypatch.setattr(look, "_NATURAL_STATISTICS", {})
     first = look.set_look(styles, naturals)
@@ -354,12 +344,6 @@ def test_a_set_look_and_the_natural_statistics_are_read_back_from_disk(tmp_path,
 def test_a_set_and_its_halves_share_one_barycenter_of_the_natural_palettes(monkeypatch):
     """The naturals' barycenter (the default content) is computed once, not per extraction."""
     from wbcgrade.color.look import set_extraction as look
-    from wbcgrade.color.presets import StyleSet
-
-    def style_set(images):
-        return StyleSet([f"s{i}" for i in range(len(images))],
-                        np.stack([image_histogram(i, 32) for i in images]),
-                        meta={"cache_dir": None})
 
     sizes = []
     real = look.barycenter

@@ -295,9 +295,7 @@ def test_black_and_white_own_photos_say_nothing_of_how_colourful_content_is():
 
 
 def _subset(styles, indices):
-    from wbcgrade.color.look.set_extraction import _styles_subset
-
-    return _styles_subset(styles, list(indices))
+    return styles.subset(list(indices))
 
 
 def look_warm_muted(img):

@@ -347,15 +347,15 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     kept = np.ones(len(parts))
     if jackknife_colors is not None:
         colors, masses = jackknife_colors
-        others = functools.lru_cache(maxsize=None)(
-            lambda keep: found.operator @ look_differences(
-                styles.take(np.frombuffer(keep, dtype=bool)), centre_of).vector())
 
         def part_look(vector: np.ndarray, part: np.ndarray):
             return look_from_differences(raw.with_vector(np.where(part, vector, 0.0)))
 
+        def refit(keep: np.ndarray) -> np.ndarray:  # the posterior's mean of the styles kept
+            return found.operator @ look_differences(styles.take(keep), centre_of).vector()
+
         kept = np.array([jackknife_share(
-            part_look(mean, part), lambda keep, part=part: part_look(others(keep.tobytes()), part),
+            part_look(mean, part), lambda keep, part=part: part_look(refit(keep), part),
             n_styles, colors, masses) for part in parts])
     applied = np.sum([k * np.where(part, mean, 0.0) for k, part in zip(kept, parts)], axis=0)
     shown = raw.with_vector(applied)

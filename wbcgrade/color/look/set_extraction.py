@@ -276,7 +276,7 @@ def colour_photos(styles, working_space: str | None = None):
     keep = np.flatnonzero(holds_colour(spread, space_scale(space)))
     if len(keep) == len(styles.names):
         return styles
-    return _styles_subset(styles, keep) if len(keep) else None
+    return styles.subset(keep) if len(keep) else None
 
 
 def _beside_shipped(own, working_space: str):
@@ -551,11 +551,6 @@ def statistics_set_look(styles, naturals, knots: int = DEFAULT_KNOTS) -> LookRes
 JACKKNIFE_BINS = 16
 
 
-def _styles_subset(styles, indices):
-    """The styles at ``indices`` as a StyleSet of their own (histograms, space, cache)."""
-    return styles.subset(indices)
-
-
 def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
     """The looks of the two halves of a style set (styles 0, 2, 4, ... and 1, 3, 5, ...),
     each extracted as :func:`set_look` does (and cached the same way); None under 2 styles.
@@ -571,7 +566,7 @@ def set_look_halves(styles, naturals=None) -> tuple[LookMap, LookMap] | None:
         against = naturals
         if own is not None and len(own.names) >= 2:
             against = _own_half(naturals, own, h)
-        halves.append(set_look(_styles_subset(styles, range(h, n, 2)), against).look)
+        halves.append(set_look(styles.subset(range(h, n, 2)), against).look)
     return halves[0], halves[1]
 
 
