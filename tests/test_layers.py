@@ -141,25 +141,12 @@ def imports_inside_functions() -> dict[str, int]:
     return found
 
 
-#: Imports of the package's own modules inside functions still left, per module (outside the
-#: command line, whose commands import the library lazily so that ``--help`` stays light).
-#: The counts may only go down; a module not listed has none.
-KNOWN_IMPORTS_INSIDE_FUNCTIONS = {
-    # the core's MXCSR kernels (numba, ~0.6 s) load on the first compute, not on
-    # ``import wbcgrade.core``
-    "wbcgrade.core._cpu": 1,
-}
-
-
 def test_the_package_is_imported_at_the_top_of_its_modules():
+    """No module imports the package's own modules inside a function, outside the command
+    line (whose commands import the library lazily so that ``--help`` stays light)."""
     found = {module: count for module, count in imports_inside_functions().items()
              if not module.startswith("wbcgrade.cli")}
-    more = {m: f"{c} > {KNOWN_IMPORTS_INSIDE_FUNCTIONS.get(m, 0)}" for m, c in found.items()
-            if c > KNOWN_IMPORTS_INSIDE_FUNCTIONS.get(m, 0)}
-    assert more == {}, "import these at the top of the module"
-    fewer = {m: f"{found.get(m, 0)} < {c}" for m, c in KNOWN_IMPORTS_INSIDE_FUNCTIONS.items()
-             if found.get(m, 0) < c}
-    assert fewer == {}, "lower KNOWN_IMPORTS_INSIDE_FUNCTIONS to what is left"
+    assert found == {}, "import these at the top of the module"
 
 
 def test_imports_point_downwards():

@@ -8,6 +8,7 @@ and numba's parallel functions (serialised by ``compiled`` on the
 
 from __future__ import annotations
 
+import ctypes
 import os
 import subprocess
 import sys
@@ -22,8 +23,10 @@ from tests.core.helpers import blobs
 from wbcgrade.color.mapping.remap import apply_color_map, identity_map
 from wbcgrade.core import (
     GridGeometry,
+    _cpu,
     barycenter,
     barycentric_coordinates,
+    fast_cpu,
     multiscale_sinkhorn,
     sinkhorn,
 )
@@ -221,6 +224,60 @@ def test_workqueue_layer_is_serialised_not_aborted():
     assert run.stdout.split() == ["workqueue", "40", "True"]
 
 
+# The CPU's flush-to-zero / denormals-are-zero flags, per thread: set inside fast_cpu and
+# restored after, not seen by a thread already running meanwhile, set for good in the core's
+# pool threads; and set without loading numba (it cost ~0.6 s per process when it did).
+_FLAGS = """
+import sys, threading
+import numpy as np
+from wbcgrade.core import fast_cpu
+from wbcgrade.core._cpu import parallel_map
+
+def flushed():  # a denormal result (1e-310), and a product of a denormal operand
+    return bool((np.array([1e-300]) * 1e-10)[0] == 0), bool((np.array([5e-310]) * 2)[0] == 0)
+
+entered, checked, other = threading.Event(), threading.Event(), []
+def bystander():
+    entered.wait()
+    other.append(flushed())
+    checked.set()
+thread = threading.Thread(target=bystander)
+thread.start()
+outside = flushed()
+with fast_cpu():
+    entered.set()
+    inside = flushed()
+    checked.wait()
+after = flushed()
+thread.join()
+pool = []
+parallel_map(lambda lo, hi: pool.append(flushed()), 2)
+print(outside == after == other[0] == (False, False), inside == (True, True),
+      pool == [(True, True)] * 2, "numba" not in sys.modules)
+"""
+
+
+def test_fast_cpu_flushes_denormals_in_its_own_thread_without_loading_numba():
+    env = {**os.environ, "WBCGRADE_THREADS": "2"}
+    run = subprocess.run([sys.executable, "-c", _FLAGS], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["True", "True", "True", "True"]
+
+
+def test_the_flags_are_read_from_glibcs_floating_point_environment():
+    """x86-64 glibc's ``fenv_t`` is 32 bytes with MXCSR last; its default masks every
+    exception (bits 7-12) and leaves the flags off."""
+    assert ctypes.sizeof(_cpu._FloatEnvironment) == 32
+    if _cpu._LIBM is None:
+        pytest.skip("not x86-64 glibc: the flags are left as they are")
+    flags = _cpu._get_flags()
+    assert flags & 0x1F80 == 0x1F80
+    with fast_cpu():
+        assert _cpu._get_flags() == flags | 0x8040
+    assert _cpu._get_flags() == flags
+
+
 _SINGLE_BLAS = """
 import sys
 import numpy as np
@@ -242,7 +299,7 @@ print(inside == (1,) * len(before), blas() == before, max(before) > 1,
 @pytest.mark.slow
 def test_single_threaded_blas_restores_the_count_and_leaves_numba_unloaded():
     """What scene matching runs its products under: BLAS on one thread inside, the count
-    restored after, and no compiled code loaded for it (unlike ``fast_cpu``'s flags)."""
+    restored after, and no compiled code loaded for it."""
     run = subprocess.run([sys.executable, "-c", _SINGLE_BLAS], capture_output=True, text=True,
                          timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]

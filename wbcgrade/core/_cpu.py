@@ -15,7 +15,7 @@ Two facts measured on the target machines (docs/architecture.md, threads):
 from __future__ import annotations
 
 import contextlib
-import functools
+import ctypes
 import os
 import platform
 import threading
@@ -30,26 +30,50 @@ __all__ = ["fast_cpu", "single_threaded_blas", "n_workers", "parallel_map"]
 _FLUSH_FLAGS = 0x8040  # MXCSR: flush-to-zero (bit 15) | denormals-are-zero (bit 6)
 
 
+class _FloatEnvironment(ctypes.Structure):
+    """glibc's x86-64 ``fenv_t`` (32 bytes): the x87 environment, then the SSE MXCSR."""
+
+    _fields_ = [("x87", ctypes.c_uint8 * 28), ("mxcsr", ctypes.c_uint32)]
+
+
+def _glibc_libm() -> ctypes.CDLL | None:
+    """glibc's maths library on x86-64, whose ``fegetenv``/``fesetenv`` read and write this
+    thread's MXCSR (and leave the x87 state as they found it); None elsewhere (other
+    architectures or C libraries, whose ``fenv_t`` differs: the flags keep their defaults)."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return None
+    try:
+        if not os.confstr("CS_GNU_LIBC_VERSION"):
+            return None
+        libm = ctypes.CDLL("libm.so.6")
+    except (AttributeError, ValueError, OSError):  # pragma: no cover - not glibc
+        return None
+    for function in (libm.fegetenv, libm.fesetenv):
+        function.argtypes = [ctypes.POINTER(_FloatEnvironment)]
+        function.restype = ctypes.c_int
+    return libm
+
+
+_LIBM = _glibc_libm()
+
+
 def _get_flags() -> int:
-    """This thread's MXCSR (x86-64; 0 elsewhere)."""
-    return _flag_functions()[0]()
+    """This thread's MXCSR (x86-64 glibc; 0 elsewhere)."""
+    if _LIBM is None:  # pragma: no cover - not x86-64 glibc
+        return 0
+    environment = _FloatEnvironment()
+    _LIBM.fegetenv(ctypes.byref(environment))
+    return environment.mxcsr
 
 
 def _set_flags(value: int) -> None:
-    """Set this thread's MXCSR (x86-64; nothing elsewhere)."""
-    _flag_functions()[1](value)
-
-
-@functools.lru_cache(maxsize=1)
-def _flag_functions() -> tuple[Callable[[], int], Callable[[int], None]]:
-    """The compiled MXCSR reader and writer (:mod:`wbcgrade.core._mxcsr`, numba loaded
-    then, not when the core is imported); on other architectures, stand-ins that keep
-    the defaults."""
-    if platform.machine().lower() in ("x86_64", "amd64"):
-        from wbcgrade.core._mxcsr import get_flags, set_flags
-
-        return get_flags, set_flags
-    return (lambda: 0), (lambda value: None)  # pragma: no cover - other architectures
+    """Set this thread's MXCSR (x86-64 glibc; nothing elsewhere)."""
+    if _LIBM is None:  # pragma: no cover - not x86-64 glibc
+        return
+    environment = _FloatEnvironment()
+    _LIBM.fegetenv(ctypes.byref(environment))
+    environment.mxcsr = value
+    _LIBM.fesetenv(ctypes.byref(environment))
 
 
 _controller: ThreadpoolController | None = None
@@ -136,10 +160,10 @@ def _leave_single_threaded_blas() -> None:
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
     """Single-threaded BLAS (process-wide, reference-counted with :func:`fast_cpu`'s),
-    restored when the last thread inside leaves; the CPU flags untouched (numba is not
-    loaded). For callers that spread independent products over their own threads:
-    OpenBLAS's threads busy-wait between products (scene matching on a shared 2-core
-    machine: 0.78 s of CPU on two threads against 0.40 s on one)."""
+    restored when the last thread inside leaves; the CPU flags untouched. For callers that
+    spread independent products over their own threads: OpenBLAS's threads busy-wait
+    between products (scene matching on a shared 2-core machine: 0.78 s of CPU on two
+    threads against 0.40 s on one)."""
     _enter_single_threaded_blas()
     try:
         yield
