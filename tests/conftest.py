@@ -8,6 +8,29 @@ import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 
+#: The thread counts of OpenBLAS, OpenMP (numba's parallel kernels) and numba, set for the
+#: workers of a run on several cores (:func:`pytest_configure`).
+THREAD_SETTINGS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                   "NUMBA_NUM_THREADS")
+
+
+def pytest_configure(config):
+    """Tests run side by side (pytest-xdist's ``-n``, in ``pyproject.toml``): each worker's
+    BLAS, OpenMP and numba get their share of the cores (unless set already), so that the
+    workers do not oversubscribe them (OpenBLAS's threads busy-wait: docs/architecture.md,
+    threads). The core's own pool (``WBCGRADE_THREADS``) keeps its size, so that its threaded
+    paths run as in one process. Set here, in the process that starts the workers, before it
+    starts them: the libraries read these when they load."""
+    workers = getattr(config.option, "numprocesses", None)
+    if not isinstance(workers, int) or workers < 2 or os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    for name in THREAD_SETTINGS:
+        os.environ.setdefault(name, str(max(1, cores // workers)))
+
 
 def pytest_sessionfinish(session, exitstatus):
     """A passing session's temporary folder is removed at its end (not each test's as it
@@ -33,14 +56,24 @@ def pytest_runtest_logreport(report):
 
 def pytest_terminal_summary(terminalreporter):
     """One line with the time of the fast tier (``-m "not slow"``) and of the whole run, so
-    that a run of the whole suite (``.ci/run``) also says what the fast tier takes."""
+    that a run of the whole suite (``.ci/run``) also says what the fast tier takes. With the
+    tests on several workers the controller sums the workers' reports; a worker prints
+    nothing."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
     (fast, fast_s), (slow, slow_s) = _TIER_TIMES["fast"], _TIER_TIMES["slow"]
     if fast + slow == 0:  # nothing ran (--collect-only)
         return
     terminalreporter.write_line(
         f"test time: fast tier {fast} tests {fast_s:.0f} s, slow {slow} tests {slow_s:.0f} s, "
         f"together {fast_s + slow_s:.0f} s (the tests' own set-up, call and tear-down, "
-        "summed)")
+        f"summed{_over_workers(terminalreporter.config)})")
+
+
+def _over_workers(config) -> str:
+    """", over N workers" when the tests ran on several (pytest-xdist), else nothing."""
+    workers = getattr(config.option, "numprocesses", None)
+    return f", over {workers} workers" if isinstance(workers, int) and workers > 1 else ""
 
 
 @pytest.fixture(scope="session", autouse=True)

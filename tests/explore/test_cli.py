@@ -9,6 +9,7 @@ import socket
 import subprocess
 import time
 import urllib.request
+import uuid
 from pathlib import Path
 
 import pytest
@@ -51,12 +52,21 @@ def test_a_busy_port_is_reported_before_any_work(photo):
     assert f"cannot listen on 127.0.0.1:{port}" in result.stderr and "--port" in result.stderr
 
 
-def _workers() -> set[int]:
+#: In the environment of the explore processes a test starts (their job workers inherit it),
+#: so that the test counts its own workers only: another test may run beside it
+#: (pytest-xdist) with workers of its own.
+TAG = "WBCGRADE_TEST_TAG"
+
+
+def _workers(tag: str) -> set[int]:
+    """The explore job workers running with ``tag`` in their environment."""
+    mine = f"{TAG}={tag}".encode()
     found = set()
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
             try:
-                if b"wbcgrade.explore._worker" in (entry / "cmdline").read_bytes():
+                if b"wbcgrade.explore._worker" in (entry / "cmdline").read_bytes() \
+                        and mine in (entry / "environ").read_bytes().split(b"\0"):
                     found.add(int(entry.name))
             except OSError:
                 continue
@@ -65,11 +75,12 @@ def _workers() -> set[int]:
 
 @pytest.mark.slow
 def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
-    before = _workers()
+    tag = uuid.uuid4().hex
+    before = _workers(tag)
     process = subprocess.Popen(
         [*WBCGRADE, "explore", str(photo), "--preset", PRESET, "--no-browser"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**command_env(), "DISPLAY": ""})
+        env={**command_env(), "DISPLAY": "", TAG: tag})
     try:
         url = process.stdout.readline().strip()
         assert url.startswith("http://127.0.0.1:") and url.endswith("/"), url
@@ -80,9 +91,9 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
         with urllib.request.urlopen(url + "api/state?palette=1", timeout=120) as answer:
             assert len(json.load(answer)["fit"]["weights"]) == 3  # the palette mode
         deadline = time.monotonic() + 60
-        while not (_workers() - before) and time.monotonic() < deadline:
+        while not (_workers(tag) - before) and time.monotonic() < deadline:
             time.sleep(0.2)
-        assert _workers() - before, "the job worker did not start"
+        assert _workers(tag) - before, "the job worker did not start"
         process.send_signal(signal.SIGINT)
         _, err = process.communicate(timeout=30)
     finally:
@@ -92,25 +103,27 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     assert "Open the address above" in err and "Stopped." in err and "Traceback" not in err
     assert "grade: " in err and "saves into: " in err
     deadline = time.monotonic() + 10
-    while (_workers() - before) and time.monotonic() < deadline:
+    while (_workers(tag) - before) and time.monotonic() < deadline:
         time.sleep(0.2)
-    assert not (_workers() - before), "the job worker outlived the server"
+    assert not (_workers(tag) - before), "the job worker outlived the server"
 
 
 @pytest.mark.slow
-def test_a_worker_still_starting_is_stopped_with_the_server(server):
+def test_a_worker_still_starting_is_stopped_with_the_server(server, monkeypatch):
     """Closed while its worker process still imports, the job queue kills it (else it
     outlived the server until its imports were done)."""
     from wbcgrade.explore.jobs import JobWorker
 
-    before = _workers()
+    tag = uuid.uuid4().hex
+    monkeypatch.setenv(TAG, tag)
+    before = _workers(tag)
     worker = JobWorker(server.studio.session.grader_state()).start()
     deadline = time.monotonic() + 30
-    while not (_workers() - before) and time.monotonic() < deadline:
+    while not (_workers(tag) - before) and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert _workers() - before, "the job worker did not start"
+    assert _workers(tag) - before, "the job worker did not start"
     worker.close()
     deadline = time.monotonic() + 0.5  # killed, not left to finish its imports (~1-2 s)
-    while (_workers() - before) and time.monotonic() < deadline:
+    while (_workers(tag) - before) and time.monotonic() < deadline:
         time.sleep(0.02)
-    assert not (_workers() - before), "the starting worker outlived close()"
+    assert not (_workers(tag) - before), "the starting worker outlived close()"
