@@ -5,6 +5,7 @@ the folder's order."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import threading
 import time
 from pathlib import Path
@@ -192,22 +193,38 @@ def test_photos_read_in_threads_keep_the_folders_order_and_skip_a_broken_one(
 
 def test_an_interrupted_folder_read_stops_reading(folder, monkeypatch):
     """Ctrl+C (in the main thread) while a folder is read: the photos not started are not
-    read (the one in flight finishes)."""
+    read (the one in flight finishes). The reader holds the second photo until the pool has
+    been told to cancel, and the interrupt waits until it holds it: on a busy machine the
+    reader otherwise ran on through the folder before the main thread raised."""
     monkeypatch.setattr(presets, "READ_THREADS", 1)
     started: list[str] = []
+    cancelled = threading.Event()
     real = presets._photo_histogram
 
     def reading(path, *args):
         started.append(path.name)
+        if len(started) > 1:
+            cancelled.wait(60)
         return real(path, *args)
 
     def progress(number, total, name):
         if number == 1:
+            deadline = time.monotonic() + 60
+            while len(started) < 2 and time.monotonic() < deadline:
+                time.sleep(0.001)
             raise KeyboardInterrupt
 
+    class Pool(concurrent.futures.ThreadPoolExecutor):
+        def shutdown(self, wait=True, *, cancel_futures=False):
+            super().shutdown(wait=False, cancel_futures=cancel_futures)
+            cancelled.set()
+            super().shutdown(wait=wait)
+
     monkeypatch.setattr(presets, "_photo_histogram", reading)
+    monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Pool)
     with pytest.raises(KeyboardInterrupt):
         presets.load_style_folder(folder, 16, progress=progress)
+    assert cancelled.is_set()
     assert 2 <= len(started) <= 3 < len(STYLE_PHOTOS) + 1
 
 
