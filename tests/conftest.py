@@ -67,13 +67,17 @@ def pytest_terminal_summary(terminalreporter):
     terminalreporter.write_line(
         f"test time: fast tier {fast} tests {fast_s:.0f} s, slow {slow} tests {slow_s:.0f} s, "
         f"together {fast_s + slow_s:.0f} s (the tests' own set-up, call and tear-down, "
-        f"summed{_over_workers(terminalreporter.config)})")
+        f"summed{_per_worker(terminalreporter.config, fast_s, slow_s)})")
 
 
-def _over_workers(config) -> str:
-    """", over N workers" when the tests ran on several (pytest-xdist), else nothing."""
+def _per_worker(config, fast_s: float, slow_s: float) -> str:
+    """With the tests on several workers (pytest-xdist), their share of each: about the wall
+    time of each tier."""
     workers = getattr(config.option, "numprocesses", None)
-    return f", over {workers} workers" if isinstance(workers, int) and workers > 1 else ""
+    if not isinstance(workers, int) or workers < 2:
+        return ""
+    return (f" over {workers} workers: {fast_s / workers:.0f} s and {slow_s / workers:.0f} s "
+            "a worker")
 
 
 @pytest.fixture(scope="session", autouse=True)
