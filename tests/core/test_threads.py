@@ -34,8 +34,8 @@ from wbcgrade.core import (
 from wbcgrade.core._jit import THREAD_SAFE_LAYERS, compiled, parallel_layer
 
 N_THREADS = 4
-#: The environment of a fresh interpreter whose BLAS has a thread per core, as a user's does
-#: (the test run's workers share the cores: tests/conftest.py).
+#: The environment of a fresh interpreter whose BLAS and numba have a thread per core, as a
+#: user's do (the test run's workers share the cores: tests/conftest.py).
 ALL_CORES = {name: value for name, value in os.environ.items() if name not in THREAD_SETTINGS}
 
 
@@ -221,7 +221,7 @@ print(numba.threading_layer(), len(same), all(same))
 
 @pytest.mark.slow
 def test_workqueue_layer_is_serialised_not_aborted():
-    env = {**os.environ, "NUMBA_THREADING_LAYER": "workqueue"}
+    env = {**ALL_CORES, "NUMBA_THREADING_LAYER": "workqueue"}
     run = subprocess.run([sys.executable, "-c", _WORKQUEUE], capture_output=True, text=True,
                          env=env, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
