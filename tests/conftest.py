@@ -21,8 +21,8 @@ def pytest_configure(config):
     threads). The core's own pool (``WBCGRADE_THREADS``) keeps its size, so that its threaded
     paths run as in one process. Set here, in the process that starts the workers, before it
     starts them: the libraries read these when they load."""
-    workers = getattr(config.option, "numprocesses", None)
-    if not isinstance(workers, int) or workers < 2 or os.environ.get("PYTEST_XDIST_WORKER"):
+    workers = _workers(config)
+    if workers < 2 or os.environ.get("PYTEST_XDIST_WORKER"):
         return
     try:
         cores = len(os.sched_getaffinity(0))
@@ -30,6 +30,15 @@ def pytest_configure(config):
         cores = os.cpu_count() or 1
     for name in THREAD_SETTINGS:
         os.environ.setdefault(name, str(max(1, cores // workers)))
+
+
+def _workers(config) -> int:
+    """How many workers pytest-xdist runs the tests on (``-n``, at most ``--maxprocesses``);
+    0 when the tests run in this process."""
+    workers = getattr(config.option, "numprocesses", None)
+    if not isinstance(workers, int):
+        return 0
+    return min(workers, getattr(config.option, "maxprocesses", None) or workers)
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -73,8 +82,8 @@ def pytest_terminal_summary(terminalreporter):
 def _per_worker(config, fast_s: float, slow_s: float) -> str:
     """With the tests on several workers (pytest-xdist), their share of each: about the wall
     time of each tier."""
-    workers = getattr(config.option, "numprocesses", None)
-    if not isinstance(workers, int) or workers < 2:
+    workers = _workers(config)
+    if workers < 2:
         return ""
     return (f" over {workers} workers: {fast_s / workers:.0f} s and {slow_s / workers:.0f} s "
             "a worker")
