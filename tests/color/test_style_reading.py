@@ -269,8 +269,10 @@ def test_a_cached_folder_gives_its_coarse_grids_from_the_cache_and_stays_sparse(
         assert isinstance(again.__dict__["_deferred_histograms"], Deferred)
     finally:
         presets.resample_histogram = real
+    sent = pickle.dumps(again)  # (a batch's workers): made dense once, and kept
+    assert isinstance(again.__dict__["_deferred_histograms"], np.ndarray)
     assert np.array_equal(again.histograms, dense)  # made dense as the first run had it
-    assert np.array_equal(pickle.loads(pickle.dumps(again)).histograms, dense)
+    assert np.array_equal(pickle.loads(sent).histograms, dense)
 
 
 def test_an_edited_style_photo_is_re_binned_not_read_from_the_cache(tmp_path):

@@ -145,6 +145,11 @@ class StyleSet:
     def bins(self) -> int:
         return int(deferred_shape(self, "histograms")[1])
 
+    def __getstate__(self) -> dict:
+        """Pickled (a batch's workers, a copy) with its histograms made dense, once: kept."""
+        self.histograms  # noqa: B018 - reading a deferred stack makes and keeps it
+        return self.__dict__
+
     @property
     def working_space(self) -> str:
         """The colour space whose unit cube the histograms cover (config name; resolved
