@@ -224,8 +224,10 @@ class HistogramCache:
     bins, the subsampling limit and the colour spaces (``space``: the
     OpenColorIO config and the working space the colours were converted into),
     so an edited photo is re-read. Entries are small sparse ``.npz`` files at the
-    top of the cache folder (:mod:`wbcgrade.color.io.cache`: a damaged entry is
-    rebuilt, one that cannot be written is one warning; caching never makes a run fail).
+    top of the cache folder, each beside the histogram re-binned onto the grids a
+    grade asks for (:meth:`get_resampled`, keyed the same way and the grid)
+    (:mod:`wbcgrade.color.io.cache`: a damaged entry is rebuilt, one that cannot be
+    written is one warning; caching never makes a run fail).
     """
 
     VERSION = 1
