@@ -303,15 +303,21 @@ class HistogramCache:
         kept in float32), so a first run and the runs that read the cache compute
         the same things (a set's look, keyed by its histograms, is found again).
         """
+        return from_sparse(*self.put_sparse(path, bins, hist, max_pixels, space), bins)
+
+    def put_sparse(self, path: Path, bins: int, hist: np.ndarray,
+                   max_pixels: int = DEFAULT_MAX_PIXELS,
+                   space: str = "") -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`put`, the histogram as stored given back as :meth:`get_sparse` gives it:
+        ``(index, values)``, which :func:`from_sparse` makes what :meth:`get` returns."""
         index, values = to_sparse(hist)
-        stored = from_sparse(index, values, bins)
         if self.enabled:
             try:
                 target = self._key(path, bins, max_pixels, space)
             except OSError:  # the photo is gone: nothing to key its entry by
-                return stored
+                return index, values
             write_entry(target, compress=True, index=index, values=values)
-        return stored
+        return index, values
 
 
 class PaletteSum:

@@ -287,8 +287,9 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
     :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time.
 
     The stack is checked against the memory budget (``limits.check_memory``: InputError
-    naming ``where``) and made dense when first read (:class:`_FolderHistograms`): the
-    cached ones are kept sparse until then. With a cache, each photo's histogram
+    naming ``where``) and made dense when first read (:class:`_FolderHistograms`): each
+    histogram is kept sparse, as the cache holds it, until then. With a cache, each photo's
+    histogram
     re-binned onto the grids of ``resampled`` (:func:`resample_histogram`, as
     :meth:`StyleSet.at_bins` does it) is read from the cache too, or made and stored."""
     from concurrent.futures import ThreadPoolExecutor
@@ -300,7 +301,7 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
     budget = _Budget(READ_MEGAPIXELS)
     grids = sorted({int(n) for n in resampled if n != bins}) if cache.enabled else []
 
-    def read(path: Path) -> tuple[np.ndarray | tuple | None, dict, InputError | None]:
+    def read(path: Path) -> tuple[tuple | None, dict, InputError | None]:
         hist = cache.get_sparse(path, bins, max_pixels, space)
         if hist is None:
             size = _megapixels(path)
@@ -311,13 +312,15 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
                 return None, {}, exc
             finally:
                 budget.give(size)
-            hist = cache.put(path, bins, dense, max_pixels, space)  # as later runs read it
+            # as later runs read it; kept sparse (a folder of hundreds of photos holds
+            # its dense stack once, when it is read)
+            hist = cache.put_sparse(path, bins, dense, max_pixels, space)
+            del dense
         coarse = {}
         for at in grids:
             found = cache.get_resampled(path, bins, at, max_pixels, space)
             if found is None:
-                dense = from_sparse(*hist, bins) if isinstance(hist, tuple) else hist
-                found = resample_histogram(dense, at)
+                found = resample_histogram(from_sparse(*hist, bins), at)
                 cache.put_resampled(path, bins, at, found, max_pixels, space)
             coarse[at] = found
         return hist, coarse, None
@@ -355,8 +358,8 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
 
 @dataclass
 class _FolderHistograms:
-    """What :func:`_read_histograms` read: each photo's histogram (dense, or sparse as the
-    cache keeps it), the grid, the photos' paths and the stacks already re-binned."""
+    """What :func:`_read_histograms` read: each photo's histogram (sparse, as the cache
+    keeps it), the grid, the photos' paths and the stacks already re-binned."""
 
     parts: list
     bins: int
