@@ -410,4 +410,5 @@ def test_a_style_folder_with_a_name_that_is_not_utf8_works_with_the_cache(tmp_pa
         assert done.returncode == 0, done.stderr.decode("utf-8", "replace")
         assert b"Traceback" not in done.stderr
     assert (tmp_path / "out.png").is_file() and (tmp_path / "p.npz").is_file()
-    assert len(list(cache.glob("*.npz"))) == 3 * 2  # two bin counts, every photo cached
+    # two bin counts, every photo cached; and each histogram of the grade on its fit grid
+    assert len(list(cache.glob("*.npz"))) == 3 * 2 + 3

@@ -409,3 +409,25 @@ def test_a_set_under_six_styles_keeps_the_full_share_and_is_not_weighed():
     few = statistics_look(tinted_statistics(hists([faded_teal(natural_photo(s))
                                                    for s in range(4)]), NATURALS), NATURALS)
     assert few.info["evidence"] is None and few.info["content_bias"] == 1.0
+
+
+def test_natural_palettes_left_out_by_name_are_told_apart_from_other_exclusions():
+    """Two benchmarks holding out different photos get different natural statistics: the
+    shipped file's digest no longer names a subset of it (two exclusions of one size
+    shared a key, so the second was served the first's cached statistics)."""
+    from wbcgrade.color.look.set_extraction import (
+        _palettes_digest,
+        natural_palettes,
+        natural_statistics,
+    )
+
+    whole = natural_palettes()
+    first = natural_palettes(exclude={whole.names[0]})
+    second = natural_palettes(exclude={whole.names[1]})
+    assert len(first.names) == len(second.names) == len(whole.names) - 1
+    assert _palettes_digest(first) != _palettes_digest(second)
+    assert _palettes_digest(whole) != _palettes_digest(first)
+    kept_first = natural_statistics(first).quantiles
+    kept_second = natural_statistics(second).quantiles
+    assert not np.array_equal(kept_first, kept_second)
+    np.testing.assert_array_equal(kept_first[0], natural_statistics(whole).quantiles[1])

@@ -6,6 +6,7 @@ the folder's order."""
 from __future__ import annotations
 
 import concurrent.futures
+import pickle
 import threading
 import time
 from pathlib import Path
@@ -18,7 +19,7 @@ import wbcgrade.color.io.images as imageio
 import wbcgrade.color.look.scene as scene
 import wbcgrade.color.presets as presets
 from tests.color.conftest import SAMPLES, STYLE_PHOTOS, small_copy, write_array
-from wbcgrade.color.histogram import HistogramCache
+from wbcgrade.color.histogram import Deferred, HistogramCache
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import StyleSource, load_styles
 from wbcgrade.errors import InputError
@@ -222,6 +223,7 @@ def test_an_interrupted_folder_read_stops_reading(folder, monkeypatch):
 
     monkeypatch.setattr(presets, "_photo_histogram", reading)
     monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Pool)
+    monkeypatch.setattr(presets, "ThreadPoolExecutor", Pool, raising=False)  # if imported on top
     with pytest.raises(KeyboardInterrupt):
         presets.load_style_folder(folder, 16, progress=progress)
     assert cancelled.is_set()
@@ -255,3 +257,76 @@ def test_header_pixels_reads_the_size_and_says_nothing_of_what_it_cannot_read(tm
     (tmp_path / "broken.jpg").write_bytes(b"\xff\xd8 not a jpeg")
     for path in (tmp_path / "gone.jpg", tmp_path, tmp_path / "broken.jpg"):
         assert imageio.header_pixels(path) == 0  # read_image says what is wrong
+
+
+def _dense_at(styles, bins: int) -> np.ndarray:
+    """What ``at_bins`` gives from the dense histograms (re-binned here, not cached)."""
+    return np.stack([presets.resample_histogram(h, bins) for h in styles.histograms])
+
+
+def test_a_cached_folder_gives_its_coarse_grids_from_the_cache_and_stays_sparse(tmp_path):
+    styles_dir = tmp_path / "styles"
+    styles_dir.mkdir()
+    for name in STYLE_PHOTOS[:3]:
+        small_copy(SAMPLES / f"{name}.jpg", styles_dir / f"{name}.jpg", width=120)
+    cache = HistogramCache(tmp_path / "cache")
+    first = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,))
+    expected, dense = first.at_bins(8).copy(), first.histograms.copy()
+    assert np.array_equal(expected, _dense_at(first, 8))  # bit for bit what at_bins makes
+
+    def refused(*_args, **_kwargs):
+        raise AssertionError("re-binned again: the cache was not used")
+
+    real = presets.resample_histogram
+    presets.resample_histogram = refused
+    try:
+        again = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,))
+        assert np.array_equal(again.at_bins(8), expected)
+        assert again.bins == 32
+        # nothing read the dense stack yet: it is still the cache's sparse entries
+        assert isinstance(again.__dict__["_deferred_histograms"], Deferred)
+    finally:
+        presets.resample_histogram = real
+    sent = pickle.dumps(again)  # (a batch's workers): made dense once, and kept
+    assert isinstance(again.__dict__["_deferred_histograms"], np.ndarray)
+    assert np.array_equal(again.histograms, dense)  # made dense as the first run had it
+    assert np.array_equal(pickle.loads(sent).histograms, dense)
+
+
+def test_an_edited_style_photo_is_re_binned_not_read_from_the_cache(tmp_path):
+    styles_dir = tmp_path / "styles"
+    styles_dir.mkdir()
+    for name in STYLE_PHOTOS[:2]:
+        small_copy(SAMPLES / f"{name}.jpg", styles_dir / f"{name}.jpg", width=120)
+    cache = HistogramCache(tmp_path / "cache")
+    before = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,)).at_bins(8)
+    edited = styles_dir / f"{STYLE_PHOTOS[0]}.jpg"
+    small_copy(SAMPLES / "sunset.jpg", edited, width=120)  # another photo under its name
+    after = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,))
+    assert not np.array_equal(after.at_bins(8)[0], before[0])
+    assert np.array_equal(after.at_bins(8), _dense_at(after, 8))
+    assert np.array_equal(after.at_bins(8)[1], before[1])
+
+
+def test_a_preset_stack_is_made_as_each_histogram_was_and_the_photo_transfer_waits(rng):
+    from wbcgrade.color.grade.grading import photo_histograms
+    from wbcgrade.color.histogram import (
+        from_sparse,
+        image_histogram,
+        stack_from_sparse,
+        to_sparse,
+    )
+
+    hists = [np.abs(rng.normal(size=(16, 16, 16))) ** 4 for _ in range(3)]
+    parts = [to_sparse(h, 1e-3) for h in hists]
+    stacked = stack_from_sparse([parts[0], hists[1], parts[2]], 16)
+    assert np.array_equal(stacked[0], from_sparse(*parts[0], 16))
+    assert np.array_equal(stacked[1], hists[1])
+    assert np.array_equal(stacked[2], from_sparse(*parts[2], 16))
+    pixels = rng.random((40, 50, 3)).astype(np.float32)
+    options = GradeOptions()
+    photo = photo_histograms(pixels, options)
+    assert isinstance(photo.__dict__["_deferred_transfer"], Deferred)  # not binned yet
+    assert photo.at(options.transfer.bins).shape == (options.transfer.bins,) * 3
+    assert np.array_equal(photo.transfer, image_histogram(pixels, options.transfer.bins, None,
+                                                          options.transfer.max_pixels))

@@ -41,6 +41,7 @@ from wbcgrade.batch.settings import (
 )
 from wbcgrade.batch.task import BatchContext
 from wbcgrade.color.colorspace import ColorEncoding
+from wbcgrade.color.grade.grading import style_grids
 from wbcgrade.color.grade.saved_grade import look_batch_options, saved_name
 from wbcgrade.color.io.raw import RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.scene import matching_hook
@@ -86,7 +87,7 @@ def _load(source: StyleSource, options: GradeOptions, progress: Progress, plan: 
     hook = None if consistent else matching_hook(source, options,
                                                  [task.source for task in plan.all_photos])
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles, hook)
+                         progress.styles, hook, resampled=style_grids(options))
     options.check_styles(len(styles.names))
     message = one_style_warning(source, styles, options.map.builder)
     if message is not None and progress.warn is not None:

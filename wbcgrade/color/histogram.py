@@ -9,6 +9,7 @@ recovered exactly as the weighted mean of its bins' positions.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,10 @@ __all__ = [
     "grid_points",
     "to_sparse",
     "from_sparse",
+    "stack_from_sparse",
+    "Deferred",
+    "deferred_field",
+    "deferred_shape",
     "HistogramCache",
     "default_cache_dir",
     "PaletteSum",
@@ -149,6 +154,69 @@ def from_sparse(index: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
     return (hist / hist.sum()).reshape(bins, bins, bins)
 
 
+def _fill_sparse(row: np.ndarray, index: np.ndarray, values: np.ndarray) -> None:
+    """Write :func:`from_sparse` of ``(index, values)`` into a zeroed flat float64 ``row``
+    (the same numbers: the same scatter, sum and division, with no new arrays)."""
+    row[index] = values
+    row /= row.sum()
+
+
+def stack_from_sparse(parts: Sequence[np.ndarray | tuple[np.ndarray, np.ndarray]],
+                      bins: int) -> np.ndarray:
+    """(S, bins, bins, bins) float64: each part a dense histogram, or the ``(index, values)``
+    of :func:`to_sparse` made dense as :func:`from_sparse` makes it, written into one
+    array (no per-histogram arrays, no stacking copy)."""
+    out = np.zeros((len(parts), bins ** 3))
+    for row, part in zip(out, parts):
+        if isinstance(part, tuple):
+            _fill_sparse(row, *part)
+        else:
+            row[:] = np.asarray(part).ravel()
+    return out.reshape(len(parts), bins, bins, bins)
+
+
+class Deferred:
+    """An array made when it is first read, through a :class:`deferred_field`: ``make(*args)``
+    gives it; its ``shape`` is known before. Pickled or copied, it is the array itself."""
+
+    __slots__ = ("shape", "_make", "_args")
+
+    def __init__(self, shape: tuple[int, ...], make: Callable[..., np.ndarray], *args) -> None:
+        self.shape = tuple(int(n) for n in shape)
+        self._make, self._args = make, args
+
+    def make(self) -> np.ndarray:
+        return self._make(*self._args)
+
+    def __reduce__(self):
+        return (np.asarray, (self.make(),))
+
+
+class deferred_field:  # noqa: N801 - used as a descriptor, like property
+    """A dataclass field that may be given a :class:`Deferred`: made, once, when first
+    read (an array given is kept as it is). :func:`deferred_shape` says its shape
+    without making it. The field has no default."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = f"_deferred_{name}"
+
+    def __get__(self, obj, owner=None):
+        if obj is None:  # the class's attribute: no default (dataclasses reads this)
+            raise AttributeError(self.slot)
+        value = obj.__dict__[self.slot]
+        if isinstance(value, Deferred):
+            value = obj.__dict__[self.slot] = value.make()
+        return value
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__[self.slot] = value
+
+
+def deferred_shape(obj, name: str) -> tuple[int, ...]:
+    """The shape of ``obj``'s :class:`deferred_field` ``name``, made or not."""
+    return tuple(np.shape(obj.__dict__[f"_deferred_{name}"]))
+
+
 class HistogramCache:
     """On-disk cache of style-photo histograms.
 
@@ -156,8 +224,10 @@ class HistogramCache:
     bins, the subsampling limit and the colour spaces (``space``: the
     OpenColorIO config and the working space the colours were converted into),
     so an edited photo is re-read. Entries are small sparse ``.npz`` files at the
-    top of the cache folder (:mod:`wbcgrade.color.io.cache`: a damaged entry is
-    rebuilt, one that cannot be written is one warning; caching never makes a run fail).
+    top of the cache folder, each beside the histogram re-binned onto the grids a
+    grade asks for (:meth:`get_resampled`, keyed the same way and the grid)
+    (:mod:`wbcgrade.color.io.cache`: a damaged entry is rebuilt, one that cannot be
+    written is one warning; caching never makes a run fail).
     """
 
     VERSION = 1
@@ -171,21 +241,59 @@ class HistogramCache:
         self.folder = Path(folder)
         self.enabled = enabled
 
-    def _key(self, path: Path, bins: int, max_pixels: int, space: str = "") -> Path:
+    def _key(self, path: Path, bins: int, max_pixels: int, space: str = "",
+             at: int | None = None) -> Path:
         text = (f"{self.VERSION}|{file_key(path)}|{bins}|{max_pixels}"
-                + (f"|{space}" if space else ""))
+                + (f"|{space}" if space else "") + (f"|at {at}" if at is not None else ""))
         return entry_path(self.folder, "", text)
 
     def get(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS,
             space: str = "") -> np.ndarray | None:
         """The cached histogram (bins, bins, bins), or None."""
+        sparse = self.get_sparse(path, bins, max_pixels, space)
+        return None if sparse is None else from_sparse(*sparse, bins)
+
+    def get_sparse(self, path: Path, bins: int, max_pixels: int = DEFAULT_MAX_PIXELS,
+                   space: str = "") -> tuple[np.ndarray, np.ndarray] | None:
+        """The cached histogram as :func:`from_sparse` takes it, ``(index, values)``, or
+        None."""
         if not self.enabled:
             return None
         try:
             data = read_entry(self._key(path, bins, max_pixels, space))
-            return from_sparse(data["index"], data["values"], bins)
+            index, values = data["index"], data["values"]
+            if (index.ndim != 1 or index.shape != values.shape or not len(index)
+                    or index.min() < 0 or index.max() >= bins ** 3):
+                return None
+            return index, values
         except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
             return None
+
+    def get_resampled(self, path: Path, bins: int, at: int,
+                      max_pixels: int = DEFAULT_MAX_PIXELS,
+                      space: str = "") -> np.ndarray | None:
+        """The cached :func:`resample_histogram` of the photo's histogram on ``bins``
+        onto ``at`` bins (at, at, at), or None. Keyed as the histogram is (the photo's
+        path, time and size, the settings), so an edited photo is resampled again."""
+        if not self.enabled:
+            return None
+        try:
+            data = read_entry(self._key(path, bins, max_pixels, space, at))
+            hist = data["hist"]
+            return hist if hist.shape == (at,) * 3 and hist.dtype == np.float64 else None
+        except Exception:  # noqa: BLE001 - any damage is a miss
+            return None
+
+    def put_resampled(self, path: Path, bins: int, at: int, hist: np.ndarray,
+                      max_pixels: int = DEFAULT_MAX_PIXELS, space: str = "") -> None:
+        """Store what :meth:`get_resampled` gives back (failures are logged, not raised)."""
+        if not self.enabled:
+            return
+        try:
+            target = self._key(path, bins, max_pixels, space, at)
+        except OSError:  # the photo is gone
+            return
+        write_entry(target, hist=np.asarray(hist, dtype=np.float64))
 
     def put(self, path: Path, bins: int, hist: np.ndarray,
             max_pixels: int = DEFAULT_MAX_PIXELS, space: str = "") -> np.ndarray:
@@ -195,15 +303,21 @@ class HistogramCache:
         kept in float32), so a first run and the runs that read the cache compute
         the same things (a set's look, keyed by its histograms, is found again).
         """
+        return from_sparse(*self.put_sparse(path, bins, hist, max_pixels, space), bins)
+
+    def put_sparse(self, path: Path, bins: int, hist: np.ndarray,
+                   max_pixels: int = DEFAULT_MAX_PIXELS,
+                   space: str = "") -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`put`, the histogram as stored given back as :meth:`get_sparse` gives it:
+        ``(index, values)``, which :func:`from_sparse` makes what :meth:`get` returns."""
         index, values = to_sparse(hist)
-        stored = from_sparse(index, values, bins)
         if self.enabled:
             try:
                 target = self._key(path, bins, max_pixels, space)
             except OSError:  # the photo is gone: nothing to key its entry by
-                return stored
+                return index, values
             write_entry(target, compress=True, index=index, values=values)
-        return stored
+        return index, values
 
 
 class PaletteSum:

@@ -53,12 +53,16 @@ from wbcgrade.color.colorspace import (
 from wbcgrade.color.defaults import DEFAULT_PRESET_WIDTH
 from wbcgrade.color.histogram import (
     DEFAULT_MAX_PIXELS,
+    Deferred,
     HistogramCache,
+    deferred_field,
+    deferred_shape,
     from_sparse,
     grid_points,
     image_histogram,
     resample_histogram,
     soft_histogram,
+    stack_from_sparse,
     to_sparse,
 )
 from wbcgrade.color.io.cache import command_cache
@@ -127,7 +131,9 @@ class StyleSet:
     """
 
     names: list[str]
-    histograms: np.ndarray
+    #: made when first read when the set was given a :class:`~wbcgrade.color.histogram.Deferred`
+    #: (a folder read from the cache: a look grade may need only :meth:`at_bins`'s grids)
+    histograms: np.ndarray = deferred_field()
     source: str = ""
     width: float | None = None
     description: str = ""
@@ -137,7 +143,12 @@ class StyleSet:
 
     @property
     def bins(self) -> int:
-        return int(self.histograms.shape[1])
+        return int(deferred_shape(self, "histograms")[1])
+
+    def __getstate__(self) -> dict:
+        """Pickled (a batch's workers, a copy) with its histograms made dense, once: kept."""
+        self.histograms  # noqa: B018 - reading a deferred stack makes and keeps it
+        return self.__dict__
 
     @property
     def working_space(self) -> str:
@@ -269,46 +280,60 @@ def _megapixels(path: Path) -> float:
 def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pixels: int,
                      working: str, warn: Callable[[str], None],
                      progress: Callable[[int, int, str], None] | None,
-                     on_image: ImageHook | None = None, where: str | os.PathLike = "styles"
-                     ) -> tuple[np.ndarray, list[str]]:
+                     on_image: ImageHook | None = None, where: str | os.PathLike = "styles",
+                     resampled: Sequence[int] = ()) -> _FolderHistograms:
     """Histograms of the readable ``files`` (from ``cache`` when it holds them; the others
-    skipped with a ``warn``ing), stacked, and their paths, in the order of ``files``; read
-    in up to :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time.
+    skipped with a ``warn``ing) and their paths, in the order of ``files``; read in up to
+    :data:`READ_THREADS` threads, :data:`READ_MEGAPIXELS` at a time.
 
-    The stack is allocated once, after its size is checked against the memory budget
-    (``limits.check_memory``: InputError naming ``where``), and filled in place."""
+    The stack is checked against the memory budget (``limits.check_memory``: InputError
+    naming ``where``) and made dense when first read (:class:`_FolderHistograms`): each
+    histogram is kept sparse, as the cache holds it, until then. With a cache, each photo's
+    histogram
+    re-binned onto the grids of ``resampled`` (:func:`resample_histogram`, as
+    :meth:`StyleSet.at_bins` does it) is read from the cache too, or made and stored."""
     from concurrent.futures import ThreadPoolExecutor
-
 
     check_memory(f"the histograms of {len(files)} style photos at {bins}^3 bins",
                  len(files) * bins ** 3 * 8 * 2, where,  # (x2: what the grade makes of them)
                  "use fewer style photos or fewer {transfer.bins}", ("transfer.bins",))
-    stack = np.empty((len(files), bins, bins, bins))
-
     space = f"{config_path()}|{working}"
     budget = _Budget(READ_MEGAPIXELS)
+    grids = sorted({int(n) for n in resampled if n != bins}) if cache.enabled else []
 
-    def read(path: Path) -> tuple[np.ndarray | None, InputError | None]:
-        hist = cache.get(path, bins, max_pixels, space)
-        if hist is not None:
-            return hist, None
-        size = _megapixels(path)
-        budget.take(size)
-        try:
-            hist = _photo_histogram(path, bins, max_pixels, working, on_image)
-        except InputError as exc:
-            return None, exc
-        finally:
-            budget.give(size)
-        return cache.put(path, bins, hist, max_pixels, space), None  # as later runs read it
+    def read(path: Path) -> tuple[tuple | None, dict, InputError | None]:
+        hist = cache.get_sparse(path, bins, max_pixels, space)
+        if hist is None:
+            size = _megapixels(path)
+            budget.take(size)
+            try:
+                dense = _photo_histogram(path, bins, max_pixels, working, on_image)
+            except InputError as exc:
+                return None, {}, exc
+            finally:
+                budget.give(size)
+            # as later runs read it; kept sparse (a folder of hundreds of photos holds
+            # its dense stack once, when it is read)
+            hist = cache.put_sparse(path, bins, dense, max_pixels, space)
+            del dense
+        coarse = {}
+        for at in grids:
+            found = cache.get_resampled(path, bins, at, max_pixels, space)
+            if found is None:
+                found = resample_histogram(from_sparse(*hist, bins), at)
+                cache.put_resampled(path, bins, at, found, max_pixels, space)
+            coarse[at] = found
+        return hist, coarse, None
 
+    parts: list = []
+    coarse_parts: dict[int, list[np.ndarray]] = {at: [] for at in grids}
     used: list[str] = []
     threads = max(1, min(READ_THREADS, cpu_count(), len(files)))
     pool = ThreadPoolExecutor(threads)
     try:
         if progress and files:
             progress(0, len(files), files[0].name)
-        for number, (path, (hist, exc)) in enumerate(zip(files, pool.map(read, files))):
+        for number, (path, (hist, coarse, exc)) in enumerate(zip(files, pool.map(read, files))):
             if progress and number + 1 < len(files):
                 progress(number + 1, len(files), files[number + 1].name)
             if exc is not None:
@@ -317,14 +342,35 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue
-            stack[len(used)] = hist
+            parts.append(hist)
+            for at in grids:
+                coarse_parts[at].append(coarse[at])
             used.append(str(path))
             del hist
     finally:  # interrupted: the photos not started are not read
         pool.shutdown(wait=True, cancel_futures=True)
     if progress:
         progress(len(files), len(files), "")
-    return stack[:len(used)], used
+    return _FolderHistograms(parts, bins, used,
+                             {at: np.stack(found) for at, found in coarse_parts.items()
+                              if len(found)})
+
+
+@dataclass
+class _FolderHistograms:
+    """What :func:`_read_histograms` read: each photo's histogram (sparse, as the cache
+    keeps it), the grid, the photos' paths and the stacks already re-binned."""
+
+    parts: list
+    bins: int
+    used: list[str]
+    resampled: dict[int, np.ndarray]
+
+    def stack(self) -> Deferred:
+        """The (S, bins, bins, bins) stack, made when first read
+        (:func:`~wbcgrade.color.histogram.stack_from_sparse`)."""
+        return Deferred((len(self.parts), *(self.bins,) * 3), stack_from_sparse, self.parts,
+                        self.bins)
 
 
 def photo_palettes(files: list[str | os.PathLike], bins: int,
@@ -338,11 +384,13 @@ def photo_palettes(files: list[str | os.PathLike], bins: int,
     when none is readable."""
     cache = cache or HistogramCache(enabled=False)
     working = resolve_space(working_space) if working_space else default_working_space()
-    hists, used = _read_histograms([Path(f) for f in files], bins, cache, max_pixels, working,
-                                   warn or log.warning, progress)
-    if not len(hists):
+    read = _read_histograms([Path(f) for f in files], bins, cache, max_pixels, working,
+                            warn or log.warning, progress)
+    used = read.used
+    if not used:
         return None
-    return StyleSet(names=[Path(path).name for path in used], histograms=hists,
+    return StyleSet(names=[Path(path).name for path in used], histograms=read.stack(),
+                    _resampled=dict(read.resampled),
                     source="", meta={"working_space": working, "ocio_config": config_path(),
                                      "files": used})
 
@@ -353,7 +401,8 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
                       warn: Callable[[str], None] | None = None,
                       progress: Callable[[int, int, str], None] | None = None,
                       working_space: str | None = None,
-                      on_image: ImageHook | None = None) -> StyleSet:
+                      on_image: ImageHook | None = None,
+                      resampled: Sequence[int] = ()) -> StyleSet:
     """Histograms of every photo in a folder (not recursive), sorted by name.
 
     Files that are not readable images are skipped with a warning (passed to
@@ -363,8 +412,10 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     ``working_space`` (None: sRGB-encoded Rec.709) before its histogram.
 
     ``on_image``: told of each photo decoded (:data:`ImageHook`; not of those whose
-    histogram was cached). Raises InputError when the folder is missing or holds no
-    usable photo.
+    histogram was cached). ``resampled``: the grids :meth:`StyleSet.at_bins` will be
+    asked for (e.g. the fit's), read from the cache with the histograms (the histograms
+    themselves are then made dense only when read). Raises InputError when the folder is
+    missing or holds no usable photo.
     """
     folder = Path(folder)
     if folder.is_file():
@@ -380,15 +431,17 @@ def load_style_folder(folder: str | os.PathLike, bins: int,
     cache = cache or HistogramCache(enabled=False)
     working = resolve_space(working_space) if working_space else default_working_space()
     files = sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    hists, used = _read_histograms(files, bins, cache, max_pixels, working, warn, progress,
-                                   on_image, folder)
+    read = _read_histograms(files, bins, cache, max_pixels, working, warn, progress,
+                            on_image, folder, resampled)
+    used = read.used
     names = [Path(path).stem for path in used]
-    if not len(hists):
+    if not used:
         raise InputError(f"{folder}: no readable photos in the style folder")
     if len(set(names)) != len(names):
         dupes = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"{folder}: several style photos share the name {dupes[0]!r}")
-    return StyleSet(names=names, histograms=hists, source=str(folder),
+    return StyleSet(names=names, histograms=read.stack(), source=str(folder),
+                    _resampled=dict(read.resampled),
                     meta={"working_space": working, "ocio_config": config_path(),
                           "files": used,
                           "cache_dir": str(cache.folder) if cache.enabled else None})
@@ -571,12 +624,13 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         raise _bad(path, "bin index out of range")
     if not np.all(np.isfinite(values)) or np.any(values < 0):
         raise _bad(path, "negative or non-finite histogram values")
-    hists = []
+    parts = []
     for s in range(len(names)):
         part = slice(int(offsets[s]), int(offsets[s + 1]))
         if not values[part].sum() > 0:
             raise _bad(path, f"style {names[s]!r} is empty")
-        hists.append(from_sparse(index[part], values[part], bins))
+        parts.append((index[part], values[part]))
+    hists = stack_from_sparse(parts, bins)  # as from_sparse makes each, in one array
     meta = dict(header)
     # what the file holds, for keys of what is computed from it (not the dense histograms)
     meta["file_digest"] = hashlib.sha1(raw).hexdigest()
@@ -588,7 +642,7 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         problem = _look_problem(meta["look"])
         if problem:
             raise _bad(path, problem)
-    return StyleSet(names=list(names), histograms=np.stack(hists), source=str(path),
+    return StyleSet(names=list(names), histograms=hists, source=str(path),
                     width=None if width is None else float(width),
                     description=str(header.get("description", "")), meta=meta)
 
@@ -680,13 +734,15 @@ class StyleSource:
 def load_styles(source: StyleSource, bins: int, working_space: str | None = None,
                 warn: Callable[[str], None] | None = None,
                 progress: Callable[[int, int, str], None] | None = None,
-                on_image: ImageHook | None = None) -> StyleSet:
+                on_image: ImageHook | None = None,
+                resampled: Sequence[int] = ()) -> StyleSet:
     """The styles a command names: a folder's histograms at ``bins`` (cached) or a preset.
 
     The histograms are those of ``working_space`` (None: sRGB-encoded
     Rec.709): style photos are converted from their own spaces before
     binning; a preset built in another working space is converted
-    (:func:`styles_in_space`).
+    (:func:`styles_in_space`). ``resampled``: a folder's grids also kept in its
+    cache (:func:`load_style_folder`).
     """
     if (source.style_dir is None) == (source.preset is None):
         raise OptionError("give exactly one of {style_dir} DIR or {preset} NAME_OR_FILE",
@@ -698,7 +754,7 @@ def load_styles(source: StyleSource, bins: int, working_space: str | None = None
         return styles_in_space(styles, working_space or default_working_space())
     return load_style_folder(source.style_dir, bins, cache=source.cache, warn=warn,
                              progress=progress, working_space=working_space,
-                             on_image=on_image)
+                             on_image=on_image, resampled=resampled)
 
 
 def one_style_warning(source: StyleSource, styles: StyleSet, mode: str) -> Worded | None:

@@ -292,12 +292,13 @@ def compiled_preferred() -> bool:
 def numpy_first(kernel: Callable, size: int, limit: int) -> bool:
     """Whether a numpy twin of compiled ``kernel`` (the same numbers, bit for bit) should
     do ``size`` items of work instead: the work is small (``size <= limit``), the
-    kernel has not run in this process yet, and the twin's work so far stays under
-    ``4 * limit``. A kernel's first call loads numba's compiler (about half a second,
-    though the kernel is cached) or, after an install, compiles it (seconds): more
-    than a small photo's whole grade; a process that grades many small photos (a
-    batch) pays that once and runs the faster kernel from then on."""
-    if size > limit or _prefer_compiled:
+    kernel has not run in this process yet, no other kernel has (numba's compiler is
+    then loaded: this kernel's first call costs only its cache), and the twin's work so
+    far stays under ``4 * limit``. A process's first kernel call loads numba's compiler
+    (about half a second, though the kernel is cached) or, after an install, compiles it
+    (seconds): more than a small photo's whole grade; a process that grades many small
+    photos (a batch) pays that once and runs the faster kernel from then on."""
+    if size > limit or _prefer_compiled or _made:
         return False
     if not (isinstance(kernel, _Kernel) and kernel._dispatcher is None) \
             and getattr(kernel, "overloads", None):

@@ -33,7 +33,7 @@ import numpy as np
 
 from wbcgrade._publish import make_folders_for, plan_outputs
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.grade.grading import Grade, grade_encoded, outcome_on_photo
+from wbcgrade.color.grade.grading import Grade, grade_encoded, outcome_on_photo, style_grids
 from wbcgrade.color.grade.saved_grade import save_grade, saved_name
 from wbcgrade.color.histogram import image_histogram
 from wbcgrade.color.io.images import (
@@ -372,7 +372,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         return report
     start = time.perf_counter()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
-                         progress.styles, matching_hook(source, options, [plan.photo]))
+                         progress.styles, matching_hook(source, options, [plan.photo]),
+                         resampled=style_grids(options))
     _warn_one_style(source, styles, options, progress.warn)
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},

@@ -69,14 +69,18 @@ def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse
 @pytest.mark.parametrize("shape, radius", [((37, 53, 5), 3), ((7, 5, 2), 9), ((1, 6, 3), 2),
                                            ((6, 1, 1), 4), ((70, 40, 12), 1)])
 def test_box_means_are_scipys_uniform_filter(rng, shape, radius):
-    """The compiled box filter (wider than the image too: mirrored again and again) gives
-    scipy.ndimage's reflect-mode uniform filter on every channel, to float32 rounding."""
+    """OpenCV's box filter (wider than the image too: mirrored again and again; up to 12
+    channels in one call, more in turn) gives scipy.ndimage's reflect-mode uniform filter
+    on every channel, to float32 rounding."""
     from scipy import ndimage
 
     x = rng.random(shape).astype(np.float32) * 2 - 0.5
     expected = np.stack([ndimage.uniform_filter(x[..., k], size=2 * radius + 1, mode="reflect")
                          for k in range(shape[2])], axis=-1)
-    np.testing.assert_allclose(regrain_module._box(x, radius), expected, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(regrain_module._box_cv2(x, radius), expected, rtol=0, atol=1e-6)
+    wide = np.concatenate([x] * 5, axis=-1)  # over 12 channels
+    np.testing.assert_allclose(regrain_module._box_cv2(wide, radius),
+                               np.concatenate([expected] * 5, axis=-1), rtol=0, atol=1e-6)
 
 
 @pytest.mark.slow
@@ -87,7 +91,8 @@ def test_window_models_solve_the_regularised_local_fit(rng):
     change = (0.3 * guide[..., ::-1] ** 2 - 0.1
               + 0.02 * rng.standard_normal(guide.shape)).astype(np.float32)
     radius, eps, y, x = 2, 0.01, 7, 9
-    models = regrain_module._window_models(guide, change, radius, eps)
+    models = regrain_module._window_models_numpy(guide, change, radius, eps, None,
+                                                 regrain_module._uniform_filter_cv2)
     window = np.s_[y - radius:y + radius + 1, x - radius:x + radius + 1]
     g = guide[window].reshape(-1, 3).astype(np.float64)
     d = change[window].reshape(-1, 3).astype(np.float64)
@@ -119,16 +124,77 @@ def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixel
 
 
 @pytest.mark.parametrize("shape, radius", [((37, 53, 3), 3), ((7, 5, 3), 9), ((1, 6, 3), 2)])
-def test_small_grids_solved_with_numpy_match_the_compiled_kernels(rng, shape, radius):
-    """Below ``_NUMPY_SOLVE_PIXELS`` the window models and box means come from numpy and
-    scipy (nothing to compile on a first run): the same numbers as the kernels."""
+def test_small_grids_solved_with_numpy_match_opencvs_filter(rng, shape, radius):
+    """Below ``_NUMPY_SOLVE_PIXELS`` the window models and box means are filtered with
+    numpy and scipy (the numbers small photos always had), above with OpenCV's box
+    filter: the same models to float32 rounding."""
     guide = rng.random(shape).astype(np.float32)
     change = (0.3 * guide[..., ::-1] ** 2 - 0.1).astype(np.float32)
-    compiled = regrain_module._window_models(guide, change, radius, 0.01)
+    fast = regrain_module._window_models_numpy(guide, change, radius, 0.01, None,
+                                               regrain_module._uniform_filter_cv2)
     plain = regrain_module._window_models_numpy(guide, change, radius, 0.01)
-    np.testing.assert_allclose(plain, compiled, rtol=0, atol=5e-5)
-    np.testing.assert_allclose(regrain_module._box_numpy(compiled, radius),
-                               regrain_module._box(compiled, radius), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(plain, fast, rtol=0, atol=5e-5)
+    np.testing.assert_allclose(regrain_module._box_numpy(fast, radius),
+                               regrain_module._box_cv2(fast, radius), rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(37, 53), (1, 9), (9, 1), (1, 1), (64, 300)])
+def test_a_photo_solved_at_full_size_is_applied_by_numpy_as_the_kernel_does(rng, shape):
+    """A photo solved at full size (up to 1.5 megapixels) takes each pixel's own ``A, b``
+    with numpy (``_apply_same_grid``: nothing to load): the kernel's float32 numbers bit
+    for bit, zeros and signed zeros among the coefficients, 0 and 1 among the colours."""
+    from wbcgrade.core import in_bands
+
+    source = rng.random((*shape, 3), dtype=np.float32)
+    source[rng.random(shape) < 0.1] = 0.0
+    source[rng.random(shape) < 0.1] = 1.0
+    coefficients = (rng.standard_normal((*shape, 12)) * 0.5).astype(np.float32)
+    coefficients[rng.random((*shape, 12)) < 0.05] = 0.0
+    coefficients[rng.random((*shape, 12)) < 0.05] = -0.0
+    width = shape[1]
+    fx = np.minimum(np.maximum(np.arange(width) + 0.5 - 0.5, 0.0), width - 1.0)
+    left = np.minimum(fx.astype(np.int64), width - 2) if width > 1 \
+        else np.zeros(width, np.int64)
+    right = np.minimum(left + 1, width - 1)
+    weight = (fx - left).astype(np.float32)
+    kernel = np.empty_like(source)
+    in_bands(regrain_module._apply_rows, shape[0], source, coefficients, 1.0, left, right,
+             weight, kernel)
+    twin = np.empty_like(source)
+    regrain_module._apply_same_grid(source, coefficients, twin)
+    assert np.array_equal(twin.view(np.uint32), kernel.view(np.uint32))
+    regrain_module._apply_same_grid(source, coefficients, source)  # in place
+    assert np.array_equal(source.view(np.uint32), kernel.view(np.uint32))
+
+
+_WITHOUT_NUMBA = """
+import sys
+import numpy as np
+import wbcgrade.core._cpu as cpu
+from wbcgrade.color.mapping.regrain import regrain_map
+from wbcgrade.color.io._quantise import to_uint8
+
+cpu.fast_cpu = lambda *args, **kwargs: None  # (its own helper: not what this test is about)
+rng = np.random.default_rng(0)
+rgb = rng.random((700, 1000, 3), dtype=np.float32)
+table = (np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1) ** 1.5)
+graded = regrain_map(rgb, table.astype(np.float32), 0.8)
+to_uint8(graded)
+assert "numba" not in sys.modules, "numba loaded"
+"""
+
+
+@pytest.mark.slow
+def test_a_photo_solved_at_full_size_is_graded_without_numba():
+    """A 0.7-megapixel photo's regrain (solved at full size: OpenCV's box filter, the numpy
+    solve and the numpy twins of the map and the apply) and its 8-bit conversion load no
+    compiled kernel: numba's start (~0.7 s) is not paid by a saved grade of that size."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _WITHOUT_NUMBA], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
 
 
 # numpy twins: a small photo's first grade runs numpy instead of loading numba's compiler
@@ -187,22 +253,25 @@ def test_numpy_first_only_for_small_work_before_the_kernel_ran(monkeypatch):
     import wbcgrade.core._jit as jit
     from wbcgrade.core import compiled, numpy_first
 
-    monkeypatch.setattr(jit, "_prefer_compiled", False)  # as in a fresh process
-
     @compiled()
     def kernel(x):  # pragma: no cover - compiled
         return x + 1
 
+    other = compiled()(lambda x: x - 1)
+    third = compiled()(lambda x: x * 2)
+    monkeypatch.setattr(jit, "_prefer_compiled", False)  # as in a fresh process
+    monkeypatch.setattr(jit, "_made", False)  # (no kernel has run yet)
     assert numpy_first(kernel, 10, 100) and not numpy_first(kernel, 1000, 100)
     # a batch of small work: the twin takes up to 4 x the limit, then the kernel is loaded
     assert [numpy_first(kernel, 100, 100) for _ in range(5)] == [True] * 3 + [False] * 2
-    other = compiled()(lambda x: x - 1)
     assert numpy_first(other, 10, 100)  # each kernel its own budget
     monkeypatch.setattr(jit, "_prefer_compiled", True)  # a batch: kernels from the start
     assert not numpy_first(other, 10, 100)
     monkeypatch.setattr(jit, "_prefer_compiled", False)
     kernel(1)
     assert not numpy_first(kernel, 10, 100)  # loaded: the kernel is the faster one now
+    monkeypatch.setattr(jit, "_made", True)  # a kernel ran: numba's compiler is loaded
+    assert not numpy_first(third, 10, 100)  # so a third one's first call costs its cache
 
 
 @pytest.mark.parametrize("shape", [(30, 45), (1, 1), (1, 7), (5, 3), (64, 9)])
@@ -228,8 +297,7 @@ import wbcgrade.color.mapping.remap as remap
 
 assert not regrain.load_kernels(1_000_000) and "numba" not in sys.modules
 assert regrain.load_kernels(16_000_000)
-kernels = {"block_means_mapped": remap, "moment_rows": regrain, "solve_columns": regrain,
-           "box_rows": regrain, "box_columns": regrain, "apply_rows": regrain}
+kernels = {"block_means_mapped": remap, "apply_rows": regrain}
 loaded = {name: list(getattr(module, "_" + name).signatures)
           for name, module in kernels.items()}
 assert all(len(signatures) == 1 for signatures in loaded.values()), loaded

@@ -18,7 +18,12 @@ from typing import NamedTuple
 import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
-from wbcgrade.color.histogram import image_histogram, resample_histogram
+from wbcgrade.color.histogram import (
+    deferred_field,
+    deferred_shape,
+    image_histogram,
+    resample_histogram,
+)
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.outcome import GradeSource, TransportCheck
 from wbcgrade.color.palette.fit import FitSummary, fit_weights
@@ -41,15 +46,18 @@ class PhotoHistograms:
     transfer grid, both of working-space colours; :meth:`at` gives other grids."""
 
     fit: np.ndarray
-    transfer: np.ndarray
+    #: a :class:`~wbcgrade.color.histogram.Deferred` is binned when first read (a look grade
+    #: may never need the transfer grid)
+    transfer: np.ndarray = deferred_field()
     pixels: tuple | None = field(default=None, repr=False, compare=False)
 
     def at(self, bins: int) -> np.ndarray:
         """The histogram on a ``bins``^3 grid: binned from the pixels when there are
         some (a photo), else re-binned from the transfer grid's (a pooled series)."""
-        for hist in (self.transfer, self.fit):
-            if hist.shape[0] == bins:
-                return hist
+        if deferred_shape(self, "transfer")[0] == bins:
+            return self.transfer
+        if self.fit.shape[0] == bins:
+            return self.fit
         if self.pixels is not None:
             encoded, alpha, limit = self.pixels
             return image_histogram(encoded, bins, alpha, limit)

@@ -64,7 +64,8 @@ from wbcgrade.color.grade.builders import (
     quiet,
 )
 from wbcgrade.color.grade.look_builder import look_map
-from wbcgrade.color.histogram import image_histogram
+from wbcgrade.color.histogram import Deferred, image_histogram
+from wbcgrade.color.look.set_extraction import FIT_BINS as LOOK_FIT_BINS
 from wbcgrade.color.mapping.lut import check_lut_size, color_map_to_lut
 from wbcgrade.color.mapping.regrain import regrain_map
 from wbcgrade.color.mapping.remap import (
@@ -93,7 +94,8 @@ from wbcgrade.color.presets import StyleSet, own_style, styles_in_space
 from wbcgrade.errors import InputError, OptionError
 
 __all__ = ["Grade", "PhotoHistograms", "MapRequest", "BuiltMap", "MAP_BUILDERS",
-           "register_map_builder", "palette_map", "look_map", "photo_histograms", "finish_map",
+           "register_map_builder", "palette_map", "look_map", "photo_histograms", "style_grids",
+           "finish_map",
            "grade_histograms", "grade_outcome", "outcome_on_photo", "strengthened",
            "grade_encoded", "grade_array"]
 
@@ -216,10 +218,12 @@ class Grade:
 def photo_histograms(encoded: np.ndarray, options: GradeOptions,
                      alpha: np.ndarray | None = None) -> PhotoHistograms:
     """The histograms of working-space colours (H, W, 3) in [0, 1]; pixels with alpha 0
-    do not count; photos above ``transfer.max_pixels`` are subsampled."""
+    do not count; photos above ``transfer.max_pixels`` are subsampled. The transfer grid's
+    is binned when first read (a look grade does not read it)."""
     limit = options.transfer.max_pixels
+    bins = options.transfer.bins
     return PhotoHistograms(image_histogram(encoded, options.fit.bins, alpha, limit),
-                           image_histogram(encoded, options.transfer.bins, alpha, limit),
+                           Deferred((bins,) * 3, image_histogram, encoded, bins, alpha, limit),
                            (encoded, alpha, limit))
 
 
@@ -231,6 +235,15 @@ def photo_histograms(encoded: np.ndarray, options: GradeOptions,
 
 
 
+
+
+def style_grids(options: GradeOptions) -> tuple[int, ...]:
+    """The grids the grade path re-bins a style set onto (:meth:`StyleSet.at_bins`) besides
+    the transfer grid: the fit's, and for a look the look's (the set's look is keyed by
+    it), which a folder's histogram cache keeps
+    (:func:`wbcgrade.color.presets.load_styles`)."""
+    look = (LOOK_FIT_BINS,) if options.map.builder == "look" else ()
+    return tuple(sorted({options.fit.bins, *look}))
 
 
 #: Map builders by name (``map.builder``): MapRequest -> BuiltMap.

@@ -61,7 +61,7 @@ def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
 
 #: Values up to which :func:`to_uint8` runs its numpy twin while ``_to_uint8`` has not run
 #: in the process (see :func:`wbcgrade.core.numpy_first`).
-_NUMPY_VALUES = 1_200_000
+_NUMPY_VALUES = 4_500_000  # (a 1.5-megapixel photo's three channels)
 
 
 def _to_uint8_numpy(flat: np.ndarray, half_even: bool) -> np.ndarray:

@@ -3,8 +3,8 @@
 Three things are kept between runs, each in its own place under one cache folder
 (:func:`cache_folder`):
 
-- style photos' histograms (``color.histogram.HistogramCache``): at the folder's
-  top, where they have always been;
+- style photos' histograms (``color.histogram.HistogramCache``), and each re-binned
+  onto the grids a grade asks for: at the folder's top, where they have always been;
 - a style set's look and the natural palettes' statistics (``color.look``): ``looks/``;
 - style photos prepared for scene matching (``color.look.scene``): ``scenes/``.
 

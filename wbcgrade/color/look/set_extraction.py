@@ -29,13 +29,20 @@ and the natural palettes that model content (:func:`natural_palettes`,
 from __future__ import annotations
 
 import functools
+import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from wbcgrade.color.colorspace import default_working_space
-from wbcgrade.color.histogram import HistogramCache, add_floor, grid_points, resample_histogram
+from wbcgrade.color.histogram import (
+    HistogramCache,
+    add_floor,
+    deferred_shape,
+    grid_points,
+    resample_histogram,
+)
 from wbcgrade.color.io.cache import cache_folder, entry_path, read_entry, write_entry
 from wbcgrade.color.look import prior
 from wbcgrade.color.look import statistics as stats
@@ -207,8 +214,6 @@ _AVERAGE_CONTENTS: dict[str, np.ndarray] = {}
 
 def _average_content(natural_map: np.ndarray, geometry) -> np.ndarray:
     """The uniform Wasserstein barycenter of the natural palettes (n, b, b, b), computed once."""
-    import hashlib
-
     digest = hashlib.sha1(np.ascontiguousarray(natural_map, dtype=np.float64).tobytes())
     digest.update(repr(natural_map.shape).encode())
     key = digest.hexdigest()
@@ -355,8 +360,9 @@ def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     keep = [i for i, name in enumerate(styles.names) if name not in exclude]
     if len(keep) == len(styles.names):
         return styles
+    meta = {k: v for k, v in styles.meta.items() if k != "file_digest"}  # not the file's
     return StyleSet([styles.names[i] for i in keep], styles.histograms[keep], styles.source,
-                    styles.width, styles.description, dict(styles.meta))
+                    styles.width, styles.description, meta)
 
 
 def _natural_path():
@@ -382,8 +388,6 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
     naturals : StyleSet of ungraded photos (default :func:`natural_palettes`),
         in the same working space as ``styles``.
     """
-    import hashlib
-
     naturals = naturals if naturals is not None else natural_palettes()
     digest = hashlib.sha1()
     own = naturals.meta.get("own")
@@ -460,14 +464,14 @@ _STAT_FIELDS = ("quantiles", "band_mass", "band_mean", "band_spread", "spread", 
 
 def _palettes_digest(palettes) -> str:
     """A digest of a StyleSet's histograms (as stored: no re-binning), once per array."""
-    import hashlib
-
-    hists = palettes.histograms
     meta = getattr(palettes, "meta", {}) or {}
     file_digest = getattr(palettes, "file_digest", None)
-    if file_digest:  # a preset file, in a working space: no need to hash arrays
+    if file_digest:  # a preset file, in a working space: its stack need not even be made
+        shape = (deferred_shape(palettes, "histograms") if isinstance(palettes, StyleSet)
+                 else np.shape(palettes.histograms))
         return (f"{file_digest}|{meta.get('working_space', '')}|"
-                f"{meta.get('converted_from', '')}|{hists.shape}")
+                f"{meta.get('converted_from', '')}|{shape}")
+    hists = palettes.histograms
     known = _DIGESTS.get(id(hists))
     if known is None or known[0] is not hists:
         digest = hashlib.sha1(repr((hists.shape, str(hists.dtype))).encode())
@@ -483,8 +487,6 @@ def natural_statistics(naturals, cache_from=None):
     key = _palettes_digest(naturals) + repr(statistics_settings())
     if key in _NATURAL_STATISTICS:
         return _NATURAL_STATISTICS[key]
-    import hashlib
-
     name = "natural-" + hashlib.sha1(key.encode()).hexdigest()
     path = _look_cache_path(name, cache_from)
 

@@ -41,224 +41,15 @@ __all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels",
 _MAX_SOLVE_PIXELS = 1_500_000
 
 
-@compiled(cache=True)
-def _reflect(i: int, n: int) -> int:  # pragma: no cover - compiled
-    """Index ``i`` of a line of ``n`` extended by mirroring (d c b a | a b c d | d c b a)."""
-    m = i % (2 * n)
-    return 2 * n - 1 - m if m >= n else m
-
-
-@compiled(cache=True)
-def _running_mean(line: np.ndarray, radius: int, out: np.ndarray) -> None:  # pragma: no cover
-    """``out[i] = mean(line[i - radius : i + radius + 1])`` over the (n, K) ``line`` mirrored
-    at its ends: a running sum in float64 (as ``scipy.ndimage.uniform_filter1d``)."""
-    n, k = line.shape
-    if n == 0:
-        return
-    inv = 1.0 / (2 * radius + 1)
-    acc = np.zeros(k, np.float64)
-    for i in range(-radius, radius + 1):
-        j = _reflect(i, n)
-        for c in range(k):
-            acc[c] += line[j, c]
-    for i in range(n):
-        for c in range(k):
-            out[i, c] = acc[c] * inv
-        enter = _reflect(i + radius + 1, n)
-        leave = _reflect(i - radius, n)
-        for c in range(k):
-            acc[c] += line[enter, c] - line[leave, c]
-
-
-#: Pixel columns of one task of the vertical pass (its running sums stay in the cache).
-_COLUMN_BLOCK = 32
-
-
-@compiled(cache=True)
-def _column_blocks(w: int) -> int:  # pragma: no cover - compiled
-    return (w + _COLUMN_BLOCK - 1) // _COLUMN_BLOCK
-
-
-@compiled(cache=True)
-def _column_sums(rows: np.ndarray, radius: int, lo: int, hi: int) -> np.ndarray:  # pragma: no cover
-    """(hi - lo, K) float64 sums of the columns lo:hi of (H, W, K) ``rows`` over the window
-    of output row 0 (mirrored at the top): the start of :func:`_column_means`."""
-    h, k = rows.shape[0], rows.shape[2]
-    acc = np.zeros((hi - lo, k), np.float64)
-    for i in range(-radius, radius + 1):
-        row = _reflect(i, h)
-        for col in range(lo, hi):
-            for c in range(k):
-                acc[col - lo, c] += rows[row, col, c]
-    return acc
-
-
-@compiled(cache=True)
-def _column_means(rows: np.ndarray, radius: int, y: int, lo: int, acc: np.ndarray,
-                  out: np.ndarray) -> None:  # pragma: no cover - compiled
-    """``out`` (n, K): the means over the window of output row ``y`` of the columns
-    lo:lo + n of (H, W, K) ``rows``, from their running sums ``acc`` (then moved to row
-    y + 1)."""
-    h, k = rows.shape[0], rows.shape[2]
-    inv = 1.0 / (2 * radius + 1)
-    enter = _reflect(y + radius + 1, h)
-    leave = _reflect(y - radius, h)
-    for i in range(acc.shape[0]):
-        for c in range(k):
-            out[i, c] = acc[i, c] * inv
-            acc[i, c] += rows[enter, lo + i, c] - rows[leave, lo + i, c]
-
-
-@compiled(nogil=True, cache=True)
-def _box_rows(x: np.ndarray, radius: int, rows: np.ndarray, lo: int,
-              hi: int) -> None:  # pragma: no cover - compiled
-    """Rows lo:hi of the horizontal pass of :func:`_box` into ``rows``."""
-    for y in range(lo, hi):
-        _running_mean(x[y], radius, rows[y])
-
-
-@compiled(nogil=True, cache=True)
-def _box_columns(rows: np.ndarray, radius: int, out: np.ndarray, lo: int,
-                 hi: int) -> None:  # pragma: no cover - compiled
-    """Column blocks lo:hi of the vertical pass of :func:`_box` into ``out``."""
-    h, w = rows.shape[:2]
-    for block in range(lo, hi):
-        start = block * _COLUMN_BLOCK
-        stop = min(start + _COLUMN_BLOCK, w)
-        acc = _column_sums(rows, radius, start, stop)
-        for y in range(h):
-            _column_means(rows, radius, y, start, acc, out[y, start:stop])
-
-
-def _box(x: np.ndarray, radius: int) -> np.ndarray:
-    """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
-    the borders: ``scipy.ndimage.uniform_filter(mode="reflect")`` on each channel, to
-    float32 rounding (rows, then blocks of columns, in bands on every core; running sums
-    in float64)."""
-    x = np.ascontiguousarray(x, dtype=np.float32)
-    h, w, k = x.shape
-    rows = np.empty((h, w, k), np.float32)
-    out = np.empty((h, w, k), np.float32)
-    if h == 0 or w == 0:
-        return out
-    in_bands(_box_rows, h, x, int(radius), rows, min_band=1)
-    in_bands(_box_columns, _column_blocks(w), rows, int(radius), out, min_band=1)
-    return out
-
-
 #: Per-pixel quantities whose window means give the local model: the guide I (3), the
 #: change d (3), the guide's products I_a I_c (a <= c: 6) and the cross products I_a d_c (9).
 _N_MOMENTS = 21
 
-
-@compiled(cache=True)
-def _solve_window(m: np.ndarray, eps: float, inverse: np.ndarray, cross: np.ndarray,
-                  out: np.ndarray, prior: np.ndarray) -> None:  # pragma: no cover - compiled
-    """One window's A (row-major, [a, c] at 3 a + c) and b into ``out`` (12,) from the
-    window means ``m`` (21,) of the moments: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
-    eps A0)``, ``b = mean(d) - A^T mean(I)``; ``A0`` the (9,) ``prior`` (empty: 0);
-    ``inverse``, ``cross``: (3, 3) scratch."""
-    # symmetric covariance of the guide (+ eps), inverted in closed form
-    s00 = m[6] - m[0] * m[0] + eps
-    s01 = m[7] - m[0] * m[1]
-    s02 = m[8] - m[0] * m[2]
-    s11 = m[9] - m[1] * m[1] + eps
-    s12 = m[10] - m[1] * m[2]
-    s22 = m[11] - m[2] * m[2] + eps
-    inverse[0, 0] = s11 * s22 - s12 * s12
-    inverse[0, 1] = s02 * s12 - s01 * s22
-    inverse[0, 2] = s01 * s12 - s02 * s11
-    inverse[1, 1] = s00 * s22 - s02 * s02
-    inverse[1, 2] = s01 * s02 - s00 * s12
-    inverse[2, 2] = s00 * s11 - s01 * s01
-    inverse[1, 0] = inverse[0, 1]
-    inverse[2, 0] = inverse[0, 2]
-    inverse[2, 1] = inverse[1, 2]
-    det = s00 * inverse[0, 0] + s01 * inverse[0, 1] + s02 * inverse[0, 2]
-    pulled = prior.shape[0] == 9
-    for a in range(3):
-        for c in range(3):
-            cross[a, c] = m[12 + 3 * a + c] - m[a] * m[3 + c]
-            if pulled:
-                cross[a, c] += eps * prior[3 * a + c]
-    for c in range(3):
-        offset = m[3 + c]
-        for a in range(3):
-            value = np.float32((inverse[a, 0] * cross[0, c] + inverse[a, 1] * cross[1, c]
-                                + inverse[a, 2] * cross[2, c]) / det)
-            out[3 * a + c] = value
-            offset -= value * m[a]
-        out[9 + c] = offset
-
-
-@compiled(nogil=True, cache=True)
-def _moment_rows(guide: np.ndarray, change: np.ndarray, radius: int, rows: np.ndarray,
-                 lo: int, hi: int) -> None:  # pragma: no cover - compiled
-    """Rows lo:hi of the moments' horizontal window means (:func:`_window_models`)."""
-    w = guide.shape[1]
-    moments = np.empty((w, _N_MOMENTS), np.float32)
-    for y in range(lo, hi):
-        for x in range(w):
-            for c in range(3):
-                moments[x, c] = guide[y, x, c]
-                moments[x, 3 + c] = change[y, x, c]
-            n = 6
-            for a in range(3):
-                for c in range(a, 3):
-                    moments[x, n] = guide[y, x, a] * guide[y, x, c]
-                    n += 1
-            for a in range(3):
-                for c in range(3):
-                    moments[x, 12 + 3 * a + c] = guide[y, x, a] * change[y, x, c]
-        _running_mean(moments, radius, rows[y])
-
-
-@compiled(nogil=True, cache=True)
-def _solve_columns(rows: np.ndarray, radius: int, eps: float, out: np.ndarray,
-                   prior: np.ndarray, lo: int, hi: int) -> None:  # pragma: no cover - compiled
-    """Column blocks lo:hi of :func:`_window_models`: the moments' window means (vertical
-    pass), solved as they come (``prior``: (H, W, 9) each window's ``A0``, or (0, 0, 9))."""
-    h, w = rows.shape[:2]
-    inverse = np.empty((3, 3))
-    cross = np.empty((3, 3))
-    pulled = prior.shape[0] == h and prior.shape[1] == w
-    none = np.empty(0, np.float32)
-    for block in range(lo, hi):
-        start = block * _COLUMN_BLOCK
-        stop = min(start + _COLUMN_BLOCK, w)
-        acc = _column_sums(rows, radius, start, stop)
-        means = np.empty((stop - start, _N_MOMENTS), np.float64)
-        for y in range(h):
-            _column_means(rows, radius, y, start, acc, means)
-            for x in range(start, stop):
-                _solve_window(means[x - start], eps, inverse, cross, out[y, x],
-                              prior[y, x] if pulled else none)
-
-
-def _window_models(guide: np.ndarray, change: np.ndarray, radius: int,
-                   eps: float, prior: np.ndarray | None = None) -> np.ndarray:
-    """(H, W, 12) float32 each window's A and b (:func:`_solve_window`): the moments'
-    window means (rows, then blocks of columns, as :func:`_box`), solved as they come;
-    in bands on every core (serial compiled kernels: a first run compiles them fast)."""
-    guide = np.ascontiguousarray(guide, dtype=np.float32)
-    change = np.ascontiguousarray(change, dtype=np.float32)
-    h, w = guide.shape[:2]
-    rows = np.empty((h, w, _N_MOMENTS), np.float32)
-    out = np.empty((h, w, 12), np.float32)
-    if h == 0 or w == 0:
-        return out
-    in_bands(_moment_rows, h, guide, change, int(radius), rows, min_band=1)
-    prior = (np.zeros((0, 0, 9), np.float32) if prior is None
-             else np.ascontiguousarray(prior, dtype=np.float32))
-    in_bands(_solve_columns, _column_blocks(w), rows, int(radius), float(eps), out, prior,
-             min_band=1)
-    return out
-
-
-#: Solve grids of fewer pixels than this are solved with numpy and scipy.ndimage
-#: (:func:`_window_models_numpy`), larger ones with the compiled kernels: on a small
-#: photo (the README's first command) both take a fraction of a second, but the kernels
-#: cost seconds to compile on a first run after install (docs/benchmarks.md).
+#: Solve grids of fewer pixels than this are filtered with numpy or scipy.ndimage
+#: (:func:`_uniform_filter`: the numbers the grade always gave there), larger ones with
+#: OpenCV's box filter (:func:`_uniform_filter_cv2`: the same means to float32 rounding,
+#: several times faster; it replaced compiled kernels whose first call cost numba's
+#: start on a photo solved at full size: docs/performance.md).
 _NUMPY_SOLVE_PIXELS = 400_000
 
 
@@ -269,22 +60,37 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
     n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0)."""
     guide = np.ascontiguousarray(guide, dtype=np.float32)
     change = np.ascontiguousarray(change, dtype=np.float32)
-    numpy = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
-    box = _box_numpy if numpy else _box
+    small = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
+    box = _box_numpy if small else _box_cv2
     pull = None
     if prior is not None:  # each window's A0 at its mean colour (the moments' first three)
         centre = box(guide, int(radius))
         pull = np.concatenate([apply_color_map(centre, np.ascontiguousarray(
             prior[..., 3 * a:3 * a + 3], dtype=np.float32)) for a in range(3)], axis=-1)
-    if numpy:
-        return _box_numpy(_window_models_numpy(guide, change, int(radius), float(eps), pull),
-                          int(radius))
-    return _box(_window_models(guide, change, int(radius), float(eps), pull), int(radius))
+    models = _window_models_numpy(guide, change, int(radius), float(eps), pull,
+                                  None if small else _uniform_filter_cv2)
+    return box(models, int(radius))
+
+
+def _box_cv2(x: np.ndarray, radius: int) -> np.ndarray:
+    """:func:`_box_numpy` with OpenCV's box filter (:func:`_uniform_filter_cv2`) on the
+    channels as they lie (up to 12 at a time: no planes copied out and back)."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    if x.size == 0:
+        return np.empty_like(x)
+    if x.shape[2] <= 12:
+        out = np.empty_like(x)
+        _uniform_filter_cv2(x, 2 * radius + 1, out)
+        return out
+    return np.concatenate([_box_cv2(x[..., k:k + 12], radius)
+                           for k in range(0, x.shape[2], 12)], axis=-1)
 
 
 def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
-    """:func:`_box` with scipy.ndimage's reflect-mode uniform filter (float64 running
-    sums), one channel a plane, on as many threads as numba uses."""
+    """(H, W, K) float32 means of every channel over (2 radius + 1)^2 windows, mirrored at
+    the borders (``d c b a | a b c d``): scipy.ndimage's reflect-mode uniform filter
+    (float64 running sums; :func:`_uniform_filter`), one channel a plane, on as many
+    threads as numba uses."""
     x = np.ascontiguousarray(x, dtype=np.float32)
     out = np.empty_like(x)
     if x.size == 0:
@@ -301,10 +107,15 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
 
 
 def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
-                         eps: float, prior: np.ndarray | None = None) -> np.ndarray:
-    """:func:`_window_models` with numpy and scipy.ndimage: the window means of the 21
-    moments (:func:`_box_numpy`'s filter), solved in closed form (float64) band by band
-    of rows. Nothing to compile."""
+                         eps: float, prior: np.ndarray | None = None,
+                         filtered=None) -> np.ndarray:
+    """(H, W, 12) float32 each window's A and b: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
+    eps A0)`` (``A[a, c]`` at ``3 a + c``; ``A0`` the (H, W, 9) ``prior``, None: 0) and
+    ``b = mean(d) - A^T mean(I)``, from the window means of the 21 moments (the guide I,
+    the change d, their products) by :func:`_box_numpy`'s filter or ``filtered`` (same
+    arguments: :func:`_uniform_filter_cv2`), solved in closed form (float64) in bands of
+    a few rows, on as many threads as numba uses. Nothing to compile."""
+    filtered = filtered or _uniform_filter
     h, w = guide.shape[:2]
     out = np.empty((h, w, 12), np.float32)
     if h == 0 or w == 0:
@@ -319,13 +130,25 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     def window_mean(k: int) -> None:
         plane = first[k] if k < 6 else np.multiply(first[pairs[k - 6][0]],
                                                    first[pairs[k - 6][1]])
-        _uniform_filter(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
+        filtered(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
-    for start in range(0, h, 64):
-        _solve_band(means[:, start:start + 64].astype(np.float64), eps, out[start:start + 64],
-                    None if prior is None else prior[start:start + 64])
+    parts = max(1, min(num_threads(), h // _SOLVE_ROWS))
+    edges = np.linspace(0, h, parts + 1).astype(int)
+
+    def solve(part: int) -> None:  # bands of a few rows: their float64 planes stay in cache
+        for start in range(edges[part], edges[part + 1], _SOLVE_ROWS):
+            stop = min(start + _SOLVE_ROWS, edges[part + 1])
+            _solve_band(means[:, start:stop].astype(np.float64), eps, out[start:stop],
+                        None if prior is None else prior[start:stop])
+
+    _threaded(solve, parts)
     return out
+
+
+#: Rows of one band of the window models' closed-form solve (:func:`_solve_band`): 8 rows
+#: of a 1-megapixel grid's 21 float64 planes stay in the cache (64 rows: 1.8x the time).
+_SOLVE_ROWS = 8
 
 
 #: Plane pixels the numpy twin of the box filter filters in a process before scipy.ndimage
@@ -351,6 +174,18 @@ def _uniform_filter(plane: np.ndarray, size: int, out: np.ndarray) -> None:
     from scipy import ndimage
 
     ndimage.uniform_filter(plane, size=size, mode="reflect", output=out)
+
+
+def _uniform_filter_cv2(plane: np.ndarray, size: int, out: np.ndarray) -> None:
+    """:func:`_uniform_filter` by OpenCV's box filter (``BORDER_REFLECT`` is scipy's
+    "reflect", mirrored again where the window is wider than the plane): the same means
+    to float32 rounding (within 6e-8 here), several times faster; it releases the
+    interpreter lock. A (H, W, K) ``plane`` (K <= 12) is filtered channel by channel in
+    one call."""
+    import cv2
+
+    cv2.boxFilter(np.ascontiguousarray(plane, dtype=np.float32), -1, (size, size), dst=out,
+                  normalize=True, borderType=cv2.BORDER_REFLECT)
 
 
 def _uniform_filter_numpy(plane: np.ndarray, size: int) -> np.ndarray:
@@ -467,7 +302,12 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     left = np.minimum(fx.astype(np.int64), lw - 2) if lw > 1 else np.zeros(w, np.int64)
     right = np.minimum(left + 1, lw - 1)
     weight = (fx - left).astype(np.float32)
-    if twin and numpy_first(_apply_rows, source.shape[0] * w, _NUMPY_APPLY_PIXELS):
+    pixels = source.shape[0] * w
+    same = step == 1.0 and coefficients.shape[:2] == source.shape[:2]
+    if twin and same and numpy_first(_apply_rows, pixels, _MAX_SOLVE_PIXELS):
+        _apply_same_grid(source, coefficients, out)
+        return
+    if twin and numpy_first(_apply_rows, pixels, _NUMPY_APPLY_PIXELS):
         _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
         return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
@@ -475,8 +315,25 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
 
 
 #: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
-#: has not run in the process (see :func:`wbcgrade.core.numpy_first`).
+#: has not run in the process (see :func:`wbcgrade.core.numpy_first`); on the pixels' own
+#: grid (a photo solved at full size) its cheaper twin :func:`_apply_same_grid`, up to
+#: :data:`_MAX_SOLVE_PIXELS`.
 _NUMPY_APPLY_PIXELS = 400_000
+
+
+def _apply_same_grid(source: np.ndarray, coefficients: np.ndarray, out: np.ndarray) -> None:
+    """``_apply_rows`` at step 1 (the coefficients on the pixels' own grid) with numpy,
+    bit for bit: the interpolation weights are then 0 and 1, so each pixel takes its own
+    node's ``A, b`` (``1 a + 0 b`` is ``a``), in the kernel's float32 order; ``out`` may
+    be ``source``."""
+    graded = np.empty(source.shape, np.float32)
+    s0, s1, s2 = source[..., 0], source[..., 1], source[..., 2]
+    for c in range(3):
+        value = coefficients[..., 9 + c] + coefficients[..., c] * s0
+        value += coefficients[..., 3 + c] * s1
+        value += coefficients[..., 6 + c] * s2
+        np.add(source[..., c], value, out=graded[..., c])
+    np.clip(graded, np.float32(0.0), np.float32(1.0), out=out)
 
 
 def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
@@ -625,12 +482,9 @@ def load_kernels(pixels: int) -> bool:
     """
     if not solved_subsampled(pixels):
         return False
-    step = _step(1, pixels)
     colors = np.full((4, 4, 3), 0.5, np.float32)
     table = np.zeros((2, 2, 2, 3), np.float32)
-    mapped, small = block_means_mapped(colors, table, 1.0, 2, with_source=True)
-    if pixels / step ** 2 >= _NUMPY_SOLVE_PIXELS:  # (a smaller grid is solved with numpy)
-        _box(_window_models(small, mapped - small, 1, float(DEFAULT_REGRAIN_EPS)), 1)
+    block_means_mapped(colors, table, 1.0, 2, with_source=True)
     _apply_upsampled(colors, np.zeros((2, 2, 12), np.float32), 2.0, np.empty_like(colors),
                      twin=False)
     return True

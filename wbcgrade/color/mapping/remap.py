@@ -199,9 +199,9 @@ def apply_color_map(rgb: np.ndarray, color_map: np.ndarray, strength: float = 1.
 
 
 #: Colours up to which :func:`apply_color_map` runs its numpy twin while ``_trilinear`` has
-#: not run in the process: a small photo is graded before numba's compiler would have
-#: loaded (docs/benchmarks.md).
-_NUMPY_PIXELS = 400_000
+#: not run in the process: a photo solved at full size (up to 1.5 megapixels) is graded
+#: before numba's compiler would have loaded (docs/benchmarks.md).
+_NUMPY_PIXELS = 1_500_000
 
 
 def _trilinear_numpy(colors: np.ndarray, table: np.ndarray, strength: float) -> np.ndarray:
