@@ -129,6 +129,35 @@ def test_the_jackknife_keeps_a_look_every_group_shows_and_drops_one_a_group_make
     assert jackknife_share(shifted(1.0), lambda keep: shifted(0.0), 2, colors, masses) == 1.0
 
 
+def test_the_jackknife_of_a_few_photos_counts_its_variance_at_its_small_sample_margin():
+    """Three photos left out one by one estimate the look's variance from two degrees of
+    freedom: counted twice (``(g + 1) / (g - 1)``), ten groups 11/9 times, so the same
+    spread of looks keeps less of a three-photo set's look than of a larger set's."""
+    from wbcgrade.color.look.prior import jackknife_share, small_sample_margin
+
+    colors = grid_points(5)
+    masses = np.ones(len(colors))
+    shift = np.array([0.05, 0.0, -0.05])
+
+    def shifted(amount):
+        return lambda x: x + amount * shift
+
+    # each photo left out moves the look by up to 0.3 of itself, evenly spread
+    def spread_by(count):
+        offsets = np.linspace(-0.3, 0.3, count)
+        return lambda keep: shifted(1.0 + offsets[int(np.argmin(keep[:count]))])
+
+    for count in (3, 10):
+        offsets = np.linspace(-0.3, 0.3, count)
+        variance = (count - 1) / count * np.sum((offsets - offsets.mean()) ** 2)
+        expected = 1.0 - small_sample_margin(count) * variance
+        kept = jackknife_share(shifted(1.0), spread_by(count), count, colors, masses)
+        assert kept == pytest.approx(expected, abs=1e-9)
+        assert kept < 1.0 - variance  # the plain 1 - V/P keeps more
+    assert small_sample_margin(3) == 2.0
+    assert small_sample_margin(10) == pytest.approx(11 / 9)
+
+
 def test_one_odd_photo_in_a_set_without_a_look_moves_photos_less_than_without_the_jackknife():
     from tests.color.test_look_statistics import natural_photo
     from wbcgrade.color.look.prior import posterior_statistics_look
