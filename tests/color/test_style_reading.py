@@ -264,12 +264,17 @@ def _dense_at(styles, bins: int) -> np.ndarray:
     return np.stack([presets.resample_histogram(h, bins) for h in styles.histograms])
 
 
-def test_a_cached_folder_gives_its_coarse_grids_from_the_cache_and_stays_sparse(tmp_path):
+def _small_style_folder(tmp_path, count: int):
+    """A folder of ``count`` small style photos and a histogram cache beside it."""
     styles_dir = tmp_path / "styles"
     styles_dir.mkdir()
-    for name in STYLE_PHOTOS[:3]:
+    for name in STYLE_PHOTOS[:count]:
         small_copy(SAMPLES / f"{name}.jpg", styles_dir / f"{name}.jpg", width=120)
-    cache = HistogramCache(tmp_path / "cache")
+    return styles_dir, HistogramCache(tmp_path / "cache")
+
+
+def test_a_cached_folder_gives_its_coarse_grids_from_the_cache_and_stays_sparse(tmp_path):
+    styles_dir, cache = _small_style_folder(tmp_path, 3)
     first = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,))
     expected, dense = first.at_bins(8).copy(), first.histograms.copy()
     assert np.array_equal(expected, _dense_at(first, 8))  # bit for bit what at_bins makes
@@ -294,11 +299,7 @@ def test_a_cached_folder_gives_its_coarse_grids_from_the_cache_and_stays_sparse(
 
 
 def test_an_edited_style_photo_is_re_binned_not_read_from_the_cache(tmp_path):
-    styles_dir = tmp_path / "styles"
-    styles_dir.mkdir()
-    for name in STYLE_PHOTOS[:2]:
-        small_copy(SAMPLES / f"{name}.jpg", styles_dir / f"{name}.jpg", width=120)
-    cache = HistogramCache(tmp_path / "cache")
+    styles_dir, cache = _small_style_folder(tmp_path, 2)
     before = presets.load_style_folder(styles_dir, 32, cache=cache, resampled=(8,)).at_bins(8)
     edited = styles_dir / f"{STYLE_PHOTOS[0]}.jpg"
     small_copy(SAMPLES / "sunset.jpg", edited, width=120)  # another photo under its name

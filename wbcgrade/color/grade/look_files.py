@@ -1,5 +1,5 @@
 """Looks written as grades: a set's look (``wbcgrade look extract``) and a look learned
-from before/after pairs (``wbcgrade look learn``, ``--originals``).
+from before/after pairs (``wbcgrade look learn``, a grade given the originals).
 
 The files around the looks' mathematics (:func:`wbcgrade.color.look.set_extraction.set_look_map`,
 :func:`wbcgrade.color.look.learn.learn_look`): outputs are planned and checked before any

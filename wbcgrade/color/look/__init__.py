@@ -27,7 +27,7 @@ Submodules:
 
 The "look" map builder the grade path calls (``look_map``) is
 :mod:`wbcgrade.color.grade.look_builder`, and the looks written as grades (``wbcgrade look
-extract``, ``wbcgrade look learn``, ``--originals``) are
+extract``, ``wbcgrade look learn``, a grade given the originals) are
 :mod:`wbcgrade.color.grade.look_files`: the grade package imports this one, never the
 other way round.
 
