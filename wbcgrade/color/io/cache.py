@@ -202,8 +202,7 @@ def write_entry(path: str | os.PathLike | None, compress: bool = False,
     """
     if path is None:
         return False
-    import numpy as np
-
+    import numpy as np  # here, as above: a command that only checks its cache loads no numpy
 
     path = Path(path)
     folder = str(path.parent)
