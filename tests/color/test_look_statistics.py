@@ -412,9 +412,9 @@ def test_a_set_under_six_styles_keeps_the_full_share_and_is_not_weighed():
 
 
 def test_natural_palettes_left_out_by_name_are_told_apart_from_other_exclusions():
-    """Two benchmarks holding out different photos get different natural statistics: the
-    shipped file's digest no longer names a subset of it (two exclusions of one size
-    shared a key, so the second was served the first's cached statistics)."""
+    """Two benchmarks holding out different photos get different natural statistics: a
+    subset of the shipped file is keyed by the names it keeps too (two exclusions of one
+    size shared a key, so the second was served the first's cached statistics)."""
     from wbcgrade.color.look.set_extraction import (
         _palettes_digest,
         natural_palettes,

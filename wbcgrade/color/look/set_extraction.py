@@ -360,9 +360,8 @@ def natural_palettes(exclude: set[str] | frozenset[str] = frozenset()):
     keep = [i for i, name in enumerate(styles.names) if name not in exclude]
     if len(keep) == len(styles.names):
         return styles
-    meta = {k: v for k, v in styles.meta.items() if k != "file_digest"}  # not the file's
     return StyleSet([styles.names[i] for i in keep], styles.histograms[keep], styles.source,
-                    styles.width, styles.description, meta)
+                    styles.width, styles.description, dict(styles.meta))
 
 
 def _natural_path():
@@ -466,11 +465,11 @@ def _palettes_digest(palettes) -> str:
     """A digest of a StyleSet's histograms (as stored: no re-binning), once per array."""
     meta = getattr(palettes, "meta", {}) or {}
     file_digest = getattr(palettes, "file_digest", None)
-    if file_digest:  # a preset file, in a working space: its stack need not even be made
-        shape = (deferred_shape(palettes, "histograms") if isinstance(palettes, StyleSet)
-                 else np.shape(palettes.histograms))
+    if file_digest:  # (styles of) a preset file, in a working space: no array hashed or made
+        names = hashlib.sha1("\0".join(palettes.names).encode()).hexdigest()
         return (f"{file_digest}|{meta.get('working_space', '')}|"
-                f"{meta.get('converted_from', '')}|{shape}")
+                f"{meta.get('converted_from', '')}|{deferred_shape(palettes, 'histograms')}|"
+                f"{names}")
     hists = palettes.histograms
     known = _DIGESTS.get(id(hists))
     if known is None or known[0] is not hists:
