@@ -55,7 +55,7 @@ from wbcgrade.color.mapping.lut import (
     lut_format_of,
     write_checked_lut,
 )
-from wbcgrade.color.mapping.regrain import load_kernels, solved_subsampled
+from wbcgrade.color.mapping.regrain import kernels_needed, load_kernels, solved_subsampled
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import (
     StyleSet,
@@ -206,7 +206,7 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
     numba and loading its first kernel (~0.7 s of Python) then runs while the photo is
     decoded and its scene matched, which hold no interpreter lock for most of their time.
     The thread, or None (nothing to load, or started before)."""
-    if _LOADER:
+    if _LOADER or not kernels_needed():  # (OpenColorIO maps a large photo's colours)
         return None
     pixels = header_pixels(photo)
     if not solved_subsampled(pixels):

@@ -29,11 +29,17 @@ import hashlib
 
 import numpy as np
 
-from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped
+from wbcgrade.color.mapping.remap import (
+    apply_color_map,
+    apply_lut_in_place,
+    block_means_mapped,
+    has_lut_library,
+    lut_processor,
+)
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
-__all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels",
+__all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels", "kernels_needed",
            "solved_subsampled", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
 
@@ -307,11 +313,68 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     if twin and same and numpy_first(_apply_rows, pixels, _MAX_SOLVE_PIXELS):
         _apply_same_grid(source, coefficients, out)
         return
+    if twin and not same and pixels > _NUMPY_APPLY_PIXELS and float(step).is_integer():
+        _apply_upsampled_cv2(source, coefficients, int(step), out)
+        return
     if twin and numpy_first(_apply_rows, pixels, _NUMPY_APPLY_PIXELS):
         _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
         return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
              weight, out)
+
+
+def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int,
+                         out: np.ndarray) -> None:
+    """``_apply_rows`` with libraries, for a whole ``step``: band by band (on every core),
+    OpenCV's bilinear resize of the band's coarse rows (pixel centres, edges replicated:
+    the kernel's clamped interpolation; rows and columns past the coarse grid's last
+    node take that node's coefficients, as the kernel's clamp gives them), then each
+    pixel's affine map with numpy. The kernel's numbers to float32 rounding (the
+    coefficients are interpolated before the map is applied: within 1e-6), no compiled
+    kernel to load; ``out`` may be ``source``."""
+    import cv2
+
+    h, w = source.shape[:2]
+    lh, lw = coefficients.shape[:2]
+    if h == 0 or w == 0:
+        return
+    coefficients = np.ascontiguousarray(coefficients, dtype=np.float32)
+    inside_w = min(w, lw * step)  # columns past the last node repeat it
+    rows = max(1, _BAND_ROWS // step) * step
+
+    def upsampled(y0: int, y1: int) -> np.ndarray:
+        """(y1 - y0, w, 12) coefficients of output rows y0:y1 (y1 <= lh * step)."""
+        c0, c1 = max(y0 // step - 1, 0), min(-(-y1 // step) + 1, lh)
+        band = cv2.resize(coefficients[c0:c1], (lw * step, (c1 - c0) * step),
+                          interpolation=cv2.INTER_LINEAR).reshape(
+                              (c1 - c0) * step, lw * step, 12)
+        band = band[y0 - c0 * step:y1 - c0 * step, :inside_w]
+        if inside_w < w:
+            band = np.concatenate([band, np.repeat(band[:, -1:], w - inside_w, axis=1)],
+                                  axis=1)
+        return band
+
+    def apply(part: int) -> None:
+        for y0 in range(edges[part], edges[part + 1], rows):
+            y1 = min(y0 + rows, edges[part + 1])
+            inside = min(y1, lh * step)  # rows past the last node repeat it
+            if inside > y0:
+                band = upsampled(y0, inside)
+            if inside < y1:
+                last = upsampled(lh * step - 1, lh * step)
+                tail = np.broadcast_to(last, (y1 - max(y0, inside), w, 12))
+                band = tail if inside <= y0 else np.concatenate([band, tail], axis=0)
+            colors = source[y0:y1]
+            value = np.einsum("...ac,...a->...c", band[..., :9].reshape(*band.shape[:2], 3, 3),
+                              colors)
+            value += band[..., 9:]
+            value += colors
+            np.clip(value, np.float32(0.0), np.float32(1.0), out=out[y0:y1])
+
+    parts = max(1, min(num_threads(), h // rows))
+    edges = (np.linspace(0, h // rows, parts + 1).astype(int) * rows)
+    edges[-1] = h
+    _threaded(apply, parts)
 
 
 #: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
@@ -362,30 +425,70 @@ def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
     np.clip(graded, np.float32(0.0), one, out=out)
 
 
-@compiled(nogil=True, cache=True)
-def _downsample_rows(x: np.ndarray, step: int, out: np.ndarray, lo: int,
-                     hi: int) -> None:  # pragma: no cover - compiled
-    """Block rows lo:hi of :func:`_downsample` into ``out`` (zeros on entry)."""
-    w, c = out.shape[1], out.shape[2]
-    scale = 1.0 / (step * step)
-    for i in range(lo, hi):
-        for di in range(step):
-            row = i * step + di
-            for j in range(w):
-                for dj in range(step):
-                    for k in range(c):
-                        out[i, j, k] += x[row, j * step + dj, k]
-        for j in range(w):
-            for k in range(c):
-                out[i, j, k] *= scale
-
-
 def _downsample(x: np.ndarray, step: int) -> np.ndarray:
-    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
+    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped):
+    OpenCV's area resize by a whole factor (float32 sums, no compiled kernel to load)."""
+    import cv2
+
     x = np.ascontiguousarray(x, dtype=np.float32)
-    out = np.zeros((x.shape[0] // step, x.shape[1] // step, x.shape[2]), np.float32)
-    in_bands(_downsample_rows, out.shape[0], x, int(step), out, min_band=1)
+    h, w = x.shape[0] // step, x.shape[1] // step
+    if h == 0 or w == 0:
+        return np.zeros((h, w, x.shape[2]), np.float32)
+    if step == 1:
+        return x.copy()
+    out = np.empty((h, w, x.shape[2]), np.float32)
+    rows = max(1, _BAND_ROWS // step)
+
+    def means(part: int) -> None:
+        for lo in range(edges[part], edges[part + 1], rows):
+            hi = min(lo + rows, edges[part + 1])
+            band = x[lo * step:hi * step, :w * step]
+            out[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA
+                                    ).reshape(hi - lo, w, x.shape[2])
+    parts = max(1, min(num_threads(), h // rows))
+    edges = np.linspace(0, h, parts + 1).astype(int)
+    _threaded(means, parts)
     return out
+
+
+#: Full-size rows a band of the subsampled regrain's passes holds (its pixels' colours and
+#: the band's coefficients stay in the CPU's cache).
+_BAND_ROWS = 32
+
+
+def _block_means(source: np.ndarray, color_map: np.ndarray, strength: float,
+                 step: int) -> tuple[np.ndarray, np.ndarray]:
+    """(mapped, source) block means of ``source`` moved through the map and of ``source``
+    itself (``block_means_mapped(..., with_source=True)``): with OpenColorIO's LUT
+    processor (:func:`~wbcgrade.color.mapping.remap.lut_processor`) and OpenCV's area
+    resize, band by band on every core, the kernel's numbers to float32 rounding and no
+    compiled kernel to load (numba's start costs a 16-megapixel grade about 0.6 s of
+    CPU); the compiled kernel without the ``opencolorio`` package."""
+    processor = lut_processor(color_map, strength)
+    if processor is None:
+        return block_means_mapped(source, color_map, strength, step, with_source=True)
+    import cv2
+
+    h, w = source.shape[0] // step, source.shape[1] // step
+    mapped = np.zeros((h, w, 3), np.float32)
+    small = np.zeros((h, w, 3), np.float32)
+    if h == 0 or w == 0:
+        return mapped, small
+    rows = max(1, _BAND_ROWS // step)
+
+    def means(part: int) -> None:
+        buffer = np.empty((rows * step, w * step, 3), np.float32)
+        for lo in range(edges[part], edges[part + 1], rows):
+            hi = min(lo + rows, edges[part + 1])
+            band = buffer[:(hi - lo) * step]
+            band[...] = source[lo * step:hi * step, :w * step]
+            small[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA)
+            apply_lut_in_place(processor, band)
+            mapped[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA)
+    parts = max(1, min(num_threads(), h // rows))
+    edges = np.linspace(0, h, parts + 1).astype(int)
+    _threaded(means, parts)
+    return mapped, small
 
 
 def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGRAIN_RADIUS,
@@ -456,7 +559,7 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     if step == 1:
         small, change = source, apply_color_map(source, color_map, strength) - source
     else:
-        mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
+        mapped, small = _block_means(source, color_map, strength, step)
         change = mapped - small
     prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
     return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
@@ -464,29 +567,35 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
 
 def solved_subsampled(pixels: int) -> bool:
     """Whether :func:`regrain_map` solves a photo of ``pixels`` pixels on a subsampled copy
-    (over 1.5 megapixels: its compiled kernels then run whatever ran before)."""
+    (over 1.5 megapixels)."""
     return _step(1, pixels) > 1
 
 
+def kernels_needed() -> bool:
+    """Whether a photo solved on a subsampled copy runs a compiled kernel: its map's block
+    means do without the ``opencolorio`` package (:func:`_block_means`); everything else
+    it runs is OpenCV's and numpy's."""
+    return not has_lut_library()
+
+
 def load_kernels(pixels: int) -> bool:
-    """Load the compiled kernels :func:`regrain_map` runs on a photo of ``pixels`` pixels
-    solved on a subsampled copy (over 1.5 megapixels), by running each on a few pixels
-    through the same wrappers (the same argument types: the signatures numba's cache
-    holds; a first run after install compiles them here). False, loading nothing, for a
-    smaller photo (its solve may run numpy's twins).
+    """Load the compiled kernel :func:`regrain_map` runs on a photo of ``pixels`` pixels
+    solved on a subsampled copy (over 1.5 megapixels) without the ``opencolorio`` package
+    (:func:`kernels_needed`), by running it on a few pixels through the same wrapper (the
+    same argument types: the signature numba's cache holds; a first run after install
+    compiles it here). False, loading nothing, for a smaller photo (its solve may run
+    numpy's twins) or where OpenColorIO maps the colours.
 
     What a command grading a large photo starts in a thread before decoding it
     (:func:`wbcgrade.photos.workflow.grade_photo`): importing numba and loading its
     first kernel is about 0.7 s of Python, most of it while the decoder and the scene
     matching hold no interpreter lock.
     """
-    if not solved_subsampled(pixels):
+    if not solved_subsampled(pixels) or not kernels_needed():
         return False
     colors = np.full((4, 4, 3), 0.5, np.float32)
     table = np.zeros((2, 2, 2, 3), np.float32)
     block_means_mapped(colors, table, 1.0, 2, with_source=True)
-    _apply_upsampled(colors, np.zeros((2, 2, 12), np.float32), 2.0, np.empty_like(colors),
-                     twin=False)
     return True
 
 
