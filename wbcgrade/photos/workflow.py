@@ -46,7 +46,7 @@ from wbcgrade.color.io.images import (
     stage_image,
 )
 from wbcgrade.color.io.raw import output_name
-from wbcgrade.color.look.scene import matching_hook
+from wbcgrade.color.look.scene import keep_style_scenes, matching_hook
 from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -221,9 +221,37 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
     return thread
 
 
+class _ReadAhead:
+    """A photo decoded in a daemon thread (:func:`read_image`) while the caller does other
+    work (loads the styles): the decoder holds no interpreter lock for most of its time,
+    so on a second core it costs the command no wall time. :meth:`image` waits for it and
+    raises what reading raised; a command that fails meanwhile does not wait for it."""
+
+    def __init__(self, photo: str | os.PathLike) -> None:
+        self.photo = Path(photo)
+        self._done = threading.Event()
+        self._image: Image | None = None
+        self._error: BaseException | None = None
+        threading.Thread(target=self._read, name="wbcgrade-read", daemon=True).start()
+
+    def _read(self) -> None:
+        try:
+            self._image = read_image(self.photo)
+        except BaseException as exc:  # noqa: BLE001 - raised again where the image is read
+            self._error = exc
+        finally:
+            self._done.set()
+
+    def image(self) -> Image:
+        self._done.wait()
+        if self._error is not None:
+            raise self._error
+        return self._image
+
+
 def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: GradeOptions,
                 *, shared: Grade | None = None, progress: Progress | None = None,
-                keep_input: bool = True) -> PhotoGrade:
+                keep_input: bool = True, read_ahead: _ReadAhead | None = None) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
     With ``shared`` (a series grade or a saved one, in the same working space), its colour
@@ -231,7 +259,8 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     (:func:`wbcgrade.color.grade.grading.grade_encoded`). ``keep_input`` False:
     nothing will look at the ungraded pixels afterwards (no report sheet), so
     a photo graded in its own space is graded in place (the returned
-    ``image.pixels`` then hold graded colours).
+    ``image.pixels`` then hold graded colours). ``read_ahead``: the photo being decoded
+    already (:class:`_ReadAhead`), waited for instead of read.
     """
     progress = progress or Progress()
     timings: dict[str, float] = {}
@@ -240,7 +269,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     regrained = (shared.regrain if shared is not None else options.regrain.settings) is not None
     if regrained:
         load_kernels_beside(photo)
-    image = read_image(photo)
+    image = read_image(photo) if read_ahead is None else read_ahead.image()
     rgb = image.rgb()
     encoding = ColorEncoding.for_image(image, options.spaces.input,
                                        options.spaces.working).named(progress.setting_names)
@@ -272,7 +301,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
 def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
                *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
-               keep_input: bool = True) -> GradeReport:
+               keep_input: bool = True, read_ahead: _ReadAhead | None = None) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
 
     The photo and the LUT are published together: when the LUT cannot be
@@ -288,7 +317,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
     progress = progress or Progress()
     timings = dict(timings or {})
     graded = grade_photo(plan.photo, styles, options, shared=shared, progress=progress,
-                         keep_input=keep_input)
+                         keep_input=keep_input, read_ahead=read_ahead)
     grade = graded.grade
     timings.update(graded.timings)
     if plan.output is not None:
@@ -371,17 +400,34 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         _save_grade(plan, report.grade)
         return report
     start = time.perf_counter()
+    read_ahead = _ReadAhead(plan.photo)  # decoded on another core while the styles load
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, matching_hook(source, options, [plan.photo]),
                          resampled=style_grids(options))
     _warn_one_style(source, styles, options, progress.warn)
+    _prepare_scenes(styles, options)
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
-                        keep_input=report_dir is not None)
+                        keep_input=report_dir is not None, read_ahead=read_ahead)
     _save_grade(plan, report.grade)
     if report_dir is not None:
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report
+
+
+def _prepare_scenes(styles: StyleSet, options: GradeOptions) -> None:
+    """The style photos prepared for scene matching now, while the photo is still being
+    decoded (:func:`wbcgrade.color.look.scene.keep_style_scenes`: read from the cache into
+    this process; the look grade finds them there), when the grade will match scenes: a
+    look grade of style photos without fixed weights. Best effort: the grade prepares
+    (and reports) whatever this could not."""
+    if (options.map.builder != "look" or options.fit.weights is not None
+            or styles.look is not None):
+        return
+    try:
+        keep_style_scenes(styles)
+    except Exception as exc:  # noqa: BLE001 - the grade itself prepares them again
+        log.debug("style photos not prepared ahead: %s", exc)
 
 
 def _warn_one_style(source: StyleSource, styles: StyleSet, options: GradeOptions,

@@ -50,7 +50,8 @@ from wbcgrade.color.io.raw import is_raw
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
-           "colour_pairs", "style_scene_images", "has_style_images", "shrink_colors",
+           "colour_pairs", "style_scene_images", "keep_style_scenes", "has_style_images",
+           "shrink_colors",
            "keep_for_matching", "matching_hook",
            "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
@@ -520,3 +521,15 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
         if progress is not None:
             progress(i + 1, n)
     return out
+
+
+def keep_style_scenes(styles) -> bool:
+    """Prepare the style photos of a StyleSet for matching ahead of the grade
+    (:func:`style_scene_images`, kept in this process: the grade's own call finds them
+    there), when it names their files (images given as arrays are not kept: nothing to
+    gain) and no more than this process keeps; whether it did."""
+    if (not styles.files or any(image is not None for image in styles.images)
+            or len(styles.names) > _IN_MEMORY_MAX):
+        return False
+    style_scene_images(styles)
+    return True
