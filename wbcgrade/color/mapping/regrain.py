@@ -325,51 +325,74 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
 
 def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int,
                          out: np.ndarray) -> None:
-    """``_apply_rows`` with libraries, for a whole ``step``: band by band (on every core),
-    OpenCV's bilinear resize of the band's coarse rows (pixel centres, edges replicated:
-    the kernel's clamped interpolation; rows and columns past the coarse grid's last
-    node take that node's coefficients, as the kernel's clamp gives them), then each
-    pixel's affine map with numpy. The kernel's numbers to float32 rounding (the
-    coefficients are interpolated before the map is applied: within 1e-6), no compiled
-    kernel to load; ``out`` may be ``source``."""
+    """``_apply_rows`` with OpenCV, for a whole ``step``: band by band (on every core), each
+    output channel's four coefficients (``A[:, c]`` plus the identity's column, and
+    ``b[c]``) bilinearly resized from the band's coarse rows (pixel centres, edges
+    replicated: the kernel's clamped interpolation; rows and columns past the coarse
+    grid's last node take that node's, as the kernel's clamp gives them), multiplied by
+    the pixels' ``(r, g, b, 1)`` and summed (``cv2.transform``). The kernel's numbers to
+    float32 rounding (the coefficients are interpolated before they are applied: within
+    1e-6), no compiled kernel to load, buffers reused band to band (fresh pages cost
+    more than the arithmetic); ``out`` may be ``source``."""
     import cv2
 
     h, w = source.shape[:2]
     lh, lw = coefficients.shape[:2]
     if h == 0 or w == 0:
         return
-    coefficients = np.ascontiguousarray(coefficients, dtype=np.float32)
+    groups = []  # per output channel c: A[0, c], A[1, c], A[2, c] (+ identity), b[c]
+    for c in range(3):
+        group = np.ascontiguousarray(coefficients[..., [c, 3 + c, 6 + c, 9 + c]],
+                                     dtype=np.float32)
+        group[..., c] += np.float32(1.0)
+        groups.append(group)
     inside_w = min(w, lw * step)  # columns past the last node repeat it
+    inside_h = min(h, lh * step)  # rows too
     rows = max(1, _BAND_ROWS // step) * step
-
-    def upsampled(y0: int, y1: int) -> np.ndarray:
-        """(y1 - y0, w, 12) coefficients of output rows y0:y1 (y1 <= lh * step)."""
-        c0, c1 = max(y0 // step - 1, 0), min(-(-y1 // step) + 1, lh)
-        band = cv2.resize(coefficients[c0:c1], (lw * step, (c1 - c0) * step),
-                          interpolation=cv2.INTER_LINEAR).reshape(
-                              (c1 - c0) * step, lw * step, 12)
-        band = band[y0 - c0 * step:y1 - c0 * step, :inside_w]
-        if inside_w < w:
-            band = np.concatenate([band, np.repeat(band[:, -1:], w - inside_w, axis=1)],
-                                  axis=1)
-        return band
+    ones = np.ones((1, 4), np.float32)
+    last = [cv2.resize(g[lh - 1:lh], (lw * step, 1), interpolation=cv2.INTER_LINEAR)
+            .reshape(1, lw * step, 4)[:, :inside_w] for g in groups]
 
     def apply(part: int) -> None:
+        coarse = [np.empty(((rows // step + 3) * step, lw * step, 4), np.float32)
+                  for _ in range(3)]
+        pixels = np.empty((rows, inside_w, 4), np.float32)
+        product = np.empty((rows, inside_w, 4), np.float32)
+        planes = [np.empty((rows, inside_w), np.float32) for _ in range(3)]
+        merged = np.empty((rows, inside_w, 3), np.float32)
+
+        def band(y0: int, y1: int, ups: list[np.ndarray]) -> None:
+            r = y1 - y0
+            colors = source[y0:y1]
+            with_one = pixels[:r]
+            cv2.cvtColor(colors[:, :inside_w], cv2.COLOR_RGB2RGBA, dst=with_one)
+            for c in range(3):
+                cv2.multiply(ups[c], with_one, dst=product[:r])
+                cv2.transform(product[:r], ones, dst=planes[c][:r])
+            cv2.merge([plane[:r] for plane in planes], dst=merged[:r])
+            if inside_w < w:  # past the last node's column: its coefficients
+                tail = colors[:, inside_w:].astype(np.float32)
+                value = np.stack([np.einsum("rxa,ra->rx", tail, up[:, -1, :3])
+                                  + up[:, -1, 3:4] for up in ups], axis=-1)
+                np.clip(value, np.float32(0.0), np.float32(1.0), out=out[y0:y1, inside_w:])
+            np.clip(merged[:r], np.float32(0.0), np.float32(1.0), out=out[y0:y1, :inside_w])
+
         for y0 in range(edges[part], edges[part + 1], rows):
             y1 = min(y0 + rows, edges[part + 1])
-            inside = min(y1, lh * step)  # rows past the last node repeat it
-            if inside > y0:
-                band = upsampled(y0, inside)
-            if inside < y1:
-                last = upsampled(lh * step - 1, lh * step)
-                tail = np.broadcast_to(last, (y1 - max(y0, inside), w, 12))
-                band = tail if inside <= y0 else np.concatenate([band, tail], axis=0)
-            colors = source[y0:y1]
-            value = np.einsum("...ac,...a->...c", band[..., :9].reshape(*band.shape[:2], 3, 3),
-                              colors)
-            value += band[..., 9:]
-            value += colors
-            np.clip(value, np.float32(0.0), np.float32(1.0), out=out[y0:y1])
+            inside = min(y1, inside_h)
+            if inside > y0:  # resized from the band's coarse rows, one above and below
+                c0, c1 = max(y0 // step - 1, 0), min(-(-inside // step) + 1, lh)
+                ups = []
+                for group, buffer in zip(groups, coarse):
+                    up = buffer[:(c1 - c0) * step]
+                    cv2.resize(group[c0:c1], (lw * step, (c1 - c0) * step), dst=up,
+                               interpolation=cv2.INTER_LINEAR)
+                    ups.append(up[y0 - c0 * step:inside - c0 * step, :inside_w])
+                band(y0, inside, ups)
+            if y1 > inside:  # past the last node's row: its coefficients
+                start = max(y0, inside)
+                band(start, y1, [np.ascontiguousarray(np.broadcast_to(
+                    row, (y1 - start, inside_w, 4))) for row in last])
 
     parts = max(1, min(num_threads(), h // rows))
     edges = (np.linspace(0, h // rows, parts + 1).astype(int) * rows)
