@@ -46,12 +46,60 @@ def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monk
         events.append(("styles", threading.current_thread().name))
         return loading(*args, **kwargs)
 
-    kept = []
+    kept, prepared, forgotten = [], [], []
     monkeypatch.setattr(workflow, "read_image", read)
     monkeypatch.setattr(workflow, "load_styles", load)
     monkeypatch.setattr(workflow, "keep_style_scenes", lambda styles: kept.append(styles))
+    preparing, forgetting = workflow.prepare_photo_scene, workflow.forget_photo_scene
+    monkeypatch.setattr(workflow, "prepare_photo_scene",
+                        lambda colors: (prepared.append(colors), preparing(colors)))
+    monkeypatch.setattr(workflow, "forget_photo_scene",
+                        lambda colors: (forgotten.append(colors), forgetting(colors)))
     result = cli("apply", str(photo), "--style", str(style_dir), "-o",
                  str(tmp_path / "out.jpg"))
     assert result.exit_code == 0, result.output
     assert ("read", "wbcgrade-read") in events and ("styles", "MainThread") in events
     assert len(kept) == 1 and kept[0].files  # the style photos, prepared ahead
+    # the photo's own keypoints found beside its histograms, and nothing kept after
+    assert len(prepared) == 1 and len(forgotten) == 1 and prepared[0] is forgotten[0]
+    result = cli("apply", str(photo), "--preset", "warm", "-o", str(tmp_path / "p.jpg"))
+    assert result.exit_code == 0, result.output
+    assert len(prepared) == 1  # a preset's look matches no scene: nothing prepared
+
+
+def test_a_photo_prepared_ahead_gives_the_scene_and_mirror_it_would_have(rng):
+    """``prepare_photo_scene`` (started by ``grade_photo`` beside the photo's histograms):
+    the grade's ``scene_image`` and ``mirrored`` of that very array get the keypoints
+    they would have computed; another array (even an equal one) is computed as before;
+    nothing is kept once forgotten, and a failure is raised where the grade asks."""
+    from wbcgrade.color.look import scene
+
+    colors = np.clip(rng.random((120, 160, 3)).cumsum(axis=1) / 80 % 1.0, 0, 1) \
+        .astype(np.float32)
+    expected = scene._scene_image(colors)
+    expected_mirror = scene._mirrored(expected)
+    scene.prepare_photo_scene(colors)
+    photo = scene.scene_image(colors)
+    mirror = scene.mirrored(photo)
+    for got, want in ((photo, expected), (mirror, expected_mirror)):
+        assert np.array_equal(got.colors, want.colors)
+        assert np.array_equal(got.points, want.points)
+        assert np.array_equal(got.descriptors, want.descriptors)
+    assert not scene._AHEAD and not scene._MIRRORS  # each taken once
+    scene.prepare_photo_scene(colors)
+    assert scene.scene_image(colors.copy()) is not None and scene._AHEAD  # not this array
+    scene.forget_photo_scene(colors)
+    assert not scene._AHEAD and not scene._MIRRORS
+    bad = np.zeros(5, np.float32)  # not an image: scene_image raises
+    scene.prepare_photo_scene(bad)
+    try:
+        scene.scene_image(bad)
+    except Exception as exc:  # noqa: BLE001 - whatever computing it raises
+        kind = type(exc)
+    else:  # pragma: no cover
+        raise AssertionError("a 1-D array was prepared")
+    try:
+        scene._scene_image(bad)
+    except Exception as exc:  # noqa: BLE001
+        assert type(exc) is kind
+    assert not scene._AHEAD

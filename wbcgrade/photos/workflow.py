@@ -46,7 +46,13 @@ from wbcgrade.color.io.images import (
     stage_image,
 )
 from wbcgrade.color.io.raw import output_name
-from wbcgrade.color.look.scene import keep_style_scenes, matching_hook
+from wbcgrade.color.look.scene import (
+    forget_photo_scene,
+    has_style_images,
+    keep_style_scenes,
+    matching_hook,
+    prepare_photo_scene,
+)
 from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -281,8 +287,15 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
         start = time.perf_counter()
-        grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
-                                   progress.fit, progress.stage)
+        matching = _matches_scenes(styles, options)
+        if matching:  # the photo's keypoints found beside its histograms and look
+            prepare_photo_scene(encoded[0])
+        try:
+            grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
+                                       progress.fit, progress.stage)
+        finally:
+            if matching:
+                forget_photo_scene(encoded[0])
         timings.update(grade.timings)
         # what the grade's own stages leave out: the histograms, the look, the outcome
         timings["grade"] = max(0.0, time.perf_counter() - start
@@ -415,14 +428,21 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
     return report
 
 
+def _matches_scenes(styles: StyleSet | None, options: GradeOptions) -> bool:
+    """Whether the grade looks for the photo's scene among the style photos: a look grade
+    (no fixed weights) of styles that have photos (a folder's, not a preset's look)."""
+    return (styles is not None and options.map.builder == "look"
+            and options.fit.weights is None and styles.look is None
+            and has_style_images(styles))
+
+
 def _prepare_scenes(styles: StyleSet, options: GradeOptions) -> None:
     """The style photos prepared for scene matching now, while the photo is still being
     decoded (:func:`wbcgrade.color.look.scene.keep_style_scenes`: read from the cache into
-    this process; the look grade finds them there), when the grade will match scenes: a
-    look grade of style photos without fixed weights. Best effort: the grade prepares
-    (and reports) whatever this could not."""
-    if (options.map.builder != "look" or options.fit.weights is not None
-            or styles.look is not None):
+    this process; the look grade finds them there), when the grade will match scenes
+    (:func:`_matches_scenes`). Best effort: the grade prepares (and reports) whatever
+    this could not."""
+    if not _matches_scenes(styles, options):
         return
     try:
         keep_style_scenes(styles)

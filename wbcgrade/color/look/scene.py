@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,7 +52,7 @@ from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
            "colour_pairs", "style_scene_images", "keep_style_scenes", "has_style_images",
-           "shrink_colors",
+           "prepare_photo_scene", "forget_photo_scene", "shrink_colors",
            "keep_for_matching", "matching_hook",
            "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
@@ -173,7 +174,69 @@ def shrink_colors(colors: np.ndarray, size: int) -> np.ndarray:
 def scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
                 features: int = MAX_FEATURES) -> SceneImage:
     """Shrink (H, W, 3) working-space colours in [0, 1] and find their keypoints (at most
-    ``features``)."""
+    ``features``): what :func:`prepare_photo_scene` started for this very array, when it
+    did."""
+    if size == MATCH_SIZE and features == MAX_FEATURES:
+        ahead = _taken_ahead(colors)
+        if ahead is not None:
+            return ahead
+    return _scene_image(colors, size, features)
+
+
+#: Photos' scene images being prepared on another thread (:func:`prepare_photo_scene`), by
+#: the id of the colours they are prepared from (the array kept beside: the same array,
+#: not a later one at its address), and the mirrors found with them, by the photo's id.
+_AHEAD: dict[int, tuple[np.ndarray, Future]] = {}
+_MIRRORS: dict[int, tuple[SceneImage, SceneImage]] = {}
+_AHEAD_LOCK = threading.Lock()
+
+
+def prepare_photo_scene(colors: np.ndarray) -> None:
+    """Start preparing a photo for matching on another thread: :func:`scene_image` of
+    ``colors`` (its default size and keypoints) and its :func:`mirrored` copy, so that the
+    decoder's next steps (the photo's histograms, the set's look: one core) and the
+    keypoints (OpenCV, no interpreter lock) run side by side. The grade's own calls for
+    this array take them (or what preparing them raised); :func:`forget_photo_scene`
+    drops them if it never asks."""
+    future: Future = Future()
+
+    def prepare() -> None:
+        try:
+            photo = _scene_image(colors)
+            future.set_result((photo, _mirrored(photo)))
+        except BaseException as exc:  # noqa: BLE001 - raised where the grade asks for it
+            future.set_exception(exc)
+
+    with _AHEAD_LOCK:
+        _AHEAD[id(colors)] = (colors, future)
+    threading.Thread(target=prepare, name="wbcgrade-scene", daemon=True).start()
+
+
+def forget_photo_scene(colors: np.ndarray) -> None:
+    """Drop what :func:`prepare_photo_scene` prepared for ``colors`` and the grade did not
+    take (nothing of a graded photo is kept: a batch grades many)."""
+    with _AHEAD_LOCK:
+        entry = _AHEAD.get(id(colors))
+        if entry is not None and entry[0] is colors:
+            del _AHEAD[id(colors)]
+        _MIRRORS.clear()
+
+
+def _taken_ahead(colors: np.ndarray) -> SceneImage | None:
+    with _AHEAD_LOCK:
+        entry = _AHEAD.get(id(colors))
+        if entry is None or entry[0] is not colors:
+            return None
+        del _AHEAD[id(colors)]
+    photo, mirror = entry[1].result()
+    with _AHEAD_LOCK:
+        _MIRRORS.clear()  # (one photo at a time: the one asked for now)
+        _MIRRORS[id(photo)] = (photo, mirror)
+    return photo
+
+
+def _scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
+                 features: int = MAX_FEATURES) -> SceneImage:
     cv2 = _cv2()
     small = shrink_colors(colors, size)
     sift = cv2.SIFT_create(nfeatures=features, contrastThreshold=CONTRAST)
@@ -302,9 +365,18 @@ def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
 
 def mirrored(photo: SceneImage) -> SceneImage:
     """The photo flipped left to right, with its own keypoints (the strongest
-    :data:`MIRROR_FEATURES`: a flipped framing shares hundreds; for :func:`unmirror`)."""
-    return scene_image(photo.colors[:, ::-1], size=max(photo.colors.shape[:2]),
-                       features=MIRROR_FEATURES)
+    :data:`MIRROR_FEATURES`: a flipped framing shares hundreds; for :func:`unmirror`);
+    the one :func:`prepare_photo_scene` found beside ``photo``, when it did."""
+    with _AHEAD_LOCK:
+        entry = _MIRRORS.pop(id(photo), None)
+    if entry is not None and entry[0] is photo:
+        return entry[1]
+    return _mirrored(photo)
+
+
+def _mirrored(photo: SceneImage) -> SceneImage:
+    return _scene_image(photo.colors[:, ::-1], size=max(photo.colors.shape[:2]),
+                        features=MIRROR_FEATURES)
 
 
 def unmirror(match: SceneMatch, width: int) -> SceneMatch:
