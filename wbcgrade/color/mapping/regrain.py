@@ -330,7 +330,8 @@ def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int
     ``b[c]``) bilinearly resized from the band's coarse rows (pixel centres, edges
     replicated: the kernel's clamped interpolation; rows and columns past the coarse
     grid's last node take that node's, as the kernel's clamp gives them), multiplied by
-    the pixels' ``(r, g, b, 1)`` and summed (``cv2.transform``). The kernel's numbers to
+    the pixels' ``(r, g, b, 1)`` and summed (an area resize of the four products, the
+    coefficients scaled by 4 beforehand: exact). The kernel's numbers to
     float32 rounding (the coefficients are interpolated before they are applied: within
     1e-6), no compiled kernel to load, buffers reused band to band (fresh pages cost
     more than the arithmetic); ``out`` may be ``source``."""
@@ -340,16 +341,16 @@ def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int
     lh, lw = coefficients.shape[:2]
     if h == 0 or w == 0:
         return
-    groups = []  # per output channel c: A[0, c], A[1, c], A[2, c] (+ identity), b[c]
-    for c in range(3):
+    groups = []  # per output channel c: A[0, c], A[1, c], A[2, c] (+ identity), b[c],
+    for c in range(3):  # times 4 (exact): the four products' mean is then their sum
         group = np.ascontiguousarray(coefficients[..., [c, 3 + c, 6 + c, 9 + c]],
                                      dtype=np.float32)
         group[..., c] += np.float32(1.0)
+        group *= np.float32(4.0)
         groups.append(group)
     inside_w = min(w, lw * step)  # columns past the last node repeat it
     inside_h = min(h, lh * step)  # rows too
     rows = max(1, _BAND_ROWS // step) * step
-    ones = np.ones((1, 4), np.float32)
     last = [cv2.resize(g[lh - 1:lh], (lw * step, 1), interpolation=cv2.INTER_LINEAR)
             .reshape(1, lw * step, 4)[:, :inside_w] for g in groups]
 
@@ -366,14 +367,16 @@ def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int
             colors = source[y0:y1]
             with_one = pixels[:r]
             cv2.cvtColor(colors[:, :inside_w], cv2.COLOR_RGB2RGBA, dst=with_one)
-            for c in range(3):
+            for c in range(3):  # the four products summed: their mean (area resize)
                 cv2.multiply(ups[c], with_one, dst=product[:r])
-                cv2.transform(product[:r], ones, dst=planes[c][:r])
+                cv2.resize(product[:r].reshape(r, 4 * inside_w), (inside_w, r),
+                           dst=planes[c][:r], interpolation=cv2.INTER_AREA)
             cv2.merge([plane[:r] for plane in planes], dst=merged[:r])
             if inside_w < w:  # past the last node's column: its coefficients
                 tail = colors[:, inside_w:].astype(np.float32)
-                value = np.stack([np.einsum("rxa,ra->rx", tail, up[:, -1, :3])
-                                  + up[:, -1, 3:4] for up in ups], axis=-1)
+                value = np.stack([(np.einsum("rxa,ra->rx", tail, up[:, -1, :3])
+                                   + up[:, -1, 3:4]) * np.float32(0.25) for up in ups],
+                                 axis=-1)
                 np.clip(value, np.float32(0.0), np.float32(1.0), out=out[y0:y1, inside_w:])
             np.clip(merged[:r], np.float32(0.0), np.float32(1.0), out=out[y0:y1, :inside_w])
 
@@ -499,15 +502,22 @@ def _block_means(source: np.ndarray, color_map: np.ndarray, strength: float,
         return mapped, small
     rows = max(1, _BAND_ROWS // step)
 
+    whole = source.shape[1] == w * step and source.dtype == np.float32 \
+        and source.flags.c_contiguous  # (bands of whole rows: mapped from where they are)
+
     def means(part: int) -> None:
         buffer = np.empty((rows * step, w * step, 3), np.float32)
         for lo in range(edges[part], edges[part + 1], rows):
             hi = min(lo + rows, edges[part + 1])
             band = buffer[:(hi - lo) * step]
-            band[...] = source[lo * step:hi * step, :w * step]
-            small[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA)
-            apply_lut_in_place(processor, band)
-            mapped[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA)
+            colors = source[lo * step:hi * step, :w * step]
+            cv2.resize(colors, (w, hi - lo), dst=small[lo:hi], interpolation=cv2.INTER_AREA)
+            if whole:
+                apply_lut_in_place(processor, colors, out=band)
+            else:
+                band[...] = colors
+                apply_lut_in_place(processor, band)
+            cv2.resize(band, (w, hi - lo), dst=mapped[lo:hi], interpolation=cv2.INTER_AREA)
     parts = max(1, min(num_threads(), h // rows))
     edges = np.linspace(0, h, parts + 1).astype(int)
     _threaded(means, parts)

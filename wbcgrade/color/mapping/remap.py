@@ -162,16 +162,23 @@ def lut_processor(color_map: np.ndarray, strength: float = 1.0):
     return ocio.Config.CreateRaw().getProcessor(lut).getDefaultCPUProcessor()
 
 
-def apply_lut_in_place(processor, rgb: np.ndarray) -> None:
-    """Grade a C-contiguous float32 (H, W, 3) image in place with a :func:`lut_processor`
-    (OpenColorIO works a row at a time: pass bands of rows, not one long row)."""
+def apply_lut_in_place(processor, rgb: np.ndarray, out: np.ndarray | None = None) -> None:
+    """Grade a C-contiguous float32 (H, W, 3) image with a :func:`lut_processor`, in place
+    or into ``out`` (the same shape and kind; OpenColorIO works a row at a time: pass
+    bands of rows, not one long row)."""
     import PyOpenColorIO as ocio
 
-    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.float32 \
-            or not rgb.flags.c_contiguous:
-        raise ValueError("rgb must be a C-contiguous float32 (H, W, 3) array")
-    if rgb.size:
-        processor.apply(ocio.PackedImageDesc(rgb, rgb.shape[1], rgb.shape[0], 3))
+    for array in (rgb, rgb if out is None else out):
+        if array.ndim != 3 or array.shape[2] != 3 or array.dtype != np.float32 \
+                or not array.flags.c_contiguous or array.shape != rgb.shape:
+            raise ValueError("rgb and out must be C-contiguous float32 (H, W, 3) arrays")
+    if not rgb.size:
+        return
+    source = ocio.PackedImageDesc(rgb, rgb.shape[1], rgb.shape[0], 3)
+    if out is None:
+        processor.apply(source)
+    else:
+        processor.apply(source, ocio.PackedImageDesc(out, out.shape[1], out.shape[0], 3))
 
 
 def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
