@@ -426,3 +426,32 @@ def test_apply_starts_one_kernel_loader_and_only_for_a_large_photo(monkeypatch, 
     monkeypatch.setattr(workflow, "kernels_needed", lambda: False)
     monkeypatch.setattr(workflow, "header_pixels", lambda path: 1 / 0)
     assert workflow.load_kernels_beside(tmp_path / "large.jpg") is None
+
+
+def test_a_subsampled_solve_in_float32_is_the_float64_one_to_its_rounding(rng, monkeypatch):
+    """A photo solved on a subsampled copy solves its window models in float32 (the
+    precision of the window means they are made of): within 1e-6 of the float64 solve
+    at the default eps; a small eps (nearly singular covariances) keeps float64."""
+    guide = rng.random((40, 50, 3)).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1
+              + 0.02 * rng.standard_normal(guide.shape)).astype(np.float32)
+    solved = []
+    real = regrain_module._solve_band
+    monkeypatch.setattr(regrain_module, "_solve_band",
+                        lambda m, *args: (solved.append(m.dtype.type), real(m, *args))[1])
+    precise = regrain_module._coefficients(guide, change, 3, 0.04)
+    fast = regrain_module._coefficients(guide, change, 3, 0.04, precise=False)
+    assert set(solved) == {np.float64, np.float32}
+    np.testing.assert_allclose(fast, precise, rtol=0, atol=1e-6)
+    solved.clear()
+    regrain_module._coefficients(guide, change, 3, 1e-5, precise=False)
+    assert set(solved) == {np.float64}
+    solved.clear()  # the subsampled regrain asks for float32, a full-size one does not
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", 700)
+    rgb, table = _image_and_map(rng)
+    regrain_map(np.clip(rgb, 0, 1), table, 0.8)
+    assert set(solved) == {np.float32}
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", 10 ** 6)
+    solved.clear()
+    regrain_map(np.clip(rgb, 0, 1), table, 0.8)
+    assert set(solved) == {np.float64}

@@ -60,10 +60,11 @@ _NUMPY_SOLVE_PIXELS = 400_000
 
 
 def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float,
-                  prior: np.ndarray | None = None) -> np.ndarray:
+                  prior: np.ndarray | None = None, precise: bool = True) -> np.ndarray:
     """(H, W, 12) float32 box-averaged coefficients of the local model
     ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``. ``prior``: (n, n,
-    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0)."""
+    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0).
+    ``precise`` False: solved in float32 (:func:`_window_models_numpy`)."""
     guide = np.ascontiguousarray(guide, dtype=np.float32)
     change = np.ascontiguousarray(change, dtype=np.float32)
     small = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
@@ -74,7 +75,7 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
         pull = np.concatenate([apply_color_map(centre, np.ascontiguousarray(
             prior[..., 3 * a:3 * a + 3], dtype=np.float32)) for a in range(3)], axis=-1)
     models = _window_models_numpy(guide, change, int(radius), float(eps), pull,
-                                  None if small else _uniform_filter_cv2)
+                                  None if small else _uniform_filter_cv2, precise)
     return box(models, int(radius))
 
 
@@ -114,13 +115,15 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
 
 def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
                          eps: float, prior: np.ndarray | None = None,
-                         filtered=None) -> np.ndarray:
+                         filtered=None, precise: bool = True) -> np.ndarray:
     """(H, W, 12) float32 each window's A and b: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
     eps A0)`` (``A[a, c]`` at ``3 a + c``; ``A0`` the (H, W, 9) ``prior``, None: 0) and
     ``b = mean(d) - A^T mean(I)``, from the window means of the 21 moments (the guide I,
     the change d, their products) by :func:`_box_numpy`'s filter or ``filtered`` (same
-    arguments: :func:`_uniform_filter_cv2`), solved in closed form (float64) in bands of
-    a few rows, on as many threads as numba uses. Nothing to compile."""
+    arguments: :func:`_uniform_filter_cv2`), solved in closed form (float64; ``precise``
+    False: in float32, the precision of the window means themselves, where ``eps`` keeps
+    the covariances far from singular: :data:`_FLOAT32_SOLVE_EPS`) in bands of a few
+    rows, on as many threads as numba uses. Nothing to compile."""
     filtered = filtered or _uniform_filter
     h, w = guide.shape[:2]
     out = np.empty((h, w, 12), np.float32)
@@ -139,18 +142,25 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
         filtered(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
+    solved = np.float64 if precise or eps < _FLOAT32_SOLVE_EPS else np.float32
     parts = max(1, min(num_threads(), h // _SOLVE_ROWS))
     edges = np.linspace(0, h, parts + 1).astype(int)
 
     def solve(part: int) -> None:  # bands of a few rows: their float64 planes stay in cache
         for start in range(edges[part], edges[part + 1], _SOLVE_ROWS):
             stop = min(start + _SOLVE_ROWS, edges[part + 1])
-            _solve_band(means[:, start:stop].astype(np.float64), eps, out[start:stop],
+            _solve_band(means[:, start:stop].astype(solved, copy=False), eps, out[start:stop],
                         None if prior is None else prior[start:stop])
 
     _threaded(solve, parts)
     return out
 
+
+#: The least ``eps`` a solve in float32 is allowed (``precise`` False): each window's
+#: covariance then has eigenvalues of at least 1e-3, its determinant at least 1e-9, far
+#: above float32's rounding of the window means it is made of (the default 0.04: within
+#: 3e-7 of the float64 solve on the 16-megapixel photo's coefficients).
+_FLOAT32_SOLVE_EPS = 1e-3
 
 #: Rows of one band of the window models' closed-form solve (:func:`_solve_band`): 8 rows
 #: of a 1-megapixel grid's 21 float64 planes stay in the cache (64 rows: 1.8x the time).
@@ -694,5 +704,7 @@ def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray
                        prior: np.ndarray | None = None) -> np.ndarray:
     h, w = source.shape[:2]
     pixels = _window(radius, max(h, w) / step)
-    _apply_upsampled(source, _coefficients(small, change, pixels, eps, prior), float(step), out)
+    # on a subsampled copy, solved in float32: its coefficients are interpolated in float32
+    coefficients = _coefficients(small, change, pixels, eps, prior, precise=step == 1)
+    _apply_upsampled(source, coefficients, float(step), out)
     return out
