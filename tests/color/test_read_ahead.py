@@ -1,42 +1,49 @@
-"""``apply`` decodes the photo on another thread while its styles load (and their scene
-images are read): the same grade, the same errors."""
+"""``apply`` decodes the photo (and finds its keypoints) on another thread while the grade's
+modules import and its styles load (and their scene images are read): the same grade,
+the same errors."""
 
 from __future__ import annotations
 
 import threading
 
 import numpy as np
+import pytest
 
+import wbcgrade.photos.read_ahead as read_ahead
 import wbcgrade.photos.workflow as workflow
 from tests.color.conftest import SAMPLES, small_copy
+from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.io.images import read_image
 from wbcgrade.errors import InputError
 
 
-def test_a_read_ahead_gives_the_photo_or_raises_what_reading_raised(tmp_path):
+def test_a_read_ahead_gives_the_photo_or_raises_what_reading_raised(tmp_path, monkeypatch):
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
-    ahead = workflow._ReadAhead(photo)
-    assert np.array_equal(ahead.image().pixels, read_image(photo).pixels)
+    ahead = read_ahead.ReadAhead(photo)
+    image, encoding, encoded = ahead.result()
+    assert np.array_equal(image.pixels, read_image(photo).pixels)
+    expected = ColorEncoding.for_image(image).encode(image.rgb(), image.is_float)[0]
+    assert np.array_equal(encoded[0], expected) and not ahead.scene_started
+    monkeypatch.chdir(tmp_path)  # the same file named otherwise, in the same spaces
+    assert ahead.serves("coffee.jpg", None, None) and ahead.serves(photo, None, None)
+    assert not ahead.serves(photo, None, "acescct") and not ahead.serves("x.jpg", None, None)
     broken = tmp_path / "broken.jpg"
     broken.write_bytes(photo.read_bytes()[:200])
-    try:
-        workflow._ReadAhead(broken).image()
-    except InputError as exc:
-        expected = str(exc)
-    else:  # pragma: no cover - the truncated file must be refused
-        raise AssertionError("a truncated JPEG was read")
-    try:
+    with pytest.raises(InputError) as raised:
+        read_ahead.ReadAhead(broken).result()
+    with pytest.raises(InputError) as direct:
         read_image(broken)
-    except InputError as exc:
-        assert str(exc) == expected
+    assert str(raised.value) == str(direct.value)
 
 
 def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monkeypatch, cli):
-    """The photo is decoded on the read-ahead thread, started before the styles load, and
-    the style photos are prepared for matching before the grade asks for them."""
+    """The photo is decoded on the read-ahead thread (started once the options are
+    checked) and its keypoints found from there; the styles load on the main thread and
+    their photos are prepared for matching before the grade asks; nothing of the photo's
+    keypoints is kept after the grade."""
     photo = small_copy(SAMPLES / "sunset.jpg", tmp_path / "sunset.jpg")
     events: list[tuple[str, str]] = []
-    reading, loading = workflow.read_image, workflow.load_styles
+    reading, loading = read_ahead.read_image, workflow.load_styles
 
     def read(path):
         events.append(("read", threading.current_thread().name))
@@ -47,11 +54,12 @@ def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monk
         return loading(*args, **kwargs)
 
     kept, prepared, forgotten = [], [], []
+    monkeypatch.setattr(read_ahead, "read_image", read)
     monkeypatch.setattr(workflow, "read_image", read)
     monkeypatch.setattr(workflow, "load_styles", load)
     monkeypatch.setattr(workflow, "keep_style_scenes", lambda styles: kept.append(styles))
-    preparing, forgetting = workflow.prepare_photo_scene, workflow.forget_photo_scene
-    monkeypatch.setattr(workflow, "prepare_photo_scene",
+    preparing, forgetting = read_ahead.prepare_photo_scene, workflow.forget_photo_scene
+    monkeypatch.setattr(read_ahead, "prepare_photo_scene",
                         lambda colors: (prepared.append(colors), preparing(colors)))
     monkeypatch.setattr(workflow, "forget_photo_scene",
                         lambda colors: (forgotten.append(colors), forgetting(colors)))
@@ -59,12 +67,13 @@ def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monk
                  str(tmp_path / "out.jpg"))
     assert result.exit_code == 0, result.output
     assert ("read", "wbcgrade-read") in events and ("styles", "MainThread") in events
+    assert len([e for e in events if e[0] == "read"]) == 1  # read once, ahead
     assert len(kept) == 1 and kept[0].files  # the style photos, prepared ahead
-    # the photo's own keypoints found beside its histograms, and nothing kept after
     assert len(prepared) == 1 and len(forgotten) == 1 and prepared[0] is forgotten[0]
     result = cli("apply", str(photo), "--preset", "warm", "-o", str(tmp_path / "p.jpg"))
     assert result.exit_code == 0, result.output
     assert len(prepared) == 1  # a preset's look matches no scene: nothing prepared
+    assert events.count(("read", "wbcgrade-read")) == 2  # (but read ahead all the same)
 
 
 def test_a_photo_prepared_ahead_gives_the_scene_and_mirror_it_would_have(rng):

@@ -75,6 +75,7 @@ from wbcgrade.limits import check_input_file
 from wbcgrade.photos.graded import GradeReport, PhotoGrade
 from wbcgrade.photos.output import grey_of, output_pixels
 from wbcgrade.photos.progress import Progress  # (defined there: no numerics)
+from wbcgrade.photos.read_ahead import ReadAhead
 from wbcgrade.photos.report import plan_report, report_from_grade
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
@@ -227,37 +228,9 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
     return thread
 
 
-class _ReadAhead:
-    """A photo decoded in a daemon thread (:func:`read_image`) while the caller does other
-    work (loads the styles): the decoder holds no interpreter lock for most of its time,
-    so on a second core it costs the command no wall time. :meth:`image` waits for it and
-    raises what reading raised; a command that fails meanwhile does not wait for it."""
-
-    def __init__(self, photo: str | os.PathLike) -> None:
-        self.photo = Path(photo)
-        self._done = threading.Event()
-        self._image: Image | None = None
-        self._error: BaseException | None = None
-        threading.Thread(target=self._read, name="wbcgrade-read", daemon=True).start()
-
-    def _read(self) -> None:
-        try:
-            self._image = read_image(self.photo)
-        except BaseException as exc:  # noqa: BLE001 - raised again where the image is read
-            self._error = exc
-        finally:
-            self._done.set()
-
-    def image(self) -> Image:
-        self._done.wait()
-        if self._error is not None:
-            raise self._error
-        return self._image
-
-
 def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: GradeOptions,
                 *, shared: Grade | None = None, progress: Progress | None = None,
-                keep_input: bool = True, read_ahead: _ReadAhead | None = None) -> PhotoGrade:
+                keep_input: bool = True, read_ahead: ReadAhead | None = None) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
     With ``shared`` (a series grade or a saved one, in the same working space), its colour
@@ -266,7 +239,8 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     nothing will look at the ungraded pixels afterwards (no report sheet), so
     a photo graded in its own space is graded in place (the returned
     ``image.pixels`` then hold graded colours). ``read_ahead``: the photo being decoded
-    already (:class:`_ReadAhead`), waited for instead of read.
+    already (:class:`~wbcgrade.photos.read_ahead.ReadAhead`), waited for instead of read
+    when it is this photo in these colour spaces.
     """
     progress = progress or Progress()
     timings: dict[str, float] = {}
@@ -275,27 +249,41 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     regrained = (shared.regrain if shared is not None else options.regrain.settings) is not None
     if regrained:
         load_kernels_beside(photo)
-    image = read_image(photo) if read_ahead is None else read_ahead.image()
-    rgb = image.rgb()
-    encoding = ColorEncoding.for_image(image, options.spaces.input,
-                                       options.spaces.working).named(progress.setting_names)
-    encoded = encoding.encode(rgb, image.is_float)
+    spaces = options.spaces
+    scene_started = False
+    if read_ahead is not None and read_ahead.serves(photo, spaces.input, spaces.working):
+        image, encoding, encoded = read_ahead.result()
+        scene_started = read_ahead.scene_started
+    else:
+        image = read_image(photo)
+        encoding = ColorEncoding.for_image(image, spaces.input, spaces.working)
+        encoded = encoding.encode(image.rgb(), image.is_float)
+    encoding = encoding.named(progress.setting_names)
     timings["read"] = time.perf_counter() - start
+    try:
+        return _graded_photo(image, encoding, encoded, styles, options, shared, progress,
+                             keep_input, timings, scene_started)
+    finally:
+        if scene_started or (shared is None and _matches_scenes(styles, options)):
+            forget_photo_scene(encoded[0])  # (nothing of a graded photo is kept)
+
+
+def _graded_photo(image: Image, encoding: ColorEncoding, encoded: tuple,
+                  styles: StyleSet | None, options: GradeOptions, shared: Grade | None,
+                  progress: Progress, keep_input: bool, timings: dict[str, float],
+                  scene_started: bool) -> PhotoGrade:
+    """:func:`grade_photo` of a photo read and encoded (``scene_started``: its keypoints
+    are being found already)."""
     fit = None
     if shared is not None:  # what the shared (series or saved) grade does to this photo
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
         start = time.perf_counter()
-        matching = _matches_scenes(styles, options)
-        if matching:  # the photo's keypoints found beside its histograms and look
-            prepare_photo_scene(encoded[0])
-        try:
-            grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
-                                       progress.fit, progress.stage)
-        finally:
-            if matching:
-                forget_photo_scene(encoded[0])
+        if not scene_started and _matches_scenes(styles, options):
+            prepare_photo_scene(encoded[0])  # keypoints found beside histograms and look
+        grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
+                                   progress.fit, progress.stage)
         timings.update(grade.timings)
         # what the grade's own stages leave out: the histograms, the look, the outcome
         timings["grade"] = max(0.0, time.perf_counter() - start
@@ -314,7 +302,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
 def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
                *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
-               keep_input: bool = True, read_ahead: _ReadAhead | None = None) -> GradeReport:
+               keep_input: bool = True, read_ahead: ReadAhead | None = None) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
 
     The photo and the LUT are published together: when the LUT cannot be
@@ -375,7 +363,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                 overwrite: bool = False, report_dir: str | os.PathLike | None = None,
                 progress: Progress | None = None,
                 encode: WriteOptions | None = None,
-                save_grade: str | os.PathLike | None = None) -> GradeReport:
+                save_grade: str | os.PathLike | None = None,
+                read_ahead: ReadAhead | None = None) -> GradeReport:
     """``wbcgrade apply``: grade ``photo`` and write it, the LUT and the report.
 
     Every output (the graded photo, the LUT, the report's files) is planned
@@ -392,6 +381,9 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
 
     ``encode``: JPEG/WebP quality and bit depth of the graded photo.
     ``save_grade``: also write the grade itself, as JSON (what ``--look`` reads).
+    ``read_ahead``: the photo being read already (the command line starts it as soon as
+    its options are checked, :meth:`~wbcgrade.photos.read_ahead.ReadAhead.for_grade`);
+    else a grade towards styles starts it before they load.
     """
     progress = progress or Progress()
     saved = isinstance(source, Grade)
@@ -404,6 +396,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                       overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
         plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
+    if read_ahead is not None:  # the outputs are planned: the grade goes ahead
+        read_ahead.proceed()
     if saved:
         spaces = options.spaces
         if spaces.working != source.working:
@@ -413,7 +407,9 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         _save_grade(plan, report.grade)
         return report
     start = time.perf_counter()
-    read_ahead = _ReadAhead(plan.photo)  # decoded on another core while the styles load
+    if read_ahead is None:  # decoded on another core while the styles load
+        read_ahead = ReadAhead.for_grade(plan.photo, source, options)
+        read_ahead.proceed()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, matching_hook(source, options, [plan.photo]),
                          resampled=style_grids(options))

@@ -209,7 +209,7 @@ def prepare_photo_scene(colors: np.ndarray) -> None:
 
     with _AHEAD_LOCK:
         _AHEAD[id(colors)] = (colors, future)
-    threading.Thread(target=prepare, name="wbcgrade-scene", daemon=True).start()
+    threading.Thread(target=prepare, name="wbcgrade-scene").start()  # (no daemon: ReadAhead)
 
 
 def forget_photo_scene(colors: np.ndarray) -> None:
