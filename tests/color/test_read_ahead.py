@@ -112,3 +112,30 @@ def test_a_photo_prepared_ahead_gives_the_scene_and_mirror_it_would_have(rng):
     except Exception as exc:  # noqa: BLE001
         assert type(exc) is kind
     assert not scene._AHEAD
+
+
+@pytest.mark.slow
+def test_a_command_refused_while_its_photo_is_read_ahead_exits_with_its_error(tmp_path):
+    """A large photo is still being decoded when the plan refuses the command (its output
+    exists): one line, exit 1, no abort (a daemon thread inside OpenImageIO when the
+    interpreter ends aborted the process: exit 134)."""
+    import os
+    import subprocess
+    import sys
+
+    import cv2
+
+    rng = np.random.default_rng(0)
+    photo = tmp_path / "large.jpg"
+    noise = rng.integers(0, 256, (3000, 4000, 3), dtype=np.uint8)
+    cv2.imwrite(str(photo), cv2.GaussianBlur(noise, (0, 0), 3))
+    (tmp_path / "out.jpg").write_bytes(b"taken")
+    env = {**os.environ, "WBCGRADE_CACHE_DIR": str(tmp_path / "cache")}
+    for _ in range(3):
+        done = subprocess.run([sys.executable, "-m", "wbcgrade", "apply", str(photo),
+                               "--style", str(SAMPLES), "-o", str(tmp_path / "out.jpg")],
+                              capture_output=True, text=True, env=env)
+        assert done.returncode == 1, done.stderr[-2000:]
+        assert done.stderr.strip().splitlines() == [
+            f"Error: {tmp_path / 'out.jpg'}: file exists (use --overwrite to replace it)"]
+    assert (tmp_path / "out.jpg").read_bytes() == b"taken"
