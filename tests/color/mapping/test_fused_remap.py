@@ -455,3 +455,21 @@ def test_a_subsampled_solve_in_float32_is_the_float64_one_to_its_rounding(rng, m
     solved.clear()
     regrain_map(np.clip(rgb, 0, 1), table, 0.8)
     assert set(solved) == {np.float64}
+
+
+def test_a_subsampled_solve_reads_its_prior_through_opencolorio(rng, monkeypatch):
+    """The grain prior of a subsampled solve (a preset's or a matched scene's look) is read
+    at each window's mean colour by OpenColorIO's LUT processor: the trilinear lookup of
+    ``apply_color_map`` to float32 rounding (the prior's values are not colours: below 0
+    and above 1 too); a full-size solve reads it as before."""
+    pytest.importorskip("PyOpenColorIO")
+    colors = rng.random((37, 41, 3)).astype(np.float32)
+    table = (rng.standard_normal((9, 9, 9, 3)) * 0.4).astype(np.float32)
+    expected = apply_color_map(colors, table)
+    np.testing.assert_allclose(regrain_module._read_prior(colors, table, False), expected,
+                               rtol=0, atol=1e-6)
+    looked = []
+    monkeypatch.setattr(regrain_module, "lut_processor",
+                        lambda *args: looked.append(args) or None)
+    assert np.array_equal(regrain_module._read_prior(colors, table, True), expected)
+    assert not looked  # (precise: apply_color_map itself)
