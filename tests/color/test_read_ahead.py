@@ -60,7 +60,7 @@ def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monk
     monkeypatch.setattr(workflow, "keep_style_scenes", lambda styles: kept.append(styles))
     preparing, forgetting = read_ahead.prepare_photo_scene, workflow.forget_photo_scene
     monkeypatch.setattr(read_ahead, "prepare_photo_scene",
-                        lambda colors: (prepared.append(colors), preparing(colors)))
+                        lambda colors, entry: (prepared.append(colors), preparing(colors, entry)))
     monkeypatch.setattr(workflow, "forget_photo_scene",
                         lambda colors: (forgotten.append(colors), forgetting(colors)))
     result = cli("apply", str(photo), "--style", str(style_dir), "-o",
@@ -139,3 +139,50 @@ def test_a_command_refused_while_its_photo_is_read_ahead_exits_with_its_error(tm
         assert done.stderr.strip().splitlines() == [
             f"Error: {tmp_path / 'out.jpg'}: file exists (use --overwrite to replace it)"]
     assert (tmp_path / "out.jpg").read_bytes() == b"taken"
+
+
+def test_a_photos_keypoints_are_kept_in_the_cache_and_found_again(rng, tmp_path,
+                                                                  monkeypatch):
+    """The photo's keypoints and its mirror's, prepared ahead, are kept in the cache
+    (``scenes/``, keyed by the file, the spaces and the matching settings): graded again,
+    the photo gets exactly what preparing them gives, without preparing them; a damaged
+    entry, or one of another size, is prepared again."""
+    from wbcgrade.color.io import cache
+    from wbcgrade.color.look import scene
+
+    monkeypatch.setattr(cache, "_COMMAND", {"folder": str(tmp_path / "cache")})
+    photo = small_copy(SAMPLES / "bridge.jpg", tmp_path / "bridge.jpg", width=900)
+    colors = read_image(photo).pixels[..., :3].copy()
+    entry = scene.photo_scene_entry(photo, None, "sRGB")
+    assert entry is not None and entry != scene.photo_scene_entry(photo, "sRGB", "sRGB")
+    expected = scene._scene_image(colors)
+    expected_mirror = scene._mirrored(expected)
+
+    def prepared() -> tuple:
+        scene.prepare_photo_scene(colors, entry)
+        found = scene.scene_image(colors)
+        return found, scene.mirrored(found)
+
+    computed = []
+    real = scene._scene_image
+    monkeypatch.setattr(scene, "_scene_image",
+                        lambda *args, **kwargs: computed.append(1) or real(*args, **kwargs))
+    for damage in (None, b"not an archive"):
+        if damage is not None:
+            entry.write_bytes(damage)
+        computed.clear()
+        first = prepared()
+        assert computed and entry.is_file()  # prepared, then kept
+        computed.clear()
+        again = prepared()
+        assert not computed  # read back
+        for got in (first, again):
+            for image, want in zip(got, (expected, expected_mirror)):
+                assert np.array_equal(image.colors, want.colors)
+                assert np.array_equal(image.points, want.points)
+                assert np.array_equal(image.descriptors, want.descriptors)
+    computed.clear()
+    smaller = colors[:200, :300].copy()  # another photo at that key: prepared again
+    scene.prepare_photo_scene(smaller, entry)
+    assert scene.scene_image(smaller).colors.shape[:2] == (200, 300) and computed
+    scene.forget_photo_scene(smaller)

@@ -17,7 +17,7 @@ import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.io.images import Image, read_image
-from wbcgrade.color.look.scene import prepare_photo_scene
+from wbcgrade.color.look.scene import photo_scene_entry, prepare_photo_scene
 
 __all__ = ["ReadAhead"]
 
@@ -52,7 +52,8 @@ class ReadAhead:
             if self.match_scenes:
                 self._decided.wait()  # (the command's outputs planned, or the grade asks)
                 if not self._cancelled.is_set():
-                    prepare_photo_scene(encoded[0])
+                    prepare_photo_scene(encoded[0], photo_scene_entry(
+                        self.photo, self.spaces[0], encoding.working))
                     self.scene_started = True
             self._result = (image, encoding, encoded)
         except BaseException as exc:  # noqa: BLE001 - raised again where the photo is read

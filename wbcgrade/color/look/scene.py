@@ -52,7 +52,8 @@ from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
            "colour_pairs", "style_scene_images", "keep_style_scenes", "has_style_images",
-           "prepare_photo_scene", "forget_photo_scene", "shrink_colors",
+           "prepare_photo_scene", "forget_photo_scene", "photo_scene_entry",
+           "shrink_colors",
            "keep_for_matching", "matching_hook",
            "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
@@ -191,25 +192,80 @@ _MIRRORS: dict[int, tuple[SceneImage, SceneImage]] = {}
 _AHEAD_LOCK = threading.Lock()
 
 
-def prepare_photo_scene(colors: np.ndarray) -> None:
+def prepare_photo_scene(colors: np.ndarray, entry: Path | None = None) -> None:
     """Start preparing a photo for matching on another thread: :func:`scene_image` of
     ``colors`` (its default size and keypoints) and its :func:`mirrored` copy, so that the
     decoder's next steps (the photo's histograms, the set's look: one core) and the
-    keypoints (OpenCV, no interpreter lock) run side by side. The grade's own calls for
-    this array take them (or what preparing them raised); :func:`forget_photo_scene`
-    drops them if it never asks."""
+    keypoints (OpenCV, no interpreter lock) run side by side. ``entry``: where they are
+    kept in the cache (:func:`photo_scene_entry`; a photo graded again, at another
+    strength or with other styles, finds them there); None: not kept. The grade's own
+    calls for this array take them (or what preparing them raised);
+    :func:`forget_photo_scene` drops them if it never asks."""
     future: Future = Future()
 
     def prepare() -> None:
         try:
-            photo = _scene_image(colors)
-            future.set_result((photo, _mirrored(photo)))
+            found = _read_photo_scene(entry, colors)
+            if found is None:
+                photo = _scene_image(colors)
+                found = (photo, _mirrored(photo))
+                _write_photo_scene(entry, *found)
+            future.set_result(found)
         except BaseException as exc:  # noqa: BLE001 - raised where the grade asks for it
             future.set_exception(exc)
 
     with _AHEAD_LOCK:
         _AHEAD[id(colors)] = (colors, future)
     threading.Thread(target=prepare, name="wbcgrade-scene").start()  # (no daemon: ReadAhead)
+
+
+def photo_scene_entry(path: str | os.PathLike, input_space: str | None,
+                      working_space: str) -> Path | None:
+    """Where the photo at ``path``, read in ``input_space`` (None: what the file says) and
+    encoded into ``working_space``, keeps its keypoints and its mirror's in the command's
+    cache (``scenes/``; None when caching is off or the file is gone): keyed by the file as
+    it is now and every matching setting, its colours kept as float32 (the photo's own
+    pairs are read from them: exactly what preparing them again gives)."""
+    folder = cache_folder()
+    if folder is None:
+        return None
+    try:
+        key = (f"photo|{file_key(path)}|{input_space or 'file'}|{working_space}|"
+               f"{MATCH_SIZE}|{MAX_FEATURES}|{MIRROR_FEATURES}|{CONTRAST}|{SMOOTH}|"
+               f"{STRETCH}|{LOCAL_CONTRAST}|{LOCAL_TILES}|{SCENE_VERSION}")
+    except OSError:
+        return None
+    return entry_path(folder, "scenes", key)
+
+
+def _read_photo_scene(entry: Path | None, colors: np.ndarray
+                      ) -> tuple[SceneImage, SceneImage] | None:
+    data = read_entry(entry)
+    if data is None:
+        return None
+    try:
+        small = np.ascontiguousarray(data["colors"], dtype=np.float32)
+        h, w = colors.shape[:2]
+        scale = MATCH_SIZE / max(h, w)
+        expected = (h, w) if scale >= 1.0 else (max(1, round(h * scale)),
+                                                 max(1, round(w * scale)))
+        if small.shape != (*expected, 3):  # (another photo at that key: computed again)
+            return None
+        photo = SceneImage(small, data["points"].astype(np.float32),
+                           data["descriptors"].astype(np.float32))
+        mirror = SceneImage(np.ascontiguousarray(small[:, ::-1]),
+                            data["mirror_points"].astype(np.float32),
+                            data["mirror_descriptors"].astype(np.float32))
+    except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
+        return None
+    return photo, mirror
+
+
+def _write_photo_scene(entry: Path | None, photo: SceneImage, mirror: SceneImage) -> None:
+    """Best effort: a cache that cannot be written is skipped."""
+    write_entry(entry, colors=photo.colors, points=photo.points,
+                descriptors=photo.descriptors, mirror_points=mirror.points,
+                mirror_descriptors=mirror.descriptors)
 
 
 def forget_photo_scene(colors: np.ndarray) -> None:
