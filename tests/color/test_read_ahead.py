@@ -186,3 +186,28 @@ def test_a_photos_keypoints_are_kept_in_the_cache_and_found_again(rng, tmp_path,
     scene.prepare_photo_scene(smaller, entry)
     assert scene.scene_image(smaller).colors.shape[:2] == (200, 300) and computed
     scene.forget_photo_scene(smaller)
+
+
+def test_style_photos_prepared_ahead_are_waited_for_and_found(tmp_path, style_dir,
+                                                             monkeypatch):
+    """``keep_style_scenes`` reads the style photos' scene images on another thread; the
+    grade's ``style_scene_images`` waits for it and gets the same images, prepared once."""
+    from wbcgrade.color.io import cache
+    from wbcgrade.color.look import scene
+    from wbcgrade.color.presets import load_style_folder
+
+    monkeypatch.setattr(cache, "_COMMAND", {"folder": str(tmp_path / "cache")})
+    monkeypatch.setattr(scene, "_IN_MEMORY", {})
+    styles = load_style_folder(style_dir, 8)
+    prepared = []
+    real = scene._scene_image
+    monkeypatch.setattr(scene, "_scene_image",
+                        lambda *args, **kwargs: prepared.append(1) or real(*args, **kwargs))
+    assert scene.keep_style_scenes(styles) and scene._STYLES_AHEAD
+    images = scene.style_scene_images(styles)
+    assert not scene._STYLES_AHEAD and len(prepared) == len(styles.names)  # once each
+    again = scene.style_scene_images(styles)
+    assert len(prepared) == len(styles.names)
+    for a, b in zip(images, again):
+        assert a is b  # kept in this process
+    assert not scene.keep_style_scenes(type(styles)(styles.names, styles.histograms))

@@ -631,6 +631,15 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`, beside
     the histograms), keyed by the file and the working space.
     """
+    with _AHEAD_LOCK:  # (the style photos being prepared ahead: waited for, then found)
+        ahead, _STYLES_AHEAD[:] = list(_STYLES_AHEAD), []
+    for thread in ahead:
+        thread.join()
+    return _style_scene_images(styles, progress, cache)
+
+
+def _style_scene_images(styles, progress: Callable[[int, int], None] | None = None,
+                        cache: bool = True) -> list[SceneImage | None]:
     images: Sequence = styles.images
     files: Sequence = styles.files
     out: list[SceneImage | None] = []
@@ -652,12 +661,29 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
 
 
 def keep_style_scenes(styles) -> bool:
-    """Prepare the style photos of a StyleSet for matching ahead of the grade
-    (:func:`style_scene_images`, kept in this process: the grade's own call finds them
-    there), when it names their files (images given as arrays are not kept: nothing to
-    gain) and no more than this process keeps; whether it did."""
+    """Start preparing the style photos of a StyleSet for matching on another thread
+    (:func:`style_scene_images`, kept in this process: read from the cache, which holds
+    no interpreter lock for most of its time, while the photo's histograms and the set's
+    look are found; the grade's own call waits for it and finds them there), when it names
+    their files (images given as arrays are not kept: nothing to gain) and no more than
+    this process keeps; whether it started. Best effort: what it could not prepare, the
+    grade prepares (and reports)."""
     if (not styles.files or any(image is not None for image in styles.images)
             or len(styles.names) > _IN_MEMORY_MAX):
         return False
-    style_scene_images(styles)
+
+    def keep() -> None:
+        try:
+            _style_scene_images(styles)
+        except Exception:  # noqa: BLE001, S110 - the grade prepares (and reports) them again
+            pass
+
+    thread = threading.Thread(target=keep, name="wbcgrade-styles")
+    with _AHEAD_LOCK:
+        _STYLES_AHEAD.append(thread)
+    thread.start()
     return True
+
+
+#: The threads :func:`keep_style_scenes` started that no grade has waited for yet.
+_STYLES_AHEAD: list[threading.Thread] = []
