@@ -211,3 +211,20 @@ def test_style_photos_prepared_ahead_are_waited_for_and_found(tmp_path, style_di
     for a, b in zip(images, again):
         assert a is b  # kept in this process
     assert not scene.keep_style_scenes(type(styles)(styles.names, styles.histograms))
+
+
+def test_a_read_ahead_the_grade_does_not_use_keeps_nothing(tmp_path):
+    """A read-ahead of other spaces than the grade's is discarded: the photo is read again
+    and what the read-ahead prepared for matching is not kept."""
+    from wbcgrade.color.look import scene
+
+    photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
+    ahead = read_ahead.ReadAhead(photo, None, "acescct", match_scenes=True)
+    ahead.proceed()
+    ahead.result()
+    assert ahead.scene_started and scene._AHEAD
+    ahead.discard()
+    assert not scene._AHEAD
+    unused = read_ahead.ReadAhead(photo, None, None, match_scenes=True)
+    unused.discard()  # (before the keypoints were started: never started)
+    assert not unused.scene_started and not scene._AHEAD

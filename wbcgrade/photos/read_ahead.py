@@ -17,7 +17,11 @@ import numpy as np
 
 from wbcgrade.color.colorspace import ColorEncoding
 from wbcgrade.color.io.images import Image, read_image
-from wbcgrade.color.look.scene import photo_scene_entry, prepare_photo_scene
+from wbcgrade.color.look.scene import (
+    forget_photo_scene,
+    photo_scene_entry,
+    prepare_photo_scene,
+)
 
 __all__ = ["ReadAhead"]
 
@@ -94,6 +98,14 @@ class ReadAhead:
         once the decoder is done, without finding the photo's keypoints)."""
         self._cancelled.set()
         self._decided.set()
+
+    def discard(self) -> None:
+        """Not needed after all (the grade reads the photo otherwise): nothing more started,
+        and nothing it prepared kept."""
+        self.cancel()
+        self._done.wait()
+        if self.scene_started and self._result is not None:
+            forget_photo_scene(self._result[2][0])
 
     def result(self) -> tuple[Image, ColorEncoding, tuple[np.ndarray, object]]:
         """(image, encoding, ``encoding.encode`` of its colours), once read; raises what

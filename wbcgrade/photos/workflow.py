@@ -255,6 +255,8 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
         image, encoding, encoded = read_ahead.result()
         scene_started = read_ahead.scene_started
     else:
+        if read_ahead is not None:  # (another photo, or other spaces)
+            read_ahead.discard()
         image = read_image(photo)
         encoding = ColorEncoding.for_image(image, spaces.input, spaces.working)
         encoded = encoding.encode(image.rgb(), image.is_float)
