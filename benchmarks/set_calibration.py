@@ -10,7 +10,10 @@ as ``apply --style`` grades) and compared with the look applied to them
 (recovered = 1 - dE2000(out, truth) / dE2000(photo, truth)). Sets with no look
 (S ungraded photos; and the three warmest, most colourful photos) give how far
 the grade moves photos when there is nothing to find (mean dE2000 of out against
-the photo; every photo should stay under 1.5).
+the photo; every photo should stay under 1.5). ``--warm K``: also every three of the
+``K`` warmest, most colourful photos (default 6: twenty sets of similar content, the
+hardest sets without a look), each grading four others; the largest change and the
+share of graded photos moved over 1.5 dE2000.
 
 Prints a table per set size (mean and worst recovered per look, the strength the
 grade reported) and a calibration table: the reported strength, binned, against
@@ -20,6 +23,7 @@ the mean recovered fraction.
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from pathlib import Path
 
@@ -65,6 +69,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=256, help="long side in px")
     parser.add_argument("--photo-dir", type=Path, default=DEFAULT_PHOTOS)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--warm", type=int, default=6,
+                        help="every three of the K warmest, most colourful photos (0: none)")
     args = parser.parse_args()
     names = sorted(p.stem for p in args.photo_dir.glob("*.jpg") if p.stem not in EXCLUDED)
     photos = {n: read_photo(args.photo_dir / f"{n}.jpg", args.size) for n in names}
@@ -115,6 +121,21 @@ def main() -> None:
             unit = " dE" if look.startswith("(") and look != "(all looks)" else "   "
             cells.append(f"{v.mean():+.2f} ({worst:+.2f}){unit} {np.nanmean(s):.2f}".rjust(30))
         print(f"| {look:18s} | " + " | ".join(cells) + " |")
+    if args.warm >= 3:
+        moves = []
+        for trio in itertools.combinations(colourful_warm(photos, args.warm), 3):
+            others = [n for n in names if n not in trio]
+            styles = [np.round(photos[n] * 255) / 255 for n in trio]
+            for name in rng.choice(others, args.graded, replace=False):
+                out, _ = grade(photos[name], styles, list(trio))
+                moves.append(delta_e(lab(out), lab(photos[name])))
+            print(f"  warm {', '.join(trio)}: {max(moves[-args.graded:]):.2f} dE",
+                  file=sys.stderr, flush=True)
+        moves = np.array(moves)
+        print(f"\nEvery three of the {args.warm} warmest, most colourful photos (no look), "
+              f"{args.graded} others graded each: mean change {moves.mean():.2f} dE, largest "
+              f"{moves.max():.2f} dE, {np.mean(moves > 1.5):.0%} of {len(moves)} graded "
+              f"photos over 1.5 dE")
     print("\nCalibration (every look photo): reported strength against recovered")
     print("| strength | photos | mean recovered |")
     print("|---|---|---|")

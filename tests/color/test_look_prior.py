@@ -185,3 +185,56 @@ def test_one_odd_photo_in_a_set_without_a_look_moves_photos_less_than_without_th
                                         for s in range(6)]), naturals)
     kept = posterior_statistics_look(shown, naturals, jackknife_colors=(colors, masses))
     assert kept.info["jackknife"]["saturation"] > 0.9 and size(kept) > 10 * size(checked)
+
+
+def test_the_posterior_covariance_is_the_gaussian_one_where_the_look_is_sure_to_be_there():
+    """One slab and (nearly) no spike: prior p and noise n per statistic give the posterior
+    variance p n / (p + n), whatever the raw differences."""
+    from wbcgrade.color.look.statistics import BANDS, QUANTILES
+
+    size = len(QUANTILES) + 3 * BANDS
+    rng = np.random.default_rng(4)
+    p, n = rng.uniform(0.5, 2.0, size), rng.uniform(0.5, 2.0, size)
+    raw = LookDifferences(np.linspace(0.05, 0.95, len(QUANTILES)), np.zeros(len(QUANTILES)),
+                          np.zeros(BANDS), np.zeros((BANDS, 3)))
+    found = posterior_look(raw.with_vector(rng.normal(0.0, 1.0, size)), np.diag(n),
+                           np.diag(p), no_look=1e-12, scales=(1.0,))
+    assert np.allclose(np.diag(found.covariance), p * n / (p + n), rtol=1e-6)
+    assert np.allclose(found.covariance, np.diag(np.diag(found.covariance)), atol=1e-9)
+    # a spike beside it: unsure whether there is a look, the mixture spreads further
+    mixed = posterior_look(raw.with_vector(np.full(size, 0.8)), np.diag(n), np.diag(p),
+                           no_look=0.5, scales=(1.0,))
+    assert 0.0 < mixed.probability < 1.0
+    assert np.all(np.diag(mixed.covariance) > 0)
+    inside = mixed.probability * p * n / (p + n)  # the slab's own share of the variance
+    assert np.all(np.diag(mixed.covariance) > inside)
+
+
+def test_a_look_is_checked_with_no_less_variance_than_the_posterior_leaves_it():
+    """Photos that agree (their groups left out give the same look) still leave the look as
+    unsure as the statistics make it: the share kept is 1 - V/P with V the posterior's."""
+    from wbcgrade.color.look.prior import jackknife_share, posterior_spread
+
+    colors = grid_points(5)
+    masses = np.ones(len(colors))
+    shift = np.array([0.05, 0.0, -0.05])
+
+    def shifted(amount):
+        return lambda x: x + amount * shift
+
+    power = float(shift @ shift)
+    same = jackknife_share(shifted(1.0), lambda keep: shifted(1.0), 3, colors, masses,
+                           unsure=lambda: 0.25 * power)
+    assert same == pytest.approx(0.75)
+    # a jackknife that varies more than the posterior decides as before
+    apart = jackknife_share(shifted(1.0), lambda keep: shifted(1.3 if keep[0] else 0.4), 3,
+                            colors, masses, unsure=lambda: 0.01 * power)
+    assert apart == jackknife_share(shifted(1.0), lambda keep: shifted(1.3 if keep[0] else 0.4),
+                                    3, colors, masses)
+    # the posterior's spread of a look linear in the differences: its covariance through it
+    covariance = np.diag([0.04, 0.01, 0.0])
+    spread = posterior_spread(lambda v: shifted(v[0] + v[1]), np.array([1.0, 0.0, 0.0]),
+                              covariance, colors, masses, draws=4000)
+    assert spread == pytest.approx(0.05 * power, rel=0.1)
+    assert posterior_spread(lambda v: shifted(v[0]), np.ones(3), np.zeros((3, 3)), colors,
+                            masses) == 0.0

@@ -47,7 +47,7 @@ from wbcgrade.color.look.statistics import (
 from wbcgrade.color.presets import load_preset
 
 __all__ = ["LookPosterior", "posterior_look", "content_noise", "load_prior", "build_prior",
-           "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE", "jackknife_share"]
+           "NO_LOOK", "PRIOR_SCALES", "COLLECTION_SHARE", "jackknife_share", "posterior_spread"]
 
 #: Prior probability that a style set has no look at all (the spike at zero).
 NO_LOOK = 0.3
@@ -82,12 +82,15 @@ class LookPosterior:
     evidence : whitened size of the raw differences (rms z against the noise).
     operator : (P, P) the posterior mean as a linear map of the raw differences, its
         mixture's weights held (what other raw differences of the same set would give).
+    covariance : (P, P) the posterior covariance of the differences (the mixture's: how
+        unsure the look is around its mean).
     """
     differences: LookDifferences
     probability: float
     share: float
     evidence: float
     operator: np.ndarray | None = None
+    covariance: np.ndarray | None = None
 
 
 def _shrunk_to_diagonal(cov: np.ndarray) -> np.ndarray:
@@ -171,32 +174,41 @@ def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarr
     ridge = 1e-10 * np.eye(len(v))
     mixture = [(noise, 1.0)] if isinstance(noise, np.ndarray) else list(noise)
     total = sum(w for _, w in mixture)
-    logs, means, spikes, operators = [], [], [], []
+    logs, means, spikes, operators, covariances = [], [], [], [], []
     for cov_noise, weight in mixture:
         share = weight / total
         log, _ = _log_gaussian(v, cov_noise + ridge)
         logs.append(np.log(no_look * share) + log)
         means.append(np.zeros_like(v))
         operators.append(np.zeros((len(v), len(v))))
+        covariances.append(np.zeros((len(v), len(v))))
         spikes.append(True)
         for scale in scales:
             cov = scale * prior
             log, inverse = _log_gaussian(v, cov + cov_noise + ridge)
             logs.append(np.log((1.0 - no_look) * share / len(scales)) + log)
             means.append(cov @ inverse)
-            operators.append(np.linalg.solve(cov + cov_noise + ridge, cov).T)
+            gain = np.linalg.solve(cov + cov_noise + ridge, cov).T
+            operators.append(gain)
+            covariances.append(cov - gain @ cov)
             spikes.append(False)
     logs = np.array(logs)
     weights = np.exp(logs - logs.max())
     weights /= weights.sum()
-    mean = np.sum(weights[:, None] * np.array(means), axis=0)
+    means = np.array(means)
+    mean = np.sum(weights[:, None] * means, axis=0)
+    # the mixture's covariance: within its components and between their means
+    centred = means - mean
+    covariance = (np.tensordot(weights, np.array(covariances), axes=1)
+                  + (weights[:, None] * centred).T @ centred)
     chol = np.linalg.cholesky(mixture[0][0] + ridge)
     white_raw, white_mean = np.linalg.solve(chol, v), np.linalg.solve(chol, mean)
     power = float(white_raw @ white_raw)
     share = float(np.clip(white_mean @ white_raw / power, 0.0, 1.0)) if power > 0 else 0.0
     operator = np.tensordot(weights, np.array(operators), axes=1)
     return LookPosterior(raw.with_vector(mean), float(1.0 - weights[np.array(spikes)].sum()),
-                         share, float(np.sqrt(power / len(v))), operator)
+                         share, float(np.sqrt(power / len(v))), operator,
+                         0.5 * (covariance + covariance.T))
 
 
 #: Groups of style photos left out in turn to measure how much a set's look varies with
@@ -214,7 +226,8 @@ def small_sample_margin(groups: int) -> float:
 
 def jackknife_share(model, refit: Callable[[np.ndarray], object], n_styles: int,
                     colors: np.ndarray, masses: np.ndarray,
-                    groups: int = JACKKNIFE_GROUPS) -> float:
+                    groups: int = JACKKNIFE_GROUPS,
+                    unsure: Callable[[], float] | None = None) -> float:
     """How much of a set's look to apply, given how much it changes with the photos shown.
 
     The look is found again with each group of style photos left out (``refit``: a mask of
@@ -224,8 +237,11 @@ def jackknife_share(model, refit: Callable[[np.ndarray], object], n_styles: int,
     displacement there: the least-squares shrinkage of a look measured with that error. A
     look every photo shows keeps nearly all of itself; one that a photo or two make up is
     dropped. ``V`` from ``g`` groups is uncertain when ``g`` is small (three photos left out
-    one by one): it is counted ``(g + 1) / (g - 1)`` times (:func:`small_sample_margin`). Under
-    three styles: 1 (nothing to leave out).
+    one by one): it is counted ``(g + 1) / (g - 1)`` times (:func:`small_sample_margin`).
+    ``unsure``: the posterior's own variance of the look on ``colors`` (how far the looks
+    the statistics allow lie from it, :func:`posterior_spread`); ``V`` is never taken under
+    it (a few photos that agree because they show alike content do not make a look sure).
+    Under three styles: 1 (nothing to leave out).
     """
     if n_styles < 3:
         return 1.0
@@ -240,7 +256,35 @@ def jackknife_share(model, refit: Callable[[np.ndarray], object], n_styles: int,
     spread = refits - refits.mean(axis=0)
     variance = (count - 1) / count * float(np.sum(masses * np.sum(spread * spread, axis=2)))
     # a variance from count - 1 degrees of freedom, taken at its small-sample margin
-    return float(np.clip(1.0 - small_sample_margin(count) * variance / power, 0.0, 1.0))
+    variance *= small_sample_margin(count)
+    if unsure is not None:
+        variance = max(variance, float(unsure()))
+    return float(np.clip(1.0 - variance / power, 0.0, 1.0))
+
+
+#: Draws from the posterior that measure how unsure a look is on colours
+#: (:func:`posterior_spread`).
+POSTERIOR_DRAWS = 32
+
+
+def posterior_spread(look_of: Callable[[np.ndarray], object], mean: np.ndarray,
+                     covariance: np.ndarray, colors: np.ndarray, masses: np.ndarray,
+                     draws: int = POSTERIOR_DRAWS) -> float:
+    """The posterior's variance of a look on ``colors`` (N, 3) weighted by ``masses``: the
+    mean square distance, over draws of the differences from N(``mean``, ``covariance``)
+    (seeded), of ``look_of(draw)``'s colours from ``look_of(mean)``'s."""
+    masses = np.asarray(masses, dtype=np.float64) / np.sum(masses)
+    values, vectors = np.linalg.eigh(covariance)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))
+    if not np.any(root):
+        return 0.0
+    centre = look_of(mean)(colors)
+    rng = np.random.default_rng(0)
+    total = 0.0
+    for _ in range(draws):
+        moved = look_of(mean + root @ rng.standard_normal(len(mean)))(colors) - centre
+        total += float(masses @ np.sum(moved * moved, axis=1))
+    return total / draws
 
 
 # --------------------------------------------------------------------------- the shipped prior
@@ -365,9 +409,15 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
         def refit(keep: np.ndarray) -> np.ndarray:  # the posterior's mean of the styles kept
             return found.operator @ look_differences(styles.take(keep), centre_of).vector()
 
+        def unsure(part: np.ndarray) -> float:  # the posterior's spread of the part's look
+            inside = np.outer(part, part)
+            return posterior_spread(lambda vector: part_look(vector, part), mean,
+                                    np.where(inside, found.covariance, 0.0), colors, masses)
+
         kept = np.array([jackknife_share(
             part_look(mean, part), lambda keep, part=part: part_look(refit(keep), part),
-            n_styles, colors, masses) for part in parts])
+            n_styles, colors, masses, unsure=lambda part=part: unsure(part))
+            for part in parts])
     applied = np.sum([k * np.where(part, mean, 0.0) for k, part in zip(kept, parts)], axis=0)
     shown = raw.with_vector(applied)
     info = {"method": "statistics", "rule": "posterior", "monochrome": False,

@@ -425,7 +425,7 @@ def set_look(styles, naturals=None, progress: Callable[[int, int], None] | None 
 
 
 #: Bumped when extraction changes, so cached looks of an older version are not used.
-LOOK_VERSION = 19
+LOOK_VERSION = 20
 
 #: How a set's look is found: "statistics" (:func:`statistics_set_look`: statistics
 #: content hardly moves, against the natural palettes' spread) or "transport"
@@ -445,6 +445,7 @@ def _prior_settings() -> tuple:
     return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.UNUSUAL_CONTENT,
             prior.DIAGONAL_SHRINK,
             prior.NOISE_DRAWS, prior.JACKKNIFE_GROUPS, prior.PARTS, JACKKNIFE_BINS,
+            prior.POSTERIOR_DRAWS,
             float(np.sum(prior.load_prior())))
 
 
