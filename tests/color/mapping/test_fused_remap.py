@@ -473,3 +473,26 @@ def test_a_subsampled_solve_reads_its_prior_through_opencolorio(rng, monkeypatch
                         lambda *args: looked.append(args) or None)
     assert np.array_equal(regrain_module._read_prior(colors, table, True), expected)
     assert not looked  # (precise: apply_color_map itself)
+
+
+@pytest.mark.parametrize("shape, radius", [((300, 50, 12), 3), ((97, 31, 5), 1),
+                                           ((400, 20, 3), 7), ((30, 40, 12), 7)])
+def test_box_means_in_bands_of_rows_are_one_calls_bit_for_bit(rng, shape, radius,
+                                                               monkeypatch):
+    """OpenCV's box filter on two bands of rows (each with the radius of rows beyond it)
+    gives the numbers of one call over the whole image, bit for bit."""
+    import cv2
+
+    x = (rng.random(shape) * 2 - 0.5).astype(np.float32)
+    whole = np.empty_like(x)
+    cv2.boxFilter(x, -1, (2 * radius + 1,) * 2, dst=whole, normalize=True,
+                  borderType=cv2.BORDER_REFLECT)
+    monkeypatch.setattr(regrain_module, "num_threads", lambda: 2)
+    calls = []
+    real = regrain_module._uniform_filter_cv2
+    monkeypatch.setattr(regrain_module, "_uniform_filter_cv2",
+                        lambda plane, *args: (calls.append(plane.shape[0]), real(plane, *args)))
+    assert np.array_equal(regrain_module._box_cv2(x, radius).view(np.uint32),
+                          whole.view(np.uint32))
+    tall = shape[0] >= 16 * (2 * radius + 1)
+    assert len(calls) == (2 if tall else 1)  # in two bands on two cores where it is tall

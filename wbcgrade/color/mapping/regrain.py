@@ -95,13 +95,30 @@ def _read_prior(colors: np.ndarray, table: np.ndarray, precise: bool) -> np.ndar
 
 def _box_cv2(x: np.ndarray, radius: int) -> np.ndarray:
     """:func:`_box_numpy` with OpenCV's box filter (:func:`_uniform_filter_cv2`) on the
-    channels as they lie (up to 12 at a time: no planes copied out and back)."""
+    channels as they lie (up to 12 at a time: no planes copied out and back), in bands of
+    rows on every core when the image is tall enough (each band filtered with the radius
+    of rows beyond it: OpenCV sums each row's window alone, so the numbers are those of
+    one call, bit for bit)."""
     x = np.ascontiguousarray(x, dtype=np.float32)
     if x.size == 0:
         return np.empty_like(x)
     if x.shape[2] <= 12:
         out = np.empty_like(x)
-        _uniform_filter_cv2(x, 2 * radius + 1, out)
+        h = x.shape[0]
+        parts = min(num_threads(), h // (8 * (2 * radius + 1)))
+        if parts <= 1:
+            _uniform_filter_cv2(x, 2 * radius + 1, out)
+            return out
+        edges = np.linspace(0, h, parts + 1).astype(int)
+
+        def band(part: int) -> None:  # rows and the radius beyond: the same sums
+            lo, hi = edges[part], edges[part + 1]
+            top, bottom = max(lo - radius, 0), min(hi + radius, h)
+            means = np.empty((bottom - top, *x.shape[1:]), np.float32)
+            _uniform_filter_cv2(x[top:bottom], 2 * radius + 1, means)
+            out[lo:hi] = means[lo - top:hi - top]
+
+        _threaded(band, parts)  # (OpenCV's box filter runs on one core)
         return out
     return np.concatenate([_box_cv2(x[..., k:k + 12], radius)
                            for k in range(0, x.shape[2], 12)], axis=-1)
