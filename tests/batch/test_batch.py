@@ -464,15 +464,32 @@ def test_a_batch_measures_the_look_against_its_own_photos(own_batch):
 @pytest.mark.slow
 def test_the_own_photos_change_the_grade_from_the_shipped_palettes(own_photos, own_batch,
                                                                     tmp_path):
-    """The grade differs from the shipped palettes' alone (``--natural shipped``)."""
+    """The look is judged against them: how sure it is that the styles share a look differs
+    from the shipped palettes' alone (``--natural shipped``), and so does the grade wherever
+    one is applied."""
     photos, warm = own_photos
     out, _ = own_batch
     shipped = run_cli("batch", str(photos), "-o", str(tmp_path / "shipped"), "--style",
                       str(warm), "--natural", "shipped", "--no-cache")
     assert "graded 8" in shipped.output and "content:" not in shipped.output
-    differ = [np.abs(_pixels(out / f"{n}.jpg") - _pixels(tmp_path / "shipped" / f"{n}.jpg")).max()
-              for n in OWN_NAMES]
-    assert max(differ) > 2 / 255
+
+    def outcome(folder: Path, name: str) -> dict:
+        return json.loads((folder / ".wbcgrade-results" / f"{name}.jpg.json").read_text())[
+            "outcome"]
+
+    judged = 0
+    for name in OWN_NAMES:
+        own, alone = outcome(out, name), outcome(tmp_path / "shipped", name)
+        assert own["source"] == alone["source"]
+        if own["source"] != "set-look":  # a style photo of its scene: that style's look
+            continue
+        judged += 1
+        assert own["look_probability"] != alone["look_probability"]  # (rounded to 0.001)
+        assert "your 8 own photos" in own["advice"] and "own photos" not in alone["advice"]
+        differ = np.abs(_pixels(out / f"{name}.jpg") - _pixels(tmp_path / "shipped"
+                                                               / f"{name}.jpg")).max()
+        assert (differ > 0) == (own["strength"] != alone["strength"])
+    assert judged >= 3
 
 
 def test_five_own_photos_are_too_few(own_photos, tmp_path):
