@@ -33,6 +33,26 @@ def test_round_trip(tmp_path, style_dir):
         save_preset(path, styles)
 
 
+def test_a_presets_dense_histograms_are_made_only_when_read(tmp_path, style_dir):
+    """A preset keeps its histograms sparse until something reads the dense stack (a cached
+    look grade reads only the shipped natural palettes' file digest: their 316 dense
+    32^3 histograms, 83 MB, are never made); read, they are the file's, each summing to 1."""
+    from wbcgrade.color.histogram import Deferred
+    from wbcgrade.color.look.set_extraction import natural_palettes
+
+    styles = load_style_folder(style_dir, 12)
+    loaded = load_preset(save_preset(tmp_path / "p.npz", styles))
+    assert isinstance(loaded.__dict__["_deferred_histograms"], Deferred)
+    assert loaded.bins == 12 and len(loaded.names) == 4  # (the shape, without making it)
+    assert isinstance(loaded.__dict__["_deferred_histograms"], Deferred)
+    np.testing.assert_allclose(loaded.histograms, styles.histograms, atol=1e-6)
+    np.testing.assert_allclose(loaded.histograms.sum(axis=(1, 2, 3)), 1.0, rtol=1e-12)
+    assert isinstance(loaded.__dict__["_deferred_histograms"], np.ndarray)  # made once, kept
+    natural = natural_palettes()
+    assert isinstance(natural.__dict__["_deferred_histograms"], Deferred)
+    assert natural.meta["file_digest"]
+
+
 def test_compact_presets_hold_the_same_histograms_in_half_the_file(tmp_path, style_dir):
     styles = load_style_folder(style_dir, 32)
     full = save_preset(tmp_path / "full.npz", styles)

@@ -123,9 +123,10 @@ def test_apply_in_look_mode_finds_the_scene_in_a_style_folder(tmp_path, photos, 
     graded = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3]
     truth = np.round(warm_look(right) * 255) / 255
     assert error(graded, truth) < 0.25 * error(right, truth)
-    # a second run reads the style images back from the cache folder and agrees
+    # a second run reads the style images (and the photo's own keypoints) back from the
+    # cache folder and agrees
     cached = list((tmp_path / "cache" / "scenes").glob("*.npz"))
-    assert len(cached) == 3
+    assert len(cached) == 4  # the three style photos' and the photo's
     again = tmp_path / "again.png"
     result = cli("apply", str(tmp_path / "photo.png"), "--style",
                  str(styles), "--mode", "look", "-o", str(again))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 
 import click
@@ -127,6 +128,13 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     started = command_started()
     options, source = take_grading_options(kwargs, photo=photo)
     encode = take_write_options(kwargs)
+    read_ahead = None
+    if look_path is None and not kwargs.get("originals_dir") and os.path.isfile(photo):
+        # the photo decoded (and its keypoints found) on another core while the grade's
+        # modules import and its styles load: the options are checked, the photo is there
+        from wbcgrade.photos.read_ahead import ReadAhead
+
+        read_ahead = ReadAhead.for_grade(photo, source, options)
     from wbcgrade.cli._progress import bar_callbacks, progress_bar
     from wbcgrade.photos.workflow import Progress, apply_photo
 
@@ -138,10 +146,17 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     graded_from = time.perf_counter()
     with progress_bar(desc="styles" if look is None else "look", leave=False) as bar:
         progress = Progress(warn=_warn, setting_names=flag_of, **bar_callbacks(bar))
-        report = apply_photo(photo, source if look is None else look, options, output=output,
-                             lut=lut, lut_size=lut_size, lut_format=lut_format,
-                             overwrite=overwrite, report_dir=report_dir, progress=progress,
-                             encode=encode, save_grade=save_grade)
+        try:
+            report = apply_photo(photo, source if look is None else look, options,
+                                 output=output, lut=lut, lut_size=lut_size,
+                                 lut_format=lut_format, overwrite=overwrite,
+                                 report_dir=report_dir, progress=progress, encode=encode,
+                                 save_grade=save_grade,
+                                 read_ahead=read_ahead if look is None else None)
+        except BaseException:
+            if read_ahead is not None:  # (the process exits once its decoder is done)
+                read_ahead.cancel()
+            raise
     if report.grade.own_style is not None:
         from wbcgrade.color.presets import own_style_warning
 

@@ -630,7 +630,10 @@ def load_preset(path: str | os.PathLike) -> StyleSet:
         if not values[part].sum() > 0:
             raise _bad(path, f"style {names[s]!r} is empty")
         parts.append((index[part], values[part]))
-    hists = stack_from_sparse(parts, bins)  # as from_sparse makes each, in one array
+    # as from_sparse makes each, in one array, when first read (a cached look grade reads
+    # only the file's digest of the shipped natural palettes: their 83 MB dense stack
+    # cost it 0.05-0.3 s)
+    hists = Deferred((len(names), bins, bins, bins), stack_from_sparse, parts, bins)
     meta = dict(header)
     # what the file holds, for keys of what is computed from it (not the dense histograms)
     meta["file_digest"] = hashlib.sha1(raw).hexdigest()

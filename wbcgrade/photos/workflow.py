@@ -46,7 +46,13 @@ from wbcgrade.color.io.images import (
     stage_image,
 )
 from wbcgrade.color.io.raw import output_name
-from wbcgrade.color.look.scene import matching_hook
+from wbcgrade.color.look.scene import (
+    forget_photo_scene,
+    has_style_images,
+    keep_style_scenes,
+    matching_hook,
+    prepare_photo_scene,
+)
 from wbcgrade.color.mapping.lut import (
     DEFAULT_LUT_SIZE,
     check_clf_support,
@@ -55,7 +61,7 @@ from wbcgrade.color.mapping.lut import (
     lut_format_of,
     write_checked_lut,
 )
-from wbcgrade.color.mapping.regrain import load_kernels, solved_subsampled
+from wbcgrade.color.mapping.regrain import kernels_needed, load_kernels, solved_subsampled
 from wbcgrade.color.options import GradeOptions
 from wbcgrade.color.presets import (
     StyleSet,
@@ -69,6 +75,7 @@ from wbcgrade.limits import check_input_file
 from wbcgrade.photos.graded import GradeReport, PhotoGrade
 from wbcgrade.photos.output import grey_of, output_pixels
 from wbcgrade.photos.progress import Progress  # (defined there: no numerics)
+from wbcgrade.photos.read_ahead import ReadAhead
 from wbcgrade.photos.report import plan_report, report_from_grade
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
@@ -206,7 +213,7 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
     numba and loading its first kernel (~0.7 s of Python) then runs while the photo is
     decoded and its scene matched, which hold no interpreter lock for most of their time.
     The thread, or None (nothing to load, or started before)."""
-    if _LOADER:
+    if _LOADER or not kernels_needed():  # (OpenColorIO maps a large photo's colours)
         return None
     pixels = header_pixels(photo)
     if not solved_subsampled(pixels):
@@ -223,7 +230,7 @@ def load_kernels_beside(photo: str | os.PathLike) -> threading.Thread | None:
 
 def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: GradeOptions,
                 *, shared: Grade | None = None, progress: Progress | None = None,
-                keep_input: bool = True) -> PhotoGrade:
+                keep_input: bool = True, read_ahead: ReadAhead | None = None) -> PhotoGrade:
     """Read and grade one photo (nothing is written).
 
     With ``shared`` (a series grade or a saved one, in the same working space), its colour
@@ -231,7 +238,9 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     (:func:`wbcgrade.color.grade.grading.grade_encoded`). ``keep_input`` False:
     nothing will look at the ungraded pixels afterwards (no report sheet), so
     a photo graded in its own space is graded in place (the returned
-    ``image.pixels`` then hold graded colours).
+    ``image.pixels`` then hold graded colours). ``read_ahead``: the photo being decoded
+    already (:class:`~wbcgrade.photos.read_ahead.ReadAhead`), waited for instead of read
+    when it is this photo in these colour spaces.
     """
     progress = progress or Progress()
     timings: dict[str, float] = {}
@@ -240,18 +249,41 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     regrained = (shared.regrain if shared is not None else options.regrain.settings) is not None
     if regrained:
         load_kernels_beside(photo)
-    image = read_image(photo)
-    rgb = image.rgb()
-    encoding = ColorEncoding.for_image(image, options.spaces.input,
-                                       options.spaces.working).named(progress.setting_names)
-    encoded = encoding.encode(rgb, image.is_float)
+    spaces = options.spaces
+    scene_started = False
+    if read_ahead is not None and read_ahead.serves(photo, spaces.input, spaces.working):
+        image, encoding, encoded = read_ahead.result()
+        scene_started = read_ahead.scene_started
+    else:
+        if read_ahead is not None:  # (another photo, or other spaces)
+            read_ahead.discard()
+        image = read_image(photo)
+        encoding = ColorEncoding.for_image(image, spaces.input, spaces.working)
+        encoded = encoding.encode(image.rgb(), image.is_float)
+    encoding = encoding.named(progress.setting_names)
     timings["read"] = time.perf_counter() - start
+    try:
+        return _graded_photo(image, encoding, encoded, styles, options, shared, progress,
+                             keep_input, timings, scene_started)
+    finally:
+        if scene_started or (shared is None and _matches_scenes(styles, options)):
+            forget_photo_scene(encoded[0])  # (nothing of a graded photo is kept)
+
+
+def _graded_photo(image: Image, encoding: ColorEncoding, encoded: tuple,
+                  styles: StyleSet | None, options: GradeOptions, shared: Grade | None,
+                  progress: Progress, keep_input: bool, timings: dict[str, float],
+                  scene_started: bool) -> PhotoGrade:
+    """:func:`grade_photo` of a photo read and encoded (``scene_started``: its keypoints
+    are being found already)."""
     fit = None
     if shared is not None:  # what the shared (series or saved) grade does to this photo
         hist = image_histogram(encoded[0], 16, image.alpha(), options.transfer.max_pixels)
         grade = replace(shared, outcome=outcome_on_photo(shared, hist))
     else:
         start = time.perf_counter()
+        if not scene_started and _matches_scenes(styles, options):
+            prepare_photo_scene(encoded[0])  # keypoints found beside histograms and look
         grade, fit = grade_encoded(encoded[0], styles, options, encoding, image.alpha(),
                                    progress.fit, progress.stage)
         timings.update(grade.timings)
@@ -272,7 +304,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
 def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
                *, shared: Grade | None = None, progress: Progress | None = None,
                timings: dict[str, float] | None = None,
-               keep_input: bool = True) -> GradeReport:
+               keep_input: bool = True, read_ahead: ReadAhead | None = None) -> GradeReport:
     """Grade a planned photo and write its outputs (:func:`plan_photo` checked them).
 
     The photo and the LUT are published together: when the LUT cannot be
@@ -288,7 +320,7 @@ def grade_file(plan: PhotoPlan, styles: StyleSet | None, options: GradeOptions,
     progress = progress or Progress()
     timings = dict(timings or {})
     graded = grade_photo(plan.photo, styles, options, shared=shared, progress=progress,
-                         keep_input=keep_input)
+                         keep_input=keep_input, read_ahead=read_ahead)
     grade = graded.grade
     timings.update(graded.timings)
     if plan.output is not None:
@@ -333,7 +365,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                 overwrite: bool = False, report_dir: str | os.PathLike | None = None,
                 progress: Progress | None = None,
                 encode: WriteOptions | None = None,
-                save_grade: str | os.PathLike | None = None) -> GradeReport:
+                save_grade: str | os.PathLike | None = None,
+                read_ahead: ReadAhead | None = None) -> GradeReport:
     """``wbcgrade apply``: grade ``photo`` and write it, the LUT and the report.
 
     Every output (the graded photo, the LUT, the report's files) is planned
@@ -350,6 +383,9 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
 
     ``encode``: JPEG/WebP quality and bit depth of the graded photo.
     ``save_grade``: also write the grade itself, as JSON (what ``--look`` reads).
+    ``read_ahead``: the photo being read already (the command line starts it as soon as
+    its options are checked, :meth:`~wbcgrade.photos.read_ahead.ReadAhead.for_grade`);
+    else a grade towards styles starts it before they load.
     """
     progress = progress or Progress()
     saved = isinstance(source, Grade)
@@ -362,6 +398,8 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
                       overwrite=overwrite, encode=encode, saved_grade=save_grade, reads=reads)
     if report_dir is not None:
         plan_report(report_dir, [plan.photo.name], [plan.photo, *reads], overwrite)
+    if read_ahead is not None:  # the outputs are planned: the grade goes ahead
+        read_ahead.proceed()
     if saved:
         spaces = options.spaces
         if spaces.working != source.working:
@@ -371,17 +409,43 @@ def apply_photo(photo: str | os.PathLike, source: StyleSource | Grade, options: 
         _save_grade(plan, report.grade)
         return report
     start = time.perf_counter()
+    if read_ahead is None:  # decoded on another core while the styles load
+        read_ahead = ReadAhead.for_grade(plan.photo, source, options)
+        read_ahead.proceed()
     styles = load_styles(source, options.transfer.bins, options.spaces.working, progress.warn,
                          progress.styles, matching_hook(source, options, [plan.photo]),
                          resampled=style_grids(options))
     _warn_one_style(source, styles, options, progress.warn)
+    _prepare_scenes(styles, options)
     report = grade_file(plan, styles, options, progress=progress,
                         timings={"styles": time.perf_counter() - start},
-                        keep_input=report_dir is not None)
+                        keep_input=report_dir is not None, read_ahead=read_ahead)
     _save_grade(plan, report.grade)
     if report_dir is not None:
         report.report = report_from_grade(report_dir, report, styles, options, overwrite)
     return report
+
+
+def _matches_scenes(styles: StyleSet | None, options: GradeOptions) -> bool:
+    """Whether the grade looks for the photo's scene among the style photos: a look grade
+    (no fixed weights) of styles that have photos (a folder's, not a preset's look)."""
+    return (styles is not None and options.map.builder == "look"
+            and options.fit.weights is None and styles.look is None
+            and has_style_images(styles))
+
+
+def _prepare_scenes(styles: StyleSet, options: GradeOptions) -> None:
+    """The style photos prepared for scene matching now, while the photo is still being
+    decoded (:func:`wbcgrade.color.look.scene.keep_style_scenes`: read from the cache into
+    this process; the look grade finds them there), when the grade will match scenes
+    (:func:`_matches_scenes`). Best effort: the grade prepares (and reports) whatever
+    this could not."""
+    if not _matches_scenes(styles, options):
+        return
+    try:
+        keep_style_scenes(styles)
+    except Exception as exc:  # noqa: BLE001 - the grade itself prepares them again
+        log.debug("style photos not prepared ahead: %s", exc)
 
 
 def _warn_one_style(source: StyleSource, styles: StyleSet, options: GradeOptions,

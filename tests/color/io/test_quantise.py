@@ -61,13 +61,22 @@ def test_an_8_bit_file_holds_what_openimageio_would_have_written(tmp_path, rng, 
 
 
 @pytest.mark.parametrize("half_even", [True, False])
-def test_to_uint8_numpy_twin_is_the_kernel(rng, half_even):
-    """A small photo's first 8-bit write runs numpy (no numba compiler to load): the same
-    code values as the compiled kernel."""
-    from wbcgrade.color.io._quantise import _to_uint8, _to_uint8_numpy
-    from wbcgrade.core import in_bands
+def test_to_uint8_is_the_float64_rule_on_every_chunk_and_thread(rng, half_even):
+    """The float32 conversion (in cache-sized chunks, on several threads) gives the code
+    values of the rule computed in float64 (``floor(x + 0.5)`` or ``rint`` of the float32
+    product), ties, NaN and infinities included, across chunk and band edges."""
+    from wbcgrade.color.io import _quantise
 
-    values = np.concatenate([_probe_values(), rng.uniform(-0.2, 1.2, 50_000).astype(np.float32)])
-    kernel = np.empty(values.shape, np.uint8)
-    in_bands(_to_uint8, values.shape[0], values, kernel, half_even)
-    assert np.array_equal(_to_uint8_numpy(values, half_even), kernel)
+    probe = _probe_values()
+    values = rng.uniform(-0.2, 1.2, 3 * _quantise._CHUNK + 123).astype(np.float32)
+    values[::997] = np.resize(probe, values[::997].shape)
+    scaled = (values * np.float32(255)).astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        rule = np.rint(scaled) if half_even else np.floor(scaled + 0.5)
+        expected = np.where(rule > 0, np.minimum(rule, 255), 0).astype(np.uint8)
+    out = np.empty(values.shape, np.uint8)
+    _quantise.in_bands(_quantise._to_uint8_fast, values.shape[0], values, out, half_even,
+                       min_band=_quantise._CHUNK // 2)  # several bands, unaligned chunks
+    assert np.array_equal(out, expected)
+    assert np.array_equal(to_uint8(values.reshape(-1, 3) if values.size % 3 == 0 else values,
+                                   half_even).ravel(), expected)

@@ -24,24 +24,57 @@ def _image_and_map(rng, h=61, w=47, size=9):
 def test_block_means_of_the_mapped_image(rng, step, strength):
     rgb, table = _image_and_map(rng)
     expected = regrain_module._downsample(apply_color_map(rgb, table, strength), step)
-    assert np.array_equal(block_means_mapped(rgb, table, strength, step), expected)
+    kernel = block_means_mapped(rgb, table, strength, step)
+    np.testing.assert_allclose(kernel, expected, rtol=0, atol=1e-6)
     mapped, source = block_means_mapped(rgb, table, strength, step, with_source=True)
-    assert np.array_equal(mapped, expected)
-    assert np.array_equal(source, regrain_module._downsample(rgb, step))
+    assert np.array_equal(mapped, kernel)
+    np.testing.assert_allclose(source, regrain_module._downsample(rgb, step), rtol=0,
+                               atol=1e-6)
+    # OpenColorIO's LUT and OpenCV's area means: the kernel's numbers to float32 rounding
+    library_mapped, library_source = regrain_module._block_means(rgb, table, strength, step)
+    np.testing.assert_allclose(library_mapped, kernel, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(library_source, source, rtol=0, atol=1e-6)
 
 
+def test_the_library_block_means_are_the_kernels_on_a_large_image(rng):
+    """A large photo's map and block means (OpenColorIO's LUT processor and OpenCV's area
+    resize, in bands on every core; colours out of the cube clipped as the kernel clips
+    them): the compiled kernel's numbers to float32 rounding, its shape (partial edge
+    blocks dropped) and no full-size array of it returned."""
+    pytest.importorskip("PyOpenColorIO")
+    rgb, table = _image_and_map(rng, h=301, w=203, size=17)
+    for step, strength in [(4, 1.0), (3, 0.7), (7, 0.0)]:
+        mapped, source = regrain_module._block_means(rgb, table, strength, step)
+        kernel = block_means_mapped(rgb, table, strength, step, with_source=True)
+        assert mapped.shape == source.shape == (301 // step, 203 // step, 3)
+        np.testing.assert_allclose(mapped, kernel[0], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(source, kernel[1], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("library", [True, False])  # the map's block means by OpenColorIO
 @pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled
-def test_regrain_map_is_regrain_of_the_mapped_image(rng, monkeypatch, max_pixels):
+def test_regrain_map_is_regrain_of_the_mapped_image(rng, monkeypatch, max_pixels, library):
+    """Bit for bit where solved at full size; to float32 rounding on a subsampled copy
+    (the block means of the mapped colours by the compiled kernel, or by OpenColorIO's
+    LUT and OpenCV's area means, against OpenCV's area means of the mapped image)."""
     monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    if not library:
+        monkeypatch.setattr(regrain_module, "lut_processor", lambda *args: None)
     rgb, table = _image_and_map(rng)
     rgb = np.clip(rgb, 0.0, 1.0)
-    assert (regrain_module._step(*rgb.shape[:2]) > 1) == (max_pixels < rgb.size)
+    subsampled = regrain_module._step(*rgb.shape[:2]) > 1
+    assert subsampled == (max_pixels < rgb.size)
     expected = regrain(rgb, apply_color_map(rgb, table, 0.8), 0.05, 0.01)
-    assert np.array_equal(regrain_map(rgb, table, 0.8, 0.05, 0.01), expected)
+    if subsampled:
+        np.testing.assert_allclose(regrain_map(rgb, table, 0.8, 0.05, 0.01), expected,
+                                   rtol=0, atol=1e-5)
+    else:
+        assert np.array_equal(regrain_map(rgb, table, 0.8, 0.05, 0.01), expected)
 
 
 @pytest.mark.parametrize("shape, coarse, step", [((23, 31), (6, 8), 4.0), ((9, 7), (3, 2), 3.0),
-                                                 ((5, 6), (1, 2), 4.0)])
+                                                 ((5, 6), (1, 2), 4.0), ((75, 40), (9, 5), 8.0),
+                                                 ((70, 13), (1, 1), 9.0)])
 def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse, step):
     source = rng.random((*shape, 3)).astype(np.float32)
     A = (rng.random((*coarse, 3, 3)).astype(np.float32) - 0.5) * 0.5
@@ -64,6 +97,13 @@ def test_regrain_applies_bilinearly_interpolated_coefficients(rng, shape, coarse
     coefficients = np.concatenate([A.reshape(*coarse, 9), b], axis=-1)
     regrain_module._apply_upsampled(source, coefficients, step, out)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
+    # a large photo's route (OpenCV's resize of the coefficients band by band, numpy's
+    # affine maps): the same numbers, rows and columns past the last node included
+    library = np.full_like(source, np.nan)
+    regrain_module._apply_upsampled_cv2(source, coefficients, int(step), library)
+    np.testing.assert_allclose(library, expected, rtol=0, atol=1e-6)
+    regrain_module._apply_upsampled_cv2(source, coefficients, int(step), source)  # in place
+    np.testing.assert_allclose(source, expected, rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("shape, radius", [((37, 53, 5), 3), ((7, 5, 2), 9), ((1, 6, 3), 2),
@@ -118,7 +158,11 @@ def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixel
     assert np.array_equal(in_place, expected)
     graded = apply_color_map(rgb, table, 0.8)
     source = rgb.copy()
-    assert np.array_equal(regrain(source, graded, 0.05, 0.01, out=source), expected)
+    assert regrain(source, graded, 0.05, 0.01, out=source) is source
+    if max_pixels < rgb.size:  # block means of the mapped colours: to float32 rounding
+        np.testing.assert_allclose(source, expected, rtol=0, atol=1e-5)
+    else:
+        assert np.array_equal(source, expected)
     with pytest.raises(ValueError, match="out must be"):
         regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))
 
@@ -295,29 +339,28 @@ import numpy as np
 import wbcgrade.color.mapping.regrain as regrain
 import wbcgrade.color.mapping.remap as remap
 
+regrain.has_lut_library = lambda: False  # (as without the opencolorio package)
+regrain.lut_processor = lambda *args: None
 assert not regrain.load_kernels(1_000_000) and "numba" not in sys.modules
 assert regrain.load_kernels(16_000_000)
-kernels = {"block_means_mapped": remap, "apply_rows": regrain}
-loaded = {name: list(getattr(module, "_" + name).signatures)
-          for name, module in kernels.items()}
-assert all(len(signatures) == 1 for signatures in loaded.values()), loaded
+loaded = list(remap._block_means_mapped.signatures)
+assert len(loaded) == 1, loaded
 regrain._MAX_SOLVE_PIXELS, regrain._NUMPY_SOLVE_PIXELS = 700, 1  # the compiled solve
 rng = np.random.default_rng(0)
 rgb = rng.random((61, 47, 3), dtype=np.float32)
 table = (np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1) ** 1.5)
 regrain.regrain_map(rgb, table.astype(np.float32), 0.8, 0.05, 0.01)
-after = {name: list(getattr(module, "_" + name).signatures)
-         for name, module in kernels.items()}
-assert after == loaded, (after, loaded)
+assert list(remap._block_means_mapped.signatures) == loaded
 """
 
 
 @pytest.mark.slow
 def test_kernels_loaded_ahead_are_the_ones_a_large_photo_runs():
-    """``load_kernels`` (what ``apply`` starts in a thread before decoding a large photo)
-    loads each kernel of the subsampled regrain with the argument types the grade then
-    calls it with: the grade adds no signature (no second compilation); a photo solved
-    at full size loads nothing (numba not even imported)."""
+    """Without OpenColorIO, ``load_kernels`` (what ``apply`` starts in a thread before
+    decoding a large photo) loads the one kernel of the subsampled regrain (its map's
+    block means) with the argument types the grade then calls it with: the grade adds no
+    signature (no second compilation); a photo solved at full size loads nothing (numba
+    not even imported)."""
     import subprocess
     import sys
 
@@ -326,15 +369,50 @@ def test_kernels_loaded_ahead_are_the_ones_a_large_photo_runs():
     assert done.returncode == 0, done.stderr[-3000:]
 
 
+_LARGE_WITHOUT_NUMBA = """
+import sys
+import numpy as np
+import wbcgrade.color.mapping.regrain as regrain
+from wbcgrade.color.io._quantise import to_uint8
+
+assert not regrain.kernels_needed() and not regrain.load_kernels(16_000_000)
+regrain._MAX_SOLVE_PIXELS, regrain._NUMPY_APPLY_PIXELS = 20_000, 0  # solved subsampled
+rng = np.random.default_rng(0)
+rgb = rng.random((300, 400, 3), dtype=np.float32)
+table = (np.stack(np.meshgrid(*[np.linspace(0, 1, 9)] * 3, indexing="ij"), -1) ** 1.5)
+assert regrain._step(300, 400) > 1
+for follow in (0.0, 1.0):
+    to_uint8(regrain.regrain_map(rgb, table.astype(np.float32), 0.8, follow=follow))
+assert "numba" not in sys.modules, "numba loaded"
+"""
+
+
+@pytest.mark.slow
+def test_a_photo_solved_on_a_subsampled_copy_is_graded_without_numba():
+    """With OpenColorIO, a large photo's regrain (the map's block means by OpenColorIO and
+    OpenCV, the coefficients' upsampling by OpenCV) and its 8-bit conversion load no
+    compiled kernel, and nothing is loaded ahead: numba's start (~0.6 s of CPU) is not
+    paid by a 16-megapixel grade."""
+    pytest.importorskip("PyOpenColorIO")
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _LARGE_WITHOUT_NUMBA], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+
+
 def test_apply_starts_one_kernel_loader_and_only_for_a_large_photo(monkeypatch, tmp_path):
-    """``grade_photo``'s loader: nothing for a photo solved at full size (its header says
-    1.4 megapixels), one thread for a larger one, handed the header's pixel count, and
-    none again in the same process."""
+    """``grade_photo``'s loader (where a large photo needs a kernel: no OpenColorIO):
+    nothing for a photo solved at full size (its header says 1.4 megapixels), one thread
+    for a larger one, handed the header's pixel count, and none again in the same
+    process; none at all where OpenColorIO maps the colours (its header not even read)."""
     import wbcgrade.photos.workflow as workflow
 
     sizes = {"small.jpg": 1_400_000, "large.jpg": 16_000_000, "next.jpg": 24_000_000}
     loaded = []
     monkeypatch.setattr(workflow, "_LOADER", [])
+    monkeypatch.setattr(workflow, "kernels_needed", lambda: True)  # (without OpenColorIO)
     monkeypatch.setattr(workflow, "header_pixels", lambda path: sizes[path.name])
     monkeypatch.setattr(workflow, "load_kernels", loaded.append)
     assert workflow.load_kernels_beside(tmp_path / "small.jpg") is None
@@ -344,3 +422,77 @@ def test_apply_starts_one_kernel_loader_and_only_for_a_large_photo(monkeypatch, 
     assert loaded == [16_000_000]
     assert workflow.load_kernels_beside(tmp_path / "next.jpg") is None
     assert loaded == [16_000_000]
+    monkeypatch.setattr(workflow, "_LOADER", [])
+    monkeypatch.setattr(workflow, "kernels_needed", lambda: False)
+    monkeypatch.setattr(workflow, "header_pixels", lambda path: 1 / 0)
+    assert workflow.load_kernels_beside(tmp_path / "large.jpg") is None
+
+
+def test_a_subsampled_solve_in_float32_is_the_float64_one_to_its_rounding(rng, monkeypatch):
+    """A photo solved on a subsampled copy solves its window models in float32 (the
+    precision of the window means they are made of): within 1e-6 of the float64 solve
+    at the default eps; a small eps (nearly singular covariances) keeps float64."""
+    guide = rng.random((40, 50, 3)).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1
+              + 0.02 * rng.standard_normal(guide.shape)).astype(np.float32)
+    solved = []
+    real = regrain_module._solve_band
+    monkeypatch.setattr(regrain_module, "_solve_band",
+                        lambda m, *args: (solved.append(m.dtype.type), real(m, *args))[1])
+    precise = regrain_module._coefficients(guide, change, 3, 0.04)
+    fast = regrain_module._coefficients(guide, change, 3, 0.04, precise=False)
+    assert set(solved) == {np.float64, np.float32}
+    np.testing.assert_allclose(fast, precise, rtol=0, atol=1e-6)
+    solved.clear()
+    regrain_module._coefficients(guide, change, 3, 1e-5, precise=False)
+    assert set(solved) == {np.float64}
+    solved.clear()  # the subsampled regrain asks for float32, a full-size one does not
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", 700)
+    rgb, table = _image_and_map(rng)
+    regrain_map(np.clip(rgb, 0, 1), table, 0.8)
+    assert set(solved) == {np.float32}
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", 10 ** 6)
+    solved.clear()
+    regrain_map(np.clip(rgb, 0, 1), table, 0.8)
+    assert set(solved) == {np.float64}
+
+
+def test_a_subsampled_solve_reads_its_prior_through_opencolorio(rng, monkeypatch):
+    """The grain prior of a subsampled solve (a preset's or a matched scene's look) is read
+    at each window's mean colour by OpenColorIO's LUT processor: the trilinear lookup of
+    ``apply_color_map`` to float32 rounding (the prior's values are not colours: below 0
+    and above 1 too); a full-size solve reads it as before."""
+    pytest.importorskip("PyOpenColorIO")
+    colors = rng.random((37, 41, 3)).astype(np.float32)
+    table = (rng.standard_normal((9, 9, 9, 3)) * 0.4).astype(np.float32)
+    expected = apply_color_map(colors, table)
+    np.testing.assert_allclose(regrain_module._read_prior(colors, table, False), expected,
+                               rtol=0, atol=1e-6)
+    looked = []
+    monkeypatch.setattr(regrain_module, "lut_processor",
+                        lambda *args: looked.append(args) or None)
+    assert np.array_equal(regrain_module._read_prior(colors, table, True), expected)
+    assert not looked  # (precise: apply_color_map itself)
+
+
+@pytest.mark.parametrize("shape, radius", [((300, 50, 12), 3), ((97, 31, 5), 1),
+                                           ((400, 20, 3), 7), ((30, 40, 12), 7)])
+def test_box_means_in_bands_of_rows_are_one_calls_bit_for_bit(rng, shape, radius,
+                                                               monkeypatch):
+    """OpenCV's box filter on two bands of rows (each with the radius of rows beyond it)
+    gives the numbers of one call over the whole image, bit for bit."""
+    import cv2
+
+    x = (rng.random(shape) * 2 - 0.5).astype(np.float32)
+    whole = np.empty_like(x)
+    cv2.boxFilter(x, -1, (2 * radius + 1,) * 2, dst=whole, normalize=True,
+                  borderType=cv2.BORDER_REFLECT)
+    monkeypatch.setattr(regrain_module, "num_threads", lambda: 2)
+    calls = []
+    real = regrain_module._uniform_filter_cv2
+    monkeypatch.setattr(regrain_module, "_uniform_filter_cv2",
+                        lambda plane, *args: (calls.append(plane.shape[0]), real(plane, *args)))
+    assert np.array_equal(regrain_module._box_cv2(x, radius).view(np.uint32),
+                          whole.view(np.uint32))
+    tall = shape[0] >= 16 * (2 * radius + 1)
+    assert len(calls) == (2 if tall else 1)  # in two bands on two cores where it is tall

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wbcgrade.core import compiled, in_bands, numpy_first
+from wbcgrade.core import in_bands
 
 __all__ = ["to_uint8", "HALVES_TO_EVEN"]
 
@@ -30,43 +30,47 @@ def _halves_to_even() -> bool:
 HALVES_TO_EVEN = _halves_to_even()
 
 
-@compiled(nogil=True, cache=True)
-def _to_uint8(flat: np.ndarray, out: np.ndarray, half_even: bool, lo: int,
-              hi: int) -> None:  # pragma: no cover - compiled
-    for i in range(lo, hi):
-        scaled = np.float64(flat[i] * np.float32(255.0))  # float32 product, as OpenImageIO's
-        value = np.rint(scaled) if half_even else np.floor(scaled + 0.5)
-        if not value > 0.0:  # negative or NaN
-            out[i] = 0
-        elif value >= 255.0:
-            out[i] = 255
-        else:
-            out[i] = np.uint8(value)
-
-
 def to_uint8(pixels: np.ndarray, half_even: bool | None = None) -> np.ndarray:
     """(..., C) float pixels in [0, 1] -> uint8 code values (OpenImageIO's conversion).
 
     ``half_even``: how exact halves round (default: as the installed
-    OpenImageIO, :data:`HALVES_TO_EVEN`).
+    OpenImageIO, :data:`HALVES_TO_EVEN`). numpy in float32, in chunks that stay in the
+    CPU's cache, on as many threads as numba would use (:func:`_to_uint8_fast`; it
+    replaced a compiled kernel: faster, and nothing to load).
     """
     flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1)
     half_even = HALVES_TO_EVEN if half_even is None else bool(half_even)
-    if numpy_first(_to_uint8, flat.shape[0], _NUMPY_VALUES):
-        return _to_uint8_numpy(flat, half_even).reshape(pixels.shape)
     out = np.empty(flat.shape, np.uint8)
-    in_bands(_to_uint8, flat.shape[0], flat, out, half_even, min_band=65536)
+    in_bands(_to_uint8_fast, flat.shape[0], flat, out, half_even, min_band=1 << 20)
     return out.reshape(pixels.shape)
 
 
-#: Values up to which :func:`to_uint8` runs its numpy twin while ``_to_uint8`` has not run
-#: in the process (see :func:`wbcgrade.core.numpy_first`).
-_NUMPY_VALUES = 4_500_000  # (a 1.5-megapixel photo's three channels)
+#: Values a chunk of :func:`_to_uint8_fast` holds (256 KB of float32: in the cache).
+_CHUNK = 1 << 16
 
 
-def _to_uint8_numpy(flat: np.ndarray, half_even: bool) -> np.ndarray:
-    """``_to_uint8`` with numpy, value for value."""
-    scaled = (flat * np.float32(255.0)).astype(np.float64)
-    value = np.rint(scaled) if half_even else np.floor(scaled + 0.5)
-    value[~(value > 0.0)] = 0.0  # negative or NaN
-    return np.minimum(value, 255.0).astype(np.uint8)
+def _to_uint8_fast(flat: np.ndarray, out: np.ndarray, half_even: bool, lo: int,
+                   hi: int) -> None:
+    """Code values lo:hi of ``flat`` into ``out``: the float32 product by 255 (as
+    OpenImageIO's), rounded in float32 (``rint``: halves to even, exact for every
+    float32; or the floor plus one where the exact fraction is at least a half:
+    ``floor(x + 0.5)`` without a float32 sum that could round up), NaN and negatives to
+    0 (``fmax`` drops NaN), capped at 255."""
+    chunk = np.empty(min(_CHUNK, max(hi - lo, 0)), np.float32)
+    fraction = None if half_even else np.empty_like(chunk)
+    for start in range(lo, hi, _CHUNK):
+        stop = min(start + _CHUNK, hi)
+        x = chunk[:stop - start]
+        np.multiply(flat[start:stop], np.float32(255.0), out=x)
+        if half_even:
+            np.rint(x, out=x)
+        else:
+            f = fraction[:stop - start]
+            np.floor(x, out=f)
+            with np.errstate(invalid="ignore"):  # (infinities: NaN, then 0 or 255)
+                np.subtract(x, f, out=x)  # the exact fraction (x - floor(x) is exact)
+            np.greater_equal(x, np.float32(0.5), out=x, casting="unsafe")
+            x += f
+        np.fmax(x, np.float32(0.0), out=x)
+        np.fmin(x, np.float32(255.0), out=x)
+        out[start:stop] = x

@@ -40,6 +40,7 @@ from wbcgrade._publish import atomic_path, check_output_path
 from wbcgrade.color.defaults import DEFAULT_MAX_IMAGE_PIXELS
 from wbcgrade.color.io._quantise import to_uint8
 from wbcgrade.color.io.raw import AP0_CHROMATICITIES, is_raw, read_raw
+from wbcgrade.core import in_bands
 from wbcgrade.errors import InputError, OptionError, first_line
 from wbcgrade.limits import MEMORY_BUDGET, check_input_file
 
@@ -280,6 +281,20 @@ _INTEGER_SCALES = {oiio.UINT8: ("uint8", np.float32(1 / 255)),
                    oiio.UINT16: ("uint16", np.float32(1 / 65535))}
 
 
+def _scaled(pixels: np.ndarray, scale: np.float32) -> np.ndarray:
+    """``np.multiply(pixels, scale, dtype=np.float32)`` in bands on every core (numpy
+    releases the interpreter lock: a 16-megapixel photo's 0.04-0.07 s in 0.02 s), the
+    same values."""
+    flat = np.ascontiguousarray(pixels).reshape(-1)
+    out = np.empty(flat.shape, np.float32)
+
+    def scale_band(lo: int, hi: int) -> None:
+        np.multiply(flat[lo:hi], scale, out=out[lo:hi], dtype=np.float32)
+
+    in_bands(scale_band, flat.shape[0], min_band=1 << 22)
+    return out.reshape(np.shape(pixels))
+
+
 def read_image(path: str | os.PathLike) -> Image:
     """Read a photo.
 
@@ -330,7 +345,7 @@ def read_image(path: str | os.PathLike) -> Image:
     finally:
         inp.close()
     if native:  # integers scaled here: the same float32 values, in half the time
-        pixels = np.multiply(pixels, native[1], dtype=np.float32)
+        pixels = _scaled(pixels, native[1])
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     if not native and not np.isfinite(pixels).all():
         raise InputError(f"{path}: image holds NaN or infinite pixel values")

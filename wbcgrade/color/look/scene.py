@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +51,9 @@ from wbcgrade.color.io.raw import is_raw
 from wbcgrade.errors import InputError
 
 __all__ = ["SceneImage", "SceneMatch", "scene_image", "match_scene", "mirrored", "unmirror",
-           "colour_pairs", "style_scene_images", "has_style_images", "shrink_colors",
+           "colour_pairs", "style_scene_images", "keep_style_scenes", "has_style_images",
+           "prepare_photo_scene", "forget_photo_scene", "photo_scene_entry",
+           "shrink_colors",
            "keep_for_matching", "matching_hook",
            "MATCH_SIZE", "MIN_INLIERS", "SURE_INLIERS"]
 
@@ -172,7 +175,124 @@ def shrink_colors(colors: np.ndarray, size: int) -> np.ndarray:
 def scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
                 features: int = MAX_FEATURES) -> SceneImage:
     """Shrink (H, W, 3) working-space colours in [0, 1] and find their keypoints (at most
-    ``features``)."""
+    ``features``): what :func:`prepare_photo_scene` started for this very array, when it
+    did."""
+    if size == MATCH_SIZE and features == MAX_FEATURES:
+        ahead = _taken_ahead(colors)
+        if ahead is not None:
+            return ahead
+    return _scene_image(colors, size, features)
+
+
+#: Photos' scene images being prepared on another thread (:func:`prepare_photo_scene`), by
+#: the id of the colours they are prepared from (the array kept beside: the same array,
+#: not a later one at its address), and the mirrors found with them, by the photo's id.
+_AHEAD: dict[int, tuple[np.ndarray, Future]] = {}
+_MIRRORS: dict[int, tuple[SceneImage, SceneImage]] = {}
+_AHEAD_LOCK = threading.Lock()
+
+
+def prepare_photo_scene(colors: np.ndarray, entry: Path | None = None) -> None:
+    """Start preparing a photo for matching on another thread: :func:`scene_image` of
+    ``colors`` (its default size and keypoints) and its :func:`mirrored` copy, so that the
+    decoder's next steps (the photo's histograms, the set's look: one core) and the
+    keypoints (OpenCV, no interpreter lock) run side by side. ``entry``: where they are
+    kept in the cache (:func:`photo_scene_entry`; a photo graded again, at another
+    strength or with other styles, finds them there); None: not kept. The grade's own
+    calls for this array take them (or what preparing them raised);
+    :func:`forget_photo_scene` drops them if it never asks."""
+    future: Future = Future()
+
+    def prepare() -> None:
+        try:
+            found = _read_photo_scene(entry, colors)
+            if found is None:
+                photo = _scene_image(colors)
+                found = (photo, _mirrored(photo))
+                _write_photo_scene(entry, *found)
+            future.set_result(found)
+        except BaseException as exc:  # noqa: BLE001 - raised where the grade asks for it
+            future.set_exception(exc)
+
+    with _AHEAD_LOCK:
+        _AHEAD[id(colors)] = (colors, future)
+    threading.Thread(target=prepare, name="wbcgrade-scene").start()  # (no daemon: ReadAhead)
+
+
+def photo_scene_entry(path: str | os.PathLike, input_space: str | None,
+                      working_space: str) -> Path | None:
+    """Where the photo at ``path``, read in ``input_space`` (None: what the file says) and
+    encoded into ``working_space``, keeps its keypoints and its mirror's in the command's
+    cache (``scenes/``; None when caching is off or the file is gone): keyed by the file as
+    it is now and every matching setting, its colours kept as float32 (the photo's own
+    pairs are read from them: exactly what preparing them again gives)."""
+    folder = cache_folder()
+    if folder is None:
+        return None
+    try:
+        key = (f"photo|{file_key(path)}|{input_space or 'file'}|{working_space}|"
+               f"{MATCH_SIZE}|{MAX_FEATURES}|{MIRROR_FEATURES}|{CONTRAST}|{SMOOTH}|"
+               f"{STRETCH}|{LOCAL_CONTRAST}|{LOCAL_TILES}|{SCENE_VERSION}")
+    except OSError:
+        return None
+    return entry_path(folder, "scenes", key)
+
+
+def _read_photo_scene(entry: Path | None, colors: np.ndarray
+                      ) -> tuple[SceneImage, SceneImage] | None:
+    data = read_entry(entry)
+    if data is None:
+        return None
+    try:
+        small = np.ascontiguousarray(data["colors"], dtype=np.float32)
+        h, w = colors.shape[:2]
+        scale = MATCH_SIZE / max(h, w)
+        expected = (h, w) if scale >= 1.0 else (max(1, round(h * scale)),
+                                                 max(1, round(w * scale)))
+        if small.shape != (*expected, 3):  # (another photo at that key: computed again)
+            return None
+        photo = SceneImage(small, data["points"].astype(np.float32),
+                           data["descriptors"].astype(np.float32))
+        mirror = SceneImage(np.ascontiguousarray(small[:, ::-1]),
+                            data["mirror_points"].astype(np.float32),
+                            data["mirror_descriptors"].astype(np.float32))
+    except Exception:  # noqa: BLE001 - any damage is a miss: computed again, rewritten
+        return None
+    return photo, mirror
+
+
+def _write_photo_scene(entry: Path | None, photo: SceneImage, mirror: SceneImage) -> None:
+    """Best effort: a cache that cannot be written is skipped."""
+    write_entry(entry, colors=photo.colors, points=photo.points,
+                descriptors=photo.descriptors, mirror_points=mirror.points,
+                mirror_descriptors=mirror.descriptors)
+
+
+def forget_photo_scene(colors: np.ndarray) -> None:
+    """Drop what :func:`prepare_photo_scene` prepared for ``colors`` and the grade did not
+    take (nothing of a graded photo is kept: a batch grades many)."""
+    with _AHEAD_LOCK:
+        entry = _AHEAD.get(id(colors))
+        if entry is not None and entry[0] is colors:
+            del _AHEAD[id(colors)]
+        _MIRRORS.clear()
+
+
+def _taken_ahead(colors: np.ndarray) -> SceneImage | None:
+    with _AHEAD_LOCK:
+        entry = _AHEAD.get(id(colors))
+        if entry is None or entry[0] is not colors:
+            return None
+        del _AHEAD[id(colors)]
+    photo, mirror = entry[1].result()
+    with _AHEAD_LOCK:
+        _MIRRORS.clear()  # (one photo at a time: the one asked for now)
+        _MIRRORS[id(photo)] = (photo, mirror)
+    return photo
+
+
+def _scene_image(colors: np.ndarray, size: int = MATCH_SIZE,
+                 features: int = MAX_FEATURES) -> SceneImage:
     cv2 = _cv2()
     small = shrink_colors(colors, size)
     sift = cv2.SIFT_create(nfeatures=features, contrastThreshold=CONTRAST)
@@ -301,9 +421,18 @@ def match_scene(photo: SceneImage, style: SceneImage, ratio: float = 0.75,
 
 def mirrored(photo: SceneImage) -> SceneImage:
     """The photo flipped left to right, with its own keypoints (the strongest
-    :data:`MIRROR_FEATURES`: a flipped framing shares hundreds; for :func:`unmirror`)."""
-    return scene_image(photo.colors[:, ::-1], size=max(photo.colors.shape[:2]),
-                       features=MIRROR_FEATURES)
+    :data:`MIRROR_FEATURES`: a flipped framing shares hundreds; for :func:`unmirror`);
+    the one :func:`prepare_photo_scene` found beside ``photo``, when it did."""
+    with _AHEAD_LOCK:
+        entry = _MIRRORS.pop(id(photo), None)
+    if entry is not None and entry[0] is photo:
+        return entry[1]
+    return _mirrored(photo)
+
+
+def _mirrored(photo: SceneImage) -> SceneImage:
+    return _scene_image(photo.colors[:, ::-1], size=max(photo.colors.shape[:2]),
+                        features=MIRROR_FEATURES)
 
 
 def unmirror(match: SceneMatch, width: int) -> SceneMatch:
@@ -502,6 +631,15 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
     in the styles' cache folder (:func:`wbcgrade.color.io.cache.cache_folder`, beside
     the histograms), keyed by the file and the working space.
     """
+    with _AHEAD_LOCK:  # (the style photos being prepared ahead: waited for, then found)
+        ahead, _STYLES_AHEAD[:] = list(_STYLES_AHEAD), []
+    for thread in ahead:
+        thread.join()
+    return _style_scene_images(styles, progress, cache)
+
+
+def _style_scene_images(styles, progress: Callable[[int, int], None] | None = None,
+                        cache: bool = True) -> list[SceneImage | None]:
     images: Sequence = styles.images
     files: Sequence = styles.files
     out: list[SceneImage | None] = []
@@ -520,3 +658,32 @@ def style_scene_images(styles, progress: Callable[[int, int], None] | None = Non
         if progress is not None:
             progress(i + 1, n)
     return out
+
+
+def keep_style_scenes(styles) -> bool:
+    """Start preparing the style photos of a StyleSet for matching on another thread
+    (:func:`style_scene_images`, kept in this process: read from the cache, which holds
+    no interpreter lock for most of its time, while the photo's histograms and the set's
+    look are found; the grade's own call waits for it and finds them there), when it names
+    their files (images given as arrays are not kept: nothing to gain) and no more than
+    this process keeps; whether it started. Best effort: what it could not prepare, the
+    grade prepares (and reports)."""
+    if (not styles.files or any(image is not None for image in styles.images)
+            or len(styles.names) > _IN_MEMORY_MAX):
+        return False
+
+    def keep() -> None:
+        try:
+            _style_scene_images(styles)
+        except Exception:  # noqa: BLE001, S110 - the grade prepares (and reports) them again
+            pass
+
+    thread = threading.Thread(target=keep, name="wbcgrade-styles")
+    with _AHEAD_LOCK:
+        _STYLES_AHEAD.append(thread)
+    thread.start()
+    return True
+
+
+#: The threads :func:`keep_style_scenes` started that no grade has waited for yet.
+_STYLES_AHEAD: list[threading.Thread] = []

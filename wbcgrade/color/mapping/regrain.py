@@ -29,11 +29,17 @@ import hashlib
 
 import numpy as np
 
-from wbcgrade.color.mapping.remap import apply_color_map, block_means_mapped
+from wbcgrade.color.mapping.remap import (
+    apply_color_map,
+    apply_lut_in_place,
+    block_means_mapped,
+    has_lut_library,
+    lut_processor,
+)
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
-__all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels",
+__all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels", "kernels_needed",
            "solved_subsampled", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
 
@@ -54,10 +60,11 @@ _NUMPY_SOLVE_PIXELS = 400_000
 
 
 def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float,
-                  prior: np.ndarray | None = None) -> np.ndarray:
+                  prior: np.ndarray | None = None, precise: bool = True) -> np.ndarray:
     """(H, W, 12) float32 box-averaged coefficients of the local model
     ``change = A^T guide + b``: ``A[a, c]`` at ``3 a + c``, then ``b``. ``prior``: (n, n,
-    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0)."""
+    n, 9) what each window's ``A`` is pulled towards, read at its mean colour (None: 0).
+    ``precise`` False: solved in float32 (:func:`_window_models_numpy`)."""
     guide = np.ascontiguousarray(guide, dtype=np.float32)
     change = np.ascontiguousarray(change, dtype=np.float32)
     small = guide.shape[0] * guide.shape[1] < _NUMPY_SOLVE_PIXELS
@@ -65,22 +72,53 @@ def _coefficients(guide: np.ndarray, change: np.ndarray, radius: int, eps: float
     pull = None
     if prior is not None:  # each window's A0 at its mean colour (the moments' first three)
         centre = box(guide, int(radius))
-        pull = np.concatenate([apply_color_map(centre, np.ascontiguousarray(
-            prior[..., 3 * a:3 * a + 3], dtype=np.float32)) for a in range(3)], axis=-1)
+        pull = np.concatenate([_read_prior(centre, np.ascontiguousarray(
+            prior[..., 3 * a:3 * a + 3], dtype=np.float32), precise) for a in range(3)],
+            axis=-1)
     models = _window_models_numpy(guide, change, int(radius), float(eps), pull,
-                                  None if small else _uniform_filter_cv2)
+                                  None if small else _uniform_filter_cv2, precise)
     return box(models, int(radius))
+
+
+def _read_prior(colors: np.ndarray, table: np.ndarray, precise: bool) -> np.ndarray:
+    """``apply_color_map(colors, table)``; not ``precise`` (a subsampled solve, in float32),
+    by OpenColorIO's LUT processor where it is installed (the same trilinear lookup to
+    float32 rounding: a megapixel grid's three lookups in 0.04 s, where the numpy twin
+    takes 0.5 s and the kernel numba's start)."""
+    processor = None if precise else lut_processor(table)
+    if processor is None:
+        return apply_color_map(colors, table)
+    out = np.empty(colors.shape, np.float32)
+    apply_lut_in_place(processor, np.ascontiguousarray(colors, dtype=np.float32), out=out)
+    return out
 
 
 def _box_cv2(x: np.ndarray, radius: int) -> np.ndarray:
     """:func:`_box_numpy` with OpenCV's box filter (:func:`_uniform_filter_cv2`) on the
-    channels as they lie (up to 12 at a time: no planes copied out and back)."""
+    channels as they lie (up to 12 at a time: no planes copied out and back), in bands of
+    rows on every core when the image is tall enough (each band filtered with the radius
+    of rows beyond it: OpenCV sums each row's window alone, so the numbers are those of
+    one call, bit for bit)."""
     x = np.ascontiguousarray(x, dtype=np.float32)
     if x.size == 0:
         return np.empty_like(x)
     if x.shape[2] <= 12:
         out = np.empty_like(x)
-        _uniform_filter_cv2(x, 2 * radius + 1, out)
+        h = x.shape[0]
+        parts = min(num_threads(), h // (8 * (2 * radius + 1)))
+        if parts <= 1:
+            _uniform_filter_cv2(x, 2 * radius + 1, out)
+            return out
+        edges = np.linspace(0, h, parts + 1).astype(int)
+
+        def band(part: int) -> None:  # rows and the radius beyond: the same sums
+            lo, hi = edges[part], edges[part + 1]
+            top, bottom = max(lo - radius, 0), min(hi + radius, h)
+            means = np.empty((bottom - top, *x.shape[1:]), np.float32)
+            _uniform_filter_cv2(x[top:bottom], 2 * radius + 1, means)
+            out[lo:hi] = means[lo - top:hi - top]
+
+        _threaded(band, parts)  # (OpenCV's box filter runs on one core)
         return out
     return np.concatenate([_box_cv2(x[..., k:k + 12], radius)
                            for k in range(0, x.shape[2], 12)], axis=-1)
@@ -108,13 +146,15 @@ def _box_numpy(x: np.ndarray, radius: int) -> np.ndarray:
 
 def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
                          eps: float, prior: np.ndarray | None = None,
-                         filtered=None) -> np.ndarray:
+                         filtered=None, precise: bool = True) -> np.ndarray:
     """(H, W, 12) float32 each window's A and b: ``A = (Cov(I) + eps Id)^-1 (Cov(I, d) +
     eps A0)`` (``A[a, c]`` at ``3 a + c``; ``A0`` the (H, W, 9) ``prior``, None: 0) and
     ``b = mean(d) - A^T mean(I)``, from the window means of the 21 moments (the guide I,
     the change d, their products) by :func:`_box_numpy`'s filter or ``filtered`` (same
-    arguments: :func:`_uniform_filter_cv2`), solved in closed form (float64) in bands of
-    a few rows, on as many threads as numba uses. Nothing to compile."""
+    arguments: :func:`_uniform_filter_cv2`), solved in closed form (float64; ``precise``
+    False: in float32, the precision of the window means themselves, where ``eps`` keeps
+    the covariances far from singular: :data:`_FLOAT32_SOLVE_EPS`) in bands of a few
+    rows, on as many threads as numba uses. Nothing to compile."""
     filtered = filtered or _uniform_filter
     h, w = guide.shape[:2]
     out = np.empty((h, w, 12), np.float32)
@@ -133,18 +173,25 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
         filtered(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
+    solved = np.float64 if precise or eps < _FLOAT32_SOLVE_EPS else np.float32
     parts = max(1, min(num_threads(), h // _SOLVE_ROWS))
     edges = np.linspace(0, h, parts + 1).astype(int)
 
     def solve(part: int) -> None:  # bands of a few rows: their float64 planes stay in cache
         for start in range(edges[part], edges[part + 1], _SOLVE_ROWS):
             stop = min(start + _SOLVE_ROWS, edges[part + 1])
-            _solve_band(means[:, start:stop].astype(np.float64), eps, out[start:stop],
+            _solve_band(means[:, start:stop].astype(solved, copy=False), eps, out[start:stop],
                         None if prior is None else prior[start:stop])
 
     _threaded(solve, parts)
     return out
 
+
+#: The least ``eps`` a solve in float32 is allowed (``precise`` False): each window's
+#: covariance then has eigenvalues of at least 1e-3, its determinant at least 1e-9, far
+#: above float32's rounding of the window means it is made of (the default 0.04: within
+#: 3e-7 of the float64 solve on the 16-megapixel photo's coefficients).
+_FLOAT32_SOLVE_EPS = 1e-3
 
 #: Rows of one band of the window models' closed-form solve (:func:`_solve_band`): 8 rows
 #: of a 1-megapixel grid's 21 float64 planes stay in the cache (64 rows: 1.8x the time).
@@ -307,11 +354,94 @@ def _apply_upsampled(source: np.ndarray, coefficients: np.ndarray, step: float,
     if twin and same and numpy_first(_apply_rows, pixels, _MAX_SOLVE_PIXELS):
         _apply_same_grid(source, coefficients, out)
         return
+    if twin and not same and pixels > _NUMPY_APPLY_PIXELS and float(step).is_integer():
+        _apply_upsampled_cv2(source, coefficients, int(step), out)
+        return
     if twin and numpy_first(_apply_rows, pixels, _NUMPY_APPLY_PIXELS):
         _apply_rows_numpy(source, coefficients, float(step), left, right, weight, out)
         return
     in_bands(_apply_rows, source.shape[0], source, coefficients, float(step), left, right,
              weight, out)
+
+
+def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int,
+                         out: np.ndarray) -> None:
+    """``_apply_rows`` with OpenCV, for a whole ``step``: band by band (on every core), each
+    output channel's four coefficients (``A[:, c]`` plus the identity's column, and
+    ``b[c]``) bilinearly resized from the band's coarse rows (pixel centres, edges
+    replicated: the kernel's clamped interpolation; rows and columns past the coarse
+    grid's last node take that node's, as the kernel's clamp gives them), multiplied by
+    the pixels' ``(r, g, b, 1)`` and summed (an area resize of the four products, the
+    coefficients scaled by 4 beforehand: exact). The kernel's numbers to
+    float32 rounding (the coefficients are interpolated before they are applied: within
+    1e-6), no compiled kernel to load, buffers reused band to band (fresh pages cost
+    more than the arithmetic); ``out`` may be ``source``."""
+    import cv2
+
+    h, w = source.shape[:2]
+    lh, lw = coefficients.shape[:2]
+    if h == 0 or w == 0:
+        return
+    groups = []  # per output channel c: A[0, c], A[1, c], A[2, c] (+ identity), b[c],
+    for c in range(3):  # times 4 (exact): the four products' mean is then their sum
+        group = np.ascontiguousarray(coefficients[..., [c, 3 + c, 6 + c, 9 + c]],
+                                     dtype=np.float32)
+        group[..., c] += np.float32(1.0)
+        group *= np.float32(4.0)
+        groups.append(group)
+    inside_w = min(w, lw * step)  # columns past the last node repeat it
+    inside_h = min(h, lh * step)  # rows too
+    rows = max(1, _BAND_ROWS // step) * step
+    last = [cv2.resize(g[lh - 1:lh], (lw * step, 1), interpolation=cv2.INTER_LINEAR)
+            .reshape(1, lw * step, 4)[:, :inside_w] for g in groups]
+
+    def apply(part: int) -> None:
+        coarse = [np.empty(((rows // step + 3) * step, lw * step, 4), np.float32)
+                  for _ in range(3)]
+        pixels = np.empty((rows, inside_w, 4), np.float32)
+        product = np.empty((rows, inside_w, 4), np.float32)
+        planes = [np.empty((rows, inside_w), np.float32) for _ in range(3)]
+        merged = np.empty((rows, inside_w, 3), np.float32)
+
+        def band(y0: int, y1: int, ups: list[np.ndarray]) -> None:
+            r = y1 - y0
+            colors = source[y0:y1]
+            with_one = pixels[:r]
+            cv2.cvtColor(colors[:, :inside_w], cv2.COLOR_RGB2RGBA, dst=with_one)
+            for c in range(3):  # the four products summed: their mean (area resize)
+                cv2.multiply(ups[c], with_one, dst=product[:r])
+                cv2.resize(product[:r].reshape(r, 4 * inside_w), (inside_w, r),
+                           dst=planes[c][:r], interpolation=cv2.INTER_AREA)
+            cv2.merge([plane[:r] for plane in planes], dst=merged[:r])
+            if inside_w < w:  # past the last node's column: its coefficients
+                tail = colors[:, inside_w:].astype(np.float32)
+                value = np.stack([(np.einsum("rxa,ra->rx", tail, up[:, -1, :3])
+                                   + up[:, -1, 3:4]) * np.float32(0.25) for up in ups],
+                                 axis=-1)
+                np.clip(value, np.float32(0.0), np.float32(1.0), out=out[y0:y1, inside_w:])
+            np.clip(merged[:r], np.float32(0.0), np.float32(1.0), out=out[y0:y1, :inside_w])
+
+        for y0 in range(edges[part], edges[part + 1], rows):
+            y1 = min(y0 + rows, edges[part + 1])
+            inside = min(y1, inside_h)
+            if inside > y0:  # resized from the band's coarse rows, one above and below
+                c0, c1 = max(y0 // step - 1, 0), min(-(-inside // step) + 1, lh)
+                ups = []
+                for group, buffer in zip(groups, coarse):
+                    up = buffer[:(c1 - c0) * step]
+                    cv2.resize(group[c0:c1], (lw * step, (c1 - c0) * step), dst=up,
+                               interpolation=cv2.INTER_LINEAR)
+                    ups.append(up[y0 - c0 * step:inside - c0 * step, :inside_w])
+                band(y0, inside, ups)
+            if y1 > inside:  # past the last node's row: its coefficients
+                start = max(y0, inside)
+                band(start, y1, [np.ascontiguousarray(np.broadcast_to(
+                    row, (y1 - start, inside_w, 4))) for row in last])
+
+    parts = max(1, min(num_threads(), h // rows))
+    edges = (np.linspace(0, h // rows, parts + 1).astype(int) * rows)
+    edges[-1] = h
+    _threaded(apply, parts)
 
 
 #: Pixels up to which :func:`_apply_upsampled` runs its numpy twin while ``_apply_rows``
@@ -362,30 +492,77 @@ def _apply_rows_numpy(source: np.ndarray, coefficients: np.ndarray, step: float,
     np.clip(graded, np.float32(0.0), one, out=out)
 
 
-@compiled(nogil=True, cache=True)
-def _downsample_rows(x: np.ndarray, step: int, out: np.ndarray, lo: int,
-                     hi: int) -> None:  # pragma: no cover - compiled
-    """Block rows lo:hi of :func:`_downsample` into ``out`` (zeros on entry)."""
-    w, c = out.shape[1], out.shape[2]
-    scale = 1.0 / (step * step)
-    for i in range(lo, hi):
-        for di in range(step):
-            row = i * step + di
-            for j in range(w):
-                for dj in range(step):
-                    for k in range(c):
-                        out[i, j, k] += x[row, j * step + dj, k]
-        for j in range(w):
-            for k in range(c):
-                out[i, j, k] *= scale
-
-
 def _downsample(x: np.ndarray, step: int) -> np.ndarray:
-    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped)."""
+    """Mean of every step x step block of an (H, W, C) image (partial edge blocks dropped):
+    OpenCV's area resize by a whole factor (float32 sums, no compiled kernel to load)."""
+    import cv2
+
     x = np.ascontiguousarray(x, dtype=np.float32)
-    out = np.zeros((x.shape[0] // step, x.shape[1] // step, x.shape[2]), np.float32)
-    in_bands(_downsample_rows, out.shape[0], x, int(step), out, min_band=1)
+    h, w = x.shape[0] // step, x.shape[1] // step
+    if h == 0 or w == 0:
+        return np.zeros((h, w, x.shape[2]), np.float32)
+    if step == 1:
+        return x.copy()
+    out = np.empty((h, w, x.shape[2]), np.float32)
+    rows = max(1, _BAND_ROWS // step)
+
+    def means(part: int) -> None:
+        for lo in range(edges[part], edges[part + 1], rows):
+            hi = min(lo + rows, edges[part + 1])
+            band = x[lo * step:hi * step, :w * step]
+            out[lo:hi] = cv2.resize(band, (w, hi - lo), interpolation=cv2.INTER_AREA
+                                    ).reshape(hi - lo, w, x.shape[2])
+    parts = max(1, min(num_threads(), h // rows))
+    edges = np.linspace(0, h, parts + 1).astype(int)
+    _threaded(means, parts)
     return out
+
+
+#: Full-size rows a band of the subsampled regrain's passes holds (its pixels' colours and
+#: the band's coefficients stay in the CPU's cache).
+_BAND_ROWS = 32
+
+
+def _block_means(source: np.ndarray, color_map: np.ndarray, strength: float,
+                 step: int) -> tuple[np.ndarray, np.ndarray]:
+    """(mapped, source) block means of ``source`` moved through the map and of ``source``
+    itself (``block_means_mapped(..., with_source=True)``): with OpenColorIO's LUT
+    processor (:func:`~wbcgrade.color.mapping.remap.lut_processor`) and OpenCV's area
+    resize, band by band on every core, the kernel's numbers to float32 rounding and no
+    compiled kernel to load (numba's start costs a 16-megapixel grade about 0.6 s of
+    CPU); the compiled kernel without the ``opencolorio`` package."""
+    processor = lut_processor(color_map, strength)
+    if processor is None:
+        return block_means_mapped(source, color_map, strength, step, with_source=True)
+    import cv2
+
+    h, w = source.shape[0] // step, source.shape[1] // step
+    mapped = np.zeros((h, w, 3), np.float32)
+    small = np.zeros((h, w, 3), np.float32)
+    if h == 0 or w == 0:
+        return mapped, small
+    rows = max(1, _BAND_ROWS // step)
+
+    whole = source.shape[1] == w * step and source.dtype == np.float32 \
+        and source.flags.c_contiguous  # (bands of whole rows: mapped from where they are)
+
+    def means(part: int) -> None:
+        buffer = np.empty((rows * step, w * step, 3), np.float32)
+        for lo in range(edges[part], edges[part + 1], rows):
+            hi = min(lo + rows, edges[part + 1])
+            band = buffer[:(hi - lo) * step]
+            colors = source[lo * step:hi * step, :w * step]
+            cv2.resize(colors, (w, hi - lo), dst=small[lo:hi], interpolation=cv2.INTER_AREA)
+            if whole:
+                apply_lut_in_place(processor, colors, out=band)
+            else:
+                band[...] = colors
+                apply_lut_in_place(processor, band)
+            cv2.resize(band, (w, hi - lo), dst=mapped[lo:hi], interpolation=cv2.INTER_AREA)
+    parts = max(1, min(num_threads(), h // rows))
+    edges = np.linspace(0, h, parts + 1).astype(int)
+    _threaded(means, parts)
+    return mapped, small
 
 
 def regrain(source: np.ndarray, graded: np.ndarray, radius: float = DEFAULT_REGRAIN_RADIUS,
@@ -456,7 +633,7 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     if step == 1:
         small, change = source, apply_color_map(source, color_map, strength) - source
     else:
-        mapped, small = block_means_mapped(source, color_map, strength, step, with_source=True)
+        mapped, small = _block_means(source, color_map, strength, step)
         change = mapped - small
     prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
     return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
@@ -464,29 +641,35 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
 
 def solved_subsampled(pixels: int) -> bool:
     """Whether :func:`regrain_map` solves a photo of ``pixels`` pixels on a subsampled copy
-    (over 1.5 megapixels: its compiled kernels then run whatever ran before)."""
+    (over 1.5 megapixels)."""
     return _step(1, pixels) > 1
 
 
+def kernels_needed() -> bool:
+    """Whether a photo solved on a subsampled copy runs a compiled kernel: its map's block
+    means do without the ``opencolorio`` package (:func:`_block_means`); everything else
+    it runs is OpenCV's and numpy's."""
+    return not has_lut_library()
+
+
 def load_kernels(pixels: int) -> bool:
-    """Load the compiled kernels :func:`regrain_map` runs on a photo of ``pixels`` pixels
-    solved on a subsampled copy (over 1.5 megapixels), by running each on a few pixels
-    through the same wrappers (the same argument types: the signatures numba's cache
-    holds; a first run after install compiles them here). False, loading nothing, for a
-    smaller photo (its solve may run numpy's twins).
+    """Load the compiled kernel :func:`regrain_map` runs on a photo of ``pixels`` pixels
+    solved on a subsampled copy (over 1.5 megapixels) without the ``opencolorio`` package
+    (:func:`kernels_needed`), by running it on a few pixels through the same wrapper (the
+    same argument types: the signature numba's cache holds; a first run after install
+    compiles it here). False, loading nothing, for a smaller photo (its solve may run
+    numpy's twins) or where OpenColorIO maps the colours.
 
     What a command grading a large photo starts in a thread before decoding it
     (:func:`wbcgrade.photos.workflow.grade_photo`): importing numba and loading its
     first kernel is about 0.7 s of Python, most of it while the decoder and the scene
     matching hold no interpreter lock.
     """
-    if not solved_subsampled(pixels):
+    if not solved_subsampled(pixels) or not kernels_needed():
         return False
     colors = np.full((4, 4, 3), 0.5, np.float32)
     table = np.zeros((2, 2, 2, 3), np.float32)
     block_means_mapped(colors, table, 1.0, 2, with_source=True)
-    _apply_upsampled(colors, np.zeros((2, 2, 12), np.float32), 2.0, np.empty_like(colors),
-                     twin=False)
     return True
 
 
@@ -552,5 +735,7 @@ def _regrain_upsampled(source: np.ndarray, small: np.ndarray, change: np.ndarray
                        prior: np.ndarray | None = None) -> np.ndarray:
     h, w = source.shape[:2]
     pixels = _window(radius, max(h, w) / step)
-    _apply_upsampled(source, _coefficients(small, change, pixels, eps, prior), float(step), out)
+    # on a subsampled copy, solved in float32: its coefficients are interpolated in float32
+    coefficients = _coefficients(small, change, pixels, eps, prior, precise=step == 1)
+    _apply_upsampled(source, coefficients, float(step), out)
     return out

@@ -14,7 +14,7 @@ from wbcgrade.color.colorspace import REC709_LUMA, SYCC_LUMA
 from wbcgrade.core import compiled, in_bands, numpy_first
 
 __all__ = ["apply_color_map", "resample_lattice", "interpolate_lattice", "block_means_mapped",
-           "identity_map", "blend_map", "keep_lightness",
+           "lut_processor", "identity_map", "blend_map", "keep_lightness",
            "monotone_lightness", "TONE_LUMA", "monochrome_toning",
            "to_monochrome", "monochrome_map"]
 
@@ -118,6 +118,67 @@ def block_means_mapped(rgb: np.ndarray, color_map: np.ndarray, strength: float,
     in_bands(_block_means_mapped, h, colors, table, np.float32(strength), int(step), mapped,
              source_means, min_band=1)
     return (mapped, source_means) if with_source else mapped
+
+
+#: Nodes per axis OpenColorIO's 3-D LUT holds at most (``Lut3DTransform``).
+_OCIO_MAX_NODES = 129
+
+
+def has_lut_library() -> bool:
+    """Whether :func:`lut_processor` can apply colour maps (the ``opencolorio`` package is
+    installed), found without importing it."""
+    from importlib.util import find_spec
+
+    return find_spec("PyOpenColorIO") is not None
+
+
+def lut_processor(color_map: np.ndarray, strength: float = 1.0):
+    """OpenColorIO's CPU processor of a colour map at ``strength``: a ``Lut3DTransform``
+    with trilinear interpolation, :func:`apply_color_map`'s numbers to float32 rounding
+    (within 4e-7; ``(1 - t) x + t T(x)`` is the map blended with the identity at its
+    nodes, which trilinear interpolation reproduces). Colours are clipped to the cube
+    as the kernel clips them, NaN becomes 0. ``processor.apply(PackedImageDesc)`` grades
+    float32 RGB pixels in place, without the interpreter lock (about 14 ns a pixel on one
+    core: faster than the compiled kernel, and nothing to load). None without the
+    ``opencolorio`` package, or for a map OpenColorIO cannot hold (over 129 nodes)."""
+    if color_map.ndim != 4 or color_map.shape[3] != 3 or len(set(color_map.shape[:3])) != 1 \
+            or color_map.shape[0] < 2:
+        raise ValueError("color_map must be (n, n, n, 3) with n >= 2")
+    if not 0.0 <= strength <= 1.0:
+        raise ValueError("strength must be in [0, 1]")
+    if color_map.shape[0] > _OCIO_MAX_NODES:
+        return None
+    try:
+        import PyOpenColorIO as ocio
+    except ImportError:
+        return None
+    table = np.asarray(color_map, dtype=np.float32)
+    if strength != 1.0:
+        table = blend_map(table, float(np.float32(strength)))
+    lut = ocio.Lut3DTransform()
+    lut.setGridSize(table.shape[0])
+    lut.setData(np.ascontiguousarray(table, dtype=np.float32).ravel())
+    lut.setInterpolation(ocio.INTERP_LINEAR)
+    return ocio.Config.CreateRaw().getProcessor(lut).getDefaultCPUProcessor()
+
+
+def apply_lut_in_place(processor, rgb: np.ndarray, out: np.ndarray | None = None) -> None:
+    """Grade a C-contiguous float32 (H, W, 3) image with a :func:`lut_processor`, in place
+    or into ``out`` (the same shape and kind; OpenColorIO works a row at a time: pass
+    bands of rows, not one long row)."""
+    import PyOpenColorIO as ocio
+
+    for array in (rgb, rgb if out is None else out):
+        if array.ndim != 3 or array.shape[2] != 3 or array.dtype != np.float32 \
+                or not array.flags.c_contiguous or array.shape != rgb.shape:
+            raise ValueError("rgb and out must be C-contiguous float32 (H, W, 3) arrays")
+    if not rgb.size:
+        return
+    source = ocio.PackedImageDesc(rgb, rgb.shape[1], rgb.shape[0], 3)
+    if out is None:
+        processor.apply(source)
+    else:
+        processor.apply(source, ocio.PackedImageDesc(out, out.shape[1], out.shape[0], 3))
 
 
 def resample_lattice(lattice: np.ndarray, size: int) -> np.ndarray:
