@@ -54,8 +54,7 @@ def test_apply_decodes_the_photo_while_the_styles_load(tmp_path, style_dir, monk
         return loading(*args, **kwargs)
 
     kept, prepared, forgotten = [], [], []
-    monkeypatch.setattr(read_ahead, "read_image", read)
-    monkeypatch.setattr(workflow, "read_image", read)
+    monkeypatch.setattr(read_ahead, "read_image", read)  # (the grade's own read too)
     monkeypatch.setattr(workflow, "load_styles", load)
     monkeypatch.setattr(workflow, "keep_style_scenes", lambda styles: kept.append(styles))
     preparing, forgetting = read_ahead.prepare_photo_scene, workflow.forget_photo_scene

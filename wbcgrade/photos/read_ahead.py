@@ -23,7 +23,16 @@ from wbcgrade.color.look.scene import (
     prepare_photo_scene,
 )
 
-__all__ = ["ReadAhead"]
+__all__ = ["ReadAhead", "read_encoded"]
+
+
+def read_encoded(photo: str | os.PathLike, input_space: str | None,
+                 working_space: str | None) -> tuple[Image, ColorEncoding, tuple]:
+    """``photo`` read, with its encoding into ``working_space`` from ``input_space`` (None:
+    what the file says) and ``encoding.encode`` of its colours: what a grade reads."""
+    image = read_image(photo)
+    encoding = ColorEncoding.for_image(image, input_space, working_space)
+    return image, encoding, encoding.encode(image.rgb(), image.is_float)
 
 
 class ReadAhead:
@@ -50,9 +59,7 @@ class ReadAhead:
 
     def _read(self) -> None:
         try:
-            image = read_image(self.photo)
-            encoding = ColorEncoding.for_image(image, *self.spaces)
-            encoded = encoding.encode(image.rgb(), image.is_float)
+            image, encoding, encoded = read_encoded(self.photo, *self.spaces)
             if self.match_scenes:
                 self._decided.wait()  # (the command's outputs planned, or the grade asks)
                 if not self._cancelled.is_set():

@@ -42,7 +42,6 @@ from wbcgrade.color.io.images import (
     check_image_output,
     check_write_options,
     header_pixels,
-    read_image,
     stage_image,
 )
 from wbcgrade.color.io.raw import output_name
@@ -75,7 +74,7 @@ from wbcgrade.limits import check_input_file
 from wbcgrade.photos.graded import GradeReport, PhotoGrade
 from wbcgrade.photos.output import grey_of, output_pixels
 from wbcgrade.photos.progress import Progress  # (defined there: no numerics)
-from wbcgrade.photos.read_ahead import ReadAhead
+from wbcgrade.photos.read_ahead import ReadAhead, read_encoded
 from wbcgrade.photos.report import plan_report, report_from_grade
 
 __all__ = ["Progress", "PhotoPlan", "PhotoGrade", "GradeReport", "default_output_path",
@@ -257,9 +256,7 @@ def grade_photo(photo: str | os.PathLike, styles: StyleSet | None, options: Grad
     else:
         if read_ahead is not None:  # (another photo, or other spaces)
             read_ahead.discard()
-        image = read_image(photo)
-        encoding = ColorEncoding.for_image(image, spaces.input, spaces.working)
-        encoded = encoding.encode(image.rgb(), image.is_float)
+        image, encoding, encoded = read_encoded(photo, spaces.input, spaces.working)
     encoding = encoding.named(progress.setting_names)
     timings["read"] = time.perf_counter() - start
     try:
