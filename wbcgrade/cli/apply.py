@@ -128,6 +128,9 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     started = command_started()
     options, source = take_grading_options(kwargs, photo=photo)
     encode = take_write_options(kwargs)
+    from wbcgrade.cli._memory import keep_freed_memory
+
+    keep_freed_memory()  # (one photo, then the process ends: its freed pages reused)
     read_ahead = None
     if look_path is None and not kwargs.get("originals_dir") and os.path.isfile(photo):
         # the photo decoded (and its keypoints found) on another core while the grade's
