@@ -124,13 +124,13 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     grade (the JSON of `apply --save-grade`, or a LUT) with no fit.
     """
     from wbcgrade.cli._clock import command_started
+    from wbcgrade.cli._process import keep_freed_memory, single_blas_thread
 
     started = command_started()
+    single_blas_thread()  # (before numpy loads, with the options)
     options, source = take_grading_options(kwargs, photo=photo)
+    keep_freed_memory()  # one photo, then the process ends: its freed pages are reused
     encode = take_write_options(kwargs)
-    from wbcgrade.cli._memory import keep_freed_memory
-
-    keep_freed_memory()  # (one photo, then the process ends: its freed pages reused)
     read_ahead = None
     if look_path is None and not kwargs.get("originals_dir") and os.path.isfile(photo):
         # the photo decoded (and its keypoints found) on another core while the grade's
