@@ -167,6 +167,33 @@ def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixel
         regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))
 
 
+@pytest.mark.parametrize("shape, radius, rows", [((50, 23, 3), 3, 8), ((50, 23, 3), 9, 4),
+                                                 ((9, 31, 3), 2, 64), ((3, 4, 3), 5, 2)])
+@pytest.mark.parametrize("precise", [True, False])
+@pytest.mark.parametrize("with_prior", [False, True])
+def test_window_models_by_bands_are_those_of_whole_planes(rng, monkeypatch, shape, radius,
+                                                         rows, precise, with_prior):
+    """A large grid's window models are made band by band of rows (each band's moments
+    filtered with the radius of rows beyond it, the bands of each thread in turn): the
+    numbers of whole planes of moments filtered by OpenCV and solved, bit for bit, with
+    bands shorter than the radius and a grid shorter than one band."""
+    monkeypatch.setattr(regrain_module, "_MOMENT_ROWS", rows)
+    guide = rng.random(shape).astype(np.float32)
+    change = (0.3 * guide[..., ::-1] ** 2 - 0.1
+              + 0.02 * rng.standard_normal(shape)).astype(np.float32)
+    prior = (0.2 * rng.standard_normal((*shape[:2], 9))).astype(np.float32) \
+        if with_prior else None
+    banded = regrain_module._window_models_numpy(guide, change, radius, 0.04, prior,
+                                                 regrain_module._uniform_filter_cv2, precise)
+
+    def whole_planes(plane, size, out):  # (not the banded filter: one call per plane)
+        regrain_module._uniform_filter_cv2(plane, size, out)
+
+    planes = regrain_module._window_models_numpy(guide, change, radius, 0.04, prior,
+                                                 whole_planes, precise)
+    assert np.array_equal(banded, planes)
+
+
 @pytest.mark.parametrize("shape, radius", [((37, 53, 3), 3), ((7, 5, 3), 9), ((1, 6, 3), 2)])
 def test_small_grids_solved_with_numpy_match_opencvs_filter(rng, shape, radius):
     """Below ``_NUMPY_SOLVE_PIXELS`` the window models and box means are filtered with

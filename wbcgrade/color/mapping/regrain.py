@@ -160,6 +160,10 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
     out = np.empty((h, w, 12), np.float32)
     if h == 0 or w == 0:
         return out
+    solved = np.float64 if precise or eps < _FLOAT32_SOLVE_EPS else np.float32
+    if filtered is _uniform_filter_cv2:  # bands of rows, their moments made there
+        _window_models_banded(guide, change, radius, eps, prior, solved, out)
+        return out
     g = np.moveaxis(np.asarray(guide, dtype=np.float32), -1, 0)
     d = np.moveaxis(np.asarray(change, dtype=np.float32), -1, 0)
     first = (g[0], g[1], g[2], d[0], d[1], d[2])
@@ -173,7 +177,6 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
         filtered(np.ascontiguousarray(plane), 2 * radius + 1, means[k])
 
     _threaded(window_mean, _N_MOMENTS)
-    solved = np.float64 if precise or eps < _FLOAT32_SOLVE_EPS else np.float32
     parts = max(1, min(num_threads(), h // _SOLVE_ROWS))
     edges = np.linspace(0, h, parts + 1).astype(int)
 
@@ -185,6 +188,58 @@ def _window_models_numpy(guide: np.ndarray, change: np.ndarray, radius: int,
 
     _threaded(solve, parts)
     return out
+
+
+def _window_models_banded(guide: np.ndarray, change: np.ndarray, radius: int, eps: float,
+                          prior: np.ndarray | None, solved: type, out: np.ndarray) -> None:
+    """:func:`_window_models_numpy` with OpenCV's box filter, band by band of
+    :data:`_MOMENT_ROWS` rows (the bands of each core in turn): a band's 21 moments are
+    made and filtered on its rows and the radius of rows beyond (OpenCV sums each row's
+    window alone: the numbers of whole planes, bit for bit), then solved there. No
+    full-size plane of moments (a 1-megapixel grid's 84 MB, fresh pages each time), and a
+    band's planes stay in the cache between the products, the filter and the solve."""
+    h, w = guide.shape[:2]
+    guide = np.ascontiguousarray(guide, dtype=np.float32)
+    change = np.ascontiguousarray(change, dtype=np.float32)
+    size = 2 * radius + 1
+    pairs = [(a, c) for a in range(3) for c in range(a, 3)]
+    pairs += [(a, 3 + c) for a in range(3) for c in range(3)]
+    rows = min(_MOMENT_ROWS, h)
+    parts = max(1, min(num_threads(), -(-h // rows)))
+    edges = np.linspace(0, -(-h // rows), parts + 1).astype(int) * rows
+
+    def models(part: int) -> None:
+        span = min(rows + 2 * radius, h)
+        planes = np.empty((6, span, w), np.float32)  # the band's guide and change
+        product = np.empty((span, w), np.float32)
+        filtered = np.empty((span, w), np.float32)
+        means = np.empty((_N_MOMENTS, rows, w), np.float32)
+        for lo in range(edges[part], min(edges[part + 1], h), rows):
+            hi = min(lo + rows, h)
+            top, bottom = max(lo - radius, 0), min(hi + radius, h)
+            n = bottom - top
+            for k in range(3):
+                planes[k, :n] = guide[top:bottom, :, k]
+                planes[3 + k, :n] = change[top:bottom, :, k]
+            for k in range(_N_MOMENTS):
+                if k < 6:
+                    plane = planes[k, :n]
+                else:
+                    a, c = pairs[k - 6]
+                    plane = np.multiply(planes[a, :n], planes[c, :n], out=product[:n])
+                _uniform_filter_cv2(plane, size, filtered[:n])
+                means[k, :hi - lo] = filtered[lo - top:hi - top]
+            for start in range(lo, hi, _SOLVE_ROWS):  # (8 rows: their planes in the cache)
+                stop = min(start + _SOLVE_ROWS, hi)
+                _solve_band(means[:, start - lo:stop - lo].astype(solved, copy=False), eps,
+                            out[start:stop], None if prior is None else prior[start:stop])
+
+    _threaded(models, parts)
+
+
+#: Rows of one band of :func:`_window_models_banded` (a 1-megapixel grid's band: 21
+#: planes of 64 rows, 7 MB; its filter reads the radius of rows beyond it as well).
+_MOMENT_ROWS = 64
 
 
 #: The least ``eps`` a solve in float32 is allowed (``precise`` False): each window's
@@ -383,11 +438,10 @@ def _apply_upsampled_cv2(source: np.ndarray, coefficients: np.ndarray, step: int
     if h == 0 or w == 0:
         return
     groups = []  # per output channel c: A[0, c], A[1, c], A[2, c] (+ identity), b[c],
+    by_channel = np.asarray(coefficients, dtype=np.float32).reshape(lh, lw, 4, 3)
     for c in range(3):  # times 4 (exact): the four products' mean is then their sum
-        group = np.ascontiguousarray(coefficients[..., [c, 3 + c, 6 + c, 9 + c]],
-                                     dtype=np.float32)
-        group[..., c] += np.float32(1.0)
-        group *= np.float32(4.0)
+        group = np.multiply(by_channel[..., c], np.float32(4.0))  # ((x + 1) 4 is 4 x + 4)
+        group[..., c] += np.float32(4.0)
         groups.append(group)
     inside_w = min(w, lw * step)  # columns past the last node repeat it
     inside_h = min(h, lh * step)  # rows too
