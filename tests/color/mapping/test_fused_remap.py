@@ -167,6 +167,38 @@ def test_regrain_writes_into_out_even_over_its_input(rng, monkeypatch, max_pixel
         regrain_map(rgb, table, 0.8, 0.05, 0.01, out=np.empty(rgb.shape, np.float64))
 
 
+@pytest.mark.parametrize("max_pixels", [10 ** 6, 700])  # solved at full size / subsampled
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_map_that_moves_nothing_is_not_regrained(rng, monkeypatch, max_pixels, dtype):
+    """The identity map (a look the styles do not share), or any map at strength 0: the
+    regrain is the colours themselves clipped to the cube (no change, so every window's
+    A and b are 0), returned without solving anything; what the solve gives to its float
+    rounding. A map one node off is regrained."""
+    monkeypatch.setattr(regrain_module, "_MAX_SOLVE_PIXELS", max_pixels)
+    rgb, table = _image_and_map(rng)
+    identity = identity_map(9, dtype)
+    solved = regrain_map(rgb, identity, 1.0, 0.05, 0.01, follow=0.5)
+    assert regrain_module.moves_nothing(identity)
+    assert regrain_module.moves_nothing(table, 0.0)
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("solved a regrain that moves nothing")
+
+    monkeypatch.setattr(regrain_module, "_regrain_upsampled", no_solve)
+    monkeypatch.setattr(regrain_module, "regrain", no_solve)
+    for color_map, strength in [(identity, 1.0), (identity, 0.4), (table, 0.0)]:
+        out = np.full(rgb.shape, np.nan, np.float32)
+        assert regrain_map(rgb, color_map, strength, 0.05, 0.01, out=out) is out
+        assert np.array_equal(out, np.clip(rgb, 0.0, 1.0).astype(np.float32))
+    np.testing.assert_allclose(out, solved, rtol=0, atol=1e-6)
+    moved = identity.copy()
+    moved[4, 4, 4, 0] += dtype(1e-3)
+    assert not regrain_module.moves_nothing(moved)
+    assert not regrain_module.moves_nothing(table, 1e-3)
+    with pytest.raises(AssertionError, match="moves nothing"):
+        regrain_map(rgb, moved, 1.0, 0.05, 0.01)
+
+
 @pytest.mark.parametrize("shape, radius, rows", [((50, 23, 3), 3, 8), ((50, 23, 3), 9, 4),
                                                  ((9, 31, 3), 2, 64), ((3, 4, 3), 5, 2)])
 @pytest.mark.parametrize("precise", [True, False])

@@ -34,13 +34,14 @@ from wbcgrade.color.mapping.remap import (
     apply_lut_in_place,
     block_means_mapped,
     has_lut_library,
+    identity_map,
     lut_processor,
 )
 from wbcgrade.color.options import DEFAULT_REGRAIN_EPS, DEFAULT_REGRAIN_RADIUS
 from wbcgrade.core import compiled, compiled_preferred, in_bands, num_threads, numpy_first
 
 __all__ = ["regrain", "regrain_map", "map_gain_prior", "load_kernels", "kernels_needed",
-           "solved_subsampled", "DEFAULT_REGRAIN_RADIUS",
+           "solved_subsampled", "moves_nothing", "DEFAULT_REGRAIN_RADIUS",
            "DEFAULT_REGRAIN_EPS"]
 
 #: Coefficients are solved on at most this many pixels and interpolated back.
@@ -680,6 +681,10 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
     step = _step(h, w)
     if not 0.0 <= follow <= 1.0:
         raise ValueError("follow must be in [0, 1]")
+    if moves_nothing(color_map, strength):  # no change to regrain: the colours, in the cube
+        out = _output(source, out)
+        np.clip(source, np.float32(0.0), np.float32(1.0), out=out)
+        return out
     if step == 1 and not follow:
         return regrain(source, apply_color_map(source, color_map, strength), radius, eps, out)
     out = _output(source, out)
@@ -691,6 +696,21 @@ def regrain_map(source: np.ndarray, color_map: np.ndarray, strength: float = 1.0
         change = mapped - small
     prior = float(follow) * map_gain_prior(color_map, strength) if follow else None
     return _regrain_upsampled(source, small, change, step, radius, eps, out, prior)
+
+
+def moves_nothing(color_map: np.ndarray, strength: float = 1.0) -> bool:
+    """Whether a colour map at ``strength`` leaves every colour where it is: strength 0, or
+    the map is the identity lattice itself (:func:`~wbcgrade.color.mapping.remap.identity_map`
+    in its own float type, node for node; a look the style photos do not share is one).
+    Its regrain is then the colours themselves, clipped to the cube (``d = 0``: every
+    window's ``A`` and ``b`` are 0), which :func:`regrain_map` returns without the passes
+    over the pixels whose float rounding would only add noise of 1e-8."""
+    table = np.asarray(color_map)
+    if table.ndim != 4 or table.shape[3] != 3 or table.dtype.kind != "f" \
+            or len(set(table.shape[:3])) != 1 or table.shape[0] < 2:
+        return False  # (not a map: the regrain says what is wrong with it)
+    return strength == 0.0 or bool(np.array_equal(table, identity_map(table.shape[0],
+                                                                      table.dtype)))
 
 
 def solved_subsampled(pixels: int) -> bool:
