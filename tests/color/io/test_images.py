@@ -276,3 +276,38 @@ def test_only_regular_files_are_read(tmp_path):
         pytest.fail("reading a FIFO blocked")
     assert "pipe.jpg: is a FIFO" in done.stdout and "is a character device" in done.stdout, \
         done.stdout + done.stderr
+
+
+@pytest.mark.parametrize("name, stored, extra", [
+    ("rgb.png", "uint8", {}), ("deep.png", "uint16", {}), ("strips.tif", "uint16", {}),
+    ("interlaced.png", "uint8", {"png:interlace": 1}),
+    ("progressive.jpg", "uint8", {"jpeg:progressive": 1, "Compression": "jpeg:100"}),
+    ("tiles.tif", "uint8", {"tile_width": 16, "tile_height": 16})])
+def test_integer_scanlines_are_scaled_in_bands_of_rows(tmp_path, monkeypatch, name, stored,
+                                                       extra):
+    """8/16-bit scanline files are read a band of rows at a time and scaled into the float32
+    pixels (no full-size array of integers): OpenImageIO's stored values scaled, bit for
+    bit, the last band short; a tiled file is read whole as before."""
+    import wbcgrade.color.io.images as images
+
+    monkeypatch.setattr(images, "_SCALED_ROWS", 7)
+    rng = np.random.default_rng(3)
+    top = np.iinfo(stored).max
+    codes = rng.integers(0, top + 1, (45, 33, 3)).astype(stored)
+    path = tmp_path / name
+    spec = oiio.ImageSpec(33, 45, 3, stored)
+    for key, value in extra.items():
+        spec.attribute(key, value)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec) and out.write_image(codes) and out.close()
+    stored_back = oiio.ImageInput.open(str(path)).read_image(0, 0, 0, 3, stored)
+    image = read_image(path)
+    assert image.pixels.dtype == np.float32
+    assert np.array_equal(image.pixels,
+                          np.multiply(stored_back, np.float32(1 / top), dtype=np.float32))
+    assert np.array_equal(image.pixels, oiio.ImageInput.open(str(path)).read_image(
+        0, 0, 0, 3, "float"))  # (OpenImageIO's own conversion gives these values)
+    truncated = tmp_path / f"cut_{name}"
+    truncated.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+    with pytest.raises(InputError, match="corrupt or truncated"):
+        read_image(truncated)

@@ -295,6 +295,30 @@ def _scaled(pixels: np.ndarray, scale: np.float32) -> np.ndarray:
     return out.reshape(np.shape(pixels))
 
 
+#: Rows of 8/16-bit scanlines read at a time and scaled (:func:`_read_scaled`).
+_SCALED_ROWS = 128
+
+
+def _read_scaled(inp: oiio.ImageInput, spec: oiio.ImageSpec, stored: str,
+                 scale: np.float32) -> np.ndarray | None:
+    """The (H, W, C) float32 pixels of an 8/16-bit scanline image: read
+    :data:`_SCALED_ROWS` rows at a time as they are stored and scaled into the float32
+    array (``np.multiply(rows, scale, dtype=np.float32)``: :func:`_scaled`'s values),
+    while the rows are in the cache; no full-size array of stored integers (a
+    16-megapixel JPEG's 48 MB, fresh pages of the kernel's, and a pass over them). None
+    when a read fails (the reader says why)."""
+    height, width, channels = spec.height, spec.width, spec.nchannels
+    out = np.empty((height, width, channels), np.float32)
+    for lo in range(0, height, _SCALED_ROWS):
+        hi = min(lo + _SCALED_ROWS, height)
+        rows = inp.read_scanlines(0, 0, spec.y + lo, spec.y + hi, spec.z, 0, channels, stored)
+        if rows is None or inp.has_error:
+            return None
+        np.multiply(np.asarray(rows).reshape(hi - lo, width, channels), scale,
+                    out=out[lo:hi], dtype=np.float32)
+    return out
+
+
 def read_image(path: str | os.PathLike) -> Image:
     """Read a photo.
 
@@ -336,7 +360,10 @@ def read_image(path: str | os.PathLike) -> Image:
         if spec.depth > 1:
             raise InputError(f"{path}: volume images are not supported")
         native = _INTEGER_SCALES.get(spec.format.basetype) if not spec.channelformats else None
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, native[0] if native else "float")
+        if native and spec.tile_width <= 0:  # scanlines: scaled as they are decoded
+            pixels = _read_scaled(inp, spec, *native)
+        else:
+            pixels = inp.read_image(0, 0, 0, spec.nchannels, native[0] if native else "float")
         if pixels is None or inp.has_error:
             raise InputError(f"{path}: corrupt or truncated image "
                              f"({first_line(inp.geterror(), 'read failed')})")
@@ -344,8 +371,8 @@ def read_image(path: str | os.PathLike) -> Image:
         spec = oiio.ImageSpec(spec)
     finally:
         inp.close()
-    if native:  # integers scaled here: the same float32 values, in half the time
-        pixels = _scaled(pixels, native[1])
+    if native and pixels.dtype != np.float32:  # integers scaled here: the same float32
+        pixels = _scaled(pixels, native[1])  # values, in half the time
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     if not native and not np.isfinite(pixels).all():
         raise InputError(f"{path}: image holds NaN or infinite pixel values")
