@@ -1,5 +1,5 @@
 """wbcgrade.cli._process: a short command's freed memory reused, not taken fresh from the
-kernel; one BLAS thread."""
+kernel; no huge pages; one BLAS thread."""
 
 import os
 import subprocess
@@ -71,3 +71,48 @@ def test_single_blas_thread_leaves_a_users_setting(monkeypatch):
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")  # (numpy is loaded here too)
     assert not single_blas_thread()
     assert os.environ["OPENBLAS_NUM_THREADS"] == "3"
+
+
+_THP = """
+import ctypes, sys
+from wbcgrade.cli._process import no_huge_pages
+if sys.argv[1] == "small":
+    assert no_huge_pages()
+print(ctypes.CDLL(None).prctl(42, 0, 0, 0, 0))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's prctl only")
+def test_no_huge_pages_for_the_process():
+    def disabled(mode: str) -> int:
+        done = subprocess.run([sys.executable, "-c", _THP, mode], capture_output=True,
+                              text=True, check=True)
+        return int(done.stdout.split()[-1])
+
+    assert disabled("default") == 0
+    assert disabled("small") == 1
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's prctl only")
+def test_a_command_run_inside_another_process_leaves_its_settings(tmp_path, monkeypatch):
+    """``wbcgrade apply`` run by click's runner in this process (a test, a notebook) sets no
+    BLAS thread count, huge pages or malloc setting of the process's; the command line
+    (``argv[0]`` the script, or ``python -m wbcgrade``) is a command's own process."""
+    import ctypes
+
+    from tests.color.conftest import SAMPLES
+    from tests.conftest import run_cli
+    from wbcgrade.cli._process import command_process
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    result = run_cli("apply", SAMPLES / "chelsea.jpg", "--preset", "warm", "-o",
+                     tmp_path / "graded.jpg")
+    assert result.exit_code == 0, result.output
+    assert "OPENBLAS_NUM_THREADS" not in os.environ
+    assert ctypes.CDLL(None).prctl(42, 0, 0, 0, 0) == 0
+    assert not command_process()
+    for first in ("/usr/bin/wbcgrade", "/site-packages/wbcgrade/__main__.py", "wbcgrade"):
+        monkeypatch.setattr(sys, "argv", [first, "apply"])
+        assert command_process()
+    monkeypatch.setattr(sys, "argv", ["/site-packages/pytest/__main__.py"])
+    assert not command_process()

@@ -123,13 +123,17 @@ def apply(ctx, photo, output, lut, lut_size, lut_format, look_path, overwrite, a
     demosaiced by LibRaw and graded in ACEScct. --look FILE applies a saved
     grade (the JSON of `apply --save-grade`, or a LUT) with no fit.
     """
+    from wbcgrade.cli import _process
     from wbcgrade.cli._clock import command_started
-    from wbcgrade.cli._process import keep_freed_memory, single_blas_thread
 
     started = command_started()
-    single_blas_thread()  # (before numpy loads, with the options)
+    settle = _process.command_process()  # (not in a longer-lived process: its own settings)
+    if settle:
+        _process.single_blas_thread()  # (before numpy loads, with the options)
     options, source = take_grading_options(kwargs, photo=photo)
-    keep_freed_memory()  # one photo, then the process ends: its freed pages are reused
+    if settle:  # one photo, then the process ends: its freed pages reused, 4 KB pages
+        _process.keep_freed_memory()
+        _process.no_huge_pages()
     encode = take_write_options(kwargs)
     read_ahead = None
     if look_path is None and not kwargs.get("originals_dir") and os.path.isfile(photo):
