@@ -45,6 +45,7 @@ def command_process() -> bool:
     return first is not None and (first.stem == "wbcgrade" or (
         first.name == "__main__.py" and first.parent.name == "wbcgrade"))
 
+
 #: ``mallopt`` parameters (glibc's malloc.h).
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_MAX = -4

@@ -704,7 +704,7 @@ def moves_nothing(color_map: np.ndarray, strength: float = 1.0) -> bool:
     in its own float type, node for node; a look the style photos do not share is one).
     Its regrain is then the colours themselves, clipped to the cube (``d = 0``: every
     window's ``A`` and ``b`` are 0), which :func:`regrain_map` returns without the passes
-    over the pixels whose float rounding would only add noise of 1e-8."""
+    over the pixels whose float rounding would only add noise under 1e-8."""
     table = np.asarray(color_map)
     if table.ndim != 4 or table.shape[3] != 3 or table.dtype.kind != "f" \
             or len(set(table.shape[:3])) != 1 or table.shape[0] < 2:
