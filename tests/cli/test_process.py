@@ -38,7 +38,6 @@ def test_a_freed_block_is_reused_without_fresh_pages():
     assert _faults_again("keep") < 16
 
 
-
 #: OpenBLAS's threads in a process that calls single_blas_thread() (or not) first.
 _BLAS = """
 import os, sys
@@ -95,9 +94,10 @@ def test_no_huge_pages_for_the_process():
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's prctl only")
 def test_a_command_run_inside_another_process_leaves_its_settings(tmp_path, monkeypatch):
-    """``wbcgrade apply`` run by click's runner in this process (a test, a notebook) sets no
-    BLAS thread count, huge pages or malloc setting of the process's; the command line
-    (``argv[0]`` the script, or ``python -m wbcgrade``) is a command's own process."""
+    """``wbcgrade apply`` run by click's runner in this process (a test, a notebook) sets
+    neither the process's BLAS thread count nor its huge pages (nor malloc's settings,
+    behind the same test); the command line (``argv[0]`` the script, or ``python -m
+    wbcgrade``) is a command's own process."""
     import ctypes
 
     from tests.color.conftest import SAMPLES
