@@ -8,6 +8,11 @@ split toning of shadows and highlights, a channel mix, per-channel film-like
 gammas), each switched on at random with a random amount, at a random
 overall size from a trace to a heavy look.
 
+Beside it, :class:`CurvesEdit`, the family a look is extrapolated with from a pair or
+two (:func:`fit_curves_edit`): a film-like response (a tone curve per channel after a
+channel mix and a saturation) follows a film stock's look further from the colours a
+pair shows than the raw editor's controls do.
+
 Arrays in, arrays out: colours are (N, 3) encoded RGB in [0, 1].
 """
 
@@ -19,7 +24,8 @@ import numpy as np
 
 from wbcgrade.color.colorspace import REC709_LUMA
 
-__all__ = ["Edit", "random_edit", "fit_edit", "SPREADS"]
+__all__ = ["Edit", "random_edit", "fit_edit", "SPREADS", "CurvesEdit", "fit_curves_edit",
+           "extrapolating_family", "FAMILIES"]
 
 _LUMA = np.array(REC709_LUMA)
 
@@ -158,7 +164,7 @@ def _edit_of(vector: np.ndarray) -> Edit:
 
 
 def fit_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
-             pull: float = EDIT_PULL, points: int = EDIT_POINTS) -> Edit:
+             pull: float = EDIT_PULL, points: int = EDIT_POINTS, max_nfev: int = 200) -> Edit:
     """The :class:`Edit` that best moves ``sources`` (N, 3) onto ``targets`` (N, 3)
     (weighted least squares, ``weights`` (N,)), each control pulled towards none by the
     generator's spread of it (:data:`SPREADS`, ``pull``): a photographer's edit explains
@@ -182,6 +188,155 @@ def fit_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
         moved = _edit_of(vector)(sources)
         return np.concatenate([((moved - targets) * root).ravel(), cost * vector])
 
-    found = least_squares(residuals, np.zeros(len(spreads)), x_scale=spreads, max_nfev=200,
+    found = least_squares(residuals, np.zeros(len(spreads)), x_scale=spreads, max_nfev=max_nfev,
                           ftol=EDIT_TOLERANCE, xtol=EDIT_TOLERANCE, gtol=EDIT_TOLERANCE)
     return _edit_of(found.x)
+
+
+# --------------------------------------------------------------------------- a film-like edit
+
+#: Knots of each channel's tone curve in :class:`CurvesEdit` (evenly spread over [0, 1]).
+CURVE_KNOTS = 9
+#: What :func:`fit_curves_edit` charges, as an rms colour error over all the pairs, for a
+#: unit of: a curve's departure from the identity at a knot, the curve's second difference
+#: between knots (its bend), an off-diagonal entry of the channel mix (cross-talk: the
+#: one-pair fit's wildest guess where its colours are few, so held hardest), the log of
+#: the saturation. Chosen on the eight tuned looks of ``benchmarks/learn.py`` with one
+#: original (docs/benchmarks.md); a mix held as loosely as the curves (0.02) let a sea's
+#: blues swing skin tones.
+CURVE_PULL = 0.02
+CURVE_BEND = 0.5
+CURVE_MIX_PULL = 0.4
+CURVE_SATURATION_PULL = 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class CurvesEdit:
+    """A film-like edit: a channel mix (cross-talk between the dyes), a saturation about
+    Rec.709 luma, then a tone curve per channel, piecewise linear through ``curves``
+    (3, K) at K knots evenly spread over [0, 1]. The identity mix and saturation 1 with
+    straight curves change nothing."""
+
+    mix: np.ndarray
+    saturation: float
+    curves: np.ndarray
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        """(..., 3) colours in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        rgb = np.asarray(rgb, dtype=np.float64)
+        s = self.saturation
+        matrix = (s * np.eye(3) + (1.0 - s) * _LUMA[None, :]) @ np.asarray(self.mix)
+        x = np.clip(rgb.reshape(-1, 3) @ matrix.T, 0.0, 1.0)
+        knots = np.linspace(0.0, 1.0, self.curves.shape[1])
+        out = np.stack([np.interp(x[:, c], knots, self.curves[c]) for c in range(3)], axis=1)
+        return np.clip(out, 0.0, 1.0).reshape(rgb.shape)
+
+
+def _curves_edit_of(vector: np.ndarray, knots: int) -> CurvesEdit:
+    """The edit of a vector: (3 * knots) curve departures, six mix entries, log saturation."""
+    grid = np.linspace(0.0, 1.0, knots)
+    curves = vector[:3 * knots].reshape(3, knots) + grid
+    mix = np.eye(3)
+    for (row, column), value in zip(_OFF_DIAGONAL, vector[3 * knots:3 * knots + 6]):
+        mix[row, column] = value
+    mix = mix / mix.sum(axis=1, keepdims=True)
+    return CurvesEdit(mix, float(np.exp(vector[3 * knots + 6])), curves)
+
+
+def fit_curves_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                    points: int = EDIT_POINTS, knots: int = CURVE_KNOTS,
+                    max_nfev: int = 300) -> CurvesEdit:
+    """The :class:`CurvesEdit` that best moves ``sources`` (N, 3) onto ``targets`` (N, 3)
+    (weighted least squares on ``points`` colours drawn by ``weights`` (N,), seeded), each
+    part held towards no edit at its cost (:data:`CURVE_PULL`, :data:`CURVE_BEND`,
+    :data:`CURVE_MIX_PULL`, :data:`CURVE_SATURATION_PULL`): a curve follows the pairs over
+    the range of values they show and stays straight beyond it."""
+    from scipy.optimize import least_squares
+
+    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
+    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    weights = np.asarray(weights, dtype=np.float64).ravel()
+    size = 3 * knots + 7
+    if len(sources) == 0 or not weights.sum() > 0:
+        return _curves_edit_of(np.zeros(size), knots)
+    share = weights / weights.sum()
+    if len(sources) > points:
+        drawn = np.random.default_rng(0).choice(len(sources), points, replace=False, p=share)
+        sources, targets, share = sources[drawn], targets[drawn], np.full(points, 1.0 / points)
+    root = np.sqrt(share)[:, None]
+    pull = np.concatenate([np.full(3 * knots, CURVE_PULL), np.full(6, CURVE_MIX_PULL),
+                           [CURVE_SATURATION_PULL]])
+
+    def residuals(vector: np.ndarray) -> np.ndarray:
+        moved = _curves_edit_of(vector, knots)(sources)
+        bend = np.diff(vector[:3 * knots].reshape(3, knots), 2, axis=1).ravel()
+        return np.concatenate([((moved - targets) * root).ravel(), CURVE_BEND * bend,
+                               pull * vector])
+
+    found = least_squares(residuals, np.zeros(size), max_nfev=max_nfev)
+    return _curves_edit_of(found.x, knots)
+
+
+# --------------------------------------------------------------------------- which family
+
+#: The families a pair's look is extrapolated with: name -> fit(sources, targets, weights).
+FAMILIES = {"edit": fit_edit, "curves": fit_curves_edit}
+#: Blocks of colour held out in turn by :func:`extrapolating_family`, and the evaluations
+#: its quick fits of the raw editor's controls may take (the full fit's 200 take seconds).
+FAMILY_BLOCKS = 4
+FAMILY_QUICK_NFEV = 40
+#: A curve per channel is learned only over the values the pairs show: under this share
+#: of their colours in any third of the tonal range (shadows, midtones, highlights), the
+#: curves are not a candidate (a near-black photo leaves them unlearned above its blacks).
+FAMILY_TONES = 0.05
+
+
+def _colour_blocks(points: np.ndarray, blocks: int, rng: np.random.Generator) -> np.ndarray:
+    """(N,) block of each colour: k-means of ``points`` (N, 3) into ``blocks`` (seeded)."""
+    centres = points[rng.choice(len(points), blocks, replace=False)]
+    label = np.zeros(len(points), dtype=int)
+    for _ in range(10):
+        label = np.argmin(((points[:, None, :] - centres[None]) ** 2).sum(axis=2), axis=1)
+        centres = np.array([points[label == j].mean(axis=0) if np.any(label == j)
+                            else centres[j] for j in range(blocks)])
+    return label
+
+
+def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                         points: int = EDIT_POINTS, blocks: int = FAMILY_BLOCKS) -> str:
+    """The name (in :data:`FAMILIES`) of the family that best carries the pairs' edit to
+    colours they do not show, judged within the pairs: their colours fall in ``blocks``
+    blocks of colour and in as many bands of luma, each held out in turn while both
+    families are fitted to the others (quick fits), and the family whose fits come nearer
+    the held-out targets (squared error) wins; pairs whose colours leave a third of the
+    tonal range nearly empty (:data:`FAMILY_TONES`) keep the raw editor's controls. A
+    film-like curve follows a stock from a photo with a range of values; from a
+    near-black photo or a sea of blues the raw editor's controls guess more safely."""
+    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
+    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    weights = np.asarray(weights, dtype=np.float64).ravel()
+    if len(sources) < 4 * blocks or not weights.sum() > 0:
+        return "edit"
+    thirds = np.bincount(np.clip((sources @ _LUMA * 3).astype(int), 0, 2), weights, 3)
+    if thirds.min() < FAMILY_TONES * weights.sum():
+        return "edit"
+    rng = np.random.default_rng(0)
+    if len(sources) > points:
+        drawn = rng.choice(len(sources), points, replace=False, p=weights / weights.sum())
+        sources, targets = sources[drawn], targets[drawn]
+    label = _colour_blocks(sources, blocks, rng)
+    luma = sources @ _LUMA
+    tone = np.searchsorted(np.quantile(luma, np.linspace(0, 1, blocks + 1)[1:-1]), luma)
+    errors = {"edit": 0.0, "curves": 0.0}
+    for held in [label == b for b in range(blocks)] + [tone == b for b in range(blocks)]:
+        kept = ~held
+        if not held.any() or kept.sum() < 2 * blocks:
+            continue
+        ones = np.ones(int(kept.sum()))
+        fits = {"edit": fit_edit(sources[kept], targets[kept], ones,
+                                 max_nfev=FAMILY_QUICK_NFEV),
+                "curves": fit_curves_edit(sources[kept], targets[kept], ones,
+                                          max_nfev=FAMILY_QUICK_NFEV)}
+        for name, fitted in fits.items():
+            errors[name] += float(np.sum((fitted(sources[held]) - targets[held]) ** 2))
+    return "curves" if errors["curves"] < errors["edit"] else "edit"

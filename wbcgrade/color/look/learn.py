@@ -66,7 +66,7 @@ from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogra
 from wbcgrade.color.io.cache import default_cache_dir
 from wbcgrade.color.io.images import image_extensions, read_image
 from wbcgrade.color.io.raw import RAW_SUFFIXES, RAW_WORKING_SPACE, is_raw
-from wbcgrade.color.look.edits import fit_edit
+from wbcgrade.color.look.edits import FAMILIES, extrapolating_family
 from wbcgrade.color.look.family import fit_look_map
 from wbcgrade.color.look.prior import posterior_statistics_look
 from wbcgrade.color.look.scene import (
@@ -569,12 +569,16 @@ def _pooled(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
             np.concatenate([p[2] / max(float(p[2].sum()), 1e-12) for p in parts]))
 
 
-def _edit_prior(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]):
+def _edit_prior(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+                family: str | None = None):
     """The :class:`LookMap` of the edit that best explains the parts' pairs
-    (:data:`EDIT_PRIOR_PAIRS`), or None for as many pairs or more."""
+    (:data:`EDIT_PRIOR_PAIRS`), or None for as many pairs or more. ``family``: the edit's
+    family (:data:`~wbcgrade.color.look.edits.FAMILIES`; None: the one that extrapolates
+    best within the pairs, :func:`~wbcgrade.color.look.edits.extrapolating_family`)."""
     if not parts or len(parts) >= EDIT_PRIOR_PAIRS:
         return None
-    edit = fit_edit(*_pooled(parts))
+    pooled = _pooled(parts)
+    edit = FAMILIES[family or extrapolating_family(*pooled)](*pooled)
     points = grid_points(17)
     return fit_look_map(points, edit(points), np.ones(len(points)), None, 1e-4, 1e-6)
 
@@ -806,8 +810,10 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     toned = (not monochrome and any(r.toned for r in used)
              and all(r.monochrome or r.toned is not False for r in used))
     plain = monochrome or toned  # (an edit's colours are not what such a look keeps)
+    family = (None if plain or len(colours) >= EDIT_PRIOR_PAIRS
+              else extrapolating_family(*_pooled(colours)))
     look, robust, _ = _fit(colours, monochrome, toned=toned,
-                           prior=None if plain else _edit_prior(colours))
+                           prior=None if plain else _edit_prior(colours, family))
     if alone and not plain:
         sources, _, weights = _pooled(colours)
         corrected = unpaired_correction(look.look, [i.after for i in read]
@@ -822,7 +828,8 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         rest = [i for i in range(len(colours)) if i not in set(held.tolist())]
         kept = [colours[i] for i in rest]
         fold_look, _, _ = _fit(kept, monochrome, [robust[i] for i in rest], rounds=1,
-                               toned=toned, prior=None if plain else _edit_prior(kept))
+                               toned=toned,
+                               prior=None if plain else _edit_prior(kept, family))
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
