@@ -308,3 +308,48 @@ def test_single_threaded_blas_restores_the_count_and_leaves_numba_unloaded():
                          env=ALL_CORES, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.split() == ["True", "True", "True", "True"]
+
+
+def test_core_computations_ask_numpy_for_no_huge_pages_and_give_the_setting_back():
+    """Inside fast_cpu / single_threaded_blas (nested, from two threads) numpy's request
+    for transparent huge pages is off; the caller's setting, on or off, comes back when the
+    last one leaves."""
+    from numpy._core import multiarray
+
+    from wbcgrade.core._cpu import fast_cpu, single_threaded_blas
+
+    switch = multiarray._set_madvise_hugepage
+
+    def current() -> bool:
+        value = switch(True)
+        switch(value)
+        return bool(value)
+
+    original = current()
+    try:
+        for setting in (True, False):
+            switch(setting)
+            seen = []
+            inside = threading.Event()
+            leave = threading.Event()
+
+            def worker():
+                with single_threaded_blas():
+                    inside.set()
+                    leave.wait(10)
+                    seen.append(current())
+
+            thread = threading.Thread(target=worker)
+            thread.start()
+            inside.wait(10)
+            with fast_cpu():
+                seen.append(current())
+                with fast_cpu():
+                    seen.append(current())
+            seen.append(current())  # the worker is still inside
+            leave.set()
+            thread.join(10)
+            assert seen == [False, False, False, False]
+            assert current() is setting
+    finally:
+        switch(original)

@@ -10,6 +10,12 @@ Two facts measured on the target machines (docs/architecture.md, threads):
   or the matrices are small (a 32^3 forward pass took 3x-15x longer). The core
   therefore runs BLAS single-threaded and spreads independent histograms over
   its own small thread pool (numpy releases the GIL inside products).
+- numpy asks the kernel for transparent huge pages for its large arrays; where
+  the kernel compacts memory to find them on the first touch ("madvise"
+  defrag), the core's many fresh temporaries stall: the 64^3 gradient spent
+  3-4.5 s of system time (of ~15 s CPU), 1 s without. Inside core
+  computations numpy's request is off (process-wide, with the BLAS limit); the
+  numbers computed do not change.
 """
 
 from __future__ import annotations
@@ -135,32 +141,52 @@ def _take_blas_control() -> None:
         clear(force=True)
 
 
+def _huge_pages(enabled: bool) -> bool | None:
+    """Set numpy's request for transparent huge pages (its large arrays' ``madvise``);
+    -> the previous setting, None where this numpy has no such switch."""
+    try:
+        from numpy._core import multiarray
+    except ImportError:  # pragma: no cover - numpy < 2
+        from numpy.core import multiarray
+    switch = getattr(multiarray, "_set_madvise_hugepage", None)
+    return None if switch is None else bool(switch(enabled))
+
+
+_huge_pages_before: bool | None = None
+
+
 def _enter_single_threaded_blas() -> None:
-    global _controller, _blas_users, _blas_limiter
+    global _controller, _blas_users, _blas_limiter, _huge_pages_before
     with _blas_lock:
         if _blas_users == 0:
             if _controller is None:
                 _controller = ThreadpoolController()
             _take_blas_control()
             _blas_limiter = _controller.limit(limits=1, user_api="blas")
+            _huge_pages_before = _huge_pages(False)
         _blas_users += 1
 
 
 def _leave_single_threaded_blas() -> None:
-    global _blas_users, _blas_limiter
+    global _blas_users, _blas_limiter, _huge_pages_before
     with _blas_lock:
         _blas_users -= 1
-        if _blas_users == 0 and _blas_limiter is not None:
-            limiter, _blas_limiter = _blas_limiter, None
-            _take_blas_control()
-            limiter.restore_original_limits()
-            _take_blas_control()  # leave it free for the caller's own limits
+        if _blas_users == 0:
+            if _huge_pages_before is not None:
+                _huge_pages(_huge_pages_before)
+                _huge_pages_before = None
+            if _blas_limiter is not None:
+                limiter, _blas_limiter = _blas_limiter, None
+                _take_blas_control()
+                limiter.restore_original_limits()
+                _take_blas_control()  # leave it free for the caller's own limits
 
 
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
-    """Single-threaded BLAS (process-wide, reference-counted with :func:`fast_cpu`'s),
-    restored when the last thread inside leaves; the CPU flags untouched. For callers that
+    """Single-threaded BLAS and no huge pages for numpy's arrays (process-wide,
+    reference-counted with :func:`fast_cpu`'s), restored when the last thread inside
+    leaves; the CPU flags untouched. For callers that
     spread independent products over their own threads: OpenBLAS's threads busy-wait
     between products (scene matching on a shared 2-core machine: 0.78 s of CPU on two
     threads against 0.40 s on one)."""
@@ -173,7 +199,8 @@ def single_threaded_blas() -> Iterator[None]:
 
 @contextlib.contextmanager
 def fast_cpu() -> Iterator[None]:
-    """Single-threaded BLAS and flushed denormals in this thread, restored on exit.
+    """Single-threaded BLAS, no huge pages for numpy's arrays and flushed denormals in
+    this thread, restored on exit.
 
     Safe from several threads at once: the BLAS limit (process-wide) is set
     when the first thread enters and restored when the last one leaves
