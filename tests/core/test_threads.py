@@ -333,13 +333,13 @@ def test_core_computations_ask_numpy_for_no_huge_pages_and_give_the_setting_back
             inside = threading.Event()
             leave = threading.Event()
 
-            def worker():
+            def worker(inside, leave, seen):
                 with single_threaded_blas():
                     inside.set()
                     leave.wait(10)
                     seen.append(current())
 
-            thread = threading.Thread(target=worker)
+            thread = threading.Thread(target=worker, args=(inside, leave, seen))
             thread.start()
             inside.wait(10)
             with fast_cpu():
