@@ -163,6 +163,27 @@ def _edit_of(vector: np.ndarray) -> Edit:
                 tuple(map(float, np.exp(parts["gamma"]))))
 
 
+def _as_pairs(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs as float64: sources (N, 3), targets (N, 3), weights (N,)."""
+    return (np.asarray(sources, dtype=np.float64).reshape(-1, 3),
+            np.asarray(targets, dtype=np.float64).reshape(-1, 3),
+            np.asarray(weights, dtype=np.float64).ravel())
+
+
+def _drawn(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray, points: int,
+           rng: np.random.Generator | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At most ``points`` pairs, drawn by weight without replacement (``rng``, default
+    seeded 0) when there are more: (sources, targets, shares summing to 1)."""
+    share = weights / weights.sum()
+    if len(sources) > points:
+        rng = np.random.default_rng(0) if rng is None else rng
+        drawn = rng.choice(len(sources), points, replace=False, p=share)
+        return sources[drawn], targets[drawn], np.full(points, 1.0 / points)
+    return sources, targets, share
+
+
 def fit_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
              pull: float = EDIT_PULL, points: int = EDIT_POINTS, max_nfev: int = 200) -> Edit:
     """The :class:`Edit` that best moves ``sources`` (N, 3) onto ``targets`` (N, 3)
@@ -171,15 +192,10 @@ def fit_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
     the colours a pair shows and extrapolates to those it does not as edits do."""
     from scipy.optimize import least_squares
 
-    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
-    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    weights = np.asarray(weights, dtype=np.float64).ravel()
+    sources, targets, weights = _as_pairs(sources, targets, weights)
     if len(sources) == 0 or not weights.sum() > 0:
         return Edit()
-    share = weights / weights.sum()
-    if len(sources) > points:
-        drawn = np.random.default_rng(0).choice(len(sources), points, replace=False, p=share)
-        sources, targets, share = sources[drawn], targets[drawn], np.full(points, 1.0 / points)
+    sources, targets, share = _drawn(sources, targets, weights, points)
     root = np.sqrt(share)[:, None]
     spreads = np.concatenate([[SPREADS[name]] * size for name, size in _LAYOUT])
     cost = 0.02 * np.sqrt(pull) / spreads
@@ -253,16 +269,11 @@ def fit_curves_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarra
     the range of values they show and stays straight beyond it."""
     from scipy.optimize import least_squares
 
-    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
-    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    weights = np.asarray(weights, dtype=np.float64).ravel()
+    sources, targets, weights = _as_pairs(sources, targets, weights)
     size = 3 * knots + 7
     if len(sources) == 0 or not weights.sum() > 0:
         return _curves_edit_of(np.zeros(size), knots)
-    share = weights / weights.sum()
-    if len(sources) > points:
-        drawn = np.random.default_rng(0).choice(len(sources), points, replace=False, p=share)
-        sources, targets, share = sources[drawn], targets[drawn], np.full(points, 1.0 / points)
+    sources, targets, share = _drawn(sources, targets, weights, points)
     root = np.sqrt(share)[:, None]
     pull = np.concatenate([np.full(3 * knots, CURVE_PULL), np.full(6, CURVE_MIX_PULL),
                            [CURVE_SATURATION_PULL]])
@@ -312,18 +323,14 @@ def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.n
     tonal range nearly empty (:data:`FAMILY_TONES`) keep the raw editor's controls. A
     film-like curve follows a stock from a photo with a range of values; from a
     near-black photo or a sea of blues the raw editor's controls guess more safely."""
-    sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
-    targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
-    weights = np.asarray(weights, dtype=np.float64).ravel()
+    sources, targets, weights = _as_pairs(sources, targets, weights)
     if len(sources) < 4 * blocks or not weights.sum() > 0:
         return "edit"
     thirds = np.bincount(np.clip((sources @ _LUMA * 3).astype(int), 0, 2), weights, 3)
     if thirds.min() < FAMILY_TONES * weights.sum():
         return "edit"
     rng = np.random.default_rng(0)
-    if len(sources) > points:
-        drawn = rng.choice(len(sources), points, replace=False, p=weights / weights.sum())
-        sources, targets = sources[drawn], targets[drawn]
+    sources, targets, _ = _drawn(sources, targets, weights, points, rng)
     label = _colour_blocks(sources, blocks, rng)
     luma = sources @ _LUMA
     tone = np.searchsorted(np.quantile(luma, np.linspace(0, 1, blocks + 1)[1:-1]), luma)
