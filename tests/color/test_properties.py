@@ -39,8 +39,10 @@ def test_weights_are_the_given_proportions_summing_to_one(values):
     assert len(weights) == len(values) and all(w >= 0 for w in weights)
     assert math.fsum(weights) == pytest.approx(1.0, abs=1e-12)
     largest = values.index(max(values))
+    total = math.fsum(v / max(values) for v in values)  # (1 to 12: a second division)
     for value, weight in zip(values, weights):
-        assert (weight == 0) == (value / max(values) == 0)  # what underflows is dropped
+        # what underflows is dropped (value / largest, then over the total, can reach 0)
+        assert (weight == 0) == (value / max(values) / total == 0)
         assert weight / weights[largest] == pytest.approx(value / values[largest], rel=1e-9)
 
 
