@@ -238,3 +238,37 @@ def test_a_look_is_checked_with_no_less_variance_than_the_posterior_leaves_it():
     assert spread == pytest.approx(0.05 * power, rel=0.1)
     assert posterior_spread(lambda v: shifted(v[0]), np.ones(3), np.zeros((3, 3)), colors,
                             masses) == 0.0
+
+
+def test_each_part_of_a_look_takes_its_own_size(monkeypatch):
+    """A strong tint with no tone change: with one size for all parts, the tint's evidence
+    lets the tone's prior grow and the tone's noise through; with a size per part the tone
+    stays where its own evidence puts it, and the tint is kept as it was."""
+    from wbcgrade.color.look.prior import PARTS, _parts
+    from wbcgrade.color.look.statistics import BANDS, QUANTILES
+
+    size = len(QUANTILES) + 3 * BANDS
+    raw = LookDifferences(np.linspace(0.05, 0.95, len(QUANTILES)), np.zeros(len(QUANTILES)),
+                          np.zeros(BANDS), np.zeros((BANDS, 3)))
+    parts = _parts(raw)
+    assert len(parts) == len(PARTS) and np.array_equal(np.sum(parts, axis=0), np.ones(size))
+    noise, prior = np.eye(size), np.eye(size)
+    tone, tint = parts[0], parts[2]
+    vector = np.where(tint, 6.0, 0.0) + np.where(tone, 1.0, 0.0)  # tone: one noise sd
+    tied = posterior_look(raw.with_vector(vector), noise, prior).differences.vector()
+    apart = posterior_look(raw.with_vector(vector), noise, prior,
+                           parts=parts).differences.vector()
+    assert np.mean(apart[tint]) > 0.75 * 6.0 and np.mean(tied[tint]) > 0.75 * 6.0
+    assert np.mean(apart[tone]) < 0.5 * np.mean(tied[tone])
+    # one part, or every part at one scale: the tied slab exactly
+    one = posterior_look(raw.with_vector(vector), noise, prior, scales=(1.0,),
+                         parts=parts).differences.vector()
+    assert np.allclose(one, posterior_look(raw.with_vector(vector), noise, prior,
+                                           scales=(1.0,)).differences.vector())
+    # a prior that ties the parts' sizes hard gives the tied slab back
+    from wbcgrade.color.look import prior as look_prior
+
+    monkeypatch.setattr(look_prior, "PART_TIE", 50.0)
+    held = posterior_look(raw.with_vector(vector), noise, prior,
+                          parts=parts).differences.vector()
+    assert np.allclose(held, tied, atol=1e-6)

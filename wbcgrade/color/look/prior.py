@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,6 +63,21 @@ COLLECTION_SHARE = 0.2
 #: scenes is unusual as a whole; a set of food or wine photos holds no greys, so its
 #: "neutral" tints are its content's colours.
 UNUSUAL_CONTENT = ((1.0, 0.0, 0.8), (1.0, 6.0, 0.2))
+#: Whether the slab lets the sizes of a look's parts (:data:`PARTS`: tone, saturation, tint)
+#: vary apart, each over :data:`PRIOR_SCALES` (True), or ties them to one size. Measured on
+#: ``benchmarks/set_calibration.py`` (four photographers' looks, 3 / 6 / 12 style photos):
+#: tied +0.02 / +0.03 / +0.18, apart +0.03 / +0.03 / +0.20; every three of the six warmest
+#: photos (no look) moved others by at most 2.01 dE tied, 0.86 dE apart (a strong warm tint
+#: no longer lets the tone's size grow with it).
+SEPARATE_PARTS = True
+#: How much the prior favours parts of one size (:data:`SEPARATE_PARTS`): a combination
+#: weighs ``exp(-PART_TIE * sum of squared differences, in steps of PRIOR_SCALES, over
+#: pairs of parts)`` (0: every combination alike; large: one size for all). A trade
+#: measured at 0 / 0.3 / 1 / one size: every three of the six warmest photos moved others by
+#: at most 0.86 / 1.40 / 1.77 / 2.01 dE (``benchmarks/set_calibration.py``); six palettes
+#: of alike content in the generator's world moved 22 / 14 / 8 / 6 % of palettes over 1.5 dE
+#: (``benchmarks/set_simulation.py``); the looks recovered alike. Real photos chose 0.
+PART_TIE = 0.0
 #: Pull of the covariances towards their diagonals (316 palettes estimate 42 x 42).
 DIAGONAL_SHRINK = 0.2
 #: Random sets drawn to measure the noise of a set's median statistics.
@@ -156,9 +172,36 @@ def _log_gaussian(vector: np.ndarray, cov: np.ndarray) -> tuple[float, np.ndarra
     return float(-0.5 * (solved @ solved + logdet + len(vector) * np.log(2 * np.pi))), inverse
 
 
+def _slabs(prior: np.ndarray, scales: tuple[float, ...],
+           parts: list[np.ndarray] | None) -> list[tuple[np.ndarray, float]]:
+    """The slab's covariances and the logs of their prior weights (summing to 1): ``prior`` at each
+    scale, or, with ``parts``, at every combination of one scale per part (``D prior D``,
+    ``D`` the square roots of the parts' scales on the diagonal: each part's size its own,
+    their correlations kept), weighted by how far apart the sizes are
+    (:data:`PART_TIE`)."""
+    if parts is None:
+        return [(scale * prior, -np.log(len(scales))) for scale in scales]
+    steps = np.log(np.asarray(scales, dtype=np.float64))
+    steps = steps / max(float(np.min(np.diff(np.sort(steps)))), 1e-12) if len(steps) > 1 \
+        else steps
+    slabs, weights = [], []
+    for combination in itertools.product(range(len(scales)), repeat=len(parts)):
+        root = np.zeros(len(prior))
+        for index, part in zip(combination, parts):
+            root[part] = np.sqrt(scales[index])
+        slabs.append(root[:, None] * prior * root[None, :])
+        at = steps[list(combination)]
+        weights.append(-PART_TIE * float(np.sum((at[:, None] - at[None, :]) ** 2)) / 2.0)
+    weights = np.array(weights)
+    top = float(np.max(weights))
+    logs = weights - (top + np.log(np.sum(np.exp(weights - top))))
+    return list(zip(slabs, logs))
+
+
 def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarray, float]],
                    prior: np.ndarray, no_look: float = NO_LOOK,
-                   scales: tuple[float, ...] = PRIOR_SCALES) -> LookPosterior:
+                   scales: tuple[float, ...] = PRIOR_SCALES,
+                   parts: list[np.ndarray] | None = None) -> LookPosterior:
     """The posterior mean of a set's look differences under a spike-and-slab prior.
 
     Parameters
@@ -169,11 +212,15 @@ def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarr
     prior : (P, P) second moment of the generator's looks' differences.
     no_look : prior probability of no look.
     scales : the slab's Gaussians, as shares of ``prior``.
+    parts : (P,) boolean masks (:data:`PARTS`) whose sizes the slab lets vary apart, each
+        over ``scales`` (the generator turns a look's controls on one by one: a strong
+        tint says nothing of the tone's size). None: one size for all.
     """
     v = raw.vector()
     ridge = 1e-10 * np.eye(len(v))
     mixture = [(noise, 1.0)] if isinstance(noise, np.ndarray) else list(noise)
     total = sum(w for _, w in mixture)
+    slabs = _slabs(prior, scales, parts)
     logs, means, spikes, operators, covariances = [], [], [], [], []
     for cov_noise, weight in mixture:
         share = weight / total
@@ -183,10 +230,9 @@ def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarr
         operators.append(np.zeros((len(v), len(v))))
         covariances.append(np.zeros((len(v), len(v))))
         spikes.append(True)
-        for scale in scales:
-            cov = scale * prior
+        for cov, log_chance in slabs:
             log, inverse = _log_gaussian(v, cov + cov_noise + ridge)
-            logs.append(np.log((1.0 - no_look) * share / len(scales)) + log)
+            logs.append(np.log((1.0 - no_look) * share) + log_chance + log)
             means.append(cov @ inverse)
             gain = np.linalg.solve(cov + cov_noise + ridge, cov).T
             operators.append(gain)
@@ -396,7 +442,8 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     units = np.full(len(raw.vector()), float(space_scale))
     units[len(raw.tone):len(raw.tone) + len(raw.saturation)] = 1.0
     prior = load_prior() * np.outer(units, units)
-    found = posterior_look(raw, noise, prior, no_look)
+    found = posterior_look(raw, noise, prior, no_look,
+                           parts=_parts(raw) if SEPARATE_PARTS else None)
     mean = found.differences.vector()
     parts = _parts(raw)
     kept = np.ones(len(parts))

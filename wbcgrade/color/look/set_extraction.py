@@ -443,8 +443,8 @@ _NATURAL_STATISTICS: dict[str, object] = {}
 def _prior_settings() -> tuple:
     """The settings of :mod:`wbcgrade.color.look.prior` a set's look depends on."""
     return (prior.NO_LOOK, prior.PRIOR_SCALES, prior.COLLECTION_SHARE, prior.UNUSUAL_CONTENT,
-            prior.DIAGONAL_SHRINK,
-            prior.NOISE_DRAWS, prior.JACKKNIFE_GROUPS, prior.PARTS, JACKKNIFE_BINS,
+            prior.DIAGONAL_SHRINK, prior.NOISE_DRAWS, prior.JACKKNIFE_GROUPS, prior.PARTS,
+            prior.SEPARATE_PARTS, prior.PART_TIE, JACKKNIFE_BINS,
             prior.POSTERIOR_DRAWS,
             float(np.sum(prior.load_prior())))
 
