@@ -174,16 +174,19 @@ def _log_gaussian(vector: np.ndarray, cov: np.ndarray) -> tuple[float, np.ndarra
 
 def _slabs(prior: np.ndarray, scales: tuple[float, ...],
            parts: list[np.ndarray] | None) -> list[tuple[np.ndarray, float]]:
-    """The slab's covariances and the logs of their prior weights (summing to 1): ``prior`` at each
-    scale, or, with ``parts``, at every combination of one scale per part (``D prior D``,
-    ``D`` the square roots of the parts' scales on the diagonal: each part's size its own,
-    their correlations kept), weighted by how far apart the sizes are
-    (:data:`PART_TIE`)."""
+    """The slab's covariances and the logs of their prior weights (which sum to 1):
+    ``prior`` at each scale, or, with ``parts``, at every combination of one scale per
+    part (``D prior D``, ``D`` the square roots of the parts' scales on the diagonal: each
+    part's size its own, their correlations kept), weighted by how far apart the sizes
+    are (:data:`PART_TIE`)."""
+    from scipy.special import logsumexp
+
     if parts is None:
         return [(scale * prior, -np.log(len(scales))) for scale in scales]
-    steps = np.log(np.asarray(scales, dtype=np.float64))
-    steps = steps / max(float(np.min(np.diff(np.sort(steps)))), 1e-12) if len(steps) > 1 \
-        else steps
+    steps = np.log(np.asarray(scales, dtype=np.float64))  # in steps of the closest two
+    gaps = np.diff(np.sort(steps))
+    if gaps.size and gaps.min() > 0:
+        steps = steps / gaps.min()
     slabs, weights = [], []
     for combination in itertools.product(range(len(scales)), repeat=len(parts)):
         root = np.zeros(len(prior))
@@ -193,9 +196,7 @@ def _slabs(prior: np.ndarray, scales: tuple[float, ...],
         at = steps[list(combination)]
         weights.append(-PART_TIE * float(np.sum((at[:, None] - at[None, :]) ** 2)) / 2.0)
     weights = np.array(weights)
-    top = float(np.max(weights))
-    logs = weights - (top + np.log(np.sum(np.exp(weights - top))))
-    return list(zip(slabs, logs))
+    return list(zip(slabs, weights - logsumexp(weights)))
 
 
 def posterior_look(raw: LookDifferences, noise: np.ndarray | list[tuple[np.ndarray, float]],
@@ -442,10 +443,9 @@ def posterior_statistics_look(styles: PaletteStatistics, naturals: PaletteStatis
     units = np.full(len(raw.vector()), float(space_scale))
     units[len(raw.tone):len(raw.tone) + len(raw.saturation)] = 1.0
     prior = load_prior() * np.outer(units, units)
-    found = posterior_look(raw, noise, prior, no_look,
-                           parts=_parts(raw) if SEPARATE_PARTS else None)
-    mean = found.differences.vector()
     parts = _parts(raw)
+    found = posterior_look(raw, noise, prior, no_look, parts=parts if SEPARATE_PARTS else None)
+    mean = found.differences.vector()
     kept = np.ones(len(parts))
     if jackknife_colors is not None:
         colors, masses = jackknife_colors
