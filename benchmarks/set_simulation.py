@@ -21,11 +21,21 @@ clip-art objects on white), the hardest "no look" there is.
 Prints, per set size: looks (mean, 5th percentile and worst recovered), sets without
 a look (mean and largest move, random and similar content) and the reported share
 against the recovered fraction.
+
+``--ceilings`` adds, per set size and per how far the edit moves the held-out palettes
+(1-3, 3-6, over 6 dE2000), the look recovered by three estimates from the same sets:
+the shipped one; the posterior mean applied in full (no jackknife share: the Bayes
+estimate, best where its prior and noise are right, as they are here); and the
+statistics measured against the style palettes' own statistics before the edit
+(content cancelled: what the look's family could show with no content noise at all).
+``--edit-sizes LO,HI`` draws the edits' overall size log-uniformly from LO to HI
+(default the generator's own, 0.15 to 1.5; ``0.6,1.5`` keeps to strong looks).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 import colour
@@ -36,7 +46,11 @@ from wbcgrade.color.histogram import resample_histogram
 from wbcgrade.color.look import set_extraction as se
 from wbcgrade.color.look.edits import random_edit
 from wbcgrade.color.look.prior import push_edit
-from wbcgrade.color.look.statistics import look_differences
+from wbcgrade.color.look.statistics import (
+    look_differences,
+    look_from_differences,
+    tinted_statistics,
+)
 from wbcgrade.color.presets import StyleSet
 
 #: Held-out palettes a set's look is judged on, and their grid.
@@ -75,6 +89,50 @@ def _set_look(content: StyleSet, hists: np.ndarray):
     return se.statistics_set_look(styles, content)
 
 
+#: The estimates ``--ceilings`` compares (see the module's docstring).
+ESTIMATES = ("shipped", "posterior in full", "content cancelled")
+#: Bands of how far an edit moves a held-out palette (mean dE2000), for ``--ceilings``.
+MOVE_BANDS = ((1.0, 3.0), (3.0, 6.0), (6.0, np.inf))
+
+
+@contextlib.contextmanager
+def _estimate(kind: str, before: StyleSet | None = None):
+    """The set look found as ``kind`` (:data:`ESTIMATES`) while the block runs: the
+    posterior's jackknife share left out, or the styles' statistics measured against
+    ``before``'s (the same palettes before the edit) instead of the natural palettes'."""
+    shipped = se.posterior_statistics_look
+
+    def in_full(*args, **kwargs):
+        return shipped(*args, **{**kwargs, "jackknife_colors": None})
+
+    def cancelled(styles, naturals, *args, **kwargs):
+        centre = tinted_statistics(before.at_bins(se.MAP_BINS), naturals)
+        return look_from_differences(look_differences(styles, centre))
+
+    se.posterior_statistics_look = {"shipped": shipped, "posterior in full": in_full,
+                                    "content cancelled": cancelled}[kind]
+    try:
+        yield
+    finally:
+        se.posterior_statistics_look = shipped
+
+
+def _ceiling_table(sizes: list[int], rows: list[tuple]) -> None:
+    """Print the looks recovered by each estimate, per set size and band of the move."""
+    print("\nLooks recovered by how far the edit moves a held-out palette: the shipped "
+          "estimate, the posterior in full, the content cancelled")
+    print("| S | move dE | held-out palettes | " + " | ".join(ESTIMATES) + " |")
+    print("|---|---|---|" + "---|" * len(ESTIMATES))
+    table = np.array(rows)  # (size, move, recovered per estimate ...)
+    for size in sizes:
+        for lo, hi in MOVE_BANDS:
+            pick = (table[:, 0] == size) & (table[:, 1] >= lo) & (table[:, 1] < hi)
+            if pick.any():
+                band = f"{lo:.0f}-{hi:.0f}" if np.isfinite(hi) else f"over {lo:.0f}"
+                values = " | ".join(f"{v:+.3f}" for v in table[pick, 2:].mean(axis=0))
+                print(f"| {size} | {band} | {int(pick.sum())} | {values} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="3,6,12", help="style photos per set")
@@ -82,8 +140,14 @@ def main() -> None:
     parser.add_argument("--similar", type=int, default=15,
                         help="sets of similar content without a look, per size")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--ceilings", action="store_true",
+                        help="also the posterior in full and the content cancelled, by move")
+    parser.add_argument("--edit-sizes", default=None, metavar="LO,HI",
+                        help="the edits' overall size, log-uniform (default 0.15,1.5)")
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
+    span = None if args.edit_sizes is None else np.log([float(v) for v in
+                                                        args.edit_sizes.split(",")])
     naturals = se.natural_palettes()
     rng = np.random.default_rng(args.seed)
     drawn = rng.permutation(len(naturals.names))
@@ -97,20 +161,35 @@ def main() -> None:
         for i in range(count)])
     vectors /= vectors.std(axis=0) + 1e-12
     looks, random_null, similar_null = [], [], []  # (size, share, rows)
+    ceilings = []  # (size, move, recovered by each of ESTIMATES)
     bar = tqdm(total=len(sizes) * (args.trials + args.similar), desc="sets", file=sys.stderr)
     for size in sizes:
         for _ in range(args.trials):
             edit = (lambda x: np.asarray(x, dtype=np.float64)) if rng.random() < NO_EDIT \
-                else random_edit(rng)
+                else random_edit(rng, None if span is None else float(np.exp(rng.uniform(*span))))
             picked = rng.choice(count, size + EVALUATED, replace=False)
             styles, held = picked[:size], picked[size:]
             pushed = np.stack([push_edit(hists[i], edit) for i in styles])
             result = _set_look(content, pushed)
-            for moved, error, found in _judge(result.look, edit, hists[held]):
+            judged = _judge(result.look, edit, hists[held])
+            for moved, error, found in judged:
                 if moved > LOOK_SIZE:
                     looks.append((size, result.share, 1.0 - error / moved))
                 elif moved < 0.3:
                     random_null.append((size, found))
+            if args.ceilings and any(moved > LOOK_SIZE for moved, _, _ in judged):
+                before = StyleSet([f"style{i}" for i in range(size)], hists[styles], "before",
+                                  meta={"cache_dir": None,
+                                        "working_space": content.working_space})
+                others = []
+                for kind in ESTIMATES[1:]:
+                    with _estimate(kind, before):
+                        others.append(_judge(_set_look(content, pushed).look, edit,
+                                             hists[held]))
+                for (moved, error, _), *rest in zip(judged, *others):
+                    if moved > LOOK_SIZE:
+                        ceilings.append((size, moved, 1.0 - error / moved,
+                                         *(1.0 - e / moved for _, e, _ in rest)))
             bar.update(1)
         for _ in range(args.similar):
             anchor = rng.integers(count)
@@ -142,6 +221,8 @@ def main() -> None:
         v = [r for _, share, r in looks if lo <= share < hi]
         if v:
             print(f"| {lo:.2f}-{min(hi, 1.0):.2f} | {len(v)} | {np.mean(v):+.3f} |")
+    if ceilings:
+        _ceiling_table(sizes, ceilings)
 
 
 if __name__ == "__main__":
