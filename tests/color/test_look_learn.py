@@ -428,3 +428,63 @@ def test_a_crop_of_the_original_shape_is_not_laid_on_it_turned():
     assert found is not None and found.how.startswith("keypoints"), found
     sources, targets, _ = pair_colours(images, found)
     assert np.median(np.abs(warm_look(sources) - targets)) < 0.02
+
+
+def _one_hue(seed=0, size=64):
+    """A photo of one hue (a purple sea): lightness and a little chroma vary, nothing else."""
+    rng = np.random.default_rng(seed)
+    light = np.linspace(0.35, 1.0, size)[None, :, None] * rng.uniform(0.8, 1.0, (size, 1, 1))
+    hue = np.array([0.62, 0.22, 0.46]) + rng.normal(0.0, 0.03, (size, size, 3))
+    return np.clip(light * hue, 0.0, 1.0)
+
+
+def _saturated(rgb):
+    """A look that leaves greys alone: chroma about luma times 1.35."""
+    luma = (rgb @ LUMA)[..., None]
+    return np.clip(luma + 1.35 * (rgb - luma), 0.0, 1.0)
+
+
+def test_a_look_from_pairs_of_few_colours_is_trusted_only_near_them():
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look import learn as learned
+
+    everywhere = grid_points(9)
+    working = default_working_space()
+
+    def pushed(x):
+        return np.clip(np.asarray(x, dtype=np.float64) * 0.9 + 0.05, 0.0, 1.0)
+
+    broad = learned.supported_look(pushed, everywhere, np.ones(len(everywhere)), working)
+    assert broad.trust == 1.0
+    np.testing.assert_allclose(broad(everywhere), pushed(everywhere))
+    sea = _one_hue().reshape(-1, 3)
+    narrow = learned.supported_look(pushed, sea, np.ones(len(sea)), working)
+    assert narrow.trust == 0.0
+    greys = np.linspace(0.5, 1.0, 11)[:, None].repeat(3, axis=1)  # (dark greys are near it)
+    np.testing.assert_allclose(narrow(greys), greys, atol=1e-4)  # far from the sea: no change
+    np.testing.assert_allclose(narrow(sea[:50]), pushed(sea[:50]), atol=0.02)  # on it: the look
+
+
+@pytest.mark.slow
+def test_one_pair_of_one_hue_keeps_greys_where_the_look_leaves_them(tmp_path, monkeypatch):
+    from wbcgrade.color.look import learn as learned
+
+    original = _one_hue()
+    before = write(tmp_path / "sea.jpg", original)
+    after = write(tmp_path / "sea-edited.png", _saturated(original))
+    greys = np.linspace(0.5, 1.0, 21)[:, None].repeat(3, axis=1)  # (dark greys are near it)
+
+    def learned_greys():
+        pairs, _ = pair_files(before, after)
+        result = learn_look(pairs)
+        sea = original.reshape(-1, 3)
+        return (np.abs(result.look(greys) - greys).max(),
+                np.abs(result.look(sea) - _saturated(sea)).mean(),
+                np.abs(sea - _saturated(sea)).mean())
+
+    moved, error, size = learned_greys()
+    assert error < 0.35 * size  # the pair's own colours get the look
+    assert moved < 2.0 / 255.0  # greys, which the look leaves alone, stay put
+    monkeypatch.setattr(learned, "TRUSTED_COVERAGE", (-1.0, 0.0))  # trusted everywhere
+    trusted_moved, _, _ = learned_greys()
+    assert trusted_moved > 2.0 * moved

@@ -91,6 +91,7 @@ from wbcgrade.core import fast_cpu
 from wbcgrade.errors import InputError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
+           "SupportedLook", "supported_look", "TRUSTED_COVERAGE",
            "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "LEARN_SIZE", "LEARN_FOLDS",
@@ -814,6 +815,9 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
               else extrapolating_family(*_pooled(colours)))
     look, robust, _ = _fit(colours, monochrome, toned=toned,
                            prior=None if plain else _edit_prior(colours, family))
+    if not plain and len(colours) < EDIT_PRIOR_PAIRS:  # few pairs: trusted near their colours
+        sources, _, weights = _pooled(colours)
+        look = replace(look, look=supported_look(look.look, sources, weights, working))
     if alone and not plain:
         sources, _, weights = _pooled(colours)
         corrected = unpaired_correction(look.look, [i.after for i in read]
@@ -830,6 +834,10 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         fold_look, _, _ = _fit(kept, monochrome, [robust[i] for i in rest], rounds=1,
                                toned=toned,
                                prior=None if plain else _edit_prior(kept, family))
+        if not plain and len(kept) < EDIT_PRIOR_PAIRS:
+            kept_sources, _, kept_weights = _pooled(kept)
+            fold_look = replace(fold_look, look=supported_look(fold_look.look, kept_sources,
+                                                               kept_weights, working))
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
@@ -910,6 +918,17 @@ PAIR_SUPPORT = 0.5
 NO_CORRECTION = 0.8
 #: Grid of the support.
 _SUPPORT_SIZE = 17
+#: With fewer pairs than :data:`EDIT_PRIOR_PAIRS`, how far the look is trusted away from
+#: the pairs' colours follows how much of what natural photos hold the pairs cover (the
+#: natural palettes' mass under their :func:`_support`): at or below the first share the
+#: look moves only the colours the pairs show (and fades to no change away from them),
+#: at or above the second it is trusted everywhere, in between partly
+#: (:class:`SupportedLook`). A pair of one hue (a purple sea: 0.28 of natural colours)
+#: fits curves that turn greys and blacks brown; a portrait or a still life (0.83 to
+#: 0.87) teaches a look that carries. Chosen on the tuned looks of
+#: ``benchmarks/one_original.py`` (each of eight photos as the one original; the held-out
+#: looks checked after; docs/benchmarks.md).
+TRUSTED_COVERAGE = (0.4, 0.7)
 
 
 @dataclass(frozen=True)
@@ -957,13 +976,52 @@ COLOUR_REGIONS = {
 }
 
 
+@dataclass(frozen=True)
+class SupportedLook:
+    """A look fitted on few pairs, trusted where their colours are.
+
+    ``x + (trust + (1 - trust) * support(x)) * (look(x) - x)``: ``support`` (m, m, m) in
+    [0, 1], how well the pairs' original colours cover ``x`` (:func:`_support`);
+    ``trust`` in [0, 1], how far the look is followed away from them.
+    """
+    look: object
+    support: np.ndarray
+    trust: float
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
+        rgb = np.asarray(rgb, dtype=np.float64)
+        flat = rgb.reshape(-1, 3)
+        mapped = np.asarray(self.look(flat), dtype=np.float64)
+        near = interpolate_lattice(self.support[..., None], flat)[:, 0]
+        follow = self.trust + (1.0 - self.trust) * np.clip(near, 0.0, 1.0)
+        return np.clip(flat + follow[:, None] * (mapped - flat), 0.0, 1.0).reshape(rgb.shape)
+
+
+def _natural_density(working: str) -> np.ndarray:
+    """(m, m, m) the natural palettes' mean histogram on the support's grid, in ``working``."""
+    natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
+    return natural.mean(axis=0)
+
+
+def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str
+                   ) -> SupportedLook:
+    """``look`` (fitted on pairs whose original colours are ``sources`` (N, 3) with
+    ``weights``) trusted as far as those colours cover natural photos'
+    (:data:`TRUSTED_COVERAGE`)."""
+    support = _support(sources, weights)
+    density = _natural_density(working).ravel()
+    covered = float(density @ support.ravel() / max(float(density.sum()), 1e-300))
+    low, high = TRUSTED_COVERAGE
+    return SupportedLook(look, support, float(np.clip((covered - low) / (high - low), 0.0, 1.0)))
+
+
 def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> dict[str, float]:
     """How sure the pairs make the look, region by region of colour: the share of what
     natural photos hold of each region (:data:`COLOUR_REGIONS`) that the pairs' original
     colours ``sources`` (N, 3, working space) cover (:func:`_support`), in [0, 1]."""
     support = _support(sources, weights).ravel()
-    natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
-    density = natural.mean(axis=0).ravel()
+    density = _natural_density(working).ravel()
     nodes = grid_points(_SUPPORT_SIZE)
     srgb = default_working_space()
     shown = nodes if working == srgb else np.clip(convert(nodes, working, srgb), 0.0, 1.0)

@@ -1,0 +1,80 @@
+"""One original, which photo: how a look learned from one before/after pair depends on the pair.
+
+Run ``python benchmarks/one_original.py`` (``--help``; about ten minutes at 384 px).
+The protocol of ``benchmarks/learn.py --originals 1`` (twelve edited photos, the first
+with its original, nine other photos graded; recovered = 1 - dE2000(out, truth) /
+dE2000(photo, truth)), but each look is learned once with each of ``--originals`` as the
+one original (the shuffled ring of ``learn.py`` turned to start at it). The default
+originals run from a purple sea, the Hubble field and a pale bridge (few of the colours
+natural photos hold) to a portrait and two still lifes (most of them).
+
+Prints a row per look and original (mean and worst photo), then per group of looks
+(tuned / held out, as in ``learn.py``): the mean, the mean of the worst photos, the share
+of (look, original) with a photo graded worse than doing nothing, and the lowest photo.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from learn import (  # noqa: E402
+    EXCLUDED,
+    HELD_OUT,
+    MONOCHROME,
+    SHARED,
+    SHUFFLE_SEED,
+    TUNED,
+    hald_table,
+    learn,
+    score,
+)
+from look import read_photo  # noqa: E402
+
+ORIGINALS = ("infinite_sea", "hubble_deep_field", "bridge", "coffee", "flower",
+             "grace_hopper", "china", "brushes")
+STYLE_PHOTOS = 12
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--looks", default=None,
+                        help="comma list (default the colour looks of learn.py)")
+    parser.add_argument("--originals", default=",".join(ORIGINALS))
+    parser.add_argument("--size", type=int, default=384, help="long side of the photos")
+    args = parser.parse_args()
+    looks = (args.looks.split(",") if args.looks
+             else [lk for lk in TUNED + HELD_OUT if lk not in MONOCHROME])
+    names = sorted(p.stem for p in (SHARED / "photos").glob("*.jpg") if p.stem not in EXCLUDED)
+    order = [names[i] for i in np.random.default_rng(SHUFFLE_SEED).permutation(len(names))]
+    photos = {n: read_photo(SHARED / "photos" / f"{n}.jpg", args.size) for n in names}
+    rows = []
+    print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}")
+    for look in looks:
+        table = hald_table(SHARED / "looks" / f"{look}.png")
+        for first in args.originals.split(","):
+            turn = order.index(first)
+            ring = order[turn:] + order[:turn]
+            with tempfile.TemporaryDirectory(prefix="wbcgrade-one-") as tmp:
+                grade, _, _ = learn(Path(tmp), photos, ring[:STYLE_PHOTOS], table, "plain", 1)
+                recovered, _ = score(grade, photos, ring[STYLE_PHOTOS:], table)
+            group = "tuned" if look in TUNED else "held-out"
+            rows.append((group, float(np.mean(recovered)), float(np.min(recovered))))
+            print(f"{look:26s} {first:18s} {rows[-1][1]:+6.3f} {rows[-1][2]:+6.3f}", flush=True)
+    print()
+    for group in ("tuned", "held-out"):
+        picked = np.array([r[1:] for r in rows if r[0] == group])
+        if len(picked):
+            print(f"{group:9s}: mean {picked[:, 0].mean():+.3f}, mean of the worst photos "
+                  f"{picked[:, 1].mean():+.3f}, a photo worse than nothing in "
+                  f"{np.mean(picked[:, 1] < 0):.0%} of {len(picked)}, lowest photo "
+                  f"{picked[:, 1].min():+.2f}")
+
+
+if __name__ == "__main__":
+    main()
