@@ -108,6 +108,30 @@ def test_it_prints_the_address_serves_and_stops_cleanly_on_ctrl_c(photo):
     assert not (_workers(tag) - before), "the job worker outlived the server"
 
 
+def _ignore_ctrl_c() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_server_started_by_a_process_that_ignores_it(photo):
+    # (a process inherits an ignored SIGINT: a test runner's worker, a script's background job)
+    process = subprocess.Popen(
+        [*WBCGRADE, "explore", str(photo), "--preset", PRESET, "--no-browser"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**command_env(), "DISPLAY": ""}, preexec_fn=_ignore_ctrl_c)
+    try:
+        url = process.stdout.readline().strip()
+        assert url.startswith("http://127.0.0.1:"), url
+        with urllib.request.urlopen(url + "api/state", timeout=60) as answer:
+            assert json.load(answer)["names"]  # serving
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0 and "Stopped." in err, err
+
+
 @pytest.mark.slow
 def test_a_worker_still_starting_is_stopped_with_the_server(server, monkeypatch):
     """Closed while its worker process still imports, the job queue kills it (else it

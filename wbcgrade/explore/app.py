@@ -91,20 +91,25 @@ def open_browser(url: str) -> bool:
 
 
 def serve(server: ExploreServer) -> None:
-    """Serve until Ctrl-C (or SIGTERM); then close the socket and stop the worker."""
+    """Serve until Ctrl-C (or SIGTERM); then close the socket and stop the worker.
+
+    Both signals are handled here, whatever the process inherited: a process started by
+    one that ignores SIGINT (a test runner's worker, a script's background job) inherits
+    the ignoring, and Ctrl-C would never stop the server."""
     import signal
 
     def stop(signum, frame):
         raise KeyboardInterrupt
 
-    previous = None
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, stop)
+        previous = {signum: signal.signal(signum, stop)
+                    for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
         server.serve_forever(poll_interval=0.2)
     except KeyboardInterrupt:
         pass
     finally:
         server.close()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
