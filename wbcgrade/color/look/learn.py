@@ -46,6 +46,7 @@ does; :func:`wbcgrade.color.grade.look_files.learned_grade` gives it as a grade.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 from collections.abc import Callable, Sequence
@@ -815,9 +816,8 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
               else extrapolating_family(*_pooled(colours)))
     look, robust, _ = _fit(colours, monochrome, toned=toned,
                            prior=None if plain else _edit_prior(colours, family))
-    if not plain and len(colours) < EDIT_PRIOR_PAIRS:  # few pairs: trusted near their colours
-        sources, _, weights = _pooled(colours)
-        look = replace(look, look=supported_look(look.look, sources, weights, working))
+    if not plain:
+        look = _trusted_near(look, colours, working)
     if alone and not plain:
         sources, _, weights = _pooled(colours)
         corrected = unpaired_correction(look.look, [i.after for i in read]
@@ -834,10 +834,8 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         fold_look, _, _ = _fit(kept, monochrome, [robust[i] for i in rest], rounds=1,
                                toned=toned,
                                prior=None if plain else _edit_prior(kept, family))
-        if not plain and len(kept) < EDIT_PRIOR_PAIRS:
-            kept_sources, _, kept_weights = _pooled(kept)
-            fold_look = replace(fold_look, look=supported_look(fold_look.look, kept_sources,
-                                                               kept_weights, working))
+        if not plain:
+            fold_look = _trusted_near(fold_look, kept, working)
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
@@ -998,10 +996,14 @@ class SupportedLook:
         return np.clip(flat + follow[:, None] * (mapped - flat), 0.0, 1.0).reshape(rgb.shape)
 
 
+@functools.lru_cache(maxsize=4)
 def _natural_density(working: str) -> np.ndarray:
-    """(m, m, m) the natural palettes' mean histogram on the support's grid, in ``working``."""
+    """(m, m, m) the natural palettes' mean histogram on the support's grid, in ``working``
+    (read-only; converted once per working space: the look, each fold and the coverage)."""
     natural = styles_in_space(natural_palettes(), working).at_bins(_SUPPORT_SIZE)
-    return natural.mean(axis=0)
+    density = natural.mean(axis=0)
+    density.setflags(write=False)
+    return density
 
 
 def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str
@@ -1014,6 +1016,16 @@ def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str
     covered = float(density @ support.ravel() / max(float(density.sum()), 1e-300))
     low, high = TRUSTED_COVERAGE
     return SupportedLook(look, support, float(np.clip((covered - low) / (high - low), 0.0, 1.0)))
+
+
+def _trusted_near(look: LearnedLook, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+                  working: str) -> LearnedLook:
+    """``look`` fitted on ``parts`` (pairs' colours), trusted near their colours
+    (:func:`supported_look`) when they are fewer than :data:`EDIT_PRIOR_PAIRS`."""
+    if len(parts) >= EDIT_PRIOR_PAIRS:
+        return look
+    sources, _, weights = _pooled(parts)
+    return replace(look, look=supported_look(look.look, sources, weights, working))
 
 
 def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> dict[str, float]:
