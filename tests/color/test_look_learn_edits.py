@@ -110,9 +110,12 @@ def test_a_pair_and_edits_with_no_look_learn_a_look_that_changes_nothing(tmp_pat
     for name in HELD:
         photo = photos[name].astype(np.float32)
         moved = np.mean(delta_E(lab(photo), lab(grade.apply(photo)), method="CIE 2000"))
-        # (0.98 and 0.76 dE2000 here, with the pair's look trusted everywhere or only near
-        # its colours: the edits' correction lifts blacks towards blue; over 0.5, the aim)
-        assert moved < 1.0
+        # (0.57 and 0.71 dE2000 here; the pair alone, a JPEG original against a PNG edit,
+        # 0.38 and 0.50. With the edits' look fitted as a smooth map on the cube, 0.98
+        # and 0.76: its pull on saturated blues lifted black to blue)
+        assert moved < 0.8
+    black = grade.apply(np.zeros((4, 4, 3), np.float32))
+    assert np.max(np.abs(black)) < 0.005  # (0.023 of blue with the smooth map)
 
 
 @pytest.mark.slow
