@@ -11,6 +11,10 @@ natural photos hold) to a portrait and two still lifes (most of them).
 Prints a row per look and original (mean and worst photo), then per group of looks
 (tuned / held out, as in ``learn.py``): the mean, the mean of the worst photos, the share
 of (look, original) with a photo graded worse than doing nothing, and the lowest photo.
+
+``--no-look``: the edited photos are the photos themselves (a pair and a set with no look
+in them); prints, per original, the mean and largest CIEDE2000 by which the learned look
+moves the nine other photos (it should change nothing).
 """
 
 from __future__ import annotations
@@ -33,8 +37,9 @@ from learn import (  # noqa: E402
     hald_table,
     learn,
     score,
+    to_8bit,
 )
-from look import read_photo  # noqa: E402
+from look import delta_e, lab, read_photo  # noqa: E402
 
 ORIGINALS = ("infinite_sea", "hubble_deep_field", "bridge", "coffee", "flower",
              "grace_hopper", "china", "brushes")
@@ -47,12 +52,17 @@ def main() -> None:
                         help="comma list (default the colour looks of learn.py)")
     parser.add_argument("--originals", default=",".join(ORIGINALS))
     parser.add_argument("--size", type=int, default=384, help="long side of the photos")
+    parser.add_argument("--no-look", action="store_true",
+                        help="edited photos with no look: how far the learned look moves photos")
     args = parser.parse_args()
     looks = (args.looks.split(",") if args.looks
              else [lk for lk in TUNED + HELD_OUT if lk not in MONOCHROME])
     names = sorted(p.stem for p in (SHARED / "photos").glob("*.jpg") if p.stem not in EXCLUDED)
     order = [names[i] for i in np.random.default_rng(SHUFFLE_SEED).permutation(len(names))]
     photos = {n: read_photo(SHARED / "photos" / f"{n}.jpg", args.size) for n in names}
+    if args.no_look:
+        no_look(photos, order, args.originals.split(","))
+        return
     rows = []
     print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}")
     for look in looks:
@@ -74,6 +84,27 @@ def main() -> None:
                   f"{picked[:, 1].mean():+.3f}, a photo worse than nothing in "
                   f"{np.mean(picked[:, 1] < 0):.0%} of {len(picked)}, lowest photo "
                   f"{picked[:, 1].min():+.2f}")
+
+
+def no_look(photos: dict, order: list[str], originals: list[str]) -> None:
+    """Each original with edited photos that are the photos themselves: the table of how
+    far (CIEDE2000, mean and largest over the nine other photos) the learned look moves."""
+    axis = np.linspace(0.0, 1.0, 64)
+    blue, green, red = np.meshgrid(axis, axis, axis, indexing="ij")
+    identity = np.stack([red, green, blue], axis=-1)  # a Hald table [b, g, r] -> (r, g, b)
+    print(f"{'original':18s} {'mean dE':>8s} {'largest':>8s}")
+    moved_all = []
+    for first in originals:
+        turn = order.index(first)
+        ring = order[turn:] + order[:turn]
+        with tempfile.TemporaryDirectory(prefix="wbcgrade-one-") as tmp:
+            grade, _, _ = learn(Path(tmp), photos, ring[:STYLE_PHOTOS], identity, "plain", 1)
+            moved = [delta_e(lab(to_8bit(grade.apply(photos[n].astype(np.float32)))),
+                             lab(to_8bit(photos[n]))) for n in ring[STYLE_PHOTOS:]]
+        moved_all += moved
+        print(f"{first:18s} {np.mean(moved):8.3f} {np.max(moved):8.3f}", flush=True)
+    print(f"\nno look: mean {np.mean(moved_all):.3f} dE2000, largest {np.max(moved_all):.3f} "
+          f"(over {len(moved_all)} graded photos)")
 
 
 if __name__ == "__main__":
