@@ -11,6 +11,10 @@ natural photos hold) to a portrait and two still lifes (most of them).
 Prints a row per look and original (mean and worst photo), then per group of looks
 (tuned / held out, as in ``learn.py``): the mean, the mean of the worst photos, the share
 of (look, original) with a photo graded worse than doing nothing, and the lowest photo.
+Each row also gives what the original's colours can carry at most: the true look applied
+where they are (the learner's support of them, ``look/learn.py``'s ``_support``) and no
+change elsewhere ("on its colours", mean and worst photo): what is beyond it has to be
+guessed, from the pair's extrapolation or from the graded photos without originals.
 
 ``--no-look``: the edited photos are the photos themselves (a pair and a set with no look
 in them); prints, per original, the mean and largest CIEDE2000 by which the learned look
@@ -34,6 +38,7 @@ from learn import (  # noqa: E402
     SHARED,
     SHUFFLE_SEED,
     TUNED,
+    apply_hald,
     hald_table,
     learn,
     score,
@@ -64,7 +69,7 @@ def main() -> None:
         no_look(photos, order, args.originals.split(","))
         return
     rows = []
-    print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}")
+    print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}   on its colours")
     for look in looks:
         table = hald_table(SHARED / "looks" / f"{look}.png")
         for first in args.originals.split(","):
@@ -73,9 +78,12 @@ def main() -> None:
             with tempfile.TemporaryDirectory(prefix="wbcgrade-one-") as tmp:
                 grade, _, _ = learn(Path(tmp), photos, ring[:STYLE_PHOTOS], table, "plain", 1)
                 recovered, _ = score(grade, photos, ring[STYLE_PHOTOS:], table)
+            carried = on_its_colours(photos, first, ring[STYLE_PHOTOS:], table)
             group = "tuned" if look in TUNED else "held-out"
-            rows.append((group, float(np.mean(recovered)), float(np.min(recovered))))
-            print(f"{look:26s} {first:18s} {rows[-1][1]:+6.3f} {rows[-1][2]:+6.3f}", flush=True)
+            rows.append((group, float(np.mean(recovered)), float(np.min(recovered)),
+                         float(np.mean(carried))))
+            print(f"{look:26s} {first:18s} {rows[-1][1]:+6.3f} {rows[-1][2]:+6.3f}   "
+                  f"{rows[-1][3]:+6.3f} {np.min(carried):+6.3f}", flush=True)
     print()
     for group in ("tuned", "held-out"):
         picked = np.array([r[1:] for r in rows if r[0] == group])
@@ -83,7 +91,30 @@ def main() -> None:
             print(f"{group:9s}: mean {picked[:, 0].mean():+.3f}, mean of the worst photos "
                   f"{picked[:, 1].mean():+.3f}, a photo worse than nothing in "
                   f"{np.mean(picked[:, 1] < 0):.0%} of {len(picked)}, lowest photo "
-                  f"{picked[:, 1].min():+.2f}")
+                  f"{picked[:, 1].min():+.2f}; the true look on the original's colours "
+                  f"{picked[:, 2].mean():+.3f}")
+
+
+def on_its_colours(photos: dict, original: str, names: list[str], table: np.ndarray
+                   ) -> list[float]:
+    """Recovered per photo of ``names`` by the true look applied where ``original``'s colours
+    are (the learner's support of them) and no change elsewhere."""
+    from wbcgrade.color.look.learn import _support
+    from wbcgrade.color.mapping.remap import interpolate_lattice
+
+    colours = photos[original].reshape(-1, 3).astype(np.float64)
+    support = _support(colours, np.full(len(colours), 1.0 / len(colours)))[..., None]
+    out = []
+    for name in names:
+        photo = photos[name]
+        flat = photo.reshape(-1, 3).astype(np.float64)
+        truth = apply_hald(table, photo)
+        near = interpolate_lattice(support, flat)
+        carried = (flat + near * (truth.reshape(-1, 3) - flat)).reshape(photo.shape)
+        truth_lab = lab(to_8bit(truth))
+        out.append(1.0 - delta_e(lab(to_8bit(carried)), truth_lab)
+                   / delta_e(lab(photo), truth_lab))
+    return out
 
 
 def no_look(photos: dict, order: list[str], originals: list[str]) -> None:
