@@ -488,3 +488,20 @@ def test_one_pair_of_one_hue_keeps_greys_where_the_look_leaves_them(tmp_path, mo
     monkeypatch.setattr(learned, "TRUSTED_COVERAGE", (-1.0, 0.0))  # trusted everywhere
     trusted_moved, _, _ = learned_greys()
     assert trusted_moved > 2.0 * moved
+
+
+def test_a_pairs_rare_colours_weigh_as_much_as_its_common_ones():
+    """A portrait's few mid greys must count in the fit as its skin does: weights divided by
+    how common each colour is give two regions of 9 000 and 1 000 pixels about the same
+    weight (9 : 1 before)."""
+    from wbcgrade.color.look import learn as learned
+
+    rng = np.random.default_rng(3)
+    common = np.array([0.8, 0.55, 0.45]) + rng.normal(0.0, 0.01, (9000, 3))
+    rare = np.array([0.45, 0.45, 0.45]) + rng.normal(0.0, 0.01, (1000, 3))
+    sources = np.clip(np.concatenate([common, rare]), 0.0, 1.0)
+    weights = np.ones(len(sources))
+    _, _, flat = learned._flattened((sources, sources, weights))
+    share = flat[9000:].sum() / flat.sum()
+    assert 0.4 < share < 0.6
+    assert np.isclose(weights[9000:].sum() / weights.sum(), 0.1)

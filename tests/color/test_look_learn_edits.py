@@ -88,7 +88,9 @@ def test_edits_without_originals_correct_the_look_where_the_pair_shows_little(
     pair_only, _ = learned_grade(*only_pair)
     ratios = [error(with_edits, bleach, photos[name]) / error(pair_only, bleach, photos[name])
               for name in HELD]
-    assert min(ratios) < 0.85 and max(ratios) < 1.05
+    # (0.855 and 0.999: with the pair's colours weighed by how rare they are, the
+    # sunset's look alone is closer and leaves the edits less to correct)
+    assert min(ratios) < 0.9 and max(ratios) < 1.05
     # where the pair shows its colours, the pair decides
     pair = photos["sunset"].astype(np.float32)
     assert np.mean(np.abs(with_edits.apply(pair) - pair_only.apply(pair))) < 0.01
@@ -110,10 +112,12 @@ def test_a_pair_and_edits_with_no_look_learn_a_look_that_changes_nothing(tmp_pat
     for name in HELD:
         photo = photos[name].astype(np.float32)
         moved = np.mean(delta_E(lab(photo), lab(grade.apply(photo)), method="CIE 2000"))
-        # (0.57 and 0.71 dE2000 here; the pair alone, a JPEG original against a PNG edit,
-        # 0.38 and 0.50. With the edits' look fitted as a smooth map on the cube, 0.98
-        # and 0.76: its pull on saturated blues lifted black to blue)
-        assert moved < 0.8
+        # (0.72 and 0.83 dE2000 here; the pair alone, a JPEG original against a PNG edit,
+        # 0.51 and 0.62: its colours weighed by how rare they are, the JPEG's errors on
+        # edges count more (0.38 and 0.50 by pixel count). With the edits' look fitted
+        # as a smooth map on the cube, 0.98 and 0.76: it lifted black to blue. Real
+        # photos with no look move 0.02: benchmarks/one_original.py --no-look)
+        assert moved < 0.9
     black = grade.apply(np.zeros((4, 4, 3), np.float32))
     assert np.max(np.abs(black)) < 0.005  # (0.023 of blue with the smooth map)
 

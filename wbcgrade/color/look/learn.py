@@ -118,6 +118,13 @@ PAIRS_PER_PHOTO = 5000
 #: (+0.84 against +0.71 with a scene look's).
 CORRECTION_NODES = 17
 CORRECTION_SMOOTHNESS = 3e-6
+#: Below this many pairs, each pair's colours are weighed against how common they are in
+#: it (weight / density ** FLATTEN_COLOURS, the density a 17^3 soft histogram blurred by
+#: ``_FLATTEN_BLUR`` nodes): a portrait's few mid greys then count as its skin does, and
+#: the fit learns them rather than taking them from the navy and skin beside them.
+FLATTEN_BELOW = 4
+FLATTEN_COLOURS = 1.0
+_FLATTEN_BLUR = 0.7
 #: Folds of the held-out check (leave-one-out below this many pairs).
 LEARN_FOLDS = 4
 #: Below this many pairs the look is pulled, where the pairs' colours say little, towards
@@ -564,6 +571,20 @@ class LearnedLook:
         return self(grid_points(size)).reshape(size, size, size, 3).astype(np.float32)
 
 
+def _flattened(part: tuple[np.ndarray, np.ndarray, np.ndarray]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A pair's colour pairs (sources (N, 3), targets, weights (N,)) with each weight divided
+    by how common its source colour is in the pair (:data:`FLATTEN_COLOURS`): every colour
+    the photo shows counts about the same, however many pixels show it."""
+    from scipy.ndimage import gaussian_filter
+
+    sources, targets, weights = part
+    density = soft_histogram(sources, _SUPPORT_SIZE, weights / max(float(weights.sum()), 1e-300))
+    density = gaussian_filter(density, _FLATTEN_BLUR) * density.size
+    common = interpolate_lattice(density[..., None], sources)[:, 0]
+    return sources, targets, weights / np.maximum(common, 1e-6) ** FLATTEN_COLOURS
+
+
 def _pooled(parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The parts' (sources, targets, weights) in one, each part weighing the same."""
@@ -812,10 +833,12 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     toned = (not monochrome and any(r.toned for r in used)
              and all(r.monochrome or r.toned is not False for r in used))
     plain = monochrome or toned  # (an edit's colours are not what such a look keeps)
+    fitted = ([_flattened(c) for c in colours] if len(colours) < FLATTEN_BELOW
+              else colours)
     family = (None if plain or len(colours) >= EDIT_PRIOR_PAIRS
-              else extrapolating_family(*_pooled(colours)))
-    look, robust, _ = _fit(colours, monochrome, toned=toned,
-                           prior=None if plain else _edit_prior(colours, family))
+              else extrapolating_family(*_pooled(fitted)))
+    look, robust, _ = _fit(fitted, monochrome, toned=toned,
+                           prior=None if plain else _edit_prior(fitted, family))
     if not plain:
         look = _trusted_near(look, colours, working)
     if alone and not plain:
@@ -830,12 +853,12 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     folds = _folds(len(colours))
     for held in folds:
         rest = [i for i in range(len(colours)) if i not in set(held.tolist())]
-        kept = [colours[i] for i in rest]
+        kept = [fitted[i] for i in rest]
         fold_look, _, _ = _fit(kept, monochrome, [robust[i] for i in rest], rounds=1,
                                toned=toned,
                                prior=None if plain else _edit_prior(kept, family))
         if not plain:
-            fold_look = _trusted_near(fold_look, kept, working)
+            fold_look = _trusted_near(fold_look, [colours[i] for i in rest], working)
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
