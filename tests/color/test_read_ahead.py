@@ -17,6 +17,19 @@ from wbcgrade.color.io.images import read_image
 from wbcgrade.errors import InputError
 
 
+@pytest.fixture(autouse=True)
+def _no_scenes_left_by_other_tests():
+    """These tests count what is prepared ahead: start from none. (An in-process command
+    of another test that fails after its read-ahead started the photo's keypoints leaves
+    them in the registry, which a process that exits never minds.)"""
+    from wbcgrade.color.look import scene
+
+    with scene._AHEAD_LOCK:
+        scene._AHEAD.clear()
+        scene._MIRRORS.clear()
+    yield
+
+
 def test_a_read_ahead_gives_the_photo_or_raises_what_reading_raised(tmp_path, monkeypatch):
     photo = small_copy(SAMPLES / "coffee.jpg", tmp_path / "coffee.jpg")
     ahead = read_ahead.ReadAhead(photo)
