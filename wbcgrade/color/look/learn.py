@@ -118,16 +118,16 @@ PAIRS_PER_PHOTO = 5000
 #: (+0.84 against +0.71 with a scene look's).
 CORRECTION_NODES = 17
 CORRECTION_SMOOTHNESS = 3e-6
-#: Below this many pairs, each pair's colours are weighed against how common they are in
-#: it (weight / density ** FLATTEN_COLOURS, the density a 17^3 soft histogram blurred by
-#: ``_FLATTEN_BLUR`` nodes): a portrait's few mid greys then count as its skin does, and
-#: the fit learns them rather than taking them from the navy and skin beside them.
-#: ``benchmarks/one_original.py`` (eight looks, each of eight photos as the one original):
-#: held out +0.445 -> +0.510, tuned +0.518 -> +0.575 (docs/benchmarks.md). The pairs'
-#: support and coverage (how far the look is trusted) still count pixels: weighed alike
-#: too, the Hubble field's and a sea's few colours earned trust (tuned +0.650, but 12 %
-#: of cases with a photo worse than nothing, against none).
-FLATTEN_BELOW = 4
+#: Each pair's colours are weighed against how common they are in it (weight / density **
+#: FLATTEN_COLOURS, the density a 17^3 soft histogram blurred by ``_FLATTEN_BLUR`` nodes): a
+#: portrait's few mid greys then count as its skin does, and the fit learns them rather
+#: than taking them from the navy and skin beside them. ``benchmarks/one_original.py``
+#: (eight looks, each of eight photos as the one original): held out +0.445 -> +0.510,
+#: tuned +0.518 -> +0.575; ``learn.py --no-variant --size 512``, twelve pairs: +0.917 /
+#: +0.903 -> +0.931 / +0.927 (docs/benchmarks.md). The pairs' support and coverage (how
+#: far a look of few pairs is trusted) still count pixels: weighed alike too, the Hubble
+#: field's and a sea's few colours earned trust (tuned +0.650, but 12 % of cases with a
+#: photo worse than nothing, against none).
 FLATTEN_COLOURS = 1.0
 _FLATTEN_BLUR = 0.7
 #: Folds of the held-out check (leave-one-out below this many pairs).
@@ -838,8 +838,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     toned = (not monochrome and any(r.toned for r in used)
              and all(r.monochrome or r.toned is not False for r in used))
     plain = monochrome or toned  # (an edit's colours are not what such a look keeps)
-    fitted = ([_flattened(c) for c in colours] if len(colours) < FLATTEN_BELOW
-              else colours)
+    fitted = [_flattened(c) for c in colours]
     family = (None if plain or len(colours) >= EDIT_PRIOR_PAIRS
               else extrapolating_family(*_pooled(fitted)))
     look, robust, _ = _fit(fitted, monochrome, toned=toned,
