@@ -465,6 +465,40 @@ def test_a_look_from_pairs_of_few_colours_is_trusted_only_near_them():
     np.testing.assert_allclose(narrow(sea[:50]), pushed(sea[:50]), atol=0.02)  # on it: the look
 
 
+def test_a_look_from_pairs_of_some_colours_reaches_further_just_beside_them(monkeypatch):
+    """Beside a pair's colours (a node or so away) the look is followed further once the
+    pairs cover enough of natural colours (NEAR_COVERAGE); far from them it still fades
+    to no change."""
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look import learn as learned
+
+    working = default_working_space()
+    monkeypatch.setattr(learned, "TRUSTED_COVERAGE", (0.98, 0.99))  # (never trusted far)
+
+    def pushed(x):
+        return np.clip(np.asarray(x, dtype=np.float64) * 0.9 + 0.05, 0.0, 1.0)
+
+    rng = np.random.default_rng(2)
+    shown = rng.uniform(0.0, 1.0, (4000, 3))
+    shown = shown[shown[:, 0] < 0.45]  # colours with little red: half the cube
+    weights = np.ones(len(shown))
+    beside = np.array([[0.54, 0.4, 0.5], [0.54, 0.2, 0.8]])  # just beyond their reds
+    far = np.array([[0.95, 0.5, 0.5]])
+
+    def followed(look):  # how far of the way to the look each colour beside goes
+        return (np.linalg.norm(look(beside) - beside, axis=1)
+                / np.linalg.norm(pushed(beside) - beside, axis=1))
+
+    supported = learned.supported_look(pushed, shown, weights, working)
+    assert supported.trust == 0.0
+    monkeypatch.setattr(learned, "NEAR_GAIN", 1.0)
+    before = learned.supported_look(pushed, shown, weights, working)
+    # (0.81 and 0.69 of the way, against 0.51 and 0.43 by the pair's own support)
+    assert np.all(followed(supported) > 0.65) and np.all(followed(before) < 0.55)
+    assert np.all(followed(supported) > followed(before) + 0.2)
+    np.testing.assert_allclose(supported(far), far, atol=1e-3)  # far: no change
+
+
 @pytest.mark.slow
 def test_one_pair_of_one_hue_keeps_greys_where_the_look_leaves_them(tmp_path, monkeypatch):
     from wbcgrade.color.look import learn as learned
