@@ -581,11 +581,8 @@ def _flattened(part: tuple[np.ndarray, np.ndarray, np.ndarray]
     """A pair's colour pairs (sources (N, 3), targets, weights (N,)) with each weight divided
     by how common its source colour is in the pair (:data:`FLATTEN_COLOURS`): every colour
     the photo shows counts about the same, however many pixels show it."""
-    from scipy.ndimage import gaussian_filter
-
     sources, targets, weights = part
-    density = soft_histogram(sources, _SUPPORT_SIZE, weights / max(float(weights.sum()), 1e-300))
-    density = gaussian_filter(density, _FLATTEN_BLUR) * density.size
+    density = _density(sources, weights, _FLATTEN_BLUR, "reflect")
     common = interpolate_lattice(density[..., None], sources)[:, 0]
     return sources, targets, weights / np.maximum(common, 1e-6) ** FLATTEN_COLOURS
 
@@ -998,14 +995,20 @@ class CorrectedLook:
         return out.reshape(rgb.shape)
 
 
-def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(m, m, m) how well colours ``sources`` (N, 3) with ``weights`` cover each node, in
-    [0, 1]."""
+def _density(sources: np.ndarray, weights: np.ndarray, blur: float, mode: str) -> np.ndarray:
+    """(m, m, m) how dense colours ``sources`` (N, 3) with ``weights`` lie at each node of
+    the support's grid (1: as dense as if spread evenly), blurred by ``blur`` nodes
+    (``mode``: scipy's edge rule)."""
     from scipy.ndimage import gaussian_filter
 
     density = soft_histogram(sources, _SUPPORT_SIZE, weights)
-    density = gaussian_filter(density, 1.0, mode="constant") * density.size
-    return np.clip(density / PAIR_SUPPORT, 0.0, 1.0)
+    return gaussian_filter(density, blur, mode=mode) * density.size
+
+
+def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(m, m, m) how well colours ``sources`` (N, 3) with ``weights`` cover each node, in
+    [0, 1]."""
+    return np.clip(_density(sources, weights, 1.0, "constant") / PAIR_SUPPORT, 0.0, 1.0)
 
 
 #: Regions of colour the learned look reports its sureness for (:func:`colour_coverage`):
