@@ -303,13 +303,15 @@ FAMILY_TONES = 0.05
 
 
 def _colour_blocks(points: np.ndarray, blocks: int, rng: np.random.Generator) -> np.ndarray:
-    """(N,) block of each colour: k-means of ``points`` (N, 3) into ``blocks`` (seeded)."""
-    centres = points[rng.choice(len(points), blocks, replace=False)]
-    label = np.zeros(len(points), dtype=int)
-    for _ in range(10):
-        label = np.argmin(((points[:, None, :] - centres[None]) ** 2).sum(axis=2), axis=1)
-        centres = np.array([points[label == j].mean(axis=0) if np.any(label == j)
-                            else centres[j] for j in range(blocks)])
+    """(N,) block of each colour: k-means of ``points`` (N, 3) into ``blocks`` (seeded; a
+    block left empty keeps its centre, quietly: a flat photo's colours repeat)."""
+    import warnings
+
+    from scipy.cluster.vq import kmeans2
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        _, label = kmeans2(points, blocks, iter=10, minit="points", seed=rng, missing="warn")
     return label
 
 
