@@ -154,6 +154,7 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
                                  str(tmp_path / "look.cube")])
     assert steps.exit_code == 0, steps.output
     assert "10 edited photos without an original" in steps.output
+    assert "away from the pairs' colours the look is followed" in steps.output
     saved = runner.invoke(main, ["apply", str(photo), "--look", str(tmp_path / "look.cube"),
                                  "-o", str(tmp_path / "saved.png")])
     assert saved.exit_code == 0, saved.output
@@ -292,3 +293,30 @@ def test_the_family_that_extrapolates_is_chosen_within_the_pairs_and_never_from_
     dark = np.clip(rng.uniform(0.0, 0.12, (3000, 1)) + rng.normal(0.0, 0.02, (3000, 3)),
                    0.0, 1.0)
     assert extrapolating_family(dark, look(dark), np.ones(len(dark))) == "edit"
+
+
+@pytest.mark.slow
+def test_edited_photos_say_how_far_a_pairs_look_carries(photos, monkeypatch):
+    """A pair of a flower trusted only near its colours; edited photos of the other
+    scenes that all show the look say to follow it further, edited photos that show no
+    look beyond the pair's colours say to keep it near them."""
+    import wbcgrade.color.look.learn as learn
+    from wbcgrade.color.colorspace import default_working_space
+
+    working = default_working_space()
+    monkeypatch.setattr(learn, "TRUSTED_COVERAGE", (0.98, 0.99))  # (trusted only near)
+    monkeypatch.setattr(learn, "NEAR_COVERAGE", (-1.0, 0.0))  # (may be raised to 1)
+    monkeypatch.setattr(learn, "NEAR_GAIN", 1.0)
+    flower = photos["flower"].reshape(-1, 3).astype(np.float64)
+    near = learn.supported_look(bleach, flower, np.ones(len(flower)), working)
+    assert near.trust == 0.0 and near.reach == 1.0
+    others = [photos[name] for name in NAMES if name != "flower"]
+    pair = bleach(photos["flower"])
+    shown = learn.evidence_trust(near, [bleach(p) for p in others] + [pair], working)
+    kept = learn.evidence_trust(near, others + [pair], working)
+    # (0.5 and 0.0 here)
+    assert shown.trust > 0.35 and kept.trust < 0.1
+    np.testing.assert_array_equal(shown.support, near.support)
+    # a look trusted as far as it may be is left as it is
+    full = learn.SupportedLook(bleach, near.support, 1.0, 1.0)
+    assert learn.evidence_trust(full, others, working) is full

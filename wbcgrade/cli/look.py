@@ -153,6 +153,13 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
                 else "extrapolated")
         click.echo(f"  how much of each kind of colour the pairs show (the rest is {rest}): "
                    f"{sure}")
+    if found.far_trust:
+        by_coverage, by_edits = found.far_trust["by_coverage"], found.far_trust["by_edits"]
+        said = ("the edited photos without an original say as much" if by_edits <= by_coverage
+                else f"{100 * by_coverage:.0f} % by their coverage alone; the edited photos "
+                     "without an original show the look reaching further")
+        click.echo(f"  away from the pairs' colours the look is followed {100 * by_edits:.0f} % "
+                   f"of the way ({said})")
     click.echo(f"wrote {found.output}: {learned} "
                f"(mean CIEDE2000 after vs look(before) {found.delta_e:.1f}{held}; "
                f"{found.seconds:.1f} s)")

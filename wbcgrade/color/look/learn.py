@@ -69,7 +69,7 @@ from wbcgrade.color.io.images import image_extensions, read_image
 from wbcgrade.color.io.raw import RAW_SUFFIXES, RAW_WORKING_SPACE, is_raw
 from wbcgrade.color.look.edits import FAMILIES, extrapolating_family
 from wbcgrade.color.look.family import fit_look_map
-from wbcgrade.color.look.prior import posterior_statistics_look
+from wbcgrade.color.look.prior import content_noise, posterior_statistics_look
 from wbcgrade.color.look.scene import (
     SceneImage,
     SceneMatch,
@@ -85,14 +85,19 @@ from wbcgrade.color.look.set_extraction import (
     natural_statistics,
     space_scale,
 )
-from wbcgrade.color.look.statistics import palette_statistics, tinted_statistics
+from wbcgrade.color.look.statistics import (
+    PaletteStatistics,
+    look_differences,
+    palette_statistics,
+    tinted_statistics,
+)
 from wbcgrade.color.mapping.remap import TONE_LUMA, to_monochrome
 from wbcgrade.color.presets import styles_in_space
 from wbcgrade.core import fast_cpu
 from wbcgrade.errors import InputError, first_line
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
-           "SupportedLook", "supported_look", "TRUSTED_COVERAGE",
+           "SupportedLook", "supported_look", "TRUSTED_COVERAGE", "evidence_trust",
            "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "LEARN_SIZE", "LEARN_FOLDS",
@@ -701,6 +706,11 @@ class LearnResult:
     working_space : the working space of the look (config name).
     folds : folds of the held-out check (0: one pair, none).
     seconds : time taken.
+    coverage : how much of each region of colour the pairs show (:func:`colour_coverage`).
+    far_trust : with few pairs and edited photos without originals, how far the look is
+        followed away from the pairs' colours (0 not at all, 1 fully): ``by_coverage`` as
+        the pairs' coverage says, ``by_edits`` as the edited photos then say
+        (:func:`evidence_trust`); empty otherwise.
     """
     look: LearnedLook | None
     pairs: list[PairReport]
@@ -711,6 +721,7 @@ class LearnResult:
     output: Path | None = None
     edits_alone: list[str] = field(default_factory=list)
     coverage: dict[str, float] = field(default_factory=dict)
+    far_trust: dict[str, float] = field(default_factory=dict)
 
     @property
     def used(self) -> list[PairReport]:
@@ -752,6 +763,7 @@ class LearnResult:
                 "unpaired": [{"name": n, "problem": why} for n, why in self.problems],
                 "edits_without_original": list(self.edits_alone),
                 "pairs_cover": {k: round(v, 3) for k, v in self.coverage.items()},
+                "far_trust": {k: round(v, 3) for k, v in self.far_trust.items()},
                 "warnings": [f"{p.name}: {p.warning}" for p in self.pairs if p.warning]}
 
 
@@ -844,9 +856,14 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         look = _trusted_near(look, colours, working)
     if alone and not plain:
         sources, _, weights = _pooled(colours)
-        corrected = unpaired_correction(look.look, [i.after for i in read]
-                                        + [image for _, image in alone],
-                                        [i.before for i in read], sources, weights, working)
+        edits = [i.after for i in read] + [image for _, image in alone]
+        inner = look.look
+        if isinstance(inner, SupportedLook):
+            chosen = evidence_trust(inner, edits, working)
+            result.far_trust = {"by_coverage": inner.trust, "by_edits": chosen.trust}
+            inner = chosen
+        corrected = unpaired_correction(inner, edits, [i.before for i in read], sources,
+                                        weights, working)
         look = replace(look, look=corrected)
     for report, (sources, targets, weights) in zip(used, colours):
         report.delta_e = float(np.mean(_delta_e(look(sources), targets, encoding)))
@@ -969,6 +986,16 @@ TRUSTED_COVERAGE = (0.4, 0.7)
 #: once after: +0.510 -> +0.533, +0.292 -> +0.305, unchanged 12 %.
 NEAR_GAIN = 3.0
 NEAR_COVERAGE = (0.25, 0.35)
+#: With fewer pairs than :data:`EDIT_PRIOR_PAIRS`, how far their look is followed away from
+#: their colours (the trust) is then chosen by the edited photos, those without an original
+#: among them (:func:`evidence_trust`): the trusts tried, the spread of the prior about the
+#: trust the coverage gives (at most :data:`NEAR_COVERAGE`'s share of the way up to 1), and
+#: the natural palettes each candidate is pushed through (a seeded draw: their medians need
+#: no more, and each candidate's statistics cost a quarter of a second). Chosen on the
+#: tuned looks of ``benchmarks/one_original.py`` (docs/benchmarks.md).
+FAR_TRUSTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+FAR_TRUST_PRIOR = 0.3
+EVIDENCE_PALETTES = 80
 
 
 @dataclass(frozen=True)
@@ -1032,11 +1059,13 @@ class SupportedLook:
     ``x + (trust + (1 - trust) * support(x)) * (look(x) - x)``: ``support`` (m, m, m) in
     [0, 1], how well the pairs' original colours cover ``x`` (:func:`_support`, reaching
     further by :data:`NEAR_GAIN` when they cover enough); ``trust`` in [0, 1], how far
-    the look is followed away from them.
+    the look is followed away from them; ``reach``, the most the edited photos may raise
+    the trust to (:func:`evidence_trust`).
     """
     look: object
     support: np.ndarray
     trust: float
+    reach: float = 1.0
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         """Map colours: (..., 3) in [0, 1] -> (..., 3) float64 in [0, 1]."""
@@ -1063,16 +1092,17 @@ def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str
     """``look`` (fitted on pairs whose original colours are ``sources`` (N, 3) with
     ``weights``) trusted as far as those colours cover natural photos'
     (:data:`TRUSTED_COVERAGE`), and just beside them further than their own support
-    (:data:`NEAR_GAIN`, :data:`NEAR_COVERAGE`)."""
+    (:data:`NEAR_GAIN`, :data:`NEAR_COVERAGE`; the edited photos may raise the trust as
+    far as the latter's share of the way to 1: ``reach``)."""
     support = _support(sources, weights)
     density = _natural_density(working).ravel()
     covered = float(density @ support.ravel() / max(float(density.sum()), 1e-300))
     low, high = TRUSTED_COVERAGE
     near_low, near_high = NEAR_COVERAGE
-    gain = 1.0 + (NEAR_GAIN - 1.0) * float(np.clip((covered - near_low)
-                                                    / (near_high - near_low), 0.0, 1.0))
-    return SupportedLook(look, np.clip(support * gain, 0.0, 1.0),
-                         float(np.clip((covered - low) / (high - low), 0.0, 1.0)))
+    near = float(np.clip((covered - near_low) / (near_high - near_low), 0.0, 1.0))
+    trust = float(np.clip((covered - low) / (high - low), 0.0, 1.0))
+    return SupportedLook(look, np.clip(support * (1.0 + (NEAR_GAIN - 1.0) * near), 0.0, 1.0),
+                         trust, max(trust, near))
 
 
 def _trusted_near(look: LearnedLook, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
@@ -1126,13 +1156,7 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
     """
     bins = MAP_BINS
     naturals = styles_in_space(natural_palettes(), working)
-    points = grid_points(bins)
-    pushed = []
-    for hist in naturals.at_bins(bins):
-        flat = hist.ravel()
-        keep = np.flatnonzero(flat > 0)
-        pushed.append(soft_histogram(look(points[keep]), bins, flat[keep]))
-    pushed_stats = palette_statistics(np.stack(pushed))
+    pushed_stats = _pushed_statistics(look, naturals.at_bins(bins))
     hists = np.stack([image_histogram(np.asarray(e, np.float64), bins) for e in edits])
     scale = space_scale(working)
     model = posterior_statistics_look(tinted_statistics(hists, pushed_stats, space_scale=scale),
@@ -1142,3 +1166,56 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
     if model.info.get("share", 0.0) <= 0.0:
         return look
     return CorrectedLook(look, model, _support(look(sources), weights))
+
+
+def _pushed_statistics(look, hists: np.ndarray) -> PaletteStatistics:
+    """The statistics of histograms ``hists`` (K, n, n, n) pushed through ``look``."""
+    bins = hists.shape[1]
+    points = grid_points(bins)
+    pushed = []
+    for hist in hists:
+        flat = hist.ravel()
+        keep = np.flatnonzero(flat > 0)
+        pushed.append(soft_histogram(look(points[keep]), bins, flat[keep]))
+    return palette_statistics(np.stack(pushed))
+
+
+def evidence_trust(look: SupportedLook, edits: Sequence[np.ndarray], working: str
+                   ) -> SupportedLook:
+    """``look`` (a look of few pairs, trusted near their colours) followed as far away from
+    them as the edited photos ``edits`` ((h, w, 3) working-space colours, with and without
+    originals) say.
+
+    Every edited photo is the look applied to some natural photo. For each trust of
+    :data:`FAR_TRUSTS`, natural palettes pushed through the look so trusted give the
+    statistics the edits would have (tone, saturation and tint by lightness); how far the
+    edits' own statistics lie from them, against what content alone varies by
+    (:func:`~wbcgrade.color.look.prior.content_noise` for a median of that many photos),
+    is the trust's likelihood. The trust chosen is the most probable under a prior about
+    the coverage's trust (:data:`FAR_TRUST_PRIOR`), from that trust up to ``look.reach``
+    (held back, on the tuned looks, it cost the portraits and still lifes that are
+    trusted fully): where the statistics cannot tell, the coverage's trust stands.
+    """
+    from scipy.stats import multivariate_normal
+
+    if look.reach <= look.trust or len(edits) == 0:
+        return look
+    naturals = styles_in_space(natural_palettes(), working)
+    pick = np.random.default_rng(0).permutation(len(naturals.names))[:EVIDENCE_PALETTES]
+    hists = naturals.at_bins(MAP_BINS)[np.sort(pick)]
+    own = np.stack([image_histogram(np.asarray(e, np.float64), MAP_BINS) for e in edits])
+    scale = space_scale(working)
+    noise, _ = content_noise(natural_statistics(naturals), len(edits),
+                             cache=default_cache_dir())
+    tried = sorted({look.trust, look.reach,
+                    *(t for t in FAR_TRUSTS if look.trust < t < look.reach)})
+    likelihood = []
+    for trust in tried:
+        pushed = _pushed_statistics(replace(look, trust=trust), hists)
+        styles = tinted_statistics(own, pushed, space_scale=scale)
+        likelihood.append(multivariate_normal.logpdf(look_differences(styles, pushed).vector(),
+                                                     cov=noise, allow_singular=True))
+    trusts = np.linspace(look.trust, look.reach, 41)
+    log_post = (np.interp(trusts, tried, likelihood)
+                - 0.5 * ((trusts - look.trust) / FAR_TRUST_PRIOR) ** 2)
+    return replace(look, trust=float(trusts[np.argmax(log_post)]))
