@@ -983,15 +983,8 @@ TRUSTED_COVERAGE = (0.4, 0.7)
 #: the tuned looks of ``one_original.py``: mean +0.575 -> +0.597, mean of the worst
 #: photos +0.393 -> +0.413, no photo worse than nothing (a gain of 3 for every pair:
 #: +0.601, but 9 % of cases with one, all from the sea; 10: +0.617, 12 %); held out run
-#: once after: +0.510 -> +0.533, +0.292 -> +0.305, unchanged 12 %. With the edited photos
-#: choosing the trust (:func:`evidence_trust`), 10 rather than 3 (so that a quarter of the
-#: uniform density of the pairs' colours a node away gives the whole look): between 0.1
-#: and 0.6 of support the look as learned was the nearer in 23 of the 32 tuned cases
-#: (six more trusted fully, within 0.1 CIE76); tuned +0.621 -> +0.635,
-#: worst photos +0.449 -> +0.466, no photo worse than nothing; held out once after +0.546
-#: -> +0.563, +0.322 -> +0.331, unchanged 12 % (the lowest, Ektar from the sea, -0.31 ->
-#: -0.33).
-NEAR_GAIN = 10.0
+#: once after: +0.510 -> +0.533, +0.292 -> +0.305, unchanged 12 %.
+NEAR_GAIN = 3.0
 NEAR_COVERAGE = (0.25, 0.35)
 #: With fewer pairs than :data:`EDIT_PRIOR_PAIRS` and edited photos without originals, how
 #: far the pairs' look is followed away from their colours (the trust) is what the edited
