@@ -152,6 +152,7 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
                                    str(originals), "-o", str(tmp_path / "learned.png")])
     assert learned.exit_code == 0, learned.output
     assert "the look learned from 1 before/after pair and 10 edited photos" in learned.output
+    assert "of the way away from the pairs' colours" in learned.output  # (how far it carries)
     steps = runner.invoke(main, ["look", "learn", str(originals), str(edits), "-o",
                                  str(tmp_path / "look.cube")])
     assert steps.exit_code == 0, steps.output

@@ -191,6 +191,9 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
                          "the lines above)")
     encoding = ColorEncoding.of(result.working_space, result.working_space)
     described = result.describe()
+    if result.far_trust:  # (few pairs, with edits without originals: how far it carries)
+        described += (f", followed {100 * result.far_trust['by_edits']:.0f} % of the way "
+                      "away from the pairs' colours")
     grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
                   working=encoding.working,  # no regrain: the look as the pairs show it
                   info={"saved_look": {"file": described, "kind": "learned"}},
