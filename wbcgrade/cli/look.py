@@ -155,7 +155,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
                    f"{sure}")
     if found.far_trust:
         by_coverage, by_edits = found.far_trust["by_coverage"], found.far_trust["by_edits"]
-        said = ("the edited photos without an original say as much" if by_edits <= by_coverage
+        said = ("as their coverage says" if by_edits <= by_coverage
                 else f"{100 * by_coverage:.0f} % by their coverage alone; the edited photos "
                      "without an original show the look reaching further")
         click.echo(f"  away from the pairs' colours the look is followed {100 * by_edits:.0f} % "
