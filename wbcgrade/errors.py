@@ -43,6 +43,25 @@ class Worded(str):
                      name_of)
 
 
+def worded_error(error: BaseException, before: str = "", after: str = "",
+                 whole: bool = False) -> Worded:
+    """The first line of ``error``'s message (``whole``: all of it) between ``before`` and
+    ``after``, still naming the settings the message names (:meth:`Worded.worded`: the
+    command line writes them as flags)."""
+    template = getattr(error, "template", None)
+    text = template if template is not None else str(error)
+    text = text.strip() if whole and text.strip() else first_line(
+        text if template is not None else error)
+    return Worded(f"{before}{text}{after}", getattr(error, "settings", ()) if template else ())
+
+
+def worded_text(text: str, before: str = "", after: str = "") -> Worded:
+    """``text`` (a :class:`Worded` or a plain str) between ``before`` and ``after``, the
+    settings it names kept."""
+    template = getattr(text, "template", str(text))
+    return Worded(f"{before}{template}{after}", getattr(text, "settings", ()))
+
+
 class WbcgradeError(Exception):
     """A failure a user can act on (bad file, bad option, unsafe computation).
 

@@ -255,6 +255,27 @@ def test_the_pixel_limit_can_be_raised_or_lowered(tmp_path, photo, monkeypatch, 
         set_max_image_pixels(None)
 
 
+@pytest.mark.parametrize("command", [["look", "learn", "{before}", "{after}", "-o", "{out}.cube"],
+                                     ["look", "extract", "{after}", "-o", "{out}.cube"],
+                                     ["preset", "build", "{after}", "-o", "{out}.npz"]])
+def test_every_command_that_reads_photos_takes_the_pixel_limit(tmp_path, command, cli):
+    before, after = tmp_path / "before", tmp_path / "after"
+    for folder in (before, after):
+        folder.mkdir()
+        for name in ("a", "b"):
+            write_array(folder / f"{name}.png", np.full((20, 30, 3), 0.5, np.float32), "uint8")
+    args = [a.format(before=before, after=after, out=tmp_path / "out") for a in command]
+    try:
+        result = cli(*args, "--max-image-pixels", "100")
+        assert result.exit_code == 1 and "Traceback" not in result.output
+        # each photo left out says which flag lets it in, as the command line spells it
+        refused = [line for line in result.output.splitlines() if "over the limit" in line]
+        assert refused and all("--max-image-pixels 600 " in line for line in refused)
+        assert not list(tmp_path.glob("out.*"))
+    finally:
+        set_max_image_pixels(None)
+
+
 # -- 12: outputs that are not regular files --------------------------------------------------
 
 def test_device_and_pipe_outputs_are_refused(tmp_path, photo, no_grading, cli):

@@ -158,6 +158,11 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
     assert steps.exit_code == 0, steps.output
     assert "10 edited photos without an original" in steps.output
     assert "away from the pairs' colours the look is followed" in steps.output
+    # how sure the look is, region by region: the same words from either command
+    sure = [line.strip() for line in steps.output.splitlines()
+            if line.strip().startswith("how much of each kind of colour the pairs show")]
+    assert len(sure) == 1 and "skies and water" in sure[0]
+    assert f"learned look: {sure[0]}" in learned.output
     saved = runner.invoke(main, ["apply", str(photo), "--look", str(tmp_path / "look.cube"),
                                  "-o", str(tmp_path / "saved.png")])
     assert saved.exit_code == 0, saved.output

@@ -14,7 +14,7 @@ def _warn(message: str) -> None:
 
 @click.command("explore")
 @click.argument("photo", type=click.Path(path_type=str))  # the library checks it (exit 1)
-@table_options("style_dir", "presets", "save_dir", "port", "no_browser")
+@table_options("style_dir", "presets", "save_dir", "port", "no_browser", "max_image_pixels")
 def explore(photo, style_dir, presets, port, save_dir, no_browser):
     """Steer the grade of PHOTO by hand in a live page, then export it.
 

@@ -155,8 +155,12 @@ def _learned_look(style_dir: str, originals: str, options):
     from wbcgrade.color.grade.look_files import learned_grade
 
     with learn_progress("learning the look") as (progress, warn):
-        grade, _ = learned_grade(originals, style_dir, working_space=options.spaces.working,
-                                 warn=warn, progress=progress)
+        grade, result = learned_grade(originals, style_dir,
+                                      working_space=options.spaces.working, warn=warn,
+                                      progress=progress)
+    words = result.coverage_words()  # (how far it is followed: the grade's own line)
+    if words:  # on stderr: standard output may be the report's JSON
+        click.echo(f"learned look: {words}", err=True)
     return grade
 
 

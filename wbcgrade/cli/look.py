@@ -13,7 +13,7 @@ from wbcgrade.cli.grading_options import (
     table_options,
     table_rows,
 )
-from wbcgrade.cli.option_table import flag_of, option
+from wbcgrade.cli.option_table import flag_of, flag_text, option
 
 #: ``--lut-size`` of the look commands (at most 129 nodes a side).
 _LUT_SIZE = click.IntRange(2, 129)
@@ -40,7 +40,7 @@ def look() -> None:
                                      "applied in [default: sRGB-encoded Rec.709].")
 @table_options("overwrite", help="Replace an existing LUT file.")
 @table_options("as_json", help="Print what was found as JSON.")
-@table_options("no_cache")
+@table_options("no_cache", "max_image_pixels")
 def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natural,
             working_space, overwrite, as_json, no_cache):
     """Extract the look the photos in STYLE_DIR share and write it as a 3-D LUT.
@@ -73,7 +73,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
         found = extract_look_file(source, output, lut_size=lut_size, lut_format=lut_format,
                                   strength=look_strength, natural=natural,
                                   working_space=working_space, overwrite=overwrite,
-                                  warn=lambda m: click.echo(f"Warning: {m}", err=True),
+                                  warn=lambda m: click.echo(f"Warning: {flag_text(m)}", err=True),
                                   on_style=on_style, on_look=on_look)
     if found.outcome is not None:  # its words name flags
         found.outcome = found.outcome.named(flag_of)
@@ -113,6 +113,7 @@ def extract(style_dir, preset, output, lut_size, lut_format, look_strength, natu
                                      "sRGB-encoded Rec.709].")
 @table_options("overwrite", help="Replace an existing output file.")
 @table_options("as_json", help="Print the report as JSON.")
+@table_options("max_image_pixels")
 def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     """Learn the look of a photographer's edits from BEFORE/AFTER pairs.
 
@@ -147,19 +148,9 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     held = ("" if found.held_out is None else
             f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
     learned = found.describe().replace("the look", f"the {kind}", 1)
-    if found.coverage:
-        sure = ", ".join(f"{name} {100 * share:.0f} %" for name, share in found.coverage.items())
-        rest = ("corrected by the edits without an original" if found.edits_alone
-                else "extrapolated")
-        click.echo(f"  how much of each kind of colour the pairs show (the rest is {rest}): "
-                   f"{sure}")
-    if found.far_trust:
-        by_coverage, by_edits = found.far_trust["by_coverage"], found.far_trust["by_edits"]
-        said = ("as their coverage says" if by_edits <= by_coverage
-                else f"{100 * by_coverage:.0f} % by their coverage alone; the edited photos "
-                     "without an original show the look reaching further")
-        click.echo(f"  away from the pairs' colours the look is followed {100 * by_edits:.0f} % "
-                   f"of the way ({said})")
+    for words in (found.coverage_words(), found.reach_words()):
+        if words:
+            click.echo(f"  {words}")
     click.echo(f"wrote {found.output}: {learned} "
                f"(mean CIEDE2000 after vs look(before) {found.delta_e:.1f}{held}; "
                f"{found.seconds:.1f} s)")

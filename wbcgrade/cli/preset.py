@@ -8,6 +8,7 @@ import os
 import click
 
 from wbcgrade.cli.grading_options import LazyOptionsCommand, check_photo, table_options, table_rows
+from wbcgrade.cli.option_table import flag_text
 
 
 @click.group("preset")
@@ -27,6 +28,7 @@ def preset() -> None:
                                      "alias, e.g. acescct), recorded in the preset [default: "
                                      "sRGB-encoded Rec.709].")
 @table_options("compact")
+@table_options("max_image_pixels")
 def build(folder, output, preset_bins, preset_width, description, overwrite, no_cache,
           working_space, compact):
     """Build a preset from the photos in FOLDER (non-images are skipped).
@@ -56,7 +58,7 @@ def build(folder, output, preset_bins, preset_width, description, overwrite, no_
     with style_progress() as progress:
         styles = load_style_folder(
             folder, bins, cache=HistogramCache(enabled=not no_cache),
-            warn=lambda m: click.echo(f"Warning: {m}", err=True), progress=progress,
+            warn=lambda m: click.echo(f"Warning: {flag_text(m)}", err=True), progress=progress,
             working_space=working_space)
     path = save_preset(output, styles, width=width, description=description, overwrite=overwrite,
                        compact=compact)

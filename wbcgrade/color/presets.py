@@ -75,7 +75,7 @@ from wbcgrade.color.io.preset_names import (
 )
 from wbcgrade.color.io.raw import is_raw
 from wbcgrade.color.mapping.remap import apply_color_map
-from wbcgrade.errors import InputError, OptionError, Worded
+from wbcgrade.errors import InputError, OptionError, Worded, worded_error
 from wbcgrade.limits import (
     MAX_MAP_SIZE,
     check_histogram_cells,
@@ -338,7 +338,7 @@ def _read_histograms(files: list[Path], bins: int, cache: HistogramCache, max_pi
                 progress(number + 1, len(files), files[number + 1].name)
             if exc is not None:
                 if path.suffix.lower() in _IMAGE_SUFFIXES or "not a readable image" not in str(exc):
-                    warn(f"skipping {exc}")
+                    warn(worded_error(exc, "skipping ", whole=True))
                 else:
                     warn(f"skipping {path.name}: not an image")
                 continue

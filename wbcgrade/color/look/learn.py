@@ -94,7 +94,7 @@ from wbcgrade.color.look.statistics import (
 from wbcgrade.color.mapping.remap import TONE_LUMA, to_monochrome
 from wbcgrade.color.presets import styles_in_space
 from wbcgrade.core import fast_cpu
-from wbcgrade.errors import InputError, first_line
+from wbcgrade.errors import InputError, worded_error, worded_text
 
 __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_correction",
            "SupportedLook", "supported_look", "TRUSTED_COVERAGE", "evidence_trust",
@@ -734,6 +734,28 @@ class LearnResult:
                 + (f" and {alone} edited photo{'s' * (alone != 1)} without an original"
                    if alone else ""))
 
+    def coverage_words(self) -> str | None:
+        """In words: how much of each region of colour the pairs show, and what becomes of
+        the rest (None when nothing was learned)."""
+        if not self.coverage:
+            return None
+        sure = ", ".join(f"{name} {100 * share:.0f} %" for name, share in self.coverage.items())
+        rest = ("corrected by the edits without an original" if self.edits_alone
+                else "extrapolated")
+        return f"how much of each kind of colour the pairs show (the rest is {rest}): {sure}"
+
+    def reach_words(self) -> str | None:
+        """In words: how far the look is followed away from the pairs' colours, and what
+        said so (None unless the edited photos were asked: :attr:`far_trust`)."""
+        if not self.far_trust:
+            return None
+        by_coverage, by_edits = self.far_trust["by_coverage"], self.far_trust["by_edits"]
+        said = ("as their coverage says" if by_edits <= by_coverage
+                else f"{100 * by_coverage:.0f} % by their coverage alone; the edited photos "
+                     "without an original show the look reaching further")
+        return (f"away from the pairs' colours the look is followed {100 * by_edits:.0f} % "
+                f"of the way ({said})")
+
     def _mean(self, key: str) -> float | None:
         values = [getattr(p, key) for p in self.used if getattr(p, key) is not None]
         return float(np.mean(values)) if values else None
@@ -809,7 +831,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         try:
             images = read_pair(pair, working)
         except (InputError, OSError) as exc:
-            report.problem = f"unreadable: {first_line(exc)}"
+            report.problem = worded_error(exc, "unreadable: ")
         else:
             registration = register_pair(images)
             if registration is None:
@@ -823,7 +845,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                 parts.append((report, pair_colours(images, registration)))
                 read.append(images)
         if report.problem:
-            warn(f"{pair.name}: {report.problem}; left out")
+            warn(worded_text(report.problem, f"{pair.name}: ", "; left out"))
     alone: list[tuple[str, np.ndarray]] = []
     for number, path in enumerate(edits_alone):
         if progress:
@@ -831,7 +853,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
         try:
             alone.append((path.stem, _read_small(Path(path), working)))
         except (InputError, OSError) as exc:
-            warn(f"{path.stem}: unreadable: {first_line(exc)}; left out")
+            warn(worded_error(exc, f"{path.stem}: unreadable: ", "; left out"))
     if progress:
         progress(total, total, "")
     result = LearnResult(None, reports, list(problems), working,
