@@ -1196,14 +1196,18 @@ def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[n
 
 
 def _pushed_statistics(look, hists: np.ndarray) -> PaletteStatistics:
-    """The statistics of histograms ``hists`` (K, n, n, n) pushed through ``look``."""
+    """The statistics of histograms ``hists`` (K, n, n, n) pushed through ``look``: the
+    look is evaluated once on the grid's nodes the histograms hold (they share the grid),
+    not once a histogram."""
     bins = hists.shape[1]
-    points = grid_points(bins)
+    flats = hists.reshape(len(hists), -1)
+    held = np.flatnonzero((flats > 0).any(axis=0))
+    mapped = np.zeros((flats.shape[1], 3))
+    mapped[held] = look(grid_points(bins)[held])
     pushed = []
-    for hist in hists:
-        flat = hist.ravel()
+    for flat in flats:
         keep = np.flatnonzero(flat > 0)
-        pushed.append(soft_histogram(look(points[keep]), bins, flat[keep]))
+        pushed.append(soft_histogram(mapped[keep], bins, flat[keep]))
     return palette_statistics(np.stack(pushed))
 
 
