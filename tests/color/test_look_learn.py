@@ -361,6 +361,36 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
     assert result.used[0].delta_e < 1.5
 
 
+
+def test_one_pair_draws_as_many_colour_pairs_as_a_shoot_of_many(tmp_path, photos, monkeypatch):
+    """A single pair is sampled as densely as several together (``PAIRS_IN_ALL`` shared
+    among them, never under ``PAIRS_PER_PHOTO`` each): one photo's colours are all the
+    look is learned from."""
+    import wbcgrade.color.look.learn as learn
+
+    monkeypatch.setattr(learn, "PAIRS_PER_PHOTO", 400)
+    monkeypatch.setattr(learn, "PAIRS_IN_ALL", 6000)
+    drawn = []
+    real = learn.pair_colours
+
+    def spy(*args, **kwargs):
+        found = real(*args, **kwargs)
+        drawn.append(len(found[0]))
+        return found
+
+    monkeypatch.setattr(learn, "pair_colours", spy)
+    before, after = make_pairs(tmp_path / "one", photos, names=("sunset",))
+    learn_look(pair_files(before, after)[0])
+    assert drawn == [6000]  # the sunset's overlap holds more than that
+    drawn.clear()
+    before, after = make_pairs(tmp_path / "five", photos)
+    learn_look(pair_files(before, after)[0])
+    assert drawn == [1200] * 5
+    monkeypatch.setattr(learn, "PAIRS_IN_ALL", 1000)
+    drawn.clear()
+    learn_look(pair_files(before, after)[0])
+    assert drawn == [400] * 5
+
 @pytest.mark.slow
 def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):
     from tests.color.io.test_raw import write_dng

@@ -101,14 +101,21 @@ __all__ = ["PairFiles", "FileMatch", "match_files", "CorrectedLook", "unpaired_c
            "PairImages", "Registration", "LearnedLook", "PairReport",
            "LearnResult", "pair_files", "learn_space", "read_pair", "register_pair",
            "pair_colours", "learn_look", "LEARN_SIZE", "LEARN_FOLDS",
-           "PAIRS_PER_PHOTO", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
+           "PAIRS_PER_PHOTO", "PAIRS_IN_ALL", "MONO_CHROMA", "TONED_SPREAD", "KEYPOINT_SIZE",
            "CORRECTION_NODES", "CORRECTION_SMOOTHNESS"]
 
 #: Long side (pixels) the photos are registered and sampled at (the scene match's size).
 LEARN_SIZE = 768
-#: Colour pairs drawn from each photo pair. Measured on ``benchmarks/learn.py`` (12 pairs,
-#: 16 film looks): 4 000 or 20 000 a pair recover the same (+0.81 either way, within 0.003).
+#: Colour pairs drawn from each photo pair: at least ``PAIRS_PER_PHOTO``, and
+#: ``PAIRS_IN_ALL`` shared among the pairs when they are few. Twelve pairs hold enough
+#: colours at 4 000 or 20 000 a pair (``benchmarks/learn.py``, 16 film looks: +0.81 either
+#: way, within 0.003); one pair does not: 5 000 of a 768-pixel photo's 300 000 miss the
+#: colours just beside those drawn, and the look there is a guess (four looks learned from
+#: each of four broad originals at 768 pixels, ``benchmarks/one_original.py``: mean
+#: recovered +0.766 with 5 000, +0.806 with 80 000, +0.810 with 150 000, +0.804 with every
+#: pixel; learning a 16-megapixel shoot took 6 s, 8 s and 9.5 s: docs/benchmarks.md).
 PAIRS_PER_PHOTO = 5000
+PAIRS_IN_ALL = 80_000
 #: The lattice correction of the learned look (what tone curves and colour mixing cannot
 #: hold; :func:`wbcgrade.color.look.scene_fit.fit_correction`): nodes a side and smoothness. A scene
 #: look's (9 nodes, 1e-3: pairs of one scene) smooths a film look's fine structure away:
@@ -823,6 +830,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
     encoding = ColorEncoding.of(working, working)
     reports, parts, read = [], [], []
     total = len(pairs) + len(edits_alone)
+    drawn = max(PAIRS_PER_PHOTO, PAIRS_IN_ALL // max(len(pairs), 1))
     for number, pair in enumerate(pairs):
         if progress:
             progress(number, total, pair.name)
@@ -842,7 +850,7 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                 report.coverage = registration.coverage
                 report.monochrome = images.monochrome
                 report.toned = images.toned
-                parts.append((report, pair_colours(images, registration)))
+                parts.append((report, pair_colours(images, registration, drawn)))
                 read.append(images)
         if report.problem:
             warn(worded_text(report.problem, f"{pair.name}: ", "; left out"))
