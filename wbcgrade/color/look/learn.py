@@ -113,7 +113,7 @@ LEARN_SIZE = 768
 #: colours just beside those drawn, and the look there is a guess (four looks learned from
 #: each of four broad originals at 768 pixels, ``benchmarks/one_original.py``: mean
 #: recovered +0.766 with 5 000, +0.806 with 80 000, +0.810 with 150 000, +0.804 with every
-#: pixel; learning a 16-megapixel shoot took 6 s, 8 s and 9.5 s: docs/benchmarks.md).
+#: pixel; learning a 16-megapixel shoot took about 6, 8 and 9.5 s: docs/benchmarks.md).
 PAIRS_PER_PHOTO = 5000
 PAIRS_IN_ALL = 80_000
 #: The lattice correction of the learned look (what tone curves and colour mixing cannot
