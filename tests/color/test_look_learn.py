@@ -361,7 +361,6 @@ def test_a_single_pair_learns_without_a_held_out_check(tmp_path, photos):
     assert result.used[0].delta_e < 1.5
 
 
-
 def test_one_pair_draws_as_many_colour_pairs_as_a_shoot_of_many(tmp_path, photos, monkeypatch):
     """A single pair is sampled as densely as several together (``PAIRS_IN_ALL`` shared
     among them, never under ``PAIRS_PER_PHOTO`` each): one photo's colours are all the
@@ -390,6 +389,7 @@ def test_one_pair_draws_as_many_colour_pairs_as_a_shoot_of_many(tmp_path, photos
     drawn.clear()
     learn_look(pair_files(before, after)[0])
     assert drawn == [400] * 5
+
 
 @pytest.mark.slow
 def test_raw_originals_are_read_and_the_look_learned_in_their_working_space(tmp_path, photos, cli):

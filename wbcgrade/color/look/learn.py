@@ -115,6 +115,7 @@ LEARN_SIZE = 768
 #: recovered +0.766 with 5 000, +0.806 with 80 000, +0.810 with 150 000, +0.804 with every
 #: pixel; learning a 16-megapixel shoot took about 6, 8 and 9.5 s: docs/benchmarks.md).
 PAIRS_PER_PHOTO = 5000
+#: Colour pairs the pairs share when they are few (above).
 PAIRS_IN_ALL = 80_000
 #: The lattice correction of the learned look (what tone curves and colour mixing cannot
 #: hold; :func:`wbcgrade.color.look.scene_fit.fit_correction`): nodes a side and smoothness. A scene
