@@ -28,6 +28,12 @@ photo is graded):
 5. for a black-and-white film, the largest chroma (max - min channel, 8-bit
    codes) of any output: 0 is black and white.
 
+``--advised`` (with ``--originals 1``): when the learner names an edited photo whose
+original would teach the look more (``original_to_add`` in ``look learn --json``), the
+look is learned again with that original beside the first, and, for comparison, with
+the next photo's original beside it instead (two originals either way); a last table
+gives the three.
+
 Looks are in two groups: ``TUNED`` (looked at while the learning's settings
 were chosen) and ``HELD_OUT`` (not looked at then; the targets are for them).
 
@@ -151,6 +157,47 @@ def score(grade, photos: dict, names: list[str], table: np.ndarray) -> tuple[lis
     return recovered, chroma
 
 
+def advised_rows(folder: Path, photos: dict, style: list[str], graded: list[str],
+                 table: np.ndarray, report) -> dict:
+    """With one original: the original the learner asks for (``report.advice``) and the
+    next photo's, each learned beside the first; their mean and worst recovered."""
+    out = {"advised": None if report.advice is None else report.advice["name"]}
+    if report.advice is None:
+        return out
+    advised = report.advice["name"]
+    for key, second in (("next", style[1]), ("with_advised", advised)):
+        names = [style[0], second] + [n for n in style[1:] if n != second]
+        grade, _, _ = learn(folder, photos, names, table, key, 2)
+        recovered, _ = score(grade, photos, graded, table)
+        out[key] = (float(np.mean(recovered)), float(np.min(recovered)))
+    return out
+
+
+def print_advised(rows: list[dict]) -> None:
+    """The table of ``--advised``: one original, then two (the next, the one asked for)."""
+    print(f"\n{'look':26s} {'group':8s} {'one':>6s}  {'asks for':18s} {'+ next':>13s} "
+          f"{'+ asked for':>13s}")
+    for row in rows:
+        if not row.get("advised"):
+            print(f"{row['look']:26s} {row['group']:8s} {row['mean']:+6.3f}  (nothing asked)")
+            continue
+        print(f"{row['look']:26s} {row['group']:8s} {row['mean']:+6.3f}  "
+              f"{row['advised'][:18]:18s} {row['next'][0]:+6.3f} {row['next'][1]:+6.3f} "
+              f"{row['with_advised'][0]:+6.3f} {row['with_advised'][1]:+6.3f}")
+    for group in ("tuned", "held-out"):
+        picked = [r for r in rows if r["group"] == group]
+        if picked:
+            def mean(key, i, picked=picked):  # (with no advice the one original stands)
+                return np.mean([r[key][i] if r.get("advised") else
+                                (r["mean"], r["worst"])[i] for r in picked])
+            one = np.mean([r["mean"] for r in picked])
+            print(f"{group:9s}: one original {one:+.3f} (worst photo mean "
+                  f"{np.mean([r['worst'] for r in picked]):+.3f}); with the next "
+                  f"{mean('next', 0):+.3f} (worst photo mean {mean('next', 1):+.3f}); with "
+                  f"the one asked for {mean('with_advised', 0):+.3f} "
+                  f"(worst photo mean {mean('with_advised', 1):+.3f})")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--photos", type=Path, default=SHARED / "photos")
@@ -164,8 +211,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--originals", type=int, default=None, metavar="K",
                         help="only the first K of the --pairs edited photos have their "
                              "original (the others are edited photos without one)")
+    parser.add_argument("--advised", action="store_true",
+                        help="with --originals 1: learn again with the original the learner "
+                             "asks for, and with the next one, beside the first")
     parser.add_argument("--json", type=Path, default=None, help="write every number here")
     args = parser.parse_args(argv)
+    if args.advised and args.originals != 1:
+        raise SystemExit("--advised needs --originals 1")
 
     looks = args.only or (QUICK if args.quick else TUNED + HELD_OUT)
     names = sorted(p.stem for p in args.photos.glob("*.jpg") if p.stem not in EXCLUDED)
@@ -197,6 +249,8 @@ def main(argv: list[str] | None = None) -> None:
                    "held_out_delta_e": report.held_out,
                    "monochrome_learned": report.look.monochrome, "max_chroma": chroma,
                    "pairs_used": len(report.used)}
+            if args.advised:
+                row.update(advised_rows(Path(tmp), photos, style, graded, table, report))
             if not args.no_variant:
                 grade, seconds, report = learn(Path(tmp), photos, style, table, "cropped",
                                                args.originals)
@@ -236,6 +290,8 @@ def main(argv: list[str] | None = None) -> None:
         print("black and white: " + ", ".join(
             f"{r['look']} learned {'B&W' if r['monochrome_learned'] else 'colour'}, "
             f"largest output chroma {r['max_chroma']}/255" for r in mono))
+    if args.advised:
+        print_advised(rows)
     if args.json:
         args.json.write_text(json.dumps({"pairs": args.pairs, "size": args.size,
                                          "rows": rows}, indent=1))

@@ -75,8 +75,9 @@ def test_edits_without_originals_correct_the_look_where_the_pair_shows_little(
     alone already comes within 6 % of the truth here, and the correction is measured
     where there is more to correct.)"""
     import wbcgrade.color.look.learn as learn
+    from wbcgrade.color.look.edits import FamilyChoice
 
-    monkeypatch.setattr(learn, "extrapolating_family", lambda *args: "edit")
+    monkeypatch.setattr(learn, "choose_family", lambda *args: FamilyChoice("edit"))
     before, after = shoot(tmp_path, photos, bleach, pair="sunset")
     with_edits, result = learned_grade(before, after)
     assert len(result.used) == 1 and len(result.edits_alone) == 10
@@ -173,6 +174,49 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
     truth = np.round(bleach(photos["astronaut"]) * 255)
     before = np.round(photos["astronaut"] * 255)
     assert np.mean(np.abs(a - truth)) < 0.6 * np.mean(np.abs(before - truth))
+
+
+@pytest.mark.slow
+def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, photos):
+    """One pair of a coffee cup (about half of what natural photos hold) beside edited
+    photos without originals: the report names the edited photo whose original would
+    widen what the pairs show most, judged from its edited colours, and it is the one
+    whose real original does; the command says it in words (and --json as
+    ``original_to_add``)."""
+    import json
+
+    import wbcgrade.color.look.learn as learn
+    from wbcgrade.cli import main
+    from wbcgrade.color.colorspace import default_working_space
+
+    originals, edits = shoot(tmp_path, photos, bleach, pair="coffee")
+    _, result = learned_grade(originals, edits)
+    advice = result.advice
+    assert advice is not None and advice["with_it"] >= advice["now"] + learn.ADVICE_GAIN
+    working = default_working_space()
+    coffee = photos["coffee"].reshape(-1, 3).astype(np.float64)
+    support = learn._support(coffee, np.ones(len(coffee)))
+    truly = {}  # the share the pair and each real original (a half photo) would cover
+    for path in edits.iterdir():
+        if path.stem != "coffee":
+            name, side = path.stem.rsplit("_", 1)
+            half = photos[name].shape[1] // 2
+            part = photos[name][:, :half] if side == "left" else photos[name][:, half:]
+            part = part.reshape(-1, 3).astype(np.float64)
+            theirs = learn._support(part, np.ones(len(part)))
+            truly[path.stem] = learn._covered(np.maximum(support, theirs), working)
+    assert max(truly, key=truly.get) == advice["name"]
+    assert abs(truly[advice["name"]] - advice["with_it"]) < 0.1
+    runner = CliRunner()
+    said = runner.invoke(main, ["look", "learn", str(originals), str(edits), "-o",
+                                str(tmp_path / "look.cube")])
+    assert said.exit_code == 0, said.output
+    assert f"the original of {advice['name']} would teach the look much more" in said.output
+    assert json.loads(json.dumps(result.as_dict()))["original_to_add"]["name"] == advice["name"]
+    # a pair that shows as much as the others could add is not asked to grow
+    (tmp_path / "broad").mkdir()
+    _, broad = learned_grade(*shoot(tmp_path / "broad", photos, bleach, pair="sunset"))
+    assert broad.advice is None
 
 
 def test_originals_need_style_photos_and_no_saved_look(tmp_path):
@@ -301,6 +345,47 @@ def test_the_family_that_extrapolates_is_chosen_within_the_pairs_and_never_from_
     dark = np.clip(rng.uniform(0.0, 0.12, (3000, 1)) + rng.normal(0.0, 0.02, (3000, 3)),
                    0.0, 1.0)
     assert extrapolating_family(dark, look(dark), np.ones(len(dark))) == "edit"
+
+
+def _jumbled(rgb):
+    """A look no global family holds: a coarse lattice of random shifts."""
+    from scipy.ndimage import map_coordinates
+
+    shifts = np.random.default_rng(0).uniform(-0.15, 0.15, (5, 5, 5, 3))
+    flat = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
+    moved = np.stack([map_coordinates(shifts[..., c], flat.T * 4, order=1) for c in range(3)],
+                     axis=1)
+    return np.clip(flat + moved, 0.0, 1.0).reshape(np.shape(rgb))
+
+
+def test_a_look_its_family_carries_within_the_pair_is_trusted_away_from_its_colours(
+        photos, monkeypatch):
+    """How well the chosen family carries a pair's edit to the pair's own held-out colours
+    (its skill) raises how far the look is followed away from them: a film-like look it
+    carries is followed fully, a jumble of colours it cannot carry stays near the pair,
+    and a pair of one hue (whose held-out blues lie beside the others) is not raised."""
+    import wbcgrade.color.look.learn as learn
+    from tests.color.test_look_learn import _one_hue
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look.edits import choose_family
+
+    working = default_working_space()
+    flower = photos["flower"].reshape(-1, 3).astype(np.float64)
+    ones = np.ones(len(flower))
+    carried = choose_family(flower, bleach(flower), ones)
+    jumbled = choose_family(flower, _jumbled(flower), ones)
+    # (0.95 and 0.37 here)
+    assert carried.skill > 0.9 and jumbled.skill < 0.5
+    monkeypatch.setattr(learn, "TRUSTED_COVERAGE", (0.98, 0.99))  # (trusted only near)
+    monkeypatch.setattr(learn, "NEAR_COVERAGE", (-1.0, 0.0))  # (may be raised to 1)
+    plain = learn.supported_look(bleach, flower, ones, working)
+    assert plain.trust == 0.0 and plain.reach == 1.0
+    assert learn.supported_look(bleach, flower, ones, working, carried.skill).trust == 1.0
+    assert learn.supported_look(_jumbled, flower, ones, working, jumbled.skill).trust == 0.0
+    monkeypatch.undo()
+    sea = _one_hue().reshape(-1, 3)
+    assert choose_family(sea, bleach(sea), np.ones(len(sea))).skill > learn.SKILLED_TRUST[1]
+    assert learn.supported_look(bleach, sea, np.ones(len(sea)), working, 1.0).trust == 0.0
 
 
 @pytest.mark.slow

@@ -158,9 +158,11 @@ def _learned_look(style_dir: str, originals: str, options):
         grade, result = learned_grade(originals, style_dir,
                                       working_space=options.spaces.working, warn=warn,
                                       progress=progress)
-    words = result.coverage_words()  # (how far it is followed: the grade's own line)
-    if words:  # on stderr: standard output may be the report's JSON
-        click.echo(f"learned look: {words}", err=True)
+    # (how far it is followed: the grade's own line); on stderr: standard output may be
+    # the report's JSON
+    for words in (result.coverage_words(), result.advice_words()):
+        if words:
+            click.echo(f"learned look: {words}", err=True)
     return grade
 
 

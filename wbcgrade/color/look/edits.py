@@ -25,7 +25,7 @@ import numpy as np
 from wbcgrade.color.colorspace import REC709_LUMA
 
 __all__ = ["Edit", "random_edit", "fit_edit", "SPREADS", "CurvesEdit", "fit_curves_edit",
-           "extrapolating_family", "FAMILIES"]
+           "extrapolating_family", "choose_family", "FamilyChoice", "FAMILIES"]
 
 _LUMA = np.array(REC709_LUMA)
 
@@ -292,7 +292,7 @@ def fit_curves_edit(sources: np.ndarray, targets: np.ndarray, weights: np.ndarra
 
 #: The families a pair's look is extrapolated with: name -> fit(sources, targets, weights).
 FAMILIES = {"edit": fit_edit, "curves": fit_curves_edit}
-#: Blocks of colour held out in turn by :func:`extrapolating_family`, and the evaluations
+#: Blocks of colour held out in turn by :func:`choose_family`, and the evaluations
 #: its quick fits of the raw editor's controls may take (the full fit's 200 take seconds).
 FAMILY_BLOCKS = 4
 FAMILY_QUICK_NFEV = 40
@@ -315,28 +315,44 @@ def _colour_blocks(points: np.ndarray, blocks: int, rng: np.random.Generator) ->
     return label
 
 
-def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
-                         points: int = EDIT_POINTS, blocks: int = FAMILY_BLOCKS) -> str:
-    """The name (in :data:`FAMILIES`) of the family that best carries the pairs' edit to
-    colours they do not show, judged within the pairs: their colours fall in ``blocks``
-    blocks of colour and in as many bands of luma, each held out in turn while both
-    families are fitted to the others (quick fits), and the family whose fits come nearer
-    the held-out targets (squared error) wins; pairs whose colours leave a third of the
-    tonal range nearly empty (:data:`FAMILY_TONES`) keep the raw editor's controls. A
-    film-like curve follows a stock from a photo with a range of values; from a
-    near-black photo or a sea of blues the raw editor's controls guess more safely."""
+@dataclass(frozen=True)
+class FamilyChoice:
+    """The family a pair's look is extrapolated with (:data:`FAMILIES`), and how well it
+    carried the pairs' edit to their own held-out colours: ``skill`` is 1 minus its
+    squared error there over no change's (1: exact, 0: no better than no change; 0 when
+    there was too little to judge)."""
+    name: str
+    skill: float = 0.0
+
+
+def choose_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                  points: int = EDIT_POINTS, blocks: int = FAMILY_BLOCKS) -> FamilyChoice:
+    """The family (in :data:`FAMILIES`) that best carries the pairs' edit to colours they
+    do not show, judged within the pairs: their colours fall in ``blocks`` blocks of
+    colour and in as many bands of luma, each held out in turn while both families are
+    fitted to the others (quick fits), and the family whose fits come nearer the held-out
+    targets (squared error) wins; pairs whose colours leave a third of the tonal range
+    nearly empty (:data:`FAMILY_TONES`) keep the raw editor's controls. A film-like curve
+    follows a stock from a photo with a range of values; from a near-black photo or a
+    sea of blues the raw editor's controls guess more safely.
+
+    Parameters
+    ----------
+    sources, targets : (N, 3) the pairs' colours before and after.
+    weights : (N,) how much each counts.
+    """
     sources, targets, weights = _as_pairs(sources, targets, weights)
     if len(sources) < 4 * blocks or not weights.sum() > 0:
-        return "edit"
+        return FamilyChoice("edit")
     thirds = np.bincount(np.clip((sources @ _LUMA * 3).astype(int), 0, 2), weights, 3)
-    if thirds.min() < FAMILY_TONES * weights.sum():
-        return "edit"
+    tones = bool(thirds.min() >= FAMILY_TONES * weights.sum())
     rng = np.random.default_rng(0)
     sources, targets, _ = _drawn(sources, targets, weights, points, rng)
     label = _colour_blocks(sources, blocks, rng)
     luma = sources @ _LUMA
     tone = np.searchsorted(np.quantile(luma, np.linspace(0, 1, blocks + 1)[1:-1]), luma)
     errors = {"edit": 0.0, "curves": 0.0}
+    unchanged = 0.0
     for held in [label == b for b in range(blocks)] + [tone == b for b in range(blocks)]:
         kept = ~held
         if not held.any() or kept.sum() < 2 * blocks:
@@ -348,4 +364,13 @@ def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.n
                                           max_nfev=FAMILY_QUICK_NFEV)}
         for name, fitted in fits.items():
             errors[name] += float(np.sum((fitted(sources[held]) - targets[held]) ** 2))
-    return "curves" if errors["curves"] < errors["edit"] else "edit"
+        unchanged += float(np.sum((sources[held] - targets[held]) ** 2))
+    name = "curves" if tones and errors["curves"] < errors["edit"] else "edit"
+    skill = 1.0 - errors[name] / unchanged if unchanged > 0 else 0.0
+    return FamilyChoice(name, float(skill))
+
+
+def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
+                         points: int = EDIT_POINTS, blocks: int = FAMILY_BLOCKS) -> str:
+    """The name of the family :func:`choose_family` chooses."""
+    return choose_family(sources, targets, weights, points, blocks).name

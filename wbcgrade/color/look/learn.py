@@ -67,7 +67,7 @@ from wbcgrade.color.histogram import grid_points, image_histogram, soft_histogra
 from wbcgrade.color.io.cache import default_cache_dir
 from wbcgrade.color.io.images import image_extensions, read_image
 from wbcgrade.color.io.raw import RAW_SUFFIXES, RAW_WORKING_SPACE, is_raw
-from wbcgrade.color.look.edits import FAMILIES, extrapolating_family
+from wbcgrade.color.look.edits import FAMILIES, choose_family, extrapolating_family
 from wbcgrade.color.look.family import fit_look_map
 from wbcgrade.color.look.prior import content_noise, posterior_statistics_look
 from wbcgrade.color.look.scene import (
@@ -716,9 +716,14 @@ class LearnResult:
     seconds : time taken.
     coverage : how much of each region of colour the pairs show (:func:`colour_coverage`).
     far_trust : with few pairs and edited photos without originals, how far the look is
-        followed away from the pairs' colours (0 not at all, 1 fully): ``by_coverage`` as
-        the pairs' coverage says, ``by_edits`` as the edited photos then say
+        followed away from the pairs' colours (0 not at all, 1 fully): ``by_pairs`` as
+        the pairs say (their coverage and how well the look carried their own held-out
+        colours: :func:`supported_look`), ``by_edits`` as the edited photos then say
         (:func:`evidence_trust`); empty otherwise.
+    advice : with few pairs, the edited photo without an original whose original would
+        show the look most of what the pairs do not (:func:`teaching_original`):
+        ``name``, the share of natural photos' colours the pairs cover ``now`` and
+        ``with_it``; None when no such photo would add much.
     """
     look: LearnedLook | None
     pairs: list[PairReport]
@@ -730,6 +735,7 @@ class LearnResult:
     edits_alone: list[str] = field(default_factory=list)
     coverage: dict[str, float] = field(default_factory=dict)
     far_trust: dict[str, float] = field(default_factory=dict)
+    advice: dict | None = None
 
     @property
     def used(self) -> list[PairReport]:
@@ -757,12 +763,21 @@ class LearnResult:
         said so (None unless the edited photos were asked: :attr:`far_trust`)."""
         if not self.far_trust:
             return None
-        by_coverage, by_edits = self.far_trust["by_coverage"], self.far_trust["by_edits"]
-        said = ("as their coverage says" if by_edits <= by_coverage
-                else f"{100 * by_coverage:.0f} % by their coverage alone; the edited photos "
+        by_pairs, by_edits = self.far_trust["by_pairs"], self.far_trust["by_edits"]
+        said = ("as the pairs themselves say" if by_edits <= by_pairs
+                else f"{100 * by_pairs:.0f} % by the pairs alone; the edited photos "
                      "without an original show the look reaching further")
         return (f"away from the pairs' colours the look is followed {100 * by_edits:.0f} % "
                 f"of the way ({said})")
+
+    def advice_words(self) -> str | None:
+        """In words: the original worth adding to learn more of the look (None: none)."""
+        if not self.advice:
+            return None
+        return (f"the original of {self.advice['name']} would teach the look much more: "
+                f"with it the pairs would show {100 * self.advice['with_it']:.0f} % of the "
+                f"colours photos hold, against {100 * self.advice['now']:.0f} % now; add it "
+                "to the originals")
 
     def _mean(self, key: str) -> float | None:
         values = [getattr(p, key) for p in self.used if getattr(p, key) is not None]
@@ -794,6 +809,8 @@ class LearnResult:
                 "edits_without_original": list(self.edits_alone),
                 "pairs_cover": {k: round(v, 3) for k, v in self.coverage.items()},
                 "far_trust": {k: round(v, 3) for k, v in self.far_trust.items()},
+                "original_to_add": None if not self.advice else {
+                    k: v if k == "name" else round(v, 3) for k, v in self.advice.items()},
                 "warnings": [f"{p.name}: {p.warning}" for p in self.pairs if p.warning]}
 
 
@@ -879,19 +896,21 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
              and all(r.monochrome or r.toned is not False for r in used))
     plain = monochrome or toned  # (an edit's colours are not what such a look keeps)
     fitted = [_flattened(c) for c in colours]
-    family = (None if plain or len(colours) >= EDIT_PRIOR_PAIRS
-              else extrapolating_family(*_pooled(fitted)))
+    choice = (None if plain or len(colours) >= EDIT_PRIOR_PAIRS
+              else choose_family(*_pooled(fitted)))
+    family = None if choice is None else choice.name
+    skill = None if choice is None else choice.skill
     look, robust, _ = _fit(fitted, monochrome, toned=toned,
                            prior=None if plain else _edit_prior(fitted, family))
     if not plain:
-        look = _trusted_near(look, colours, working)
+        look = _trusted_near(look, colours, working, skill)
     if alone and not plain:
         sources, _, weights = _pooled(colours)
         edits = [i.after for i in read] + [image for _, image in alone]
         inner = look.look
         if isinstance(inner, SupportedLook):
             chosen = evidence_trust(inner, edits, working)
-            result.far_trust = {"by_coverage": inner.trust, "by_edits": chosen.trust}
+            result.far_trust = {"by_pairs": inner.trust, "by_edits": chosen.trust}
             inner = chosen
         corrected = unpaired_correction(inner, edits, [i.before for i in read], sources,
                                         weights, working)
@@ -907,14 +926,16 @@ def learn_look(pairs: Sequence[PairFiles], working_space: str | None = None,
                                toned=toned,
                                prior=None if plain else _edit_prior(kept, family))
         if not plain:
-            fold_look = _trusted_near(fold_look, [colours[i] for i in rest], working)
+            fold_look = _trusted_near(fold_look, [colours[i] for i in rest], working, skill)
         for i in held:
             sources, targets, _ = colours[i]
             used[i].held_out = float(np.mean(_delta_e(fold_look(sources), targets, encoding)))
     result.look, result.folds = look, len(folds)
-    result.coverage = colour_coverage(np.concatenate([c[0] for c in colours]),
-                                      np.concatenate([c[2] / max(float(c[2].sum()), 1e-12)
-                                                      for c in colours]), working)
+    shown = (np.concatenate([c[0] for c in colours]),
+             np.concatenate([c[2] / max(float(c[2].sum()), 1e-12) for c in colours]))
+    result.coverage = colour_coverage(*shown, working)
+    if alone and not plain and len(colours) < EDIT_PRIOR_PAIRS:
+        result.advice = teaching_original(*shown, alone, working)
     _flag_disagreements(used, warn)
     _warn_mixed(used, monochrome, toned, warn)
     result.seconds = time.perf_counter() - start
@@ -1017,6 +1038,18 @@ TRUSTED_COVERAGE = (0.4, 0.7)
 #: once after: +0.510 -> +0.533, +0.292 -> +0.305, unchanged 12 %.
 NEAR_GAIN = 3.0
 NEAR_COVERAGE = (0.25, 0.35)
+#: How far the pairs' look is trusted away from their colours also follows how well its
+#: family carried the pairs' edit to their own held-out colours (the skill of
+#: :func:`~wbcgrade.color.look.edits.choose_family`: 1 minus its error over no change's):
+#: from no trust at the first skill to full trust at the second, once the pairs cover
+#: the second share of :data:`NEAR_COVERAGE` (a pair of one hue carries its held-out
+#: blocks of blues easily: they lie beside the others, and its look still turns greys).
+#: A film stock learned from the Hubble field or a bridge is carried that well (Velvia
+#: 0.74 to 0.94), a subtle stock less (Portra from a still life 0.14 to 0.46). Chosen on
+#: the tuned looks of ``benchmarks/one_original.py`` (384 px): mean +0.653 -> +0.662, mean
+#: of the worst photos +0.480 -> +0.489, still none worse than nothing ((0.6, 0.9): +0.665,
+#: +0.485, 3 % of cases with one); held out once after: +0.584 -> +0.585.
+SKILLED_TRUST = (0.7, 0.9)
 #: With fewer pairs than :data:`EDIT_PRIOR_PAIRS` and edited photos without originals, how
 #: far the pairs' look is followed away from their colours (the trust) is what the edited
 #: photos make most probable (:func:`evidence_trust`): the trusts whose likelihood is
@@ -1123,32 +1156,45 @@ def _natural_density(working: str) -> np.ndarray:
     return density
 
 
-def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str
-                   ) -> SupportedLook:
+def _covered(support: np.ndarray, working: str) -> float:
+    """The share of natural photos' colours a support (m, m, m) in [0, 1] covers."""
+    density = _natural_density(working).ravel()
+    return float(density @ support.ravel() / max(float(density.sum()), 1e-300))
+
+
+def supported_look(look, sources: np.ndarray, weights: np.ndarray, working: str,
+                   skill: float | None = None) -> SupportedLook:
     """``look`` (fitted on pairs whose original colours are ``sources`` (N, 3) with
     ``weights``) trusted as far as those colours cover natural photos'
     (:data:`TRUSTED_COVERAGE`), and just beside them further than their own support
     (:data:`NEAR_GAIN`, :data:`NEAR_COVERAGE`; the edited photos may raise the trust as
-    far as the latter's share of the way to 1: ``reach``)."""
+    far as the latter's share of the way to 1: ``reach``). ``skill``: how well the look's
+    family carried the pairs' edit to their own held-out colours
+    (:class:`~wbcgrade.color.look.edits.FamilyChoice`); a high one raises the trust of
+    pairs that cover enough (:data:`SKILLED_TRUST`)."""
     support = _support(sources, weights)
-    density = _natural_density(working).ravel()
-    covered = float(density @ support.ravel() / max(float(density.sum()), 1e-300))
+    covered = _covered(support, working)
     low, high = TRUSTED_COVERAGE
     near_low, near_high = NEAR_COVERAGE
     near = float(np.clip((covered - near_low) / (near_high - near_low), 0.0, 1.0))
     trust = float(np.clip((covered - low) / (high - low), 0.0, 1.0))
+    reach = max(trust, near)
+    if skill is not None and near >= 1.0:  # (held-out blocks of one hue lie side by side)
+        low, high = SKILLED_TRUST
+        trust = max(trust, min(reach, float(np.clip((skill - low) / (high - low), 0.0, 1.0))))
     return SupportedLook(look, np.clip(support * (1.0 + (NEAR_GAIN - 1.0) * near), 0.0, 1.0),
-                         trust, max(trust, near))
+                         trust, reach)
 
 
 def _trusted_near(look: LearnedLook, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
-                  working: str) -> LearnedLook:
+                  working: str, skill: float | None = None) -> LearnedLook:
     """``look`` fitted on ``parts`` (pairs' colours), trusted near their colours
-    (:func:`supported_look`) when they are fewer than :data:`EDIT_PRIOR_PAIRS`."""
+    (:func:`supported_look`, ``skill`` its family's) when they are fewer than
+    :data:`EDIT_PRIOR_PAIRS`."""
     if len(parts) >= EDIT_PRIOR_PAIRS:
         return look
     sources, _, weights = _pooled(parts)
-    return replace(look, look=supported_look(look.look, sources, weights, working))
+    return replace(look, look=supported_look(look.look, sources, weights, working, skill))
 
 
 def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> dict[str, float]:
@@ -1166,6 +1212,44 @@ def colour_coverage(sources: np.ndarray, weights: np.ndarray, working: str) -> d
         total = float(mass.sum())
         out[name] = float(mass @ np.minimum(support, 1.0) / total) if total > 0 else 0.0
     return out
+
+
+#: With fewer pairs than :data:`EDIT_PRIOR_PAIRS`, an edited photo without its original is
+#: named as the one worth pairing when its colours would widen the share of natural
+#: photos' colours the pairs cover by at least this much (:func:`teaching_original`): one
+#: original of a purple sea covers 0.28 of them and teaches a look +0.09 to +0.37 of the
+#: way on other photos; one of a portrait or a still life covers 0.82 to 0.87 and teaches
+#: +0.78 to +0.94 (``benchmarks/one_original.py``, tuned looks).
+ADVICE_GAIN = 0.15
+#: Pixels of each edited photo looked at (evenly strided) by :func:`teaching_original`.
+_ADVICE_PIXELS = 20_000
+
+
+def teaching_original(sources: np.ndarray, weights: np.ndarray,
+                      edits: Sequence[tuple[str, np.ndarray]], working: str) -> dict | None:
+    """Of edited photos without an original, the one whose original would teach the look
+    most: beside the pairs' original colours ``sources`` (N, 3) with ``weights``, it
+    would cover most of natural photos' colours (:func:`_support`; its edited colours
+    stand for its original's, which a look moves but little in this measure).
+
+    Parameters
+    ----------
+    edits : (name, (h, w, 3) working-space colours) of each edited photo.
+
+    Returns ``{"name", "now", "with_it"}`` (the shares covered), or None when none would
+    widen the share by :data:`ADVICE_GAIN`.
+    """
+    support = _support(sources, weights)
+    now = _covered(support, working)
+    best = None
+    for name, image in edits:
+        colours = np.asarray(image, dtype=np.float64).reshape(-1, 3)
+        colours = colours[::max(1, len(colours) // _ADVICE_PIXELS)]
+        theirs = _support(colours, np.ones(len(colours)))
+        with_it = _covered(np.maximum(support, theirs), working)
+        if best is None or with_it > best["with_it"]:
+            best = {"name": name, "now": now, "with_it": with_it}
+    return best if best is not None and best["with_it"] >= now + ADVICE_GAIN else None
 
 
 def unpaired_correction(look, edits: Sequence[np.ndarray], originals: Sequence[np.ndarray],
