@@ -182,7 +182,7 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     photos without originals: the report names the edited photo whose original would
     widen what the pairs show most, judged from its edited colours, and it is the one
     whose real original does; the command says it in words (and --json as
-    ``original_to_add``)."""
+    ``original_to_add``, as apply's report does with the grade's source)."""
     import json
 
     import wbcgrade.color.look.learn as learn
@@ -190,7 +190,7 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     from wbcgrade.color.colorspace import default_working_space
 
     originals, edits = shoot(tmp_path, photos, bleach, pair="coffee")
-    _, result = learned_grade(originals, edits)
+    grade, result = learned_grade(originals, edits)
     advice = result.advice
     assert advice is not None and advice["with_it"] >= advice["now"] + learn.ADVICE_GAIN
     working = default_working_space()
@@ -213,6 +213,8 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     assert said.exit_code == 0, said.output
     assert f"the original of {advice['name']} would teach the look much more" in said.output
     assert json.loads(json.dumps(result.as_dict()))["original_to_add"]["name"] == advice["name"]
+    # (apply --originals --json reports it with the grade's source)
+    assert grade.info["saved_look"]["original_to_add"]["name"] == advice["name"]
     # a pair that shows as much as the others could add is not asked to grow
     (tmp_path / "broad").mkdir()
     _, broad = learned_grade(*shoot(tmp_path / "broad", photos, bleach, pair="sunset"))
