@@ -211,7 +211,7 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     said = runner.invoke(main, ["look", "learn", str(originals), str(edits), "-o",
                                 str(tmp_path / "look.cube")])
     assert said.exit_code == 0, said.output
-    assert f"the original of {advice['name']} would teach the look much more" in said.output
+    assert f"the original of {advice['name']} would teach the look more" in said.output
     assert json.loads(json.dumps(result.as_dict()))["original_to_add"]["name"] == advice["name"]
     # (apply --originals --json reports it with the grade's source)
     assert grade.info["saved_look"]["original_to_add"]["name"] == advice["name"]

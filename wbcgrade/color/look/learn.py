@@ -774,7 +774,7 @@ class LearnResult:
         """In words: the original worth adding to learn more of the look (None: none)."""
         if not self.advice:
             return None
-        return (f"the original of {self.advice['name']} would teach the look much more: "
+        return (f"the original of {self.advice['name']} would teach the look more: "
                 f"with it the pairs would show {100 * self.advice['with_it']:.0f} % of the "
                 f"colours photos hold, against {100 * self.advice['now']:.0f} % now; add it "
                 "to the originals")
