@@ -159,12 +159,13 @@ def score(grade, photos: dict, names: list[str], table: np.ndarray) -> tuple[lis
 
 def advised_rows(folder: Path, photos: dict, style: list[str], graded: list[str],
                  table: np.ndarray, report) -> dict:
-    """With one original: the original the learner asks for (``report.advice``) and the
+    """With one original: the original the learner asks for (``report.original_to_add``) and the
     next photo's, each learned beside the first; their mean and worst recovered."""
-    out = {"advised": None if report.advice is None else report.advice["name"]}
-    if report.advice is None:
+    asked = report.original_to_add
+    out = {"advised": None if asked is None else asked["name"]}
+    if asked is None:
         return out
-    advised = report.advice["name"]
+    advised = asked["name"]
     for key, second in (("next", style[1]), ("with_advised", advised)):
         names = [style[0], second] + [n for n in style[1:] if n != second]
         grade, _, _ = learn(folder, photos, names, table, key, 2)

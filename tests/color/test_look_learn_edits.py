@@ -164,6 +164,10 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
             if line.strip().startswith("how much of each kind of colour the pairs show")]
     assert len(sure) == 1 and "skies and water" in sure[0]
     assert f"learned look: {sure[0]}" in learned.output
+    # which original would teach more (a bridge shows 0.41 of natural colours): the same
+    asked = [line.strip() for line in steps.output.splitlines()
+             if "would teach the look more" in line]
+    assert len(asked) == 1 and f"learned look: {asked[0]}" in learned.output
     saved = runner.invoke(main, ["apply", str(photo), "--look", str(tmp_path / "look.cube"),
                                  "-o", str(tmp_path / "saved.png")])
     assert saved.exit_code == 0, saved.output
@@ -176,8 +180,36 @@ def test_apply_with_originals_is_look_learn_then_apply_look(tmp_path, photos):
     assert np.mean(np.abs(a - truth)) < 0.6 * np.mean(np.abs(before - truth))
 
 
+def test_the_original_to_add_is_the_one_that_widens_what_the_pairs_show():
+    """A pair of blues alone: of an edited photo of more blues, one of greens and one of
+    every colour, the last is named, with the share the pooled colours cover; a pair
+    that already shows every colour is asked nothing."""
+    from wbcgrade.color.colorspace import default_working_space
+    from wbcgrade.color.look import learn as learned
+
+    working = default_working_space()
+    rng = np.random.default_rng(5)
+    blues = np.clip(rng.normal([0.2, 0.3, 0.7], 0.05, (3000, 3)), 0.0, 1.0)
+    greens = np.clip(rng.normal([0.3, 0.6, 0.2], 0.05, (40, 40, 3)), 0.0, 1.0)
+    everything = rng.uniform(0.0, 1.0, (40, 40, 3))
+    more_blues = np.clip(rng.normal([0.2, 0.3, 0.7], 0.05, (40, 40, 3)), 0.0, 1.0)
+    weights = np.full(len(blues), 1.0 / len(blues))
+    edits = [("IMG_1", more_blues), ("IMG_2", greens), ("IMG_3", everything)]
+    add = learned.teaching_original(blues, weights, edits, working)
+    assert add is not None and add["name"] == "IMG_3"
+    flat = everything.reshape(-1, 3)
+    pooled = learned._support(np.concatenate([blues, flat]), np.concatenate(
+        [weights, np.full(len(flat), 1.0 / len(flat))]))
+    assert np.isclose(add["with_it"], learned._covered(pooled, working))
+    assert add["with_it"] >= add["now"] + learned.ADVICE_GAIN
+    broad = flat
+    assert learned.teaching_original(broad, np.full(len(broad), 1.0 / len(broad)), edits,
+                                     working) is None
+
+
 @pytest.mark.slow
-def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, photos):
+def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, photos,
+                                                                      monkeypatch):
     """One pair of a coffee cup (about half of what natural photos hold) beside edited
     photos without originals: the report names the edited photo whose original would
     widen what the pairs show most, judged from its edited colours, and it is the one
@@ -189,22 +221,34 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     from wbcgrade.cli import main
     from wbcgrade.color.colorspace import default_working_space
 
+    skills = []  # (what learn_look hands the trust: the family's skill within the pair)
+    supported = learn.supported_look
+
+    def recording(look, sources, weights, working, skill=None):
+        skills.append(skill)
+        return supported(look, sources, weights, working, skill)
+
+    monkeypatch.setattr(learn, "supported_look", recording)
     originals, edits = shoot(tmp_path, photos, bleach, pair="coffee")
     grade, result = learned_grade(originals, edits)
-    advice = result.advice
+    # (bleach carried within the espresso: skill 0.99, so it is followed fully)
+    assert skills and all(s is not None and s > 0.9 for s in skills)
+    assert result.far_trust["by_pairs"] == 1.0
+    monkeypatch.undo()
+    advice = result.original_to_add
     assert advice is not None and advice["with_it"] >= advice["now"] + learn.ADVICE_GAIN
     working = default_working_space()
     coffee = photos["coffee"].reshape(-1, 3).astype(np.float64)
-    support = learn._support(coffee, np.ones(len(coffee)))
-    truly = {}  # the share the pair and each real original (a half photo) would cover
+    truly = {}  # the share the pair pooled with each real original (a half photo) covers
     for path in edits.iterdir():
         if path.stem != "coffee":
             name, side = path.stem.rsplit("_", 1)
             half = photos[name].shape[1] // 2
             part = photos[name][:, :half] if side == "left" else photos[name][:, half:]
             part = part.reshape(-1, 3).astype(np.float64)
-            theirs = learn._support(part, np.ones(len(part)))
-            truly[path.stem] = learn._covered(np.maximum(support, theirs), working)
+            pooled = learn._support(np.concatenate([coffee, part]), np.concatenate(
+                [np.full(len(coffee), 1.0 / len(coffee)), np.full(len(part), 1.0 / len(part))]))
+            truly[path.stem] = learn._covered(pooled, working)
     assert max(truly, key=truly.get) == advice["name"]
     assert abs(truly[advice["name"]] - advice["with_it"]) < 0.1
     runner = CliRunner()
@@ -218,7 +262,7 @@ def test_the_learned_look_names_the_original_that_would_teach_it_most(tmp_path, 
     # a pair that shows as much as the others could add is not asked to grow
     (tmp_path / "broad").mkdir()
     _, broad = learned_grade(*shoot(tmp_path / "broad", photos, bleach, pair="sunset"))
-    assert broad.advice is None
+    assert broad.original_to_add is None
 
 
 def test_originals_need_style_photos_and_no_saved_look(tmp_path):

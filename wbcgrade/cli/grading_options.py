@@ -160,7 +160,7 @@ def _learned_look(style_dir: str, originals: str, options):
                                       progress=progress)
     # (how far it is followed: the grade's own line); on stderr: standard output may be
     # the report's JSON
-    for words in (result.coverage_words(), result.advice_words()):
+    for words in (result.coverage_words(), result.original_to_add_words()):
         if words:
             click.echo(f"learned look: {words}", err=True)
     return grade

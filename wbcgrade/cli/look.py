@@ -148,7 +148,7 @@ def learn(before, after, output, lut_size, working_space, overwrite, as_json):
     held = ("" if found.held_out is None else
             f", {found.held_out:.1f} with each pair held out ({found.folds}-fold)")
     learned = found.describe().replace("the look", f"the {kind}", 1)
-    for words in (found.coverage_words(), found.reach_words(), found.advice_words()):
+    for words in (found.coverage_words(), found.reach_words(), found.original_to_add_words()):
         if words:
             click.echo(f"  {words}")
     click.echo(f"wrote {found.output}: {learned} "

@@ -195,8 +195,8 @@ def learned_grade(before: str | os.PathLike, after: str | os.PathLike, *,
         described += (f", followed {100 * result.far_trust['by_edits']:.0f} % of the way "
                       "away from the pairs' colours")
     source = {"file": described, "kind": "learned"}
-    if result.advice:  # (the report's JSON: which original would teach the look most)
-        source["original_to_add"] = result.as_dict()["original_to_add"]
+    if result.original_to_add:  # (the report's JSON: the original that would teach most)
+        source["original_to_add"] = result.original_to_add_dict()
     grade = Grade(("learned look",), np.ones(1), result.look.lattice(lut_size),
                   working=encoding.working,  # no regrain: the look as the pairs show it
                   info={"saved_look": source},

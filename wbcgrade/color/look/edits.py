@@ -319,8 +319,8 @@ def _colour_blocks(points: np.ndarray, blocks: int, rng: np.random.Generator) ->
 class FamilyChoice:
     """The family a pair's look is extrapolated with (:data:`FAMILIES`), and how well it
     carried the pairs' edit to their own held-out colours: ``skill`` is 1 minus its
-    squared error there over no change's (1: exact, 0: no better than no change; 0 when
-    there was too little to judge)."""
+    squared error there over no change's (1: exact, 0: no better than no change, below 0:
+    worse; 0 when there was too little to judge)."""
     name: str
     skill: float = 0.0
 
@@ -340,6 +340,12 @@ def choose_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
     ----------
     sources, targets : (N, 3) the pairs' colours before and after.
     weights : (N,) how much each counts.
+
+    Returns
+    -------
+    :class:`FamilyChoice`: the family chosen and its own skill on the held-out colours
+    (the raw editor's controls' when the tonal range keeps them; then the curves are
+    not fitted).
     """
     sources, targets, weights = _as_pairs(sources, targets, weights)
     if len(sources) < 4 * blocks or not weights.sum() > 0:
@@ -359,15 +365,16 @@ def choose_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
             continue
         ones = np.ones(int(kept.sum()))
         fits = {"edit": fit_edit(sources[kept], targets[kept], ones,
-                                 max_nfev=FAMILY_QUICK_NFEV),
-                "curves": fit_curves_edit(sources[kept], targets[kept], ones,
-                                          max_nfev=FAMILY_QUICK_NFEV)}
+                                 max_nfev=FAMILY_QUICK_NFEV)}
+        if tones:
+            fits["curves"] = fit_curves_edit(sources[kept], targets[kept], ones,
+                                             max_nfev=FAMILY_QUICK_NFEV)
         for name, fitted in fits.items():
             errors[name] += float(np.sum((fitted(sources[held]) - targets[held]) ** 2))
         unchanged += float(np.sum((sources[held] - targets[held]) ** 2))
     name = "curves" if tones and errors["curves"] < errors["edit"] else "edit"
     skill = 1.0 - errors[name] / unchanged if unchanged > 0 else 0.0
-    return FamilyChoice(name, float(skill))
+    return FamilyChoice(name, float(skill) if np.isfinite(skill) else 0.0)
 
 
 def extrapolating_family(sources: np.ndarray, targets: np.ndarray, weights: np.ndarray,
