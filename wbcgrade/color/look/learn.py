@@ -1062,11 +1062,11 @@ NEAR_COVERAGE = (0.25, 0.35)
 #: blocks of blues easily: they lie beside the others, and its look still turns greys).
 #: A film stock learned from the Hubble field or a bridge is carried that well (Velvia
 #: 0.74 to 0.94), a subtle stock less (Portra from the espresso, the flower or the Hubble
-#: field 0.14 to 0.46). Chosen on
-#: the tuned looks of ``benchmarks/one_original.py`` (384 px): mean +0.653 -> +0.661, mean
-#: of the worst photos +0.480 -> +0.487, still none worse than nothing (without the
-#: coverage's condition (0.6, 0.9) gave +0.665, +0.485, 3 % of cases with one, and (0.7,
-#: 0.9) the sea's greys moved); held out once after: +0.584 -> +0.585, +0.349 -> +0.352.
+#: field 0.14 to 0.46). Chosen on the tuned looks of ``benchmarks/one_original.py``
+#: (384 px): mean +0.653 -> +0.661, mean of the worst photos +0.480 -> +0.487, still none
+#: worse than nothing (without the coverage's condition (0.6, 0.9) gave +0.665, +0.485, 3 %
+#: of cases with one, and (0.7, 0.9) the sea's greys moved); held out once after: +0.584
+#: -> +0.585, +0.349 -> +0.352.
 SKILLED_TRUST = (0.7, 0.9)
 #: With fewer pairs than :data:`EDIT_PRIOR_PAIRS` and edited photos without originals, how
 #: far the pairs' look is followed away from their colours (the trust) is what the edited
@@ -1122,7 +1122,18 @@ def _density(sources: np.ndarray, weights: np.ndarray, blur: float, mode: str) -
 def _support(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(m, m, m) how well colours ``sources`` (N, 3) with ``weights`` cover each node, in
     [0, 1]."""
-    return np.clip(_density(sources, weights, 1.0, "constant") / PAIR_SUPPORT, 0.0, 1.0)
+    return _support_of(_support_density(sources, weights))
+
+
+def _support_density(sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(m, m, m) the density :func:`_support` is read from (linear in the colours' mass:
+    the density of two sets pooled is their mean, weighed by each set's total weight)."""
+    return _density(sources, weights, 1.0, "constant")
+
+
+def _support_of(density: np.ndarray) -> np.ndarray:
+    """:func:`_support` from its density (:func:`_support_density`)."""
+    return np.clip(density / PAIR_SUPPORT, 0.0, 1.0)
 
 
 #: Regions of colour the learned look reports its sureness for (:func:`colour_coverage`):
@@ -1250,8 +1261,8 @@ def teaching_original(sources: np.ndarray, weights: np.ndarray,
     most: pooled with the pairs' original colours ``sources`` (N, 3) with ``weights``
     (each pair weighing the same, as the look is fitted), it would cover most of natural
     photos' colours (:func:`_support`). Its edited colours stand for its original's: a
-    subtle look moves them little in this measure, a strong one more (a bleach bypass
-    edit of an espresso covers 0.87 of them, its original 0.79), so the share is
+    subtle look moves them little in this measure, a strong one more (beside a bridge,
+    a bleach-bypassed espresso promises 0.84, its original covers 0.68), so the share is
     approximate.
 
     Parameters
@@ -1265,16 +1276,16 @@ def teaching_original(sources: np.ndarray, weights: np.ndarray,
     """
     sources = np.asarray(sources, dtype=np.float64).reshape(-1, 3)
     weights = np.asarray(weights, dtype=np.float64).ravel()
-    now = _covered(_support(sources, weights), working)
+    pairs, total = _support_density(sources, weights), float(weights.sum())
+    now = _covered(_support_of(pairs), working)
     best: OriginalToAdd | None = None
     for name, image in edits:
         colours = np.asarray(image, dtype=np.float64).reshape(-1, 3)
         colours = colours[::max(1, len(colours) // _ADVICE_PIXELS)]
         if not len(colours):
             continue
-        pooled = _support(np.concatenate([sources, colours]),
-                          np.concatenate([weights, np.full(len(colours), 1.0 / len(colours))]))
-        with_it = _covered(pooled, working)
+        theirs = _support_density(colours, np.ones(len(colours)))  # (its weight: 1)
+        with_it = _covered(_support_of((total * pairs + theirs) / (total + 1.0)), working)
         if best is None or with_it > best["with_it"]:
             best = {"name": name, "now": now, "with_it": with_it}
     return best if best is not None and best["with_it"] >= now + ADVICE_GAIN else None
