@@ -16,6 +16,11 @@ where they are (the learner's support of them, ``look/learn.py``'s ``_support``)
 change elsewhere ("on its colours", mean and worst photo): what is beyond it has to be
 guessed, from the pair's extrapolation or from the graded photos without originals.
 
+``--advised``: each case is learned again with the original the learner asks for
+(``look learn``'s advice) beside the first, where it asks for one; prints what was asked
+for and the mean and worst photo then, and per group the share of cases with a photo
+under +0.50 (the advice followed, or the look as learned where nothing was asked).
+
 ``--no-look``: the edited photos are the photos themselves (a pair and a set with no look
 in them); prints, per original, the mean and largest CIEDE2000 by which the learned look
 moves the nine other photos (it should change nothing).
@@ -59,6 +64,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=384, help="long side of the photos")
     parser.add_argument("--no-look", action="store_true",
                         help="edited photos with no look: how far the learned look moves photos")
+    parser.add_argument("--advised", action="store_true",
+                        help="also learn with the original the learner asks for beside the first")
     args = parser.parse_args()
     looks = (args.looks.split(",") if args.looks
              else [lk for lk in TUNED + HELD_OUT if lk not in MONOCHROME])
@@ -69,21 +76,32 @@ def main() -> None:
         no_look(photos, order, args.originals.split(","))
         return
     rows = []
-    print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}   on its colours")
+    print(f"{'look':26s} {'original':18s} {'mean':>6s} {'worst':>6s}   on its colours"
+          + ("   asks for         mean  worst" if args.advised else ""))
     for look in looks:
         table = hald_table(SHARED / "looks" / f"{look}.png")
         for first in args.originals.split(","):
             turn = order.index(first)
             ring = order[turn:] + order[:turn]
             with tempfile.TemporaryDirectory(prefix="wbcgrade-one-") as tmp:
-                grade, _, _ = learn(Path(tmp), photos, ring[:STYLE_PHOTOS], table, "plain", 1)
+                grade, _, report = learn(Path(tmp), photos, ring[:STYLE_PHOTOS], table,
+                                         "plain", 1)
                 recovered, _ = score(grade, photos, ring[STYLE_PHOTOS:], table)
+                asked = report.original_to_add
+                followed = recovered  # (nothing asked: the look stays as learned)
+                if args.advised and asked is not None:
+                    followed = advised(Path(tmp), photos, ring, asked["name"], table)
             carried = on_its_colours(photos, first, ring[STYLE_PHOTOS:], table)
             group = "tuned" if look in TUNED else "held-out"
             rows.append((group, float(np.mean(recovered)), float(np.min(recovered)),
-                         float(np.mean(carried))))
-            print(f"{look:26s} {first:18s} {rows[-1][1]:+6.3f} {rows[-1][2]:+6.3f}   "
-                  f"{rows[-1][3]:+6.3f} {np.min(carried):+6.3f}", flush=True)
+                         float(np.mean(carried)), float(np.mean(followed)),
+                         float(np.min(followed))))
+            line = (f"{look:26s} {first:18s} {rows[-1][1]:+6.3f} {rows[-1][2]:+6.3f}   "
+                    f"{rows[-1][3]:+6.3f} {np.min(carried):+6.3f}")
+            if args.advised:
+                line += (f"   {asked['name'] if asked else '(nothing)':15s} "
+                         f"{rows[-1][4]:+6.3f} {rows[-1][5]:+6.3f}")
+            print(line, flush=True)
     print()
     for group in ("tuned", "held-out"):
         picked = np.array([r[1:] for r in rows if r[0] == group])
@@ -93,6 +111,23 @@ def main() -> None:
                   f"{np.mean(picked[:, 1] < 0):.0%} of {len(picked)}, lowest photo "
                   f"{picked[:, 1].min():+.2f}; the true look on the original's colours "
                   f"{picked[:, 2].mean():+.3f}")
+            if args.advised:
+                print(f"{'':9s}  with the original asked for (where one is): mean "
+                      f"{picked[:, 3].mean():+.3f}, mean of the worst photos "
+                      f"{picked[:, 4].mean():+.3f}, a photo under +0.50 in "
+                      f"{np.mean(picked[:, 4] < 0.5):.0%} of {len(picked)}, lowest photo "
+                      f"{picked[:, 4].min():+.2f}")
+
+
+def advised(folder: Path, photos: dict, ring: list[str], second: str, table: np.ndarray
+            ) -> list[float]:
+    """Recovered per graded photo of the ring's look learned again with ``second``'s original
+    beside the first (the one the learner asked for)."""
+    style = ring[:STYLE_PHOTOS]
+    names = [style[0], second] + [n for n in style[1:] if n != second]
+    grade, _, _ = learn(folder, photos, names, table, "advised", 2)
+    recovered, _ = score(grade, photos, ring[STYLE_PHOTOS:], table)
+    return recovered
 
 
 def on_its_colours(photos: dict, original: str, names: list[str], table: np.ndarray
