@@ -165,13 +165,20 @@ def advised_rows(folder: Path, photos: dict, style: list[str], graded: list[str]
     out = {"advised": None if asked is None else asked["name"]}
     if asked is None:
         return out
-    advised = asked["name"]
-    for key, second in (("next", style[1]), ("with_advised", advised)):
-        names = [style[0], second] + [n for n in style[1:] if n != second]
-        grade, _, _ = learn(folder, photos, names, table, key, 2)
-        recovered, _ = score(grade, photos, graded, table)
+    for key, second in (("next", style[1]), ("with_advised", asked["name"])):
+        recovered = learned_beside(folder, photos, style, second, graded, table, key)
         out[key] = (float(np.mean(recovered)), float(np.min(recovered)))
     return out
+
+
+def learned_beside(folder: Path, photos: dict, style: list[str], second: str,
+                   graded: list[str], table: np.ndarray, variant: str) -> list[float]:
+    """Recovered per photo of ``graded`` by the look learned with ``second``'s original
+    beside the first of ``style`` (the other edited photos without one)."""
+    names = [style[0], second] + [n for n in style[1:] if n != second]
+    grade, _, _ = learn(folder, photos, names, table, variant, 2)
+    recovered, _ = score(grade, photos, graded, table)
+    return recovered
 
 
 def print_advised(rows: list[dict]) -> None:

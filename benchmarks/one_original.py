@@ -46,6 +46,7 @@ from learn import (  # noqa: E402
     apply_hald,
     hald_table,
     learn,
+    learned_beside,
     score,
     to_8bit,
 )
@@ -90,7 +91,9 @@ def main() -> None:
                 asked = report.original_to_add
                 followed = recovered  # (nothing asked: the look stays as learned)
                 if args.advised and asked is not None:
-                    followed = advised(Path(tmp), photos, ring, asked["name"], table)
+                    followed = learned_beside(Path(tmp), photos, ring[:STYLE_PHOTOS],
+                                              asked["name"], ring[STYLE_PHOTOS:], table,
+                                              "advised")
             carried = on_its_colours(photos, first, ring[STYLE_PHOTOS:], table)
             group = "tuned" if look in TUNED else "held-out"
             rows.append((group, float(np.mean(recovered)), float(np.min(recovered)),
@@ -117,17 +120,6 @@ def main() -> None:
                       f"{picked[:, 4].mean():+.3f}, a photo under +0.50 in "
                       f"{np.mean(picked[:, 4] < 0.5):.0%} of {len(picked)}, lowest photo "
                       f"{picked[:, 4].min():+.2f}")
-
-
-def advised(folder: Path, photos: dict, ring: list[str], second: str, table: np.ndarray
-            ) -> list[float]:
-    """Recovered per graded photo of the ring's look learned again with ``second``'s original
-    beside the first (the one the learner asked for)."""
-    style = ring[:STYLE_PHOTOS]
-    names = [style[0], second] + [n for n in style[1:] if n != second]
-    grade, _, _ = learn(folder, photos, names, table, "advised", 2)
-    recovered, _ = score(grade, photos, ring[STYLE_PHOTOS:], table)
-    return recovered
 
 
 def on_its_colours(photos: dict, original: str, names: list[str], table: np.ndarray
